@@ -1,0 +1,157 @@
+//! Ray acceleration: the [`Accelerator`] trait, the brute-force
+//! [`list::ListAccel`] (the test oracle), and the BVH.
+
+pub mod list;
+
+use crate::geometry::Ray;
+
+/// A ray-primitive intersection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit.
+    pub t: f32,
+    /// Primitive index in the [`crate::prepared::PreparedScene`] (triangles
+    /// first, then analytic spheres).
+    pub prim: u32,
+    /// Barycentric coordinates of vertices 1 and 2 for triangles (vertex 0
+    /// has `1 - u - v`); for spheres unused.
+    pub u: f32,
+    /// See `u`.
+    pub v: f32,
+}
+
+/// Finds what a ray hits. Implementations must give the same answers.
+pub trait Accelerator: Send + Sync {
+    /// The closest hit with `t` in `(ray.t_min, ray.t_max)`.
+    fn intersect(&self, ray: &Ray) -> Option<Hit>;
+    /// True if anything is hit with `t` in `(ray.t_min, ray.t_max)`.
+    fn occluded(&self, ray: &Ray) -> bool;
+}
+
+/// Watertight ray-triangle intersection (Woop, Benthin and Wald 2013),
+/// returning `(t, u, v)` with `u`, `v` the barycentrics of `p1` and `p2`.
+/// Rays through a shared edge hit exactly one of its two triangles (or
+/// both, never neither).
+#[inline]
+pub fn intersect_triangle(
+    ray: &Ray,
+    p0: glam::Vec3,
+    p1: glam::Vec3,
+    p2: glam::Vec3,
+) -> Option<(f32, f32, f32)> {
+    let d = ray.dir;
+    // Permute so that z is the largest direction component.
+    let kz = d.abs().max_position();
+    let mut kx = (kz + 1) % 3;
+    let mut ky = (kx + 1) % 3;
+    if d[kz] < 0.0 {
+        std::mem::swap(&mut kx, &mut ky);
+    }
+    let sz = 1.0 / d[kz];
+    let sx = d[kx] * sz;
+    let sy = d[ky] * sz;
+    let a = p0 - ray.origin;
+    let b = p1 - ray.origin;
+    let c = p2 - ray.origin;
+    let ax = a[kx] - sx * a[kz];
+    let ay = a[ky] - sy * a[kz];
+    let bx = b[kx] - sx * b[kz];
+    let by = b[ky] - sy * b[kz];
+    let cx = c[kx] - sx * c[kz];
+    let cy = c[ky] - sy * c[kz];
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // Recompute in double precision on edges (the paper's fallback).
+        let (cxd, cyd, bxd, byd, axd, ayd) = (
+            cx as f64, cy as f64, bx as f64, by as f64, ax as f64, ay as f64,
+        );
+        u = (cxd * byd - cyd * bxd) as f32;
+        v = (axd * cyd - ayd * cxd) as f32;
+        w = (bxd * ayd - byd * axd) as f32;
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let az = sz * a[kz];
+    let bz = sz * b[kz];
+    let cz = sz * c[kz];
+    let t_scaled = u * az + v * bz + w * cz;
+    let inv = 1.0 / det;
+    let t = t_scaled * inv;
+    if !(t > ray.t_min && t < ray.t_max) {
+        return None;
+    }
+    // u weights p0, v weights p1, w weights p2.
+    Some((t, v * inv, w * inv))
+}
+
+/// Ray-sphere intersection, `(t)` of the nearest root in range.
+#[inline]
+pub fn intersect_sphere(ray: &Ray, center: glam::Vec3, radius: f32) -> Option<f32> {
+    let oc = ray.origin - center;
+    let a = ray.dir.length_squared();
+    let half_b = oc.dot(ray.dir);
+    let c = oc.length_squared() - radius * radius;
+    // Numerically robust discriminant (Hearn/Baker via "Ray Tracing Gems" ch. 7).
+    let l = oc - ray.dir * (half_b / a);
+    let disc = radius * radius - l.length_squared();
+    if disc < 0.0 {
+        return None;
+    }
+    let sq = (a * disc).sqrt();
+    let q = -half_b - sq.copysign(half_b);
+    let (mut t0, mut t1) = (c / q, q / a);
+    if t0 > t1 {
+        std::mem::swap(&mut t0, &mut t1);
+    }
+    if t0 > ray.t_min && t0 < ray.t_max {
+        Some(t0)
+    } else if t1 > ray.t_min && t1 < ray.t_max {
+        Some(t1)
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    #[test]
+    fn triangle_hit_and_barycentrics() {
+        let r = Ray::new(Vec3::new(0.25, 0.25, 1.0), Vec3::NEG_Z);
+        let (t, u, v) = intersect_triangle(&r, Vec3::ZERO, Vec3::X, Vec3::Y).expect("hit");
+        assert!((t - 1.0).abs() < 1e-6 && (u - 0.25).abs() < 1e-6 && (v - 0.25).abs() < 1e-6);
+        let miss = Ray::new(Vec3::new(0.75, 0.75, 1.0), Vec3::NEG_Z);
+        assert!(intersect_triangle(&miss, Vec3::ZERO, Vec3::X, Vec3::Y).is_none());
+    }
+
+    #[test]
+    fn shared_edge_is_watertight() {
+        // Two triangles sharing the diagonal of the unit square: a ray
+        // exactly through the diagonal hits at least one.
+        let (a, b, c, d) = (Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y);
+        for i in 0..=100 {
+            let s = i as f32 / 100.0;
+            let r = Ray::new(Vec3::new(s, s, 1.0), Vec3::new(0.0, 0.0, -1.0));
+            let h = intersect_triangle(&r, a, b, c).is_some()
+                || intersect_triangle(&r, a, c, d).is_some();
+            assert!(h, "slipped through at {s}");
+        }
+    }
+
+    #[test]
+    fn sphere_roots() {
+        let r = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z);
+        assert!((intersect_sphere(&r, Vec3::ZERO, 1.0).expect("hit") - 4.0).abs() < 1e-5);
+        let inside = Ray::new(Vec3::ZERO, Vec3::X);
+        assert!((intersect_sphere(&inside, Vec3::ZERO, 2.0).expect("hit") - 2.0).abs() < 1e-5);
+    }
+}

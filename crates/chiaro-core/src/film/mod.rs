@@ -1,0 +1,211 @@
+//! The film every technique writes: linear RGB `f32` radiance plus depth and
+//! normal buffers, and the tiling used to render it in parallel.
+//!
+//! Tone mapping, palettes and image metrics live in the submodules; file
+//! encoding lives in chiaro-io.
+
+use crate::progress::Progress;
+use crate::shading::sanitize;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// A rendered image. Pixels are row-major from the top-left.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Film {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear RGB radiance; never NaN or infinite (writers sanitise).
+    pub color: Vec<Vec3>,
+    /// Distance from the eye along the primary ray to the first surface
+    /// (scene units), `f32::INFINITY` where nothing was hit.
+    pub depth: Vec<f32>,
+    /// World-space unit shading normal of the first surface, zero where none.
+    pub normal: Vec<Vec3>,
+}
+
+impl Film {
+    /// A black film with infinite depth.
+    pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            color: vec![Vec3::ZERO; n],
+            depth: vec![f32::INFINITY; n],
+            normal: vec![Vec3::ZERO; n],
+        }
+    }
+
+    /// Index of pixel `(x, y)`.
+    #[inline]
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        y as usize * self.width as usize + x as usize
+    }
+
+    /// The colour at `(x, y)`.
+    #[inline]
+    pub fn get(&self, x: u32, y: u32) -> Vec3 {
+        self.color[self.index(x, y)]
+    }
+
+    /// Sets pixel `(x, y)`, replacing NaN, infinite or negative channels by 0.
+    #[inline]
+    pub fn set(&mut self, x: u32, y: u32, c: Vec3) {
+        let i = self.index(x, y);
+        self.color[i] = sanitize(c);
+    }
+
+    /// Copies a rendered tile into the film.
+    pub fn write_tile(&mut self, tile: &TilePixels) {
+        let r = tile.rect;
+        for y in 0..r.height {
+            for x in 0..r.width {
+                let src = (y * r.width + x) as usize;
+                let dst = self.index(r.x + x, r.y + y);
+                self.color[dst] = sanitize(tile.color[src]);
+                self.depth[dst] = tile.depth[src];
+                self.normal[dst] = tile.normal[src];
+            }
+        }
+    }
+
+    /// Mean colour over all pixels.
+    pub fn mean(&self) -> Vec3 {
+        self.color.iter().copied().sum::<Vec3>() / self.color.len().max(1) as f32
+    }
+
+    /// True if every channel of every pixel is finite and non-negative.
+    pub fn is_clean(&self) -> bool {
+        self.color
+            .iter()
+            .all(|c| c.is_finite() && c.min_element() >= 0.0)
+    }
+}
+
+/// A rectangle of the film.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TileRect {
+    /// Left column.
+    pub x: u32,
+    /// Top row.
+    pub y: u32,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+/// The pixels of one rendered tile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TilePixels {
+    /// Where it goes.
+    pub rect: TileRect,
+    /// Row-major colours.
+    pub color: Vec<Vec3>,
+    /// Row-major depths.
+    pub depth: Vec<f32>,
+    /// Row-major normals.
+    pub normal: Vec<Vec3>,
+}
+
+impl TilePixels {
+    /// A tile of black pixels with infinite depth.
+    pub fn new(rect: TileRect) -> Self {
+        let n = rect.width as usize * rect.height as usize;
+        Self {
+            rect,
+            color: vec![Vec3::ZERO; n],
+            depth: vec![f32::INFINITY; n],
+            normal: vec![Vec3::ZERO; n],
+        }
+    }
+}
+
+/// Splits a `width x height` image into tiles of at most `size x size`,
+/// row by row.
+pub fn tiles(width: u32, height: u32, size: u32) -> Vec<TileRect> {
+    let size = size.max(1);
+    let mut out = Vec::new();
+    let mut y = 0;
+    while y < height {
+        let mut x = 0;
+        let h = size.min(height - y);
+        while x < width {
+            let w = size.min(width - x);
+            out.push(TileRect {
+                x,
+                y,
+                width: w,
+                height: h,
+            });
+            x += w;
+        }
+        y += h;
+    }
+    out
+}
+
+/// Renders every tile in parallel with `render_tile` and assembles the film.
+/// Reports one unit of progress per tile under the stage `stage`, and stops
+/// with [`crate::error::CoreError::Cancelled`] when the progress asks to.
+/// The result does not depend on the number of threads as long as
+/// `render_tile` depends only on the tile.
+pub fn render_tiles<F>(
+    width: u32,
+    height: u32,
+    tile_size: u32,
+    stage: &str,
+    progress: &dyn Progress,
+    render_tile: F,
+) -> crate::error::Result<Film>
+where
+    F: Fn(TileRect) -> TilePixels + Sync,
+{
+    let rects = tiles(width, height, tile_size);
+    progress.begin(stage, rects.len() as u64);
+    let done: Vec<Option<TilePixels>> = rects
+        .par_iter()
+        .map(|&r| {
+            if progress.cancelled() {
+                return None;
+            }
+            let t = render_tile(r);
+            progress.advance(1);
+            Some(t)
+        })
+        .collect();
+    let mut film = Film::new(width, height);
+    for t in done {
+        film.write_tile(&t.ok_or(crate::error::CoreError::Cancelled)?);
+    }
+    Ok(film)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_cover_the_image_once() {
+        let (w, h) = (37, 23);
+        let mut count = vec![0u8; (w * h) as usize];
+        for t in tiles(w, h, 8) {
+            for y in t.y..t.y + t.height {
+                for x in t.x..t.x + t.width {
+                    count[(y * w + x) as usize] += 1;
+                }
+            }
+        }
+        assert!(count.iter().all(|&c| c == 1));
+    }
+
+    #[test]
+    fn set_guards_nan() {
+        let mut f = Film::new(2, 2);
+        f.set(1, 1, Vec3::new(f32::NAN, 1.0, -2.0));
+        assert_eq!(f.get(1, 1), Vec3::new(0.0, 1.0, 0.0));
+        assert!(f.is_clean());
+    }
+}

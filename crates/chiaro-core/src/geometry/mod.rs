@@ -1,0 +1,13 @@
+//! Geometry: rays, bounds, orthonormal frames, normals and tangents,
+//! built-in primitives and the Utah teapot.
+
+mod bounds;
+mod frame;
+pub mod normals;
+pub mod primitives;
+mod ray;
+
+pub use bounds::Aabb;
+pub use frame::Frame;
+pub use normals::{face_normal, vertex_normals};
+pub use ray::{Ray, offset_ray_origin};

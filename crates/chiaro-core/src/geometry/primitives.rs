@@ -1,0 +1,239 @@
+//! Built-in primitives as triangle meshes, in object space with uvs:
+//! sphere, plane/quad, disk, box (cube), cylinder. The Utah teapot lives in
+//! [`super::teapot`].
+
+use crate::scene::Mesh;
+use glam::{Vec2, Vec3};
+use std::f32::consts::{PI, TAU};
+
+/// A UV sphere of `radius` centred at the origin, poles on +-y, with
+/// `slices` segments around and `stacks` from pole to pole.
+pub fn uv_sphere(radius: f32, slices: u32, stacks: u32) -> Mesh {
+    let (slices, stacks) = (slices.max(3), stacks.max(2));
+    let mut m = Mesh {
+        name: "sphere".into(),
+        ..Mesh::default()
+    };
+    for j in 0..=stacks {
+        let v = j as f32 / stacks as f32;
+        let theta = v * PI;
+        for i in 0..=slices {
+            let u = i as f32 / slices as f32;
+            // The seam column repeats column 0 exactly.
+            let phi = (i % slices) as f32 / slices as f32 * TAU;
+            let n = Vec3::new(
+                theta.sin() * phi.sin(),
+                theta.cos(),
+                theta.sin() * phi.cos(),
+            );
+            m.positions.push(n * radius);
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(u, v));
+        }
+    }
+    let row = slices + 1;
+    for j in 0..stacks {
+        for i in 0..slices {
+            let a = j * row + i;
+            let (b, c, d) = (a + 1, a + row, a + row + 1);
+            if j != 0 {
+                m.indices.push([a, c, b]);
+            }
+            if j != stacks - 1 {
+                m.indices.push([b, c, d]);
+            }
+        }
+    }
+    m
+}
+
+/// A square in the xz plane from `-half` to `+half`, normal +y, subdivided
+/// `n x n` times (so scan conversion and radiosity get vertices inside).
+pub fn plane(half: f32, n: u32) -> Mesh {
+    let n = n.max(1);
+    let mut m = Mesh {
+        name: "plane".into(),
+        ..Mesh::default()
+    };
+    for j in 0..=n {
+        for i in 0..=n {
+            let (u, v) = (i as f32 / n as f32, j as f32 / n as f32);
+            m.positions.push(Vec3::new(
+                (2.0 * u - 1.0) * half,
+                0.0,
+                (2.0 * v - 1.0) * half,
+            ));
+            m.normals.push(Vec3::Y);
+            m.uvs.push(Vec2::new(u, v));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            let (b, c, d) = (a + 1, a + n + 1, a + n + 2);
+            m.indices.push([a, c, b]);
+            m.indices.push([b, c, d]);
+        }
+    }
+    m
+}
+
+/// A parallelogram `corner + s * edge_u + t * edge_v`, two triangles, front
+/// face along `edge_u x edge_v`.
+pub fn quad(corner: Vec3, edge_u: Vec3, edge_v: Vec3) -> Mesh {
+    let n = edge_u.cross(edge_v).normalize_or_zero();
+    Mesh {
+        name: "quad".into(),
+        positions: vec![
+            corner,
+            corner + edge_u,
+            corner + edge_u + edge_v,
+            corner + edge_v,
+        ],
+        normals: vec![n; 4],
+        uvs: vec![
+            Vec2::new(0.0, 1.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::ZERO,
+        ],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        ..Mesh::default()
+    }
+}
+
+/// A disk of `radius` in the xz plane, normal +y, with `segments` around.
+pub fn disk(radius: f32, segments: u32) -> Mesh {
+    let segments = segments.max(3);
+    let mut m = Mesh {
+        name: "disk".into(),
+        ..Mesh::default()
+    };
+    m.positions.push(Vec3::ZERO);
+    m.normals.push(Vec3::Y);
+    m.uvs.push(Vec2::splat(0.5));
+    for i in 0..segments {
+        let phi = i as f32 / segments as f32 * TAU;
+        let (s, c) = phi.sin_cos();
+        m.positions.push(Vec3::new(s * radius, 0.0, c * radius));
+        m.normals.push(Vec3::Y);
+        m.uvs.push(Vec2::new(0.5 + 0.5 * s, 0.5 + 0.5 * c));
+    }
+    for i in 0..segments {
+        m.indices.push([0, 1 + i, 1 + (i + 1) % segments]);
+    }
+    m
+}
+
+/// The unit cube `[-1, 1]^3`, 24 vertices so every face has its own normals and uvs.
+pub fn cube() -> Mesh {
+    let mut m = Mesh {
+        name: "box".into(),
+        ..Mesh::default()
+    };
+    let faces = [
+        (Vec3::X, Vec3::NEG_Z, Vec3::Y),
+        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::X, Vec3::NEG_Z),
+        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (Vec3::NEG_Z, Vec3::NEG_X, Vec3::Y),
+    ];
+    for (n, u, v) in faces {
+        let base = m.positions.len() as u32;
+        for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            m.positions.push(n + u * su + v * sv);
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(0.5 + 0.5 * su, 0.5 - 0.5 * sv));
+        }
+        m.indices.push([base, base + 1, base + 2]);
+        m.indices.push([base, base + 2, base + 3]);
+    }
+    m
+}
+
+/// A box with the given half extents centred at the origin.
+pub fn box_mesh(half: Vec3) -> Mesh {
+    let mut m = cube();
+    for p in &mut m.positions {
+        *p *= half;
+    }
+    m
+}
+
+/// A closed cylinder of `radius` from `y = 0` to `y = height`, with caps.
+pub fn cylinder(radius: f32, height: f32, segments: u32) -> Mesh {
+    let segments = segments.max(3);
+    let mut m = Mesh {
+        name: "cylinder".into(),
+        ..Mesh::default()
+    };
+    for i in 0..=segments {
+        let u = i as f32 / segments as f32;
+        let (s, c) = (u * TAU).sin_cos();
+        let n = Vec3::new(s, 0.0, c);
+        for (y, v) in [(0.0, 1.0), (height, 0.0)] {
+            m.positions.push(Vec3::new(s * radius, y, c * radius));
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(u, v));
+        }
+    }
+    for i in 0..segments {
+        let a = 2 * i;
+        m.indices.push([a, a + 2, a + 1]);
+        m.indices.push([a + 1, a + 2, a + 3]);
+    }
+    for (y, n) in [(0.0, Vec3::NEG_Y), (height, Vec3::Y)] {
+        let centre = m.positions.len() as u32;
+        m.positions.push(Vec3::new(0.0, y, 0.0));
+        m.normals.push(n);
+        m.uvs.push(Vec2::splat(0.5));
+        for i in 0..segments {
+            let (s, c) = (i as f32 / segments as f32 * TAU).sin_cos();
+            m.positions.push(Vec3::new(s * radius, y, c * radius));
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(0.5 + 0.5 * s, 0.5 + 0.5 * c));
+        }
+        for i in 0..segments {
+            let (a, b) = (centre + 1 + i, centre + 1 + (i + 1) % segments);
+            if n.y > 0.0 {
+                m.indices.push([centre, a, b])
+            } else {
+                m.indices.push([centre, b, a])
+            }
+        }
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::face_normal;
+
+    fn outward(m: &Mesh) {
+        for t in &m.indices {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            let centroid = (a + b + c) / 3.0;
+            let n = face_normal(a, b, c).expect("non-degenerate");
+            let avg_n =
+                (m.normals[t[0] as usize] + m.normals[t[1] as usize] + m.normals[t[2] as usize])
+                    .normalize();
+            assert!(
+                n.dot(avg_n) > 0.5,
+                "{} winding disagrees with normals at {centroid}",
+                m.name
+            );
+        }
+    }
+
+    #[test]
+    fn primitives_are_wound_outwards() {
+        outward(&uv_sphere(1.0, 12, 6));
+        outward(&plane(1.0, 3));
+        outward(&disk(1.0, 8));
+        outward(&cube());
+        outward(&cylinder(1.0, 2.0, 10));
+        outward(&quad(Vec3::ZERO, Vec3::X, Vec3::Y));
+    }
+}

@@ -1,0 +1,192 @@
+//! Sampling: seeded per-pixel generators and warps from the unit square to
+//! the shapes renderers sample, each with its pdf (named in sets:
+//! `sample_*` and `*_pdf`).
+//!
+//! Sources: pbrt-v4 `util/sampling.h`; Shirley and Chiu 1997 for the
+//! concentric disk map.
+
+use glam::{Vec2, Vec3};
+use rand::{RngExt, SeedableRng};
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
+
+/// The generator used by every technique: PCG32.
+pub type Rng = rand_pcg::Pcg32;
+
+/// SplitMix64 finaliser, used to hash seeds.
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The generator for pixel `(x, y)`, sample `sample`, under the scene seed:
+/// results never depend on the thread count or tile order.
+pub fn pixel_rng(seed: u64, x: u32, y: u32, sample: u32) -> Rng {
+    let key = mix64(
+        seed ^ mix64((u64::from(x) << 32) | u64::from(y))
+            ^ mix64(u64::from(sample).wrapping_add(0x51ED_2701)),
+    );
+    Rng::seed_from_u64(key)
+}
+
+/// A uniform number in `[0, 1)`.
+#[inline]
+pub fn uniform(rng: &mut Rng) -> f32 {
+    // 24 random bits: exactly representable, strictly below 1.
+    (rng.random::<u32>() >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+/// A uniform point in `[0, 1)^2`.
+#[inline]
+pub fn uniform2(rng: &mut Rng) -> Vec2 {
+    Vec2::new(uniform(rng), uniform(rng))
+}
+
+/// Concentric map from the square to the unit disk (Shirley and Chiu 1997).
+pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
+    let o = 2.0 * u - Vec2::ONE;
+    if o.x == 0.0 && o.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, theta) = if o.x.abs() > o.y.abs() {
+        (o.x, FRAC_PI_4 * (o.y / o.x))
+    } else {
+        (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
+    };
+    Vec2::new(r * theta.cos(), r * theta.sin())
+}
+
+/// Cosine-weighted direction about +z (local frame).
+pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = sample_concentric_disk(u);
+    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+    Vec3::new(d.x, d.y, z)
+}
+
+/// Pdf (per solid angle) of [`sample_cosine_hemisphere`]: `cos_theta / pi`.
+#[inline]
+pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
+    cos_theta.max(0.0) * FRAC_1_PI
+}
+
+/// Uniform direction on the unit sphere.
+pub fn sample_uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Pdf (per solid angle) of [`sample_uniform_sphere`]: `1 / (4 pi)`.
+#[inline]
+pub fn uniform_sphere_pdf() -> f32 {
+    0.25 * FRAC_1_PI
+}
+
+/// Uniform direction on the hemisphere about +z.
+pub fn sample_uniform_hemisphere(u: Vec2) -> Vec3 {
+    let z = u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Pdf (per solid angle) of [`sample_uniform_hemisphere`]: `1 / (2 pi)`.
+#[inline]
+pub fn uniform_hemisphere_pdf() -> f32 {
+    0.5 * FRAC_1_PI
+}
+
+/// Uniform barycentrics `(b0, b1)` on a triangle (b2 = 1 - b0 - b1),
+/// Heitz 2019's low-distortion map.
+pub fn sample_uniform_triangle(u: Vec2) -> Vec2 {
+    let (b0, b1);
+    if u.x < u.y {
+        b0 = u.x / 2.0;
+        b1 = u.y - b0;
+    } else {
+        b1 = u.y / 2.0;
+        b0 = u.x - b1;
+    }
+    Vec2::new(b0, b1)
+}
+
+/// Direction about +z distributed as the Phong lobe `(cos)^n`:
+/// pdf `(n + 1) / (2 pi) cos^n`.
+pub fn sample_phong_lobe(u: Vec2, n: f32) -> Vec3 {
+    let cos_t = u.x.powf(1.0 / (n + 1.0));
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+}
+
+/// Pdf (per solid angle) of [`sample_phong_lobe`].
+#[inline]
+pub fn phong_lobe_pdf(cos_t: f32, n: f32) -> f32 {
+    if cos_t <= 0.0 {
+        0.0
+    } else {
+        (n + 1.0) * 0.5 * FRAC_1_PI * cos_t.powf(n)
+    }
+}
+
+/// The power heuristic with beta = 2 (Veach 1997) for MIS.
+#[inline]
+pub fn power_heuristic(pdf_f: f32, pdf_g: f32) -> f32 {
+    let (f, g) = (pdf_f * pdf_f, pdf_g * pdf_g);
+    if f + g == 0.0 { 0.0 } else { f / (f + g) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rng_is_deterministic_per_pixel() {
+        let a: Vec<f32> = {
+            let mut r = pixel_rng(7, 3, 4, 0);
+            (0..4).map(|_| uniform(&mut r)).collect()
+        };
+        let b: Vec<f32> = {
+            let mut r = pixel_rng(7, 3, 4, 0);
+            (0..4).map(|_| uniform(&mut r)).collect()
+        };
+        let c: Vec<f32> = {
+            let mut r = pixel_rng(7, 4, 3, 0);
+            (0..4).map(|_| uniform(&mut r)).collect()
+        };
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+        assert!(a.iter().all(|&x| (0.0..1.0).contains(&x)));
+    }
+
+    #[test]
+    fn warps_land_on_their_shapes() {
+        let mut r = pixel_rng(1, 0, 0, 0);
+        for _ in 0..1000 {
+            let u = uniform2(&mut r);
+            assert!(sample_concentric_disk(u).length() <= 1.0 + 1e-6);
+            let h = sample_cosine_hemisphere(u);
+            assert!(h.z >= 0.0 && (h.length() - 1.0).abs() < 1e-5);
+            assert!((sample_uniform_sphere(u).length() - 1.0).abs() < 1e-5);
+            let b = sample_uniform_triangle(u);
+            assert!(b.x >= 0.0 && b.y >= 0.0 && b.x + b.y <= 1.0 + 1e-6);
+        }
+    }
+
+    #[test]
+    fn cosine_hemisphere_mean_cos_is_two_thirds() {
+        // E[cos] under pdf cos/pi is 2/3.
+        let k = 256;
+        let mut s = 0.0;
+        for i in 0..k {
+            for j in 0..k {
+                let u = Vec2::new((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32);
+                s += sample_cosine_hemisphere(u).z;
+            }
+        }
+        assert!((s / (k * k) as f32 - 2.0 / 3.0).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,327 @@
+//! Render settings: which technique, the image size, and the options of each
+//! technique. Every struct has defaults and round-trips through serde, so a
+//! render can be reproduced from its saved settings, and `--set key=value`
+//! can address any field by its dotted path (`shadow_map.resolution`).
+
+use super::TransparencyMode;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// Largest accepted image width or height.
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+/// Largest accepted pixel count (width * height): 64 Mpixel, about 1.8 GB of film.
+pub const MAX_IMAGE_PIXELS: u64 = 8192 * 8192;
+/// Largest accepted samples per pixel.
+pub const MAX_SAMPLES: u32 = 1 << 16;
+
+/// A complete way of making a picture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Technique {
+    /// Ray-cast eye-light preview: no shadows, camera-headlight shading.
+    Preview,
+    /// Scan conversion, one illumination per polygon.
+    Flat,
+    /// Scan conversion, illumination at vertices, colours interpolated.
+    Gouraud,
+    /// Scan conversion, normals interpolated, illumination per pixel.
+    #[default]
+    Phong,
+    /// Whitted recursive ray tracing.
+    Whitted,
+    /// Radiosity solved on patches, displayed by Gouraud scan conversion.
+    Radiosity,
+    /// Radiosity for diffuse interreflection plus Whitted ray tracing.
+    Hybrid,
+    /// The unbiased path-traced reference.
+    Path,
+}
+
+impl Technique {
+    /// Every technique, in the order they are listed to users.
+    pub const ALL: [Technique; 8] = [
+        Technique::Preview,
+        Technique::Flat,
+        Technique::Gouraud,
+        Technique::Phong,
+        Technique::Whitted,
+        Technique::Radiosity,
+        Technique::Hybrid,
+        Technique::Path,
+    ];
+
+    /// The name used on the command line and in scene files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Technique::Preview => "preview",
+            Technique::Flat => "flat",
+            Technique::Gouraud => "gouraud",
+            Technique::Phong => "phong",
+            Technique::Whitted => "whitted",
+            Technique::Radiosity => "radiosity",
+            Technique::Hybrid => "hybrid",
+            Technique::Path => "path",
+        }
+    }
+
+    /// Parses a technique name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|t| t.name() == name)
+    }
+}
+
+/// How the scan converter shades a polygon.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShadeMode {
+    /// Constant shading with the face normal.
+    Flat,
+    /// Illumination at vertices, interpolated colours.
+    Gouraud,
+    /// Interpolated normals, illumination per pixel.
+    Phong,
+}
+
+/// How the visibility of a light sample is decided.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShadowMethod {
+    /// Every light sample is visible.
+    None,
+    /// Shadow z-buffers (two-pass z-buffer).
+    Map,
+    /// Crow's shadow volumes with a stencil count.
+    Volume,
+    /// Shadow rays (ray tracers; the scan converter may use them too).
+    #[default]
+    Ray,
+    /// Atherton-Weiler-Greenberg object-precision shadows.
+    Object,
+    /// Bouknight-Kelley scan-line shadows.
+    Scanline,
+}
+
+/// Anti-aliasing strategy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum AaMode {
+    /// `samples` stratified samples per pixel, box-filtered.
+    #[default]
+    Supersample,
+    /// Whitted's adaptive supersampling (ray tracers).
+    Adaptive,
+    /// One sample per pixel, then an edge-aware post filter.
+    Post,
+}
+
+/// Tone mapping applied when writing low-dynamic-range images.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ToneMap {
+    /// Clamp to `[0, 1]`.
+    #[default]
+    Clamp,
+    /// Reinhard `x / (1 + x)`.
+    Reinhard,
+    /// A filmic curve (ACES fit by Narkowicz 2015).
+    Filmic,
+}
+
+/// Depth cueing: blend towards `color` with distance from the eye.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DepthCue {
+    /// The cue colour reached at `far`.
+    pub color: Vec3,
+    /// Distance where cueing starts (scale `max_scale`).
+    pub near: f32,
+    /// Distance where cueing ends (scale `min_scale`).
+    pub far: f32,
+    /// Fraction of the shaded colour kept at `near`.
+    pub max_scale: f32,
+    /// Fraction of the shaded colour kept at `far`.
+    pub min_scale: f32,
+}
+
+impl Default for DepthCue {
+    fn default() -> Self {
+        Self {
+            color: Vec3::ZERO,
+            near: 0.0,
+            far: 100.0,
+            max_scale: 1.0,
+            min_scale: 0.0,
+        }
+    }
+}
+
+/// Options of shadow z-buffers.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ShadowMapSettings {
+    /// Side of each shadow map (or cube face) in texels.
+    pub resolution: u32,
+    /// Constant depth bias, in shadow-map texels.
+    pub bias: f32,
+    /// Slope-scaled bias factor.
+    pub slope_bias: f32,
+    /// Percentage-closer filter radius in texels (0 = a single test).
+    pub pcf_radius: u32,
+}
+
+impl Default for ShadowMapSettings {
+    fn default() -> Self {
+        Self {
+            resolution: 2048,
+            bias: 1.0,
+            slope_bias: 2.0,
+            pcf_radius: 1,
+        }
+    }
+}
+
+/// Options of the Whitted ray tracer.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WhittedSettings {
+    /// Maximum recursion depth (0 = local shading at the first hit only).
+    pub max_depth: u32,
+    /// Rays whose accumulated weight falls below this are not traced.
+    pub min_weight: f32,
+    /// Adaptive supersampling: subdivide where corner colours differ by more.
+    pub adaptive_threshold: f32,
+    /// Adaptive supersampling: maximum subdivision depth.
+    pub adaptive_max_depth: u32,
+}
+
+impl Default for WhittedSettings {
+    fn default() -> Self {
+        Self {
+            max_depth: 6,
+            min_weight: 1e-3,
+            adaptive_threshold: 0.05,
+            adaptive_max_depth: 3,
+        }
+    }
+}
+
+/// Options of the path tracer.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PathSettings {
+    /// Maximum path length in bounces (1 = direct light only).
+    pub max_depth: u32,
+    /// Russian roulette starts at this depth.
+    pub rr_depth: u32,
+}
+
+impl Default for PathSettings {
+    fn default() -> Self {
+        Self {
+            max_depth: 8,
+            rr_depth: 3,
+        }
+    }
+}
+
+/// Options of the radiosity solver.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RadiositySettings {
+    /// `jacobi`, `gauss-seidel`, `progressive` or `hierarchical`.
+    pub solver: String,
+    /// `hemicube`, `raycast` or `analytic`.
+    pub formfactor: String,
+    /// Largest patch edge, scene units (0 = choose from the scene size).
+    pub patch_size: f32,
+    /// Hemicube resolution (pixels on the top face's side).
+    pub hemicube_resolution: u32,
+    /// Stop when the unshot energy (or residual) falls below this fraction.
+    pub tolerance: f32,
+    /// Iteration cap.
+    pub max_iterations: u32,
+}
+
+impl Default for RadiositySettings {
+    fn default() -> Self {
+        Self {
+            solver: "progressive".into(),
+            formfactor: "raycast".into(),
+            patch_size: 0.0,
+            hemicube_resolution: 128,
+            tolerance: 0.01,
+            max_iterations: 100_000,
+        }
+    }
+}
+
+/// Everything that decides how a scene is rendered.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RenderSettings {
+    /// The technique.
+    pub technique: Technique,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Samples per pixel (supersampling or path samples).
+    pub samples: u32,
+    /// Seed of every random number (per pixel and sample).
+    pub seed: u64,
+    /// Light visibility for the local techniques and the ray tracers.
+    pub shadows: ShadowMethod,
+    /// Overrides every material's transparency mode when set.
+    pub transparency: Option<TransparencyMode>,
+    /// Anti-aliasing strategy.
+    pub aa: AaMode,
+    /// Samples per area light per shading point.
+    pub light_samples: u32,
+    /// Depth cueing, off when absent.
+    pub depth_cue: Option<DepthCue>,
+    /// Tone mapping for 8-bit output.
+    pub tonemap: ToneMap,
+    /// Exposure in stops applied before tone mapping.
+    pub exposure: f32,
+    /// Back-face culling for closed meshes.
+    pub cull_backfaces: bool,
+    /// Shadow map options.
+    pub shadow_map: ShadowMapSettings,
+    /// Whitted options.
+    pub whitted: WhittedSettings,
+    /// Path tracer options.
+    pub path: PathSettings,
+    /// Radiosity options.
+    pub radiosity: RadiositySettings,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            technique: Technique::Phong,
+            width: 640,
+            height: 480,
+            samples: 1,
+            seed: 0,
+            shadows: ShadowMethod::Ray,
+            transparency: None,
+            aa: AaMode::Supersample,
+            light_samples: 16,
+            depth_cue: None,
+            tonemap: ToneMap::Clamp,
+            exposure: 0.0,
+            cull_backfaces: true,
+            shadow_map: ShadowMapSettings::default(),
+            whitted: WhittedSettings::default(),
+            path: PathSettings::default(),
+            radiosity: RadiositySettings::default(),
+        }
+    }
+}
+
+impl RenderSettings {
+    /// Width over height.
+    pub fn aspect(&self) -> f32 {
+        self.width as f32 / self.height.max(1) as f32
+    }
+}

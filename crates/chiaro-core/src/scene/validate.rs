@@ -1,0 +1,396 @@
+//! `Scene::validate`: every problem in a scene, not only the first.
+
+use super::{
+    AreaShape, Geometry, Light, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, Scene, Texture,
+};
+use glam::Vec3;
+use std::fmt;
+
+/// How bad an [`Issue`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Severity {
+    /// The scene renders, but probably not as meant.
+    Warning,
+    /// The scene cannot be rendered.
+    Error,
+}
+
+/// One problem found in a scene. `path` names the item (`objects[3].material`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Issue {
+    /// Warning or error.
+    pub severity: Severity,
+    /// Where in the scene, as a path of fields and indices.
+    pub path: String,
+    /// What is wrong and what was expected.
+    pub message: String,
+}
+
+impl fmt::Display for Issue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let sev = match self.severity {
+            Severity::Warning => "warning",
+            Severity::Error => "error",
+        };
+        write!(f, "{sev}: {}: {}", self.path, self.message)
+    }
+}
+
+struct Checker {
+    issues: Vec<Issue>,
+}
+
+impl Checker {
+    fn error(&mut self, path: impl Into<String>, message: impl Into<String>) {
+        self.issues.push(Issue {
+            severity: Severity::Error,
+            path: path.into(),
+            message: message.into(),
+        });
+    }
+    fn warn(&mut self, path: impl Into<String>, message: impl Into<String>) {
+        self.issues.push(Issue {
+            severity: Severity::Warning,
+            path: path.into(),
+            message: message.into(),
+        });
+    }
+    fn finite(&mut self, path: &str, v: Vec3) {
+        if !v.is_finite() {
+            self.error(path, format!("expected finite numbers, got {v}"));
+        }
+    }
+    fn non_negative(&mut self, path: &str, v: Vec3) {
+        self.finite(path, v);
+        if v.min_element() < 0.0 {
+            self.error(path, format!("expected values >= 0, got {v}"));
+        }
+    }
+    fn positive_scalar(&mut self, path: &str, x: f32) {
+        if !(x.is_finite() && x > 0.0) {
+            self.error(path, format!("expected a finite number > 0, got {x}"));
+        }
+    }
+}
+
+impl Scene {
+    /// Checks the whole scene and returns every problem found (empty when
+    /// the scene is fine). Errors make a scene unrenderable; warnings do not.
+    pub fn validate(&self) -> Vec<Issue> {
+        let mut c = Checker { issues: Vec::new() };
+        let r = &self.render;
+        if r.width == 0 || r.height == 0 {
+            c.error(
+                "render",
+                format!(
+                    "image size must be at least 1x1, got {}x{}",
+                    r.width, r.height
+                ),
+            );
+        } else if r.width > MAX_IMAGE_SIDE
+            || r.height > MAX_IMAGE_SIDE
+            || u64::from(r.width) * u64::from(r.height) > MAX_IMAGE_PIXELS
+        {
+            c.error(
+                "render",
+                format!(
+                    "image size {}x{} exceeds the limit ({MAX_IMAGE_SIDE} per side, {MAX_IMAGE_PIXELS} pixels)",
+                    r.width, r.height
+                ),
+            );
+        }
+        if r.samples == 0 || r.samples > MAX_SAMPLES {
+            c.error(
+                "render.samples",
+                format!("expected 1..={MAX_SAMPLES}, got {}", r.samples),
+            );
+        }
+        if !r.exposure.is_finite() {
+            c.error("render.exposure", "expected a finite number");
+        }
+
+        let cam = &self.camera;
+        c.finite("camera.eye", cam.eye);
+        c.finite("camera.look_at", cam.look_at);
+        c.finite("camera.up", cam.up);
+        if !(cam.fov_y_degrees > 0.0 && cam.fov_y_degrees < 180.0) {
+            c.error(
+                "camera.fov",
+                format!("expected 0 < fov < 180 degrees, got {}", cam.fov_y_degrees),
+            );
+        }
+        if (cam.look_at - cam.eye).length_squared() == 0.0 {
+            c.error("camera", "eye and look_at are the same point");
+        }
+        if !(cam.near > 0.0 && cam.far > cam.near && cam.far.is_finite()) {
+            c.error(
+                "camera",
+                format!(
+                    "expected 0 < near < far, got near {} far {}",
+                    cam.near, cam.far
+                ),
+            );
+        }
+
+        let ntex = self.textures.len();
+        let check_tex = |c: &mut Checker, path: String, t: Option<super::TextureId>| {
+            if let Some(t) = t {
+                if t.index() >= ntex {
+                    c.error(
+                        path,
+                        format!("texture index {} out of range ({} textures)", t.0, ntex),
+                    );
+                }
+            }
+        };
+
+        for (i, m) in self.materials.iter().enumerate() {
+            let p = format!("materials[{i}] ({})", m.name);
+            c.non_negative(&format!("{p}.ambient"), m.ambient);
+            c.non_negative(&format!("{p}.diffuse"), m.diffuse);
+            c.non_negative(&format!("{p}.specular"), m.specular);
+            c.non_negative(&format!("{p}.reflect"), m.reflect);
+            c.non_negative(&format!("{p}.transmit"), m.transmit);
+            c.non_negative(&format!("{p}.emission"), m.emission);
+            c.non_negative(&format!("{p}.absorption"), m.absorption);
+            if !(m.shininess.is_finite() && m.shininess >= 0.0) {
+                c.error(
+                    format!("{p}.shininess"),
+                    format!("expected a finite number >= 0, got {}", m.shininess),
+                );
+            }
+            c.positive_scalar(&format!("{p}.ior"), m.ior);
+            if !(m.roughness.is_finite() && m.roughness > 0.0 && m.roughness <= 1.0) {
+                c.error(
+                    format!("{p}.roughness"),
+                    format!("expected 0 < roughness <= 1, got {}", m.roughness),
+                );
+            }
+            if m.diffuse.max_element() > 1.0 {
+                c.warn(format!("{p}.diffuse"), "an albedo above 1 creates energy");
+            }
+            if (m.diffuse + m.reflect + m.transmit).max_element() > 1.0 + 1e-4 {
+                c.warn(format!("{p}"), "diffuse + reflect + transmit exceeds 1: the surface creates energy in the ray tracers");
+            }
+            check_tex(&mut c, format!("{p}.texture"), m.texture);
+            check_tex(&mut c, format!("{p}.normal_map"), m.normal_map);
+            check_tex(&mut c, format!("{p}.emission_texture"), m.emission_texture);
+            if let Some(b) = m.bump {
+                check_tex(&mut c, format!("{p}.bump"), Some(b.texture));
+                if !b.height.is_finite() {
+                    c.error(format!("{p}.bump.height"), "expected a finite number");
+                }
+            }
+        }
+
+        for (i, t) in self.textures.iter().enumerate() {
+            if let Texture::Image(img) = t {
+                if img.width == 0
+                    || img.height == 0
+                    || img.texels.len() != (img.width as usize * img.height as usize)
+                {
+                    c.error(
+                        format!("textures[{i}] ({})", img.source),
+                        "image has no texels or a wrong texel count",
+                    );
+                }
+            }
+        }
+
+        for (i, mesh) in self.meshes.iter().enumerate() {
+            let p = format!("meshes[{i}] ({})", mesh.name);
+            let n = mesh.positions.len();
+            if mesh.positions.iter().any(|v| !v.is_finite()) {
+                c.error(
+                    format!("{p}.positions"),
+                    "a vertex position is NaN or infinite",
+                );
+            }
+            for (name, len) in [
+                ("normals", mesh.normals.len()),
+                ("uvs", mesh.uvs.len()),
+                ("tangents", mesh.tangents.len()),
+                ("colors", mesh.colors.len()),
+            ] {
+                if len != 0 && len != n {
+                    c.error(
+                        format!("{p}.{name}"),
+                        format!("expected 0 or {n} entries, got {len}"),
+                    );
+                }
+            }
+            if mesh.normals.iter().any(|v| !v.is_finite())
+                || mesh.uvs.iter().any(|v| !v.is_finite())
+            {
+                c.error(format!("{p}"), "a normal or uv is NaN or infinite");
+            }
+            if let Some((t, tri)) = mesh
+                .indices
+                .iter()
+                .enumerate()
+                .find(|(_, t)| t.iter().any(|&k| k as usize >= n))
+            {
+                c.error(
+                    format!("{p}.indices[{t}]"),
+                    format!("vertex index out of range in {tri:?} ({n} vertices)"),
+                );
+            }
+            let degenerate = mesh
+                .indices
+                .iter()
+                .filter(|t| {
+                    t.iter().all(|&k| (k as usize) < n) && {
+                        let [a, b, cc] = t.map(|k| mesh.positions[k as usize]);
+                        (b - a).cross(cc - a).length_squared() == 0.0
+                    }
+                })
+                .count();
+            if degenerate > 0 {
+                c.warn(
+                    format!("{p}"),
+                    format!("{degenerate} zero-area triangle(s) will not be drawn"),
+                );
+            }
+            if !mesh.face_materials.is_empty() && mesh.face_materials.len() != mesh.indices.len() {
+                c.error(
+                    format!("{p}.face_materials"),
+                    format!(
+                        "expected 0 or {} entries, got {}",
+                        mesh.indices.len(),
+                        mesh.face_materials.len()
+                    ),
+                );
+            }
+            if let Some(m) = mesh
+                .face_materials
+                .iter()
+                .find(|m| m.index() >= self.materials.len())
+            {
+                c.error(
+                    format!("{p}.face_materials"),
+                    format!(
+                        "material index {} out of range ({} materials)",
+                        m.0,
+                        self.materials.len()
+                    ),
+                );
+            }
+        }
+
+        for (i, o) in self.objects.iter().enumerate() {
+            let p = format!("objects[{i}] ({})", o.name);
+            if o.material.index() >= self.materials.len() {
+                c.error(
+                    format!("{p}.material"),
+                    format!(
+                        "material index {} out of range ({} materials)",
+                        o.material.0,
+                        self.materials.len()
+                    ),
+                );
+            }
+            match o.geometry {
+                Geometry::Mesh(m) if m.index() >= self.meshes.len() => {
+                    c.error(
+                        format!("{p}.mesh"),
+                        format!(
+                            "mesh index {} out of range ({} meshes)",
+                            m.0,
+                            self.meshes.len()
+                        ),
+                    );
+                }
+                Geometry::Sphere { radius } => c.positive_scalar(&format!("{p}.radius"), radius),
+                Geometry::Mesh(_) => {}
+            }
+            let m = o.transform.world_from_object();
+            if !m.is_finite() {
+                c.error(
+                    format!("{p}.transform"),
+                    "transform has NaN or infinite entries",
+                );
+            } else if m.determinant().abs() < 1e-20 {
+                c.error(
+                    format!("{p}.transform"),
+                    "transform is singular (a scale of 0?)",
+                );
+            }
+        }
+
+        for (i, l) in self.lights.iter().enumerate() {
+            let p = format!("lights[{i}] ({})", l.kind());
+            c.non_negative(&format!("{p}.color"), l.power_rgb());
+            match l {
+                Light::Point { position, .. } => c.finite(&format!("{p}.position"), *position),
+                Light::Directional { direction, .. } => {
+                    c.finite(&format!("{p}.direction"), *direction);
+                    if direction.length_squared() == 0.0 {
+                        c.error(format!("{p}.direction"), "direction is the zero vector");
+                    }
+                }
+                Light::Spot(s) => {
+                    c.finite(&format!("{p}.position"), s.position);
+                    c.finite(&format!("{p}.direction"), s.direction);
+                    if s.direction.length_squared() == 0.0 {
+                        c.error(format!("{p}.direction"), "direction is the zero vector");
+                    }
+                    if !(s.cone_degrees > 0.0 && s.cone_degrees <= 180.0) {
+                        c.error(
+                            format!("{p}.cone"),
+                            format!("expected 0 < cone <= 180 degrees, got {}", s.cone_degrees),
+                        );
+                    }
+                    if !(s.exponent.is_finite() && s.exponent >= 0.0) {
+                        c.error(format!("{p}.exponent"), "expected a finite number >= 0");
+                    }
+                }
+                Light::Area { shape, .. } => {
+                    if !(shape.area().is_finite() && shape.area() > 0.0) {
+                        c.error(
+                            format!("{p}.shape"),
+                            "area light has zero or non-finite area",
+                        );
+                    }
+                    if let AreaShape::Disk { normal, .. } = shape {
+                        if normal.length_squared() == 0.0 {
+                            c.error(format!("{p}.normal"), "normal is the zero vector");
+                        }
+                    }
+                }
+                Light::Ambient { .. } => {}
+            }
+        }
+        if let Some(env) = &self.environment {
+            check_tex(&mut c, "environment".into(), Some(env.texture));
+        }
+        c.issues
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+
+    #[test]
+    fn reports_every_problem() {
+        let mut s = Scene::default();
+        s.render.width = 0;
+        s.camera.fov_y_degrees = 200.0;
+        s.objects.push(Object {
+            material: MaterialId(3),
+            geometry: Geometry::Mesh(MeshId(9)),
+            ..Default::default()
+        });
+        let issues = s.validate();
+        let errors = issues
+            .iter()
+            .filter(|i| i.severity == Severity::Error)
+            .count();
+        assert!(errors >= 4, "{issues:#?}");
+    }
+
+    #[test]
+    fn default_scene_is_valid() {
+        assert!(Scene::default().validate().is_empty());
+    }
+}

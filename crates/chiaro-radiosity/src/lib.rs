@@ -1,0 +1,1 @@
+//! Radiosity for chiaro: patches, form factors, solvers, view-independent solutions.

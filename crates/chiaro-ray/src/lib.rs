@@ -1,0 +1,1 @@
+//! Ray tracing for chiaro: Whitted recursive ray tracing and the path-traced reference.

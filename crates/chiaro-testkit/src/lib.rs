@@ -1,0 +1,1 @@
+//! Test support for chiaro: approximate comparisons, image diffs, analytic scenes.

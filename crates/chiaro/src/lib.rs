@@ -1,0 +1,1 @@
+//! The chiaro facade: every technique behind one render() entry point, and compare().
