@@ -5,7 +5,7 @@
 
 use crate::geometry::normals::{tangents, vertex_normals};
 use crate::geometry::{Aabb, Ray, face_normal, primitives};
-use crate::scene::{Geometry, Material, MaterialId, Scene, Texture};
+use crate::scene::{AreaShape, Geometry, Light, Material, MaterialId, Scene, Texture};
 use crate::shading::SurfaceMaterial;
 use crate::shading::texture::bilinear;
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
@@ -71,6 +71,10 @@ pub struct PreparedScene<'s> {
     pub spheres: Vec<PreparedSphere>,
     /// Triangles whose material emits.
     pub emissive_triangles: Vec<u32>,
+    /// The lights every technique uses: the scene's lights followed by one
+    /// [`AreaShape::Triangle`] area light per emissive triangle (radiance =
+    /// the material's emission, one-sided unless the material is two-sided).
+    pub lights: Vec<Light>,
     /// World-space bounds of everything.
     pub bounds: Aabb,
 }
@@ -115,6 +119,7 @@ impl<'s> PreparedScene<'s> {
             tri_object: Vec::new(),
             spheres: Vec::new(),
             emissive_triangles: Vec::new(),
+            lights: scene.lights.clone(),
             bounds: Aabb::EMPTY,
         };
         for (oi, obj) in scene.objects.iter().enumerate() {
@@ -153,6 +158,13 @@ impl<'s> PreparedScene<'s> {
         ps.emissive_triangles = (0..ps.triangles.len() as u32)
             .filter(|&t| ps.material(ps.tri_material[t as usize]).is_emissive())
             .collect();
+        for &t in &ps.emissive_triangles {
+            let [a, b, c] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+            let m = ps.material(ps.tri_material[t as usize]);
+            if crate::geometry::face_normal(a, b, c).is_some() {
+                ps.lights.push(Light::Area { shape: AreaShape::Triangle { a, b, c }, color: m.emission, intensity: 1.0, two_sided: m.two_sided });
+            }
+        }
         ps
     }
 

@@ -1,1 +1,135 @@
-//! The chiaro facade: every technique behind one render() entry point, and compare().
+//! chiaro: one scene, every classic illumination and shading technique.
+//!
+//! This crate is the facade the CLI, the Python module and the web viewer
+//! use. It re-exports the scene model and offers one entry point,
+//! [`render`], which dispatches a scene to the technique its settings name,
+//! plus [`settings::apply_override`] for `--set key=value`.
+//!
+//! ```
+//! use chiaro::scene::{Scene, Material, Object, Geometry, Technique};
+//! use chiaro::progress::NoProgress;
+//!
+//! let mut scene = Scene::default();
+//! scene.add_material(Material::diffuse("white", chiaro::Vec3::splat(0.8)));
+//! scene.objects.push(Object { geometry: Geometry::Sphere { radius: 1.0 }, ..Default::default() });
+//! let mut settings = scene.render.clone();
+//! settings.technique = Technique::Preview;
+//! settings.width = 16;
+//! settings.height = 16;
+//! let film = chiaro::render(&scene, &settings, &NoProgress).unwrap();
+//! assert!(film.get(8, 8).x > 0.5);
+//! ```
+
+pub mod settings;
+
+pub use chiaro_core::film::{self, Film};
+pub use chiaro_core::progress::{self, NoProgress, Progress};
+pub use chiaro_core::scene::{self, RenderSettings, Scene, Technique};
+pub use chiaro_core::{Vec2, Vec3};
+pub use chiaro_io as io;
+
+use chiaro_core::accel::list::ListAccel;
+use chiaro_core::accel::Accelerator;
+use chiaro_core::error::CoreError;
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::scene::Severity;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Anything that can go wrong between a file and a picture.
+#[derive(Debug, Error)]
+pub enum Error {
+    /// A scene or settings problem, or a technique refusing the scene.
+    #[error(transparent)]
+    Core(#[from] CoreError),
+    /// A file could not be read or written.
+    #[error(transparent)]
+    Io(#[from] chiaro_io::IoError),
+}
+
+/// Result with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// The techniques this build can render, in the order they are listed.
+pub fn available_techniques() -> &'static [Technique] {
+    &[Technique::Preview]
+}
+
+/// Statistics of one render.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RenderStats {
+    /// Wall-clock time of the render (excluding file I/O).
+    pub elapsed: Duration,
+    /// Triangles in the prepared scene.
+    pub triangles: u64,
+    /// Rays traced, where the technique counts them (0 otherwise).
+    pub rays: u64,
+}
+
+/// Checks that `settings` can be rendered by this build: the technique
+/// exists, and the image size and sample count are within limits.
+pub fn check_settings(settings: &RenderSettings) -> Result<(), CoreError> {
+    if !available_techniques().contains(&settings.technique) {
+        return Err(CoreError::UnknownTechnique {
+            name: settings.technique.name().into(),
+            available: technique_list(),
+        });
+    }
+    let mut probe = Scene::default();
+    probe.render = settings.clone();
+    let issues: Vec<String> = probe
+        .validate()
+        .into_iter()
+        .filter(|i| i.severity == Severity::Error && i.path.starts_with("render"))
+        .map(|i| i.to_string())
+        .collect();
+    if issues.is_empty() { Ok(()) } else { Err(CoreError::InvalidScene { issues }) }
+}
+
+/// The names of [`available_techniques`], comma separated.
+pub fn technique_list() -> String {
+    available_techniques().iter().map(|t| t.name()).collect::<Vec<_>>().join(", ")
+}
+
+/// The accelerator used by the ray-based techniques.
+fn accelerator(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+    Box::new(ListAccel::new(p))
+}
+
+/// Renders `scene` with `settings` (which override `scene.render`), reporting
+/// to `progress`. The scene is validated first: every error found is
+/// reported at once.
+pub fn render(scene: &Scene, settings: &RenderSettings, progress: &dyn Progress) -> Result<Film> {
+    render_with_stats(scene, settings, progress).map(|(f, _)| f)
+}
+
+/// [`render`], also returning [`RenderStats`].
+pub fn render_with_stats(scene: &Scene, settings: &RenderSettings, progress: &dyn Progress) -> Result<(Film, RenderStats)> {
+    check_settings(settings)?;
+    let mut scene_checked = scene.clone();
+    scene_checked.render = settings.clone();
+    let errors: Vec<String> =
+        scene_checked.validate().into_iter().filter(|i| i.severity == Severity::Error).map(|i| i.to_string()).collect();
+    if !errors.is_empty() {
+        return Err(CoreError::InvalidScene { issues: errors }.into());
+    }
+    let start = Instant::now();
+    let film = match settings.technique {
+        Technique::Preview => chiaro_ray::preview::render_with(scene, settings, progress, &accelerator)?,
+        other => {
+            return Err(CoreError::UnknownTechnique { name: other.name().into(), available: technique_list() }.into());
+        }
+    };
+    let stats = RenderStats {
+        elapsed: start.elapsed(),
+        triangles: scene.triangle_count() as u64,
+        rays: 0,
+    };
+    debug_assert!(film.is_clean());
+    Ok((film, stats))
+}
+
+/// World-space bounds of everything in the scene.
+pub fn scene_bounds(scene: &Scene) -> chiaro_core::geometry::Aabb {
+    PreparedScene::new(scene, chiaro_core::prepared::PrepareOptions { analytic_spheres: true, ..Default::default() }).bounds
+}

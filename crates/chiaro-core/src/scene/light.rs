@@ -88,6 +88,10 @@ pub enum AreaShape {
     },
     /// Sphere emitting outwards.
     Sphere { center: Vec3, radius: f32 },
+    /// Triangle `(a, b, c)`, normal `(b - a) x (c - a)` normalised. Emissive
+    /// mesh triangles become lights of this shape in
+    /// [`crate::prepared::PreparedScene::lights`].
+    Triangle { a: Vec3, b: Vec3, c: Vec3 },
 }
 
 impl AreaShape {
@@ -97,6 +101,7 @@ impl AreaShape {
             AreaShape::Quad { edge_u, edge_v, .. } => edge_u.cross(edge_v).length(),
             AreaShape::Disk { radius, .. } => std::f32::consts::PI * radius * radius,
             AreaShape::Sphere { radius, .. } => 4.0 * std::f32::consts::PI * radius * radius,
+            AreaShape::Triangle { a, b, c } => 0.5 * (b - a).cross(c - a).length(),
         }
     }
 
@@ -109,6 +114,7 @@ impl AreaShape {
                 edge_v,
             } => corner + 0.5 * (edge_u + edge_v),
             AreaShape::Disk { center, .. } | AreaShape::Sphere { center, .. } => center,
+            AreaShape::Triangle { a, b, c } => (a + b + c) / 3.0,
         }
     }
 }

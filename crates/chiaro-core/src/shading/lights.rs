@@ -153,6 +153,15 @@ fn sample_area(
         AreaShape::Sphere { center, radius } => {
             return sample_sphere_cone(center, radius, le, p, u);
         }
+        AreaShape::Triangle { a, b, c } => {
+            let bary = crate::sampling::sample_uniform_triangle(u);
+            let cr = (b - a).cross(c - a);
+            let area2 = cr.length();
+            if area2 <= 0.0 {
+                return None;
+            }
+            (a * bary.x + b * bary.y + c * (1.0 - bary.x - bary.y), cr / area2, 0.5 * area2)
+        }
     };
     let d = q - p;
     let dist2 = d.length_squared();
