@@ -1,6 +1,8 @@
 //! Ray acceleration: the [`Accelerator`] trait, the brute-force
-//! [`list::ListAccel`] (the test oracle), and the BVH.
+//! [`list::ListAccel`] (the test oracle), and the BVH ([`bvh::Bvh`], with the
+//! scene-level [`bvh::SceneBvh`]).
 
+pub mod bvh;
 pub mod list;
 
 use crate::geometry::Ray;
@@ -39,56 +41,107 @@ pub fn intersect_triangle(
     p1: glam::Vec3,
     p2: glam::Vec3,
 ) -> Option<(f32, f32, f32)> {
-    let d = ray.dir;
-    // Permute so that z is the largest direction component.
-    let kz = d.abs().max_position();
-    let mut kx = (kz + 1) % 3;
-    let mut ky = (kx + 1) % 3;
-    if d[kz] < 0.0 {
-        std::mem::swap(&mut kx, &mut ky);
+    WatertightRay::new(ray).intersect(p0, p1, p2)
+}
+
+/// The per-ray part of the watertight ray-triangle test (Woop, Benthin and
+/// Wald 2013, "Watertight Ray/Triangle Intersection", JCGT 2(1)): the axis
+/// permutation and shear, computed once per ray and reused for every
+/// triangle it meets. [`intersect_triangle`] is `WatertightRay::new(ray)
+/// .intersect(..)`, so both give bit-identical answers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WatertightRay {
+    /// Ray origin.
+    pub origin: glam::Vec3,
+    /// Accepted parameter range `(t_min, t_max)`.
+    pub t_min: f32,
+    /// See `t_min`.
+    pub t_max: f32,
+    kx: usize,
+    ky: usize,
+    kz: usize,
+    sx: f32,
+    sy: f32,
+    sz: f32,
+}
+
+impl WatertightRay {
+    /// Precomputes the shear of `ray` (any non-zero direction).
+    #[inline]
+    pub fn new(ray: &Ray) -> Self {
+        let d = ray.dir;
+        // Permute so that z is the largest direction component.
+        let kz = d.abs().max_position();
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = 1.0 / d[kz];
+        Self {
+            origin: ray.origin,
+            t_min: ray.t_min,
+            t_max: ray.t_max,
+            kx,
+            ky,
+            kz,
+            sx: d[kx] * sz,
+            sy: d[ky] * sz,
+            sz,
+        }
     }
-    let sz = 1.0 / d[kz];
-    let sx = d[kx] * sz;
-    let sy = d[ky] * sz;
-    let a = p0 - ray.origin;
-    let b = p1 - ray.origin;
-    let c = p2 - ray.origin;
-    let ax = a[kx] - sx * a[kz];
-    let ay = a[ky] - sy * a[kz];
-    let bx = b[kx] - sx * b[kz];
-    let by = b[ky] - sy * b[kz];
-    let cx = c[kx] - sx * c[kz];
-    let cy = c[ky] - sy * c[kz];
-    let mut u = cx * by - cy * bx;
-    let mut v = ax * cy - ay * cx;
-    let mut w = bx * ay - by * ax;
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        // Recompute in double precision on edges (the paper's fallback).
-        let (cxd, cyd, bxd, byd, axd, ayd) = (
-            cx as f64, cy as f64, bx as f64, by as f64, ax as f64, ay as f64,
-        );
-        u = (cxd * byd - cyd * bxd) as f32;
-        v = (axd * cyd - ayd * cxd) as f32;
-        w = (bxd * ayd - byd * axd) as f32;
+
+    /// Intersects the triangle `(p0, p1, p2)`: `(t, u, v)` with `t` in
+    /// `(t_min, t_max)` and `u`, `v` the barycentrics of `p1` and `p2`.
+    #[inline]
+    pub fn intersect(
+        &self,
+        p0: glam::Vec3,
+        p1: glam::Vec3,
+        p2: glam::Vec3,
+    ) -> Option<(f32, f32, f32)> {
+        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
+        let (sx, sy, sz) = (self.sx, self.sy, self.sz);
+        let a = p0 - self.origin;
+        let b = p1 - self.origin;
+        let c = p2 - self.origin;
+        let ax = a[kx] - sx * a[kz];
+        let ay = a[ky] - sy * a[kz];
+        let bx = b[kx] - sx * b[kz];
+        let by = b[ky] - sy * b[kz];
+        let cx = c[kx] - sx * c[kz];
+        let cy = c[ky] - sy * c[kz];
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            // Recompute in double precision on edges (the paper's fallback).
+            let (cxd, cyd, bxd, byd, axd, ayd) = (
+                cx as f64, cy as f64, bx as f64, by as f64, ax as f64, ay as f64,
+            );
+            u = (cxd * byd - cyd * bxd) as f32;
+            v = (axd * cyd - ayd * cxd) as f32;
+            w = (bxd * ayd - byd * axd) as f32;
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let az = sz * a[kz];
+        let bz = sz * b[kz];
+        let cz = sz * c[kz];
+        let t_scaled = u * az + v * bz + w * cz;
+        let inv = 1.0 / det;
+        let t = t_scaled * inv;
+        if !(t > self.t_min && t < self.t_max) {
+            return None;
+        }
+        // u weights p0, v weights p1, w weights p2.
+        Some((t, v * inv, w * inv))
     }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return None;
-    }
-    let det = u + v + w;
-    if det == 0.0 {
-        return None;
-    }
-    let az = sz * a[kz];
-    let bz = sz * b[kz];
-    let cz = sz * c[kz];
-    let t_scaled = u * az + v * bz + w * cz;
-    let inv = 1.0 / det;
-    let t = t_scaled * inv;
-    if !(t > ray.t_min && t < ray.t_max) {
-        return None;
-    }
-    // u weights p0, v weights p1, w weights p2.
-    Some((t, v * inv, w * inv))
 }
 
 /// Ray-sphere intersection, `(t)` of the nearest root in range.
