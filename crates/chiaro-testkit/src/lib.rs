@@ -1,1 +1,97 @@
-//! Test support for chiaro: approximate comparisons, image diffs, analytic scenes.
+//! Test support for chiaro: an approximate-equality macro, film comparison
+//! with a report of where two films differ, and small analytic scenes that
+//! several crates' tests share.
+
+pub mod scenes;
+
+use chiaro_core::film::Film;
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+
+/// Asserts `|a - b| <= eps` for floats, with both values in the message.
+#[macro_export]
+macro_rules! assert_approx_eq {
+    ($a:expr, $b:expr, $eps:expr) => {{
+        let (a, b, eps) = ($a as f64, $b as f64, $eps as f64);
+        assert!((a - b).abs() <= eps, "assert_approx_eq failed: {} vs {} (eps {})", a, b, eps);
+    }};
+}
+
+/// How two films differ over a set of pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FilmDiff {
+    /// Pixels compared.
+    pub compared: usize,
+    /// Pixels whose largest channel difference exceeds the tolerance.
+    pub over: usize,
+    /// Largest channel difference seen.
+    pub max_abs: f32,
+    /// Mean absolute channel difference.
+    pub mean_abs: f32,
+}
+
+/// Compares `a` and `b` on the pixels where `mask(index)` is true, counting
+/// pixels whose largest absolute channel difference exceeds `tol`.
+///
+/// # Panics
+/// If the films differ in size (a test bug, not user input).
+pub fn diff_films(a: &Film, b: &Film, tol: f32, mask: impl Fn(usize) -> bool) -> FilmDiff {
+    assert_eq!((a.width, a.height), (b.width, b.height), "films differ in size");
+    let mut d = FilmDiff::default();
+    let mut sum = 0.0f64;
+    for i in 0..a.color.len() {
+        if !mask(i) {
+            continue;
+        }
+        let e = (a.color[i] - b.color[i]).abs().max_element();
+        d.compared += 1;
+        d.max_abs = d.max_abs.max(e);
+        sum += f64::from(e);
+        if e > tol {
+            d.over += 1;
+        }
+    }
+    d.mean_abs = if d.compared > 0 { (sum / d.compared as f64) as f32 } else { 0.0 };
+    d
+}
+
+/// Where failing tests write images: `target/test-output/<name>.ppm`.
+pub fn output_path(name: &str) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/test-output");
+    let _ = std::fs::create_dir_all(&root);
+    root.join(format!("{name}.ppm"))
+}
+
+/// Writes a film as a binary PPM (clamped, sRGB-encoded) for looking at
+/// test failures; errors are ignored (it is a diagnostic).
+pub fn dump_ppm(film: &Film, name: &str) -> PathBuf {
+    let path = output_path(name);
+    let mut bytes = format!("P6\n{} {}\n255\n", film.width, film.height).into_bytes();
+    for c in &film.color {
+        for ch in c.to_array() {
+            let x = ch.clamp(0.0, 1.0);
+            let s = if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
+            bytes.push((s * 255.0 + 0.5) as u8);
+        }
+    }
+    let _ = std::fs::write(&path, bytes);
+    path
+}
+
+/// Mean colour of the pixels selected by `mask`.
+pub fn masked_mean(film: &Film, mask: impl Fn(usize) -> bool) -> Vec3 {
+    let (mut s, mut n) = (Vec3::ZERO, 0usize);
+    for (i, c) in film.color.iter().enumerate() {
+        if mask(i) {
+            s += *c;
+            n += 1;
+        }
+    }
+    if n == 0 { Vec3::ZERO } else { s / n as f32 }
+}
+
+/// The shared assets folder (`../shared/assets` beside the repository), if present.
+pub fn shared_assets() -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets");
+    p.is_dir().then_some(p)
+}
