@@ -4,6 +4,10 @@
 //! Tone mapping, palettes and image metrics live in the submodules; file
 //! encoding lives in chiaro-io.
 
+pub mod metrics;
+pub mod palette;
+pub mod tonemap;
+
 use crate::progress::Progress;
 use crate::shading::sanitize;
 use glam::Vec3;

@@ -5,6 +5,7 @@ mod bounds;
 mod frame;
 pub mod normals;
 pub mod primitives;
+pub mod teapot;
 mod ray;
 
 pub use bounds::Aabb;

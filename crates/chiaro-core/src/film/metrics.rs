@@ -1,0 +1,320 @@
+//! Image metrics for comparing techniques: RMSE, PSNR, mean relative error,
+//! and a false-colour difference image.
+//!
+//! All metrics work on the films' **linear** colours (before exposure and
+//! tone mapping), over every channel of every pixel; `a` is the image under
+//! test and `b` the reference. Films must have the same size.
+
+use super::Film;
+use super::tonemap::srgb_eotf;
+use crate::error::{CoreError, Result};
+use crate::shading::sanitize;
+use glam::Vec3;
+
+/// The `epsilon` in the mean relative error `|a - b| / (b + epsilon)`: keeps
+/// black reference pixels from dominating (the convention of e.g. the
+/// "relMSE" of Rousselle et al. 2011 uses 0.01 as well).
+pub const RELATIVE_EPSILON: f32 = 0.01;
+
+fn check_sizes(a: &Film, b: &Film) -> Result<()> {
+    if a.width != b.width || a.height != b.height {
+        return Err(CoreError::Unsupported(format!(
+            "cannot compare images of different sizes: {}x{} and {}x{}",
+            a.width, a.height, b.width, b.height
+        )));
+    }
+    Ok(())
+}
+
+/// Iterates over the channel pairs `(a, b)` of two equally sized films, NaN
+/// and negative values read as 0.
+fn channels<'f>(a: &'f Film, b: &'f Film) -> impl Iterator<Item = (f64, f64)> + 'f {
+    a.color.iter().zip(&b.color).flat_map(|(&x, &y)| {
+        let (x, y) = (sanitize(x), sanitize(y));
+        [(x.x, y.x), (x.y, y.y), (x.z, y.z)].map(|(p, q)| (f64::from(p), f64::from(q)))
+    })
+}
+
+/// Mean squared error over all channels (linear units squared).
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn mse(a: &Film, b: &Film) -> Result<f64> {
+    check_sizes(a, b)?;
+    let n = a.color.len() * 3;
+    if n == 0 {
+        return Ok(0.0);
+    }
+    Ok(channels(a, b).map(|(p, q)| (p - q) * (p - q)).sum::<f64>() / n as f64)
+}
+
+/// Root mean squared error over all channels, in linear radiance units:
+/// `sqrt(mean((a - b)^2))`.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn rmse(a: &Film, b: &Film) -> Result<f64> {
+    mse(a, b).map(f64::sqrt)
+}
+
+/// Peak signal-to-noise ratio in decibels, `10 log10(peak^2 / MSE)`, with
+/// the MSE on linear values and the stated `peak` (1.0 for a film whose
+/// white is 1). Identical films give `f64::INFINITY`.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size or `peak` is not
+/// positive and finite.
+pub fn psnr(a: &Film, b: &Film, peak: f32) -> Result<f64> {
+    if !(peak.is_finite() && peak > 0.0) {
+        return Err(CoreError::Unsupported(format!(
+            "PSNR peak must be positive, got {peak}"
+        )));
+    }
+    let m = mse(a, b)?;
+    if m == 0.0 {
+        return Ok(f64::INFINITY);
+    }
+    let p = f64::from(peak);
+    Ok(10.0 * (p * p / m).log10())
+}
+
+/// Mean relative error over all channels,
+/// `mean(|a - b| / (b + RELATIVE_EPSILON))`, dimensionless (0.05 = 5 %),
+/// with `b` the reference.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn mean_relative_error(a: &Film, b: &Film) -> Result<f64> {
+    check_sizes(a, b)?;
+    let n = a.color.len() * 3;
+    if n == 0 {
+        return Ok(0.0);
+    }
+    let eps = f64::from(RELATIVE_EPSILON);
+    Ok(channels(a, b)
+        .map(|(p, q)| (p - q).abs() / (q + eps))
+        .sum::<f64>()
+        / n as f64)
+}
+
+/// Which per-pixel error the difference image shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ErrorKind {
+    /// Mean over channels of `|a - b|` (linear radiance units).
+    #[default]
+    Absolute,
+    /// Mean over channels of `|a - b| / (b + RELATIVE_EPSILON)`.
+    Relative,
+}
+
+/// The viridis colour map (van der Walt and Smith, matplotlib 2015), sampled
+/// at 9 evenly spaced points as 8-bit sRGB (`viridis(9)` in R):
+/// #440154 #472D7B #3B528B #2C728E #21908C #27AD81 #5DC863 #AADC32 #FDE725.
+const VIRIDIS: [[u8; 3]; 9] = [
+    [0x44, 0x01, 0x54],
+    [0x47, 0x2d, 0x7b],
+    [0x3b, 0x52, 0x8b],
+    [0x2c, 0x72, 0x8e],
+    [0x21, 0x90, 0x8c],
+    [0x27, 0xad, 0x81],
+    [0x5d, 0xc8, 0x63],
+    [0xaa, 0xdc, 0x32],
+    [0xfd, 0xe7, 0x25],
+];
+
+/// The viridis colour at `t` in `[0, 1]` (clamped; NaN gives 0), as
+/// **linear** RGB, so that writing it through the sRGB encoder shows the
+/// published colours. Interpolated linearly between the 9 samples in sRGB
+/// code space.
+pub fn viridis(t: f32) -> Vec3 {
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (VIRIDIS.len() - 1) as f32;
+    let i = (x.floor() as usize).min(VIRIDIS.len() - 2);
+    let f = x - i as f32;
+    let c = |k: usize| {
+        Vec3::new(
+            VIRIDIS[k][0].into(),
+            VIRIDIS[k][1].into(),
+            VIRIDIS[k][2].into(),
+        )
+    };
+    let s = (c(i) * (1.0 - f) + c(i + 1) * f) / 255.0;
+    Vec3::new(srgb_eotf(s.x), srgb_eotf(s.y), srgb_eotf(s.z))
+}
+
+/// A false-colour difference image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ErrorImage {
+    /// The per-pixel error mapped through [`viridis`]: dark purple is no
+    /// error, yellow is `scale` or more. Depth and normal are those of `a`.
+    pub film: Film,
+    /// The error that maps to the top of the colour map.
+    pub scale: f32,
+    /// The largest per-pixel error.
+    pub max_error: f32,
+}
+
+/// A false-colour image of the per-pixel error between `a` and the
+/// reference `b` (see [`ErrorKind`]), each pixel's error divided by `scale`
+/// and mapped through [`viridis`]. Without a `scale` (or with a non-positive
+/// one) the 99th percentile of the per-pixel errors is used (the largest
+/// error if that is 0; 1 if all are 0), so a few fireflies do not wash out
+/// the image.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn difference_image(
+    a: &Film,
+    b: &Film,
+    kind: ErrorKind,
+    scale: Option<f32>,
+) -> Result<ErrorImage> {
+    check_sizes(a, b)?;
+    let errors: Vec<f32> = a
+        .color
+        .iter()
+        .zip(&b.color)
+        .map(|(&x, &y)| {
+            let (x, y) = (sanitize(x), sanitize(y));
+            let d = (x - y).abs();
+            let e = match kind {
+                ErrorKind::Absolute => d,
+                ErrorKind::Relative => d / (y + Vec3::splat(RELATIVE_EPSILON)),
+            };
+            let m = (e.x + e.y + e.z) / 3.0;
+            if m.is_finite() { m } else { 0.0 }
+        })
+        .collect();
+    let max_error = errors.iter().copied().fold(0.0, f32::max);
+    let scale = match scale {
+        Some(s) if s.is_finite() && s > 0.0 => s,
+        _ => {
+            let mut sorted = errors.clone();
+            sorted.sort_by(f32::total_cmp);
+            let p99 = sorted
+                .get((sorted.len() as f32 * 0.99) as usize)
+                .or(sorted.last())
+                .copied()
+                .unwrap_or(0.0);
+            if p99 > 0.0 {
+                p99
+            } else if max_error > 0.0 {
+                max_error
+            } else {
+                1.0
+            }
+        }
+    };
+    let mut film = a.clone();
+    for (c, &e) in film.color.iter_mut().zip(&errors) {
+        *c = viridis(e / scale);
+    }
+    Ok(ErrorImage {
+        film,
+        scale,
+        max_error,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flat(w: u32, h: u32, c: Vec3) -> Film {
+        let mut f = Film::new(w, h);
+        f.color.fill(c);
+        f
+    }
+
+    #[test]
+    fn rmse_and_psnr_closed_forms() {
+        let a = flat(4, 4, Vec3::splat(0.5));
+        let b = flat(4, 4, Vec3::splat(0.4));
+        // Every channel differs by 0.1: RMSE 0.1, PSNR 20 dB at peak 1.
+        assert!((rmse(&a, &b).unwrap_or(0.0) - 0.1).abs() < 1e-6);
+        assert!((psnr(&a, &b, 1.0).unwrap_or(0.0) - 20.0).abs() < 1e-4);
+        // Peak 10 adds 20 dB.
+        assert!((psnr(&a, &b, 10.0).unwrap_or(0.0) - 40.0).abs() < 1e-4);
+        assert_eq!(psnr(&a, &a, 1.0).ok(), Some(f64::INFINITY));
+        assert!(psnr(&a, &b, 0.0).is_err());
+        // One channel of one pixel off by 1 out of 16 * 3 channels.
+        let mut c = a.clone();
+        c.color[5].y += 1.0;
+        assert!((mse(&c, &a).unwrap_or(0.0) - 1.0 / 48.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn relative_error_closed_form() {
+        let a = flat(2, 2, Vec3::splat(1.1));
+        let b = flat(2, 2, Vec3::splat(0.99));
+        let e = mean_relative_error(&a, &b).unwrap_or(0.0);
+        assert!((e - 0.11).abs() < 1e-6, "{e}");
+        // Black reference: |a| / 0.01.
+        let z = flat(2, 2, Vec3::ZERO);
+        let e = mean_relative_error(&flat(2, 2, Vec3::splat(0.001)), &z).unwrap_or(0.0);
+        assert!((e - 0.1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn sizes_must_match() {
+        let a = Film::new(2, 2);
+        let b = Film::new(3, 2);
+        assert!(rmse(&a, &b).is_err());
+        assert!(mean_relative_error(&a, &b).is_err());
+        assert!(difference_image(&a, &b, ErrorKind::Absolute, None).is_err());
+    }
+
+    #[test]
+    fn nan_is_read_as_zero() {
+        let mut a = flat(2, 1, Vec3::ZERO);
+        a.color[0] = Vec3::splat(f32::NAN);
+        let b = flat(2, 1, Vec3::ZERO);
+        assert_eq!(rmse(&a, &b).ok(), Some(0.0));
+    }
+
+    #[test]
+    fn viridis_endpoints() {
+        let lo = viridis(0.0);
+        let hi = viridis(1.0);
+        assert!((lo.x - srgb_eotf(68.0 / 255.0)).abs() < 1e-6);
+        assert!((hi.y - srgb_eotf(231.0 / 255.0)).abs() < 1e-6);
+        assert_eq!(viridis(-3.0), lo);
+        assert_eq!(viridis(f32::NAN), lo);
+        assert_eq!(viridis(7.0), hi);
+        // Luminance increases along the map.
+        let luma = |c: Vec3| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+        for i in 1..=20 {
+            assert!(luma(viridis(i as f32 / 20.0)) > luma(viridis((i - 1) as f32 / 20.0)));
+        }
+    }
+
+    #[test]
+    fn difference_image_maps_error_to_colour() {
+        let b = flat(4, 1, Vec3::splat(0.5));
+        let mut a = b.clone();
+        a.color[1] = Vec3::splat(0.75); // error 0.25
+        a.color[2] = Vec3::splat(1.0); // error 0.5
+        let img = difference_image(&a, &b, ErrorKind::Absolute, Some(0.5)).expect("same size");
+        assert_eq!(img.scale, 0.5);
+        assert!((img.max_error - 0.5).abs() < 1e-6);
+        assert_eq!(img.film.color[0], viridis(0.0));
+        assert!((img.film.color[1] - viridis(0.5)).abs().max_element() < 1e-6);
+        assert_eq!(img.film.color[2], viridis(1.0));
+        assert!(img.film.is_clean());
+        // Automatic scale: the 99th percentile, here the largest error.
+        let auto = difference_image(&a, &b, ErrorKind::Absolute, None).expect("same size");
+        assert!((auto.scale - 0.5).abs() < 1e-6);
+        // Relative: 0.25 / 0.51.
+        let rel = difference_image(&a, &b, ErrorKind::Relative, Some(1.0)).expect("same size");
+        assert!(
+            (rel.film.color[1] - viridis(0.25 / 0.51))
+                .abs()
+                .max_element()
+                < 1e-5
+        );
+    }
+}
