@@ -53,11 +53,17 @@ pub type Result<T, E = IoError> = std::result::Result<T, E>;
 impl IoError {
     /// Wraps an OS error with its path.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        IoError::Io { path: path.into(), source }
+        IoError::Io {
+            path: path.into(),
+            source,
+        }
     }
 
     /// A format error with a message.
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        IoError::Format { path: path.into(), message: message.into() }
+        IoError::Format {
+            path: path.into(),
+            message: message.into(),
+        }
     }
 }

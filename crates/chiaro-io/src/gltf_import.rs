@@ -1,1 +1,940 @@
-//! (in progress)
+//! glTF 2.0 (`.gltf` with external or embedded base64 buffers, `.glb`) read
+//! through the gltf crate into an [`Imported`] file.
+//!
+//! What is read: the default scene's node hierarchy (or every root node when
+//! the file names no scene), each node's mesh primitives (triangles; strips
+//! and fans are converted; points and lines are skipped with a warning) with
+//! positions, normals, tangents, `TEXCOORD_0`, `COLOR_0` and sparse
+//! accessors; perspective cameras; `KHR_lights_punctual`; materials.
+//! Skins, morph targets and animations are not applied: the bind pose is
+//! loaded and a warning given.
+//!
+//! The file is checked before anything is read: JSON errors give the line
+//! and column, schema errors the JSON path (`meshes[0].primitives[0].indices`),
+//! a required extension chiaro does not implement (Draco, meshopt, ...) is an
+//! error naming it, and every accessor's type and byte range is checked
+//! against its buffer, and every index against its vertex count, so a
+//! malformed file gives an error, never a panic.
+//!
+//! # Materials (metallic-roughness to chiaro)
+//!
+//! - `model = torrance-sparrow`, `roughness = roughnessFactor^2` (the GGX
+//!   alpha of the glTF BRDF, glTF 2.0 spec appendix B), clamped to `[1e-3, 1]`.
+//! - `specular` (F0) `= mix(0.04, baseColor, metallic)` and
+//!   `diffuse = baseColor * (1 - metallic)` (spec appendix B.3.5).
+//! - `baseColorTexture` -> `texture` (sRGB decoded); it multiplies the
+//!   diffuse colour only. The metallic-roughness and occlusion textures are
+//!   ignored (with a warning).
+//! - `normalTexture` -> `normal_map` (linear); `emissiveFactor *
+//!   KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
+//!   `emission_texture`; `doubleSided` -> `two_sided`; `alphaMode = BLEND`
+//!   -> `transmit = 1 - alpha` drawn `interpolated`.
+//!
+//! # Lights
+//!
+//! glTF gives point and spot intensity in candela (lm/sr), so the
+//! irradiance at distance d is `I cos(theta) / d^2`; chiaro's convention
+//! (DESIGN.md section 3) is `pi Ip cos(theta) / d^2`, hence `Ip = I / pi`
+//! with inverse-square fall-off. Directional lights give illuminance in lux,
+//! `E = pi Ip`, hence also `Ip = lux / pi`. Spot cones: `cone =
+//! outerConeAngle`, `cone_softness = outer - inner` (degrees), Warn exponent
+//! 0. `range` is ignored.
+
+use crate::{Imported, ImportedObject, IoError, Result};
+use chiaro_core::scene::{Attenuation, ImageTexture};
+use chiaro_core::scene::{
+    Camera, Light, Material, Mesh, ReflectanceModel, SpotLight, Texture, TextureId,
+    TransparencyMode, WrapMode,
+};
+use chiaro_core::{Mat4, Vec2, Vec3, Vec4};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+use std::collections::{BTreeSet, HashMap};
+use std::path::Path;
+
+/// Extensions whose absence would change the result, that chiaro reads.
+const SUPPORTED_REQUIRED: &[&str] = &["KHR_lights_punctual", "KHR_materials_emissive_strength"];
+
+/// Largest glTF file read (bytes); bigger inputs are refused.
+const MAX_FILE_BYTES: u64 = 2 << 30;
+
+/// Reads a `.gltf` or `.glb` file and the buffers and images it references
+/// (relative to its directory, or embedded). Returns its meshes, materials,
+/// textures, placed objects (node world matrices), lights and cameras, or an
+/// [`IoError`] naming the file and what is wrong (with the JSON line and
+/// column or the JSON path).
+pub fn load_gltf(path: &Path) -> Result<Imported> {
+    let meta = std::fs::metadata(path).map_err(|e| IoError::io(path, e))?;
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(IoError::format(path, "file too large"));
+    }
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let base = path.parent().unwrap_or_else(|| Path::new("."));
+    load_gltf_slice(&bytes, Some(base), path)
+}
+
+/// Reads glTF or GLB bytes held in memory. External files resolve against
+/// `base` (none: only embedded data is allowed); `path` names the input in
+/// messages. Returns what [`load_gltf`] returns.
+pub fn load_gltf_slice(bytes: &[u8], base: Option<&Path>, path: &Path) -> Result<Imported> {
+    // Every known panic is prevented by the checks below; a panic inside the
+    // gltf crate on input nobody foresaw is still turned into an error.
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read(bytes, base, path)));
+    match result {
+        Ok(r) => r,
+        Err(_) => Err(IoError::format(
+            path,
+            "malformed glTF: the reader failed on this file",
+        )),
+    }
+}
+
+fn in_err(path: &Path, location: impl Into<String>, message: impl Into<String>) -> IoError {
+    IoError::In {
+        path: path.to_path_buf(),
+        location: location.into(),
+        message: message.into(),
+    }
+}
+
+fn read(bytes: &[u8], base: Option<&Path>, path: &Path) -> Result<Imported> {
+    let is_glb = bytes.starts_with(b"glTF");
+    // The gltf crate subtracts the 12-byte header from the declared length unchecked.
+    if is_glb {
+        let declared = bytes
+            .get(8..12)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        match declared {
+            Some(n) if n >= 12 => {}
+            _ => {
+                return Err(IoError::format(
+                    path,
+                    "malformed GLB header: the declared length is shorter than the header",
+                ));
+            }
+        }
+    }
+    // Parse without validation, check extensions, then validate.
+    let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| match e {
+        gltf::Error::Deserialize(j) if !is_glb => IoError::At {
+            path: path.to_path_buf(),
+            line: j.line(),
+            column: j.column(),
+            message: format!("invalid glTF JSON: {j}"),
+        },
+        gltf::Error::Deserialize(j) => in_err(
+            path,
+            format!("JSON chunk line {} column {}", j.line(), j.column()),
+            format!("invalid glTF JSON: {j}"),
+        ),
+        other => IoError::format(path, format!("not a readable glTF/GLB file: {other}")),
+    })?;
+    let doc = &gltf.document;
+    for (i, ext) in doc.extensions_required().enumerate() {
+        if !SUPPORTED_REQUIRED.contains(&ext) {
+            return Err(in_err(
+                path,
+                format!("extensionsRequired[{i}]"),
+                format!(
+                    "the file requires extension {ext}, which chiaro does not support{}",
+                    match ext {
+                        "KHR_draco_mesh_compression" => " (Draco-compressed meshes)",
+                        "EXT_meshopt_compression" => " (meshopt-compressed buffers)",
+                        "KHR_mesh_quantization" => " (quantized vertex attributes)",
+                        _ => "",
+                    }
+                ),
+            ));
+        }
+    }
+    // The validator itself indexes `accessors` with each POSITION index unchecked.
+    let root = doc.as_json();
+    for (i, mesh) in root.meshes.iter().enumerate() {
+        for (j, prim) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= root.accessors.len() {
+                    return Err(in_err(
+                        path,
+                        format!("meshes[{i}].primitives[{j}].attributes"),
+                        format!(
+                            "{semantic:?} refers to accessor {} but there are {}",
+                            index.value(),
+                            root.accessors.len()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    {
+        use gltf::json::validation::Validate;
+        let mut errors = Vec::new();
+        let root = doc.as_json();
+        root.validate(root, gltf::json::Path::new, &mut |p, e| {
+            errors.push((p(), e))
+        });
+        if let Some((p, e)) = errors.first() {
+            let more = if errors.len() > 1 {
+                format!(" (and {} more problems)", errors.len() - 1)
+            } else {
+                String::new()
+            };
+            return Err(in_err(path, p.to_string(), format!("{e}{more}")));
+        }
+    }
+    let mut warnings = Vec::new();
+    let supported_used = ["KHR_lights_punctual", "KHR_materials_emissive_strength"];
+    for ext in doc.extensions_used() {
+        if !supported_used.contains(&ext) {
+            warnings.push(format!(
+                "{}: extension {ext} is not supported and is ignored",
+                path.display()
+            ));
+        }
+    }
+
+    let buffers = load_buffers(doc, base, gltf.blob.clone(), path)?;
+    let mut b = Builder {
+        doc,
+        buffers: &buffers,
+        base,
+        path,
+        out: Imported::default(),
+        mesh_cache: HashMap::new(),
+        material_map: HashMap::new(),
+        texture_map: HashMap::new(),
+        noted: BTreeSet::new(),
+    };
+    b.out.warnings = warnings;
+    if doc.skins().len() > 0 {
+        b.note("skins are not applied: the bind pose is loaded");
+    }
+    if doc.animations().len() > 0 {
+        b.note("animations are ignored");
+    }
+    // The default scene, else the first, else every root node.
+    let scene = doc.default_scene().or_else(|| doc.scenes().next());
+    let roots: Vec<gltf::Node> = match scene {
+        Some(s) => s.nodes().collect(),
+        None => {
+            let mut is_child = vec![false; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    is_child[c.index()] = true;
+                }
+            }
+            doc.nodes().filter(|n| !is_child[n.index()]).collect()
+        }
+    };
+    let mut visited = vec![false; doc.nodes().len()];
+    let mut stack: Vec<(gltf::Node, Mat4)> =
+        roots.into_iter().map(|n| (n, Mat4::IDENTITY)).collect();
+    // Depth-first with an explicit stack; a node is visited once even if a
+    // (malformed) file makes it the child of several parents or of itself.
+    while let Some((node, parent)) = stack.pop() {
+        if std::mem::replace(&mut visited[node.index()], true) {
+            b.note("a node is reachable twice (cycle or shared child): visited once");
+            continue;
+        }
+        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        let world = parent * local;
+        if !world.is_finite() {
+            b.note("a node has a non-finite transform: skipped");
+            continue;
+        }
+        b.node(&node, world)?;
+        for c in node.children() {
+            stack.push((c, world));
+        }
+    }
+    Ok(b.out)
+}
+
+/// Loads every buffer, checking URIs before handing them to the gltf crate.
+fn load_buffers(
+    doc: &gltf::Document,
+    base: Option<&Path>,
+    mut blob: Option<Vec<u8>>,
+    path: &Path,
+) -> Result<Vec<gltf::buffer::Data>> {
+    let mut out = Vec::new();
+    for buffer in doc.buffers() {
+        let loc = format!("buffers[{}]", buffer.index());
+        if let gltf::buffer::Source::Uri(uri) = buffer.source() {
+            check_uri(uri).map_err(|m| in_err(path, format!("{loc}.uri"), m))?;
+            if !uri.starts_with("data:") && base.is_none() {
+                return Err(in_err(
+                    path,
+                    format!("{loc}.uri"),
+                    "external buffer without a directory",
+                ));
+            }
+        }
+        let data = gltf::buffer::Data::from_source_and_blob(buffer.source(), base, &mut blob)
+            .map_err(|e| in_err(path, loc.clone(), format!("cannot load buffer: {e}")))?;
+        if data.len() < buffer.length() {
+            return Err(in_err(
+                path,
+                loc,
+                format!(
+                    "buffer holds {} bytes but byteLength says {}",
+                    data.len(),
+                    buffer.length()
+                ),
+            ));
+        }
+        out.push(data);
+    }
+    Ok(out)
+}
+
+/// A relative URI must percent-decode to UTF-8 (the gltf crate would panic otherwise).
+fn check_uri(uri: &str) -> std::result::Result<(), String> {
+    if uri.contains(':') {
+        return Ok(());
+    }
+    String::from_utf8(percent_decode_bytes(uri))
+        .map(|_| ())
+        .map_err(|_| format!("URI {uri:?} does not decode to UTF-8"))
+}
+
+/// A converted primitive: its mesh index in the output and its material.
+type ConvertedPrimitive = (usize, Option<usize>);
+
+struct Builder<'a> {
+    doc: &'a gltf::Document,
+    buffers: &'a [gltf::buffer::Data],
+    base: Option<&'a Path>,
+    path: &'a Path,
+    out: Imported,
+    /// (mesh, primitive) -> (mesh index in out, material) or None when skipped.
+    mesh_cache: HashMap<(usize, usize), Option<ConvertedPrimitive>>,
+    material_map: HashMap<usize, usize>,
+    texture_map: HashMap<(usize, bool), Option<TextureId>>,
+    noted: BTreeSet<String>,
+}
+
+impl Builder<'_> {
+    /// Records a warning once per file.
+    fn note(&mut self, msg: impl Into<String>) {
+        let msg = msg.into();
+        if self.noted.insert(msg.clone()) {
+            self.out
+                .warnings
+                .push(format!("{}: {msg}", self.path.display()));
+        }
+    }
+
+    fn node(&mut self, node: &gltf::Node, world: Mat4) -> Result<()> {
+        if let Some(cam) = node.camera() {
+            match cam.projection() {
+                gltf::camera::Projection::Perspective(p) => {
+                    let eye = world.transform_point3(Vec3::ZERO);
+                    let forward = world.transform_vector3(Vec3::NEG_Z).try_normalize();
+                    let up = world.transform_vector3(Vec3::Y).try_normalize();
+                    let fov = p.yfov().to_degrees();
+                    match (forward, up) {
+                        (Some(f), Some(u)) if fov > 0.0 && fov < 180.0 && eye.is_finite() => {
+                            let near = if p.znear() > 0.0 { p.znear() } else { 0.01 };
+                            let far = p
+                                .zfar()
+                                .filter(|f| f.is_finite() && *f > near)
+                                .unwrap_or(near * 1.0e7);
+                            self.out.cameras.push(Camera {
+                                eye,
+                                look_at: eye + f,
+                                up: u,
+                                fov_y_degrees: fov,
+                                near,
+                                far,
+                            });
+                        }
+                        _ => self.note("a camera with a degenerate transform or fov was skipped"),
+                    }
+                }
+                gltf::camera::Projection::Orthographic(_) => {
+                    self.note("orthographic cameras are not supported and were skipped");
+                }
+            }
+        }
+        if let Some(light) = node.light() {
+            self.light(&light, world);
+        }
+        if node.weights().is_some() {
+            self.note("morph target weights are ignored: the base shape is loaded");
+        }
+        let Some(mesh) = node.mesh() else {
+            return Ok(());
+        };
+        for prim in mesh.primitives() {
+            let key = (mesh.index(), prim.index());
+            let entry = match self.mesh_cache.get(&key) {
+                Some(e) => *e,
+                None => {
+                    let e = self.primitive(&mesh, &prim)?;
+                    self.mesh_cache.insert(key, e);
+                    e
+                }
+            };
+            if let Some((mesh_index, material)) = entry {
+                let name = match (node.name(), mesh.name()) {
+                    (Some(n), _) => format!("{n}#{}", prim.index()),
+                    (None, Some(m)) => format!("{m}#{}", prim.index()),
+                    (None, None) => format!("node{}#{}", node.index(), prim.index()),
+                };
+                self.out.objects.push(ImportedObject {
+                    name,
+                    mesh: mesh_index,
+                    matrix: world,
+                    material,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: Mat4) {
+        use gltf::khr_lights_punctual::Kind;
+        let color = Vec3::from(light.color());
+        // Candela (or lux) to chiaro's Ip: divide by pi (module docs).
+        let intensity = light.intensity() / std::f32::consts::PI;
+        if !(color.is_finite() && intensity.is_finite() && intensity >= 0.0) {
+            self.note("a light with invalid colour or intensity was skipped");
+            return;
+        }
+        if light.range().is_some() {
+            self.note("light `range` is ignored (inverse-square fall-off everywhere)");
+        }
+        let position = world.transform_point3(Vec3::ZERO);
+        let direction = world.transform_vector3(Vec3::NEG_Z).try_normalize();
+        let Some(direction) = direction else {
+            self.note("a light with a degenerate transform was skipped");
+            return;
+        };
+        let l = match light.kind() {
+            Kind::Directional => Light::Directional {
+                direction,
+                color,
+                intensity,
+            },
+            Kind::Point => Light::Point {
+                position,
+                color,
+                intensity,
+                attenuation: Attenuation::InverseSquare,
+            },
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let outer = outer_cone_angle.to_degrees().clamp(1e-3, 90.0);
+                let inner = inner_cone_angle.to_degrees().clamp(0.0, outer);
+                Light::Spot(SpotLight {
+                    position,
+                    direction,
+                    color,
+                    intensity,
+                    attenuation: Attenuation::InverseSquare,
+                    exponent: 0.0,
+                    cone_degrees: outer,
+                    cone_softness_degrees: outer - inner,
+                    flaps: Vec::new(),
+                })
+            }
+        };
+        self.out.lights.push(l);
+    }
+
+    /// Checks an accessor: element type among `allowed`, count >= 1, and
+    /// every byte it reads inside its buffer view and buffer.
+    fn check_accessor(
+        &self,
+        acc: &gltf::Accessor,
+        what: &str,
+        dims: &[Dimensions],
+        types: &[DataType],
+    ) -> Result<()> {
+        let loc = format!("accessors[{}]", acc.index());
+        if !dims.contains(&acc.dimensions()) || !types.contains(&acc.data_type()) {
+            return Err(in_err(
+                self.path,
+                loc,
+                format!(
+                    "{what}: unsupported element type {:?} of {:?}",
+                    acc.dimensions(),
+                    acc.data_type()
+                ),
+            ));
+        }
+        if acc.count() == 0 {
+            return Err(in_err(self.path, loc, format!("{what}: count is 0")));
+        }
+        let elem = acc.size();
+        let check_view =
+            |view: &gltf::buffer::View, offset: usize, count: usize, elem: usize, vloc: &str| {
+                let stride = view.stride().unwrap_or(elem);
+                let data_len = self
+                    .buffers
+                    .get(view.buffer().index())
+                    .map_or(0, |d| d.len());
+                let view_end = view.offset().checked_add(view.length());
+                let need = stride
+                    .checked_mul(count - 1)
+                    .and_then(|x| x.checked_add(elem))
+                    .and_then(|x| x.checked_add(offset));
+                match (view_end, need) {
+                    (Some(end), Some(need))
+                        if stride >= elem && end <= data_len && need <= view.length() =>
+                    {
+                        Ok(())
+                    }
+                    _ => Err(in_err(
+                        self.path,
+                        vloc.to_string(),
+                        format!("{what}: data lies outside its buffer view or buffer"),
+                    )),
+                }
+            };
+        if let Some(view) = acc.view() {
+            check_view(&view, acc.offset(), acc.count(), elem, &loc)?;
+        }
+        if let Some(sparse) = acc.sparse() {
+            let sloc = format!("{loc}.sparse");
+            let n = sparse.count();
+            if n == 0 {
+                return Err(in_err(
+                    self.path,
+                    sloc,
+                    format!("{what}: sparse count is 0"),
+                ));
+            }
+            let idx = sparse.indices();
+            check_view(
+                &idx.view(),
+                idx.offset(),
+                n,
+                idx.index_type().size(),
+                &format!("{sloc}.indices"),
+            )?;
+            let vals = sparse.values();
+            check_view(
+                &vals.view(),
+                vals.offset(),
+                n,
+                elem,
+                &format!("{sloc}.values"),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Converts one primitive; `None` when it is skipped (not triangles, no positions).
+    fn primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+    ) -> Result<Option<ConvertedPrimitive>> {
+        let loc = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
+        let mode = prim.mode();
+        if matches!(
+            mode,
+            Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
+        ) {
+            self.note(format!(
+                "{loc}: {mode:?} primitives are skipped (only triangles are drawn)"
+            ));
+            return Ok(None);
+        }
+        if prim.morph_targets().len() > 0 {
+            self.note("morph targets are ignored: the base shape is loaded");
+        }
+        let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
+            self.note(format!("{loc}: no POSITION attribute: skipped"));
+            return Ok(None);
+        };
+        self.check_accessor(&pos_acc, "POSITION", &[Dimensions::Vec3], &[DataType::F32])?;
+        let buffers = self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        let positions: Vec<Vec3> = match reader.read_positions() {
+            Some(it) => it.map(Vec3::from).collect(),
+            None => vec![Vec3::ZERO; pos_acc.count()],
+        };
+        let n = positions.len();
+        if n != pos_acc.count() {
+            return Err(in_err(
+                self.path,
+                loc,
+                "POSITION data is shorter than its count",
+            ));
+        }
+        let mut m = Mesh {
+            name: format!(
+                "{}:{}#{}",
+                self.path
+                    .file_name()
+                    .map(|f| f.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                mesh.name().unwrap_or("mesh"),
+                prim.index()
+            ),
+            positions,
+            ..Mesh::default()
+        };
+        if let Some(acc) = prim.get(&gltf::Semantic::Normals) {
+            self.check_accessor(&acc, "NORMAL", &[Dimensions::Vec3], &[DataType::F32])?;
+            if let Some(it) = reader.read_normals() {
+                let v: Vec<Vec3> = it.map(|x| Vec3::from(x).normalize_or_zero()).collect();
+                if v.len() == n && v.iter().all(|x| x.is_finite() && *x != Vec3::ZERO) {
+                    m.normals = v;
+                } else {
+                    self.note(format!(
+                        "{loc}: invalid NORMAL data: normals will be computed"
+                    ));
+                }
+            }
+        }
+        if let Some(acc) = prim.get(&gltf::Semantic::Tangents) {
+            self.check_accessor(&acc, "TANGENT", &[Dimensions::Vec4], &[DataType::F32])?;
+            if let Some(it) = reader.read_tangents() {
+                let v: Vec<Vec4> = it.map(Vec4::from).collect();
+                if v.len() == n && v.iter().all(|x| x.is_finite()) {
+                    m.tangents = v;
+                }
+            }
+        }
+        if let Some(acc) = prim.get(&gltf::Semantic::TexCoords(0)) {
+            self.check_accessor(
+                &acc,
+                "TEXCOORD_0",
+                &[Dimensions::Vec2],
+                &[DataType::F32, DataType::U8, DataType::U16],
+            )?;
+            if let Some(it) = reader.read_tex_coords(0) {
+                let v: Vec<Vec2> = it.into_f32().map(Vec2::from).collect();
+                if v.len() == n {
+                    m.uvs = v;
+                }
+            }
+        }
+        if let Some(acc) = prim.get(&gltf::Semantic::Colors(0)) {
+            self.check_accessor(
+                &acc,
+                "COLOR_0",
+                &[Dimensions::Vec3, Dimensions::Vec4],
+                &[DataType::F32, DataType::U8, DataType::U16],
+            )?;
+            if let Some(it) = reader.read_colors(0) {
+                let v: Vec<Vec3> = it.into_rgb_f32().map(Vec3::from).collect();
+                if v.len() == n && v.iter().all(|x| x.is_finite()) {
+                    m.colors = v;
+                }
+            }
+        }
+        let indices: Vec<u32> = match prim.indices() {
+            Some(acc) => {
+                self.check_accessor(
+                    &acc,
+                    "indices",
+                    &[Dimensions::Scalar],
+                    &[DataType::U8, DataType::U16, DataType::U32],
+                )?;
+                let v: Vec<u32> = reader
+                    .read_indices()
+                    .map(|it| it.into_u32().collect())
+                    .unwrap_or_else(|| vec![0; acc.count()]);
+                if let Some(bad) = v.iter().find(|&&i| i as usize >= n) {
+                    return Err(in_err(
+                        self.path,
+                        format!("{loc}.indices"),
+                        format!("index {bad} out of range ({n} vertices)"),
+                    ));
+                }
+                v
+            }
+            None => (0..n as u32).collect(),
+        };
+        m.indices = match mode {
+            Mode::TriangleStrip => (2..indices.len())
+                .map(|i| {
+                    let (a, b, c) = (indices[i - 2], indices[i - 1], indices[i]);
+                    if i % 2 == 0 { [a, b, c] } else { [b, a, c] }
+                })
+                .collect(),
+            Mode::TriangleFan => (2..indices.len())
+                .map(|i| [indices[i - 1], indices[i], indices[0]])
+                .collect(),
+            _ => {
+                if !indices.len().is_multiple_of(3) {
+                    self.note(format!(
+                        "{loc}: index count is not a multiple of 3: the rest is ignored"
+                    ));
+                }
+                indices
+                    .chunks_exact(3)
+                    .map(|c| [c[0], c[1], c[2]])
+                    .collect()
+            }
+        };
+        let material = match prim.material().index() {
+            Some(i) => Some(self.material(i)?),
+            None => None,
+        };
+        self.out.meshes.push(m);
+        Ok(Some((self.out.meshes.len() - 1, material)))
+    }
+
+    fn material(&mut self, index: usize) -> Result<usize> {
+        if let Some(&i) = self.material_map.get(&index) {
+            return Ok(i);
+        }
+        let Some(gm) = self.doc.materials().nth(index) else {
+            return Err(in_err(
+                self.path,
+                format!("materials[{index}]"),
+                "missing material",
+            ));
+        };
+        let pbr = gm.pbr_metallic_roughness();
+        let base = Vec4::from(pbr.base_color_factor());
+        let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
+        let rough = pbr.roughness_factor().clamp(0.0, 1.0);
+        let base_rgb = base.truncate().max(Vec3::ZERO);
+        let d = Material::default();
+        let strength = gm.emissive_strength().unwrap_or(1.0).max(0.0);
+        let mut mat = Material {
+            name: gm
+                .name()
+                .map_or_else(|| format!("material{index}"), str::to_string),
+            diffuse: base_rgb * (1.0 - metallic),
+            specular: Vec3::splat(0.04).lerp(base_rgb, metallic),
+            model: ReflectanceModel::TorranceSparrow,
+            roughness: (rough * rough).clamp(1e-3, 1.0),
+            emission: Vec3::from(gm.emissive_factor()).max(Vec3::ZERO) * strength,
+            two_sided: gm.double_sided(),
+            ..d
+        };
+        if gm.alpha_mode() == gltf::material::AlphaMode::Blend && base.w < 1.0 {
+            mat.transmit = Vec3::splat((1.0 - base.w).clamp(0.0, 1.0));
+            mat.transparency = TransparencyMode::Interpolated;
+        }
+        if let Some(info) = pbr.base_color_texture() {
+            mat.texture = self.texture_info(info.texture(), info.tex_coord(), true);
+        }
+        if let Some(info) = gm.emissive_texture() {
+            mat.emission_texture = self.texture_info(info.texture(), info.tex_coord(), true);
+        }
+        if let Some(nt) = gm.normal_texture() {
+            mat.normal_map = self.texture_info(nt.texture(), nt.tex_coord(), false);
+        }
+        if pbr.metallic_roughness_texture().is_some() {
+            self.note("metallic-roughness textures are ignored (factors only)");
+        }
+        if gm.occlusion_texture().is_some() {
+            self.note("occlusion textures are ignored");
+        }
+        for c in [&mut mat.diffuse, &mut mat.specular, &mut mat.emission] {
+            if !c.is_finite() {
+                *c = Vec3::ZERO;
+            }
+        }
+        self.out.materials.push(mat);
+        let i = self.out.materials.len() - 1;
+        self.material_map.insert(index, i);
+        Ok(i)
+    }
+
+    fn texture_info(
+        &mut self,
+        tex: gltf::Texture,
+        tex_coord: u32,
+        srgb: bool,
+    ) -> Option<TextureId> {
+        if tex_coord != 0 {
+            self.note("textures on TEXCOORD_1 or later are ignored");
+            return None;
+        }
+        let image = tex.source();
+        let key = (image.index(), srgb);
+        if let Some(t) = self.texture_map.get(&key) {
+            return *t;
+        }
+        let wrap = match tex.sampler().wrap_s() {
+            gltf::texture::WrappingMode::ClampToEdge => WrapMode::Clamp,
+            gltf::texture::WrappingMode::MirroredRepeat => WrapMode::Mirror,
+            gltf::texture::WrappingMode::Repeat => WrapMode::Repeat,
+        };
+        let id = match self.decode_image(&image, srgb) {
+            Ok(mut img) => {
+                img.wrap = wrap;
+                self.out.textures.push(Texture::Image(img));
+                Some(TextureId(self.out.textures.len() as u32 - 1))
+            }
+            Err(msg) => {
+                self.note(format!("images[{}]: {msg}: texture ignored", image.index()));
+                None
+            }
+        };
+        self.texture_map.insert(key, id);
+        id
+    }
+
+    fn decode_image(
+        &self,
+        image: &gltf::Image,
+        srgb: bool,
+    ) -> std::result::Result<ImageTexture, String> {
+        let (bytes, source): (Vec<u8>, String) = match image.source() {
+            gltf::image::Source::View { view, .. } => {
+                let data = self
+                    .buffers
+                    .get(view.buffer().index())
+                    .ok_or("buffer missing")?;
+                let end = view.offset().checked_add(view.length()).ok_or("bad view")?;
+                let slice = data
+                    .0
+                    .get(view.offset()..end)
+                    .ok_or("image view outside its buffer")?;
+                (
+                    slice.to_vec(),
+                    format!("{}#images[{}]", self.path.display(), image.index()),
+                )
+            }
+            gltf::image::Source::Uri { uri, .. } => {
+                if let Some(rest) = uri.strip_prefix("data:") {
+                    let b64 = rest
+                        .split_once(";base64,")
+                        .map(|(_, b)| b)
+                        .ok_or("data URI is not base64")?;
+                    (
+                        decode_base64(b64)?,
+                        format!("{}#images[{}]", self.path.display(), image.index()),
+                    )
+                } else {
+                    check_uri(uri)?;
+                    let base = self.base.ok_or("external image without a directory")?;
+                    let rel = percent_decode(uri);
+                    let p = base.join(&rel);
+                    let bytes = std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+                    (bytes, p.display().to_string())
+                }
+            }
+        };
+        let img =
+            image::load_from_memory(&bytes).map_err(|e| format!("cannot decode image: {e}"))?;
+        Ok(to_texture(&img, srgb, source))
+    }
+}
+
+/// Converts a decoded image to linear RGBA `f32` texels (sRGB removed when `srgb`).
+pub(crate) fn to_texture(img: &image::DynamicImage, srgb: bool, source: String) -> ImageTexture {
+    let rgba = img.to_rgba32f();
+    let (width, height) = rgba.dimensions();
+    let eight_bit = !matches!(
+        img,
+        image::DynamicImage::ImageRgb32F(_) | image::DynamicImage::ImageRgba32F(_)
+    );
+    let texels = rgba
+        .pixels()
+        .map(|p| {
+            let [r, g, b, a] = p.0;
+            if srgb && eight_bit {
+                [srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a]
+            } else {
+                [r, g, b, a]
+            }
+        })
+        .collect();
+    ImageTexture {
+        source,
+        width,
+        height,
+        texels,
+        wrap: WrapMode::Repeat,
+    }
+}
+
+/// The sRGB electro-optical transfer function (IEC 61966-2-1).
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn percent_decode(s: &str) -> String {
+    String::from_utf8_lossy(&percent_decode_bytes(s)).into_owned()
+}
+
+/// Decodes `%XX` escapes (RFC 3986); malformed escapes are kept as they are.
+fn percent_decode_bytes(s: &str) -> Vec<u8> {
+    let bytes = s.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%'
+            && i + 2 < bytes.len()
+            && let Some(v) = std::str::from_utf8(&bytes[i + 1..i + 3])
+                .ok()
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+        {
+            out.push(v);
+            i += 3;
+            continue;
+        }
+        out.push(bytes[i]);
+        i += 1;
+    }
+    out
+}
+
+/// Standard base64 (RFC 4648), padding optional.
+fn decode_base64(s: &str) -> std::result::Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(s.len() * 3 / 4);
+    let mut acc = 0u32;
+    let mut bits = 0;
+    for c in s.bytes() {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            b'=' => break,
+            b' ' | b'\n' | b'\r' | b'\t' => continue,
+            _ => return Err("invalid base64 data".into()),
+        };
+        acc = (acc << 6) | u32::from(v);
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_round_trip() {
+        assert_eq!(decode_base64("aGVsbG8=").unwrap_or_default(), b"hello");
+        assert_eq!(decode_base64("aGk").unwrap_or_default(), b"hi");
+        assert!(decode_base64("a*b").is_err());
+    }
+
+    #[test]
+    fn bad_percent_encoding_is_refused() {
+        assert!(check_uri("a%20b.bin").is_ok());
+        assert!(check_uri("a%ff.bin").is_err());
+    }
+
+    #[test]
+    fn srgb_endpoints() {
+        assert_eq!(srgb_to_linear(0.0), 0.0);
+        assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
+        assert!((srgb_to_linear(0.5) - 0.214).abs() < 1e-3);
+    }
+}

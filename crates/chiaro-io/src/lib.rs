@@ -7,6 +7,17 @@
 //! - [`images`]: decoding image textures (PNG, JPEG, HDR, EXR) to linear texels.
 //! - [`output`]: writing films (PNG 8/16-bit, OpenEXR with depth and normal,
 //!   Radiance HDR, PPM, palette PNG), always through a temporary file and a rename.
+//!
+//! The entry point for scenes is [`load_scene`]: it reads a `.toml` scene,
+//! or an `.obj` / `.gltf` / `.glb` file as a whole scene (with a camera
+//! framing it, a light and default render settings when the file has none).
+//!
+//! # Glossary
+//! - **whole-scene load**: a mesh file opened directly, not referenced from a
+//!   `.toml` scene; missing camera and lights are supplied.
+//! - **[`Imported`]**: what a mesh file contributes (meshes, materials,
+//!   textures, placed objects, lights, cameras), with ids local to the file,
+//!   merged into a [`Scene`] by [`Imported::merge_into`].
 
 pub mod error;
 pub mod gltf_import;
@@ -16,3 +27,424 @@ pub mod output;
 pub mod scene_toml;
 
 pub use error::{IoError, Result};
+
+use chiaro_core::geometry::Aabb;
+use chiaro_core::scene::{
+    Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, Object, Scene, Severity, Texture,
+    TextureId, Transform,
+};
+use chiaro_core::{Mat4, Vec3};
+use std::path::{Path, PathBuf};
+
+/// A scene read from a file, with the warnings met on the way (unsupported
+/// optional features, missing material libraries, `Scene::validate`
+/// warnings). Warnings never stop a load; errors do.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Loaded {
+    /// The scene, validated: `scene.validate()` reports no errors.
+    pub scene: Scene,
+    /// Human-readable warnings, each naming its file.
+    pub warnings: Vec<String>,
+}
+
+/// Reads a scene file, choosing the reader by extension (case-insensitive):
+/// `.toml` (the chiaro scene format, see [`scene_toml`]), `.obj` (with its
+/// `.mtl`), `.gltf` or `.glb`.
+///
+/// A mesh file read this way becomes a whole scene: its first camera (or one
+/// framing its bounds, looking down -z), its lights (or an ambient light plus
+/// a directional light from over the camera's shoulder), and default render
+/// settings.
+///
+/// Returns an [`IoError`] naming the file (and the line and column, or the
+/// glTF JSON path) when the file cannot be read, does not parse, or
+/// describes a scene that `Scene::validate` rejects.
+pub fn load_scene(path: &Path) -> Result<Loaded> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    match ext.as_str() {
+        "toml" => {
+            let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+            let base = path.parent().unwrap_or_else(|| Path::new("."));
+            scene_toml::parse_scene(&text, base, path)
+        }
+        "obj" => {
+            let imported = obj::load_obj_meshes(path)?;
+            whole_scene(imported, path)
+        }
+        "gltf" | "glb" => {
+            let imported = gltf_import::load_gltf(path)?;
+            whole_scene(imported, path)
+        }
+        _ => Err(IoError::format(
+            path,
+            format!("unknown scene file extension {ext:?}: expected .toml, .obj, .gltf or .glb"),
+        )),
+    }
+}
+
+/// Parses a `.toml` scene held in memory (tests, Python). Relative mesh and
+/// texture paths resolve against `base_dir`; `name` stands for the file in
+/// error messages (`name:line:col: ...`).
+///
+/// Returns the scene and its warnings, or the first error met.
+pub fn load_scene_str(toml_text: &str, base_dir: &Path, name: &str) -> Result<Loaded> {
+    scene_toml::parse_scene(toml_text, base_dir, Path::new(name))
+}
+
+/// One placed mesh of an [`Imported`] file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportedObject {
+    /// Name (file node or OBJ object name).
+    pub name: String,
+    /// Index into [`Imported::meshes`].
+    pub mesh: usize,
+    /// `file_from_object`: the node's world matrix inside the file.
+    pub matrix: Mat4,
+    /// Index into [`Imported::materials`] for faces without a per-face
+    /// material; `None` for the default material.
+    pub material: Option<usize>,
+}
+
+/// What a mesh file (OBJ or glTF) contributes to a scene. Ids are local to
+/// the file: `Mesh::face_materials` index [`Imported::materials`], and the
+/// texture ids in those materials index [`Imported::textures`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Imported {
+    /// Meshes in object space.
+    pub meshes: Vec<Mesh>,
+    /// Materials of the file.
+    pub materials: Vec<Material>,
+    /// Decoded textures of the file.
+    pub textures: Vec<Texture>,
+    /// Placed meshes.
+    pub objects: Vec<ImportedObject>,
+    /// Lights, in the file's world space.
+    pub lights: Vec<Light>,
+    /// Cameras, in the file's world space (the first is the default view).
+    pub cameras: Vec<Camera>,
+    /// Warnings met while reading, each naming the file.
+    pub warnings: Vec<String>,
+}
+
+impl Imported {
+    /// Adds everything to `scene`, placing the file with `world_from_file`.
+    ///
+    /// `material_override` replaces every material of the file (per-face
+    /// materials are dropped); otherwise the file's materials are appended
+    /// (and a default material where a mesh has none). `template` supplies
+    /// the other object settings (smooth, crease angle, shade mode, shadows);
+    /// its name prefixes the object names when not empty. Lights and cameras
+    /// are *not* added; the caller decides. Returns the indices of the new
+    /// objects in `scene.objects`.
+    pub fn merge_into(
+        &self,
+        scene: &mut Scene,
+        world_from_file: Mat4,
+        material_override: Option<MaterialId>,
+        template: &Object,
+    ) -> Vec<usize> {
+        let tex_base = scene.textures.len() as u32;
+        let shift_tex = |t: Option<TextureId>| t.map(|t| TextureId(t.0 + tex_base));
+        let mat_base = scene.materials.len() as u32;
+        let mesh_base = scene.meshes.len() as u32;
+        if material_override.is_none() {
+            scene.textures.extend(self.textures.iter().cloned());
+            for m in &self.materials {
+                let mut m = m.clone();
+                m.texture = shift_tex(m.texture);
+                m.normal_map = shift_tex(m.normal_map);
+                m.emission_texture = shift_tex(m.emission_texture);
+                if let Some(b) = &mut m.bump {
+                    b.texture = TextureId(b.texture.0 + tex_base);
+                }
+                scene.materials.push(m);
+            }
+        }
+        let mut default_material: Option<MaterialId> = material_override;
+        let mut get_default = |scene: &mut Scene| {
+            *default_material.get_or_insert_with(|| scene.add_material(Material::default()))
+        };
+        for mesh in &self.meshes {
+            let mut mesh = mesh.clone();
+            if material_override.is_some() {
+                mesh.face_materials.clear();
+            } else {
+                for f in &mut mesh.face_materials {
+                    f.0 += mat_base;
+                }
+            }
+            scene.meshes.push(mesh);
+        }
+        let mut out = Vec::with_capacity(self.objects.len());
+        for o in &self.objects {
+            let material = match (material_override, o.material) {
+                (Some(m), _) => m,
+                (None, Some(local)) => MaterialId(mat_base + local as u32),
+                (None, None) => get_default(scene),
+            };
+            let name = if template.name.is_empty() {
+                o.name.clone()
+            } else {
+                format!("{}/{}", template.name, o.name)
+            };
+            out.push(scene.objects.len());
+            scene.objects.push(Object {
+                name,
+                geometry: Geometry::Mesh(MeshId(mesh_base + o.mesh as u32)),
+                material,
+                transform: Transform::from_matrix(world_from_file * o.matrix),
+                ..template.clone()
+            });
+        }
+        out
+    }
+}
+
+/// Builds a whole scene from one mesh file: its objects, its lights or
+/// default ones, its first camera or one framing the bounds.
+fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
+    let mut scene = Scene::default();
+    let template = Object::default();
+    imported.merge_into(&mut scene, Mat4::IDENTITY, None, &template);
+    let mut warnings = imported.warnings.clone();
+    let bounds = world_bounds(&scene);
+    scene.camera = match imported.cameras.first() {
+        Some(c) => *c,
+        None => framing_camera(bounds, scene.render.aspect()),
+    };
+    // A camera inside the file keeps its clip range only if it is sane for the bounds.
+    scene.lights = imported.lights.clone();
+    let has_emitters = scene.materials.iter().any(Material::is_emissive);
+    if scene.lights.is_empty() {
+        scene.lights = default_lights(&scene.camera);
+        if !has_emitters {
+            warnings.push(format!(
+                "{}: the file has no lights: added an ambient light and a directional light",
+                path.display()
+            ));
+        }
+    }
+    finish(scene, warnings, path)
+}
+
+/// The world-space bounds of every object (mesh vertices, sphere boxes).
+pub fn world_bounds(scene: &Scene) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for o in &scene.objects {
+        let m = o.transform.world_from_object();
+        match o.geometry {
+            Geometry::Mesh(id) => {
+                if let Some(mesh) = scene.meshes.get(id.index()) {
+                    for p in &mesh.positions {
+                        let q = m.transform_point3(*p);
+                        if q.is_finite() {
+                            b = b.grow(q);
+                        }
+                    }
+                }
+            }
+            Geometry::Sphere { radius } => {
+                for corner in 0..8 {
+                    let s = Vec3::new(
+                        if corner & 1 == 0 { -radius } else { radius },
+                        if corner & 2 == 0 { -radius } else { radius },
+                        if corner & 4 == 0 { -radius } else { radius },
+                    );
+                    let q = m.transform_point3(s);
+                    if q.is_finite() {
+                        b = b.grow(q);
+                    }
+                }
+            }
+        }
+    }
+    b
+}
+
+/// A camera on the +z side of `bounds` looking at its centre, far enough
+/// that the bounding sphere fits the vertical field of view (and the
+/// horizontal one for `aspect` < 1), slightly raised. An empty box gives the
+/// default camera.
+pub fn framing_camera(bounds: Aabb, aspect: f32) -> Camera {
+    if bounds.is_empty() {
+        return Camera::default();
+    }
+    let center = bounds.center();
+    let radius = (0.5 * bounds.diagonal()).max(1e-3);
+    let base = Camera::default();
+    let half_fov = (0.5 * base.fov_y_degrees).to_radians();
+    // The sphere fits where sin(half_fov) = radius / distance; for a narrow
+    // image the horizontal half-angle atan(aspect tan(half_fov)) is smaller.
+    let half_h = (aspect.clamp(0.05, 20.0) * half_fov.tan()).atan();
+    let distance = 1.1 * radius / half_fov.min(half_h).sin();
+    let dir = Vec3::new(0.0, 0.25, 1.0).normalize();
+    Camera {
+        eye: center + dir * distance,
+        look_at: center,
+        up: Vec3::Y,
+        near: (distance - radius).max(distance * 1e-3) * 0.5,
+        far: (distance + radius) * 2.0,
+        ..base
+    }
+}
+
+/// The lights added to a file that has none: ambient 0.1 and a white
+/// directional light of intensity 1 shining from above the camera's right
+/// shoulder.
+pub fn default_lights(camera: &Camera) -> Vec<Light> {
+    let f = camera.frame();
+    let direction = (f.forward - 0.5 * f.up - 0.3 * f.right).normalize_or_zero();
+    let direction = if direction == Vec3::ZERO {
+        Vec3::NEG_Y
+    } else {
+        direction
+    };
+    vec![
+        Light::Ambient {
+            color: Vec3::ONE,
+            intensity: 0.1,
+        },
+        Light::Directional {
+            direction,
+            color: Vec3::ONE,
+            intensity: 1.0,
+        },
+    ]
+}
+
+/// Runs `Scene::validate`: errors become one [`IoError::Format`] listing
+/// them, warnings are appended to `warnings`.
+fn finish(scene: Scene, mut warnings: Vec<String>, path: &Path) -> Result<Loaded> {
+    let mut errors = Vec::new();
+    for issue in scene.validate() {
+        match issue.severity {
+            Severity::Error => errors.push(format!("{}: {}", issue.path, issue.message)),
+            Severity::Warning => warnings.push(format!(
+                "{}: {}: {}",
+                path.display(),
+                issue.path,
+                issue.message
+            )),
+        }
+    }
+    if !errors.is_empty() {
+        return Err(IoError::format(
+            path,
+            format!("invalid scene: {}", errors.join("; ")),
+        ));
+    }
+    Ok(Loaded { scene, warnings })
+}
+
+/// Resolves `rel` against `base` (absolute paths are kept).
+pub(crate) fn resolve(base: &Path, rel: &str) -> PathBuf {
+    let p = Path::new(rel);
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        base.join(p)
+    }
+}
+
+/// `light` moved by the affine transform `m` (positions as points,
+/// directions as vectors, renormalised; sizes scaled by the cube root of
+/// the determinant for area lights).
+pub fn transform_light(light: &Light, m: Mat4) -> Light {
+    use chiaro_core::scene::AreaShape;
+    let dir = |d: Vec3| m.transform_vector3(d).try_normalize().unwrap_or(d);
+    let scale = m.determinant().abs().cbrt();
+    match light.clone() {
+        Light::Ambient { .. } => light.clone(),
+        Light::Point {
+            position,
+            color,
+            intensity,
+            attenuation,
+        } => Light::Point {
+            position: m.transform_point3(position),
+            color,
+            intensity,
+            attenuation,
+        },
+        Light::Directional {
+            direction,
+            color,
+            intensity,
+        } => Light::Directional {
+            direction: dir(direction),
+            color,
+            intensity,
+        },
+        Light::Spot(mut s) => {
+            s.position = m.transform_point3(s.position);
+            s.direction = dir(s.direction);
+            for f in &mut s.flaps {
+                f.axis = dir(f.axis);
+            }
+            Light::Spot(s)
+        }
+        Light::Area {
+            shape,
+            color,
+            intensity,
+            two_sided,
+        } => {
+            let shape = match shape {
+                AreaShape::Quad {
+                    corner,
+                    edge_u,
+                    edge_v,
+                } => AreaShape::Quad {
+                    corner: m.transform_point3(corner),
+                    edge_u: m.transform_vector3(edge_u),
+                    edge_v: m.transform_vector3(edge_v),
+                },
+                AreaShape::Disk {
+                    center,
+                    normal,
+                    radius,
+                } => AreaShape::Disk {
+                    center: m.transform_point3(center),
+                    normal: dir(normal),
+                    radius: radius * scale,
+                },
+                AreaShape::Sphere { center, radius } => AreaShape::Sphere {
+                    center: m.transform_point3(center),
+                    radius: radius * scale,
+                },
+                AreaShape::Triangle { a, b, c } => AreaShape::Triangle {
+                    a: m.transform_point3(a),
+                    b: m.transform_point3(b),
+                    c: m.transform_point3(c),
+                },
+            };
+            Light::Area {
+                shape,
+                color,
+                intensity,
+                two_sided,
+            }
+        }
+    }
+}
+
+/// Decodes an image texture file to linear RGBA (`srgb`: remove the sRGB
+/// curve from 8-bit colour data). Delegates to the image decoder of this
+/// crate; returns an error naming the file when it cannot be read or decoded.
+pub(crate) fn load_texture_file(
+    path: &Path,
+    srgb: bool,
+) -> Result<chiaro_core::scene::ImageTexture> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let img = image::load_from_memory(&bytes)
+        .map_err(|e| IoError::format(path, format!("cannot decode image: {e}")))?;
+    Ok(gltf_import::to_texture(
+        &img,
+        srgb,
+        path.display().to_string(),
+    ))
+}
