@@ -13,7 +13,13 @@ use std::path::{Path, PathBuf};
 macro_rules! assert_approx_eq {
     ($a:expr, $b:expr, $eps:expr) => {{
         let (a, b, eps) = ($a as f64, $b as f64, $eps as f64);
-        assert!((a - b).abs() <= eps, "assert_approx_eq failed: {} vs {} (eps {})", a, b, eps);
+        assert!(
+            (a - b).abs() <= eps,
+            "assert_approx_eq failed: {} vs {} (eps {})",
+            a,
+            b,
+            eps
+        );
     }};
 }
 
@@ -36,7 +42,11 @@ pub struct FilmDiff {
 /// # Panics
 /// If the films differ in size (a test bug, not user input).
 pub fn diff_films(a: &Film, b: &Film, tol: f32, mask: impl Fn(usize) -> bool) -> FilmDiff {
-    assert_eq!((a.width, a.height), (b.width, b.height), "films differ in size");
+    assert_eq!(
+        (a.width, a.height),
+        (b.width, b.height),
+        "films differ in size"
+    );
     let mut d = FilmDiff::default();
     let mut sum = 0.0f64;
     for i in 0..a.color.len() {
@@ -51,7 +61,11 @@ pub fn diff_films(a: &Film, b: &Film, tol: f32, mask: impl Fn(usize) -> bool) ->
             d.over += 1;
         }
     }
-    d.mean_abs = if d.compared > 0 { (sum / d.compared as f64) as f32 } else { 0.0 };
+    d.mean_abs = if d.compared > 0 {
+        (sum / d.compared as f64) as f32
+    } else {
+        0.0
+    };
     d
 }
 
@@ -70,7 +84,11 @@ pub fn dump_ppm(film: &Film, name: &str) -> PathBuf {
     for c in &film.color {
         for ch in c.to_array() {
             let x = ch.clamp(0.0, 1.0);
-            let s = if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
+            let s = if x <= 0.003_130_8 {
+                12.92 * x
+            } else {
+                1.055 * x.powf(1.0 / 2.4) - 0.055
+            };
             bytes.push((s * 255.0 + 0.5) as u8);
         }
     }

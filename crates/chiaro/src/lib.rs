@@ -28,8 +28,8 @@ pub use chiaro_core::scene::{self, RenderSettings, Scene, Technique};
 pub use chiaro_core::{Vec2, Vec3};
 pub use chiaro_io as io;
 
-use chiaro_core::accel::list::ListAccel;
 use chiaro_core::accel::Accelerator;
+use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::error::CoreError;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::Severity;
@@ -83,17 +83,25 @@ pub fn check_settings(settings: &RenderSettings) -> Result<(), CoreError> {
         .filter(|i| i.severity == Severity::Error && i.path.starts_with("render"))
         .map(|i| i.to_string())
         .collect();
-    if issues.is_empty() { Ok(()) } else { Err(CoreError::InvalidScene { issues }) }
+    if issues.is_empty() {
+        Ok(())
+    } else {
+        Err(CoreError::InvalidScene { issues })
+    }
 }
 
 /// The names of [`available_techniques`], comma separated.
 pub fn technique_list() -> String {
-    available_techniques().iter().map(|t| t.name()).collect::<Vec<_>>().join(", ")
+    available_techniques()
+        .iter()
+        .map(|t| t.name())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The accelerator used by the ray-based techniques.
 fn accelerator(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
-    Box::new(ListAccel::new(p))
+    Box::new(SceneBvh::new(p))
 }
 
 /// Renders `scene` with `settings` (which override `scene.render`), reporting
@@ -104,20 +112,34 @@ pub fn render(scene: &Scene, settings: &RenderSettings, progress: &dyn Progress)
 }
 
 /// [`render`], also returning [`RenderStats`].
-pub fn render_with_stats(scene: &Scene, settings: &RenderSettings, progress: &dyn Progress) -> Result<(Film, RenderStats)> {
+pub fn render_with_stats(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> Result<(Film, RenderStats)> {
     check_settings(settings)?;
     let mut scene_checked = scene.clone();
     scene_checked.render = settings.clone();
-    let errors: Vec<String> =
-        scene_checked.validate().into_iter().filter(|i| i.severity == Severity::Error).map(|i| i.to_string()).collect();
+    let errors: Vec<String> = scene_checked
+        .validate()
+        .into_iter()
+        .filter(|i| i.severity == Severity::Error)
+        .map(|i| i.to_string())
+        .collect();
     if !errors.is_empty() {
         return Err(CoreError::InvalidScene { issues: errors }.into());
     }
     let start = Instant::now();
     let film = match settings.technique {
-        Technique::Preview => chiaro_ray::preview::render_with(scene, settings, progress, &accelerator)?,
+        Technique::Preview => {
+            chiaro_ray::preview::render_with(scene, settings, progress, &accelerator)?
+        }
         other => {
-            return Err(CoreError::UnknownTechnique { name: other.name().into(), available: technique_list() }.into());
+            return Err(CoreError::UnknownTechnique {
+                name: other.name().into(),
+                available: technique_list(),
+            }
+            .into());
         }
     };
     let stats = RenderStats {
@@ -131,5 +153,12 @@ pub fn render_with_stats(scene: &Scene, settings: &RenderSettings, progress: &dy
 
 /// World-space bounds of everything in the scene.
 pub fn scene_bounds(scene: &Scene) -> chiaro_core::geometry::Aabb {
-    PreparedScene::new(scene, chiaro_core::prepared::PrepareOptions { analytic_spheres: true, ..Default::default() }).bounds
+    PreparedScene::new(
+        scene,
+        chiaro_core::prepared::PrepareOptions {
+            analytic_spheres: true,
+            ..Default::default()
+        },
+    )
+    .bounds
 }

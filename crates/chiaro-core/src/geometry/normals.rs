@@ -138,10 +138,10 @@ pub fn vertex_normals(
                     let mut sum = Vec3::ZERO;
                     if let Some(list) = around.get(&weld[v as usize]) {
                         for &(g, w) in list {
-                            if let Some(ng) = face_n[g as usize] {
-                                if ng.dot(nf) >= cos_crease - 1e-6 {
-                                    sum += ng * w;
-                                }
+                            if let Some(ng) = face_n[g as usize]
+                                && ng.dot(nf) >= cos_crease - 1e-6
+                            {
+                                sum += ng * w;
                             }
                         }
                     }

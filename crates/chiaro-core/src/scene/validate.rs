@@ -134,13 +134,13 @@ impl Scene {
 
         let ntex = self.textures.len();
         let check_tex = |c: &mut Checker, path: String, t: Option<super::TextureId>| {
-            if let Some(t) = t {
-                if t.index() >= ntex {
-                    c.error(
-                        path,
-                        format!("texture index {} out of range ({} textures)", t.0, ntex),
-                    );
-                }
+            if let Some(t) = t
+                && t.index() >= ntex
+            {
+                c.error(
+                    path,
+                    format!("texture index {} out of range ({} textures)", t.0, ntex),
+                );
             }
         };
 
@@ -170,7 +170,7 @@ impl Scene {
                 c.warn(format!("{p}.diffuse"), "an albedo above 1 creates energy");
             }
             if (m.diffuse + m.reflect + m.transmit).max_element() > 1.0 + 1e-4 {
-                c.warn(format!("{p}"), "diffuse + reflect + transmit exceeds 1: the surface creates energy in the ray tracers");
+                c.warn(p.clone(), "diffuse + reflect + transmit exceeds 1: the surface creates energy in the ray tracers");
             }
             check_tex(&mut c, format!("{p}.texture"), m.texture);
             check_tex(&mut c, format!("{p}.normal_map"), m.normal_map);
@@ -184,16 +184,15 @@ impl Scene {
         }
 
         for (i, t) in self.textures.iter().enumerate() {
-            if let Texture::Image(img) = t {
-                if img.width == 0
+            if let Texture::Image(img) = t
+                && (img.width == 0
                     || img.height == 0
-                    || img.texels.len() != (img.width as usize * img.height as usize)
-                {
-                    c.error(
-                        format!("textures[{i}] ({})", img.source),
-                        "image has no texels or a wrong texel count",
-                    );
-                }
+                    || img.texels.len() != (img.width as usize * img.height as usize))
+            {
+                c.error(
+                    format!("textures[{i}] ({})", img.source),
+                    "image has no texels or a wrong texel count",
+                );
             }
         }
 
@@ -222,7 +221,7 @@ impl Scene {
             if mesh.normals.iter().any(|v| !v.is_finite())
                 || mesh.uvs.iter().any(|v| !v.is_finite())
             {
-                c.error(format!("{p}"), "a normal or uv is NaN or infinite");
+                c.error(p.clone(), "a normal or uv is NaN or infinite");
             }
             if let Some((t, tri)) = mesh
                 .indices
@@ -247,7 +246,7 @@ impl Scene {
                 .count();
             if degenerate > 0 {
                 c.warn(
-                    format!("{p}"),
+                    p.clone(),
                     format!("{degenerate} zero-area triangle(s) will not be drawn"),
                 );
             }
@@ -351,10 +350,10 @@ impl Scene {
                             "area light has zero or non-finite area",
                         );
                     }
-                    if let AreaShape::Disk { normal, .. } = shape {
-                        if normal.length_squared() == 0.0 {
-                            c.error(format!("{p}.normal"), "normal is the zero vector");
-                        }
+                    if let AreaShape::Disk { normal, .. } = shape
+                        && normal.length_squared() == 0.0
+                    {
+                        c.error(format!("{p}.normal"), "normal is the zero vector");
                     }
                 }
                 Light::Ambient { .. } => {}
