@@ -32,7 +32,11 @@ pub fn known_keys() -> Vec<String> {
 
 fn collect_keys(t: &toml::Table, prefix: &str, out: &mut Vec<String>) {
     for (k, v) in t {
-        let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+        let key = if prefix.is_empty() {
+            k.clone()
+        } else {
+            format!("{prefix}.{k}")
+        };
         match v {
             toml::Value::Table(sub) => collect_keys(sub, &key, out),
             _ => out.push(key),
@@ -44,7 +48,9 @@ fn collect_keys(t: &toml::Table, prefix: &str, out: &mut Vec<String>) {
 /// `[0, 0, 1]`, `"x"`) or, failing that, a bare string (`map`).
 fn parse_value(text: &str) -> toml::Value {
     match toml::from_str::<toml::Table>(&format!("v = {text}")) {
-        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(text.into())),
+        Ok(mut t) => t
+            .remove("v")
+            .unwrap_or_else(|| toml::Value::String(text.into())),
         Err(_) => toml::Value::String(text.into()),
     }
 }
@@ -52,12 +58,22 @@ fn parse_value(text: &str) -> toml::Value {
 /// Sets `key` (a dotted path such as `shadow_map.resolution` or `technique`)
 /// to `value` in `settings`. Errors: an unknown key (listing the known ones),
 /// or a value of the wrong kind (saying what was expected).
-pub fn apply_override(settings: &mut RenderSettings, key: &str, value: &str) -> Result<(), CoreError> {
+pub fn apply_override(
+    settings: &mut RenderSettings,
+    key: &str,
+    value: &str,
+) -> Result<(), CoreError> {
     let known = known_keys();
     if !known.iter().any(|k| k == key) && !known.iter().any(|k| k.starts_with(&format!("{key}."))) {
-        return Err(CoreError::UnknownSetting { key: key.into(), known: known.join(", ") });
+        return Err(CoreError::UnknownSetting {
+            key: key.into(),
+            known: known.join(", "),
+        });
     }
-    let bad = |message: String| CoreError::BadSetting { key: key.into(), message };
+    let bad = |message: String| CoreError::BadSetting {
+        key: key.into(),
+        message,
+    };
     let mut root = match toml::Value::try_from(&*settings) {
         Ok(toml::Value::Table(t)) => t,
         _ => return Err(bad("internal: settings do not serialise to a table".into())),
@@ -65,7 +81,9 @@ pub fn apply_override(settings: &mut RenderSettings, key: &str, value: &str) -> 
     let parts: Vec<&str> = key.split('.').collect();
     let mut table = &mut root;
     for part in &parts[..parts.len() - 1] {
-        let entry = table.entry(part.to_string()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        let entry = table
+            .entry(part.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
         table = match entry {
             toml::Value::Table(t) => t,
             _ => return Err(bad(format!("`{part}` is not a table"))),
@@ -105,7 +123,12 @@ mod tests {
         let mut s = RenderSettings::default();
         let e = apply_override(&mut s, "shadow", "map").expect_err("unknown");
         let msg = e.to_string();
-        assert!(msg.contains("unknown setting `shadow`") && msg.contains("shadows") && msg.contains("shadow_map.resolution"), "{msg}");
+        assert!(
+            msg.contains("unknown setting `shadow`")
+                && msg.contains("shadows")
+                && msg.contains("shadow_map.resolution"),
+            "{msg}"
+        );
     }
 
     #[test]
