@@ -5,10 +5,15 @@
 
 use crate::geometry::normals::{tangents, vertex_normals};
 use crate::geometry::{Aabb, Ray, face_normal, primitives};
+use crate::scene::TextureId;
 use crate::scene::{AreaShape, Geometry, Light, Material, MaterialId, Scene, Texture};
 use crate::shading::SurfaceMaterial;
-use crate::shading::texture::bilinear;
+use crate::shading::texture::{
+    MipMap, TexCoord, bump_normal, eval_height, eval_texture, normal_map_normal,
+    uv_surface_gradient,
+};
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use std::sync::OnceLock;
 
 /// How to flatten the scene.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -77,6 +82,9 @@ pub struct PreparedScene<'s> {
     pub lights: Vec<Light>,
     /// World-space bounds of everything.
     pub bounds: Aabb,
+    /// Mip-map pyramids of the scene's image textures (index = texture id),
+    /// built on first use by [`PreparedScene::mip_map`].
+    pub mip_maps: OnceLock<Vec<Option<MipMap>>>,
 }
 
 /// A surface point found by a ray, with everything shading needs.
@@ -121,6 +129,7 @@ impl<'s> PreparedScene<'s> {
             emissive_triangles: Vec::new(),
             lights: scene.lights.clone(),
             bounds: Aabb::EMPTY,
+            mip_maps: OnceLock::new(),
         };
         for (oi, obj) in scene.objects.iter().enumerate() {
             let world_from_object = obj.transform.world_from_object();
@@ -162,7 +171,12 @@ impl<'s> PreparedScene<'s> {
             let [a, b, c] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
             let m = ps.material(ps.tri_material[t as usize]);
             if crate::geometry::face_normal(a, b, c).is_some() {
-                ps.lights.push(Light::Area { shape: AreaShape::Triangle { a, b, c }, color: m.emission, intensity: 1.0, two_sided: m.two_sided });
+                ps.lights.push(Light::Area {
+                    shape: AreaShape::Triangle { a, b, c },
+                    color: m.emission,
+                    intensity: 1.0,
+                    two_sided: m.two_sided,
+                });
             }
         }
         ps
@@ -335,23 +349,202 @@ impl<'s> PreparedScene<'s> {
     }
 
     /// The material parameters at a surface point with textures and vertex
-    /// colours applied (base level of image textures).
+    /// colours applied (base level of image textures, bilinear). Same as
+    /// [`PreparedScene::surface_material_lod`] with no footprint.
     pub fn surface_material(&self, hit: &SurfaceHit) -> SurfaceMaterial {
+        self.surface_material_lod(hit, Vec2::ZERO, Vec2::ZERO)
+    }
+
+    /// The mip-map pyramid of image texture `t` (`None` for a procedural or
+    /// missing texture). All pyramids are built, in parallel, on the first call.
+    pub fn mip_map(&self, t: TextureId) -> Option<&MipMap> {
+        use rayon::prelude::*;
+        self.mip_maps
+            .get_or_init(|| {
+                self.scene
+                    .textures
+                    .par_iter()
+                    .map(|t| match t {
+                        Texture::Image(img) => Some(MipMap::new(img)),
+                        Texture::Procedural(_) => None,
+                    })
+                    .collect()
+            })
+            .get(t.index())
+            .and_then(Option::as_ref)
+    }
+
+    /// Evaluates texture `t` at `tc` (linear RGBA), trilinear through its
+    /// mip-map when `tc` has a footprint, bilinear on the base image
+    /// otherwise; white for a missing texture.
+    pub fn eval_texture(&self, t: TextureId, tc: &TexCoord) -> Vec4 {
+        let Some(tex) = self.scene.textures.get(t.index()) else {
+            return Vec4::ONE;
+        };
+        let has_footprint = tc.duv_dx != Vec2::ZERO || tc.duv_dy != Vec2::ZERO;
+        let mip = if has_footprint && matches!(tex, Texture::Image(_)) {
+            self.mip_map(t)
+        } else {
+            None
+        };
+        eval_texture(tex, mip, tc)
+    }
+
+    /// The texture lookup point of `hit` with screen-space uv derivatives.
+    pub fn tex_coord(hit: &SurfaceHit, duv_dx: Vec2, duv_dy: Vec2) -> TexCoord {
+        TexCoord {
+            uv: hit.uv,
+            duv_dx,
+            duv_dy,
+            p_object: hit.p_object,
+        }
+    }
+
+    /// The factor the diffuse texture applies to `kd` at `tc` (RGB, one when
+    /// the material has no texture).
+    pub fn diffuse_texture_factor(&self, material: MaterialId, tc: &TexCoord) -> Vec3 {
+        match self.material(material).texture {
+            Some(t) => self.eval_texture(t, tc).truncate(),
+            None => Vec3::ONE,
+        }
+    }
+
+    /// The material parameters at a surface point with vertex colours and
+    /// textures applied; image textures are filtered over the pixel footprint
+    /// given by the screen-space derivatives of the uvs, `duv_dx` and `duv_dy`
+    /// (uv units per pixel; zero for the base level). Procedural textures are
+    /// evaluated at the object-space point (or the uvs).
+    pub fn surface_material_lod(
+        &self,
+        hit: &SurfaceHit,
+        duv_dx: Vec2,
+        duv_dy: Vec2,
+    ) -> SurfaceMaterial {
         let m = self.material(hit.material);
         let mut sm = SurfaceMaterial::from_material(m);
         sm.kd *= hit.color;
-        if let Some(Texture::Image(img)) =
-            m.texture.and_then(|t| self.scene.textures.get(t.index()))
-        {
-            sm.kd *= bilinear(img, hit.uv).truncate();
+        let tc = Self::tex_coord(hit, duv_dx, duv_dy);
+        if let Some(t) = m.texture {
+            sm.kd *= self.eval_texture(t, &tc).truncate();
         }
-        if let Some(Texture::Image(img)) = m
-            .emission_texture
-            .and_then(|t| self.scene.textures.get(t.index()))
-        {
-            sm.emission *= bilinear(img, hit.uv).truncate();
+        if let Some(t) = m.emission_texture {
+            sm.emission *= self.eval_texture(t, &tc).truncate();
         }
         sm
+    }
+
+    /// `(dp/du, dp/dv)`: world-space derivatives of position with respect to
+    /// the texture coordinates on triangle `t` (pbrt-v4 section 6.5.3). For
+    /// degenerate uvs, an arbitrary orthonormal tangent frame of the face.
+    pub fn triangle_dpduv(&self, t: u32) -> (Vec3, Vec3) {
+        let [i0, i1, i2] = self.triangles[t as usize].map(|i| i as usize);
+        let (p0, p1, p2) = (self.positions[i0], self.positions[i1], self.positions[i2]);
+        let (uv0, uv1, uv2) = (self.uvs[i0], self.uvs[i1], self.uvs[i2]);
+        let (dp1, dp2) = (p1 - p0, p2 - p0);
+        let (d1, d2) = (uv1 - uv0, uv2 - uv0);
+        let det = d1.x * d2.y - d2.x * d1.y;
+        if det.abs() > 1e-12 {
+            let inv = 1.0 / det;
+            let dpdu = (dp1 * d2.y - dp2 * d1.y) * inv;
+            let dpdv = (dp2 * d1.x - dp1 * d2.x) * inv;
+            if dpdu.is_finite() && dpdv.is_finite() && dpdu.cross(dpdv) != Vec3::ZERO {
+                return (dpdu, dpdv);
+            }
+        }
+        let f = crate::geometry::Frame::from_normal(self.face_normal(t));
+        (f.s, f.t)
+    }
+
+    /// The shading normal after the material's tangent-space normal map and
+    /// bump map: `n` is the unit (front-side) shading normal of `hit`,
+    /// `dpdu`/`dpdv` its position derivatives (see
+    /// [`PreparedScene::triangle_dpduv`]) and `duv_dx`/`duv_dy` the pixel
+    /// footprint (zero for the finest level). Returns a unit normal on the
+    /// front side; `n` itself when the material has neither map. Flip the
+    /// result afterwards for the back of a two-sided surface.
+    pub fn perturbed_normal(
+        &self,
+        hit: &SurfaceHit,
+        n: Vec3,
+        dpdu: Vec3,
+        dpdv: Vec3,
+        duv_dx: Vec2,
+        duv_dy: Vec2,
+    ) -> Vec3 {
+        let m = self.material(hit.material);
+        let mut n = n;
+        let tc = Self::tex_coord(hit, duv_dx, duv_dy);
+        if let Some(t) = m.normal_map {
+            let rgb = self.eval_texture(t, &tc).truncate();
+            n = normal_map_normal(n, hit.tangent, rgb);
+        }
+        let Some(bump) = m.bump else {
+            return n;
+        };
+        let Some(tex) = self.scene.textures.get(bump.texture.index()) else {
+            return n;
+        };
+        let grad = match tex {
+            Texture::Procedural(p) if !p.use_uv => {
+                // Central differences of the solid texture in object space,
+                // carried to world space by the transpose of object_from_world
+                // (gradients are covectors).
+                let eps = 1e-3 / p.scale.abs().max(1e-6);
+                let h = |d: Vec3| {
+                    let tc = TexCoord {
+                        p_object: hit.p_object + d,
+                        ..tc
+                    };
+                    eval_height(tex, None, &tc)
+                };
+                let g_obj = Vec3::new(
+                    h(Vec3::X * eps) - h(Vec3::NEG_X * eps),
+                    h(Vec3::Y * eps) - h(Vec3::NEG_Y * eps),
+                    h(Vec3::Z * eps) - h(Vec3::NEG_Z * eps),
+                ) * (bump.height / (2.0 * eps));
+                let object_from_world = self
+                    .scene
+                    .objects
+                    .get(hit.object as usize)
+                    .map_or(Mat4::IDENTITY, |o| {
+                        o.transform.world_from_object().inverse()
+                    });
+                Mat3::from_mat4(object_from_world).transpose() * g_obj
+            }
+            _ => {
+                // Central differences in uv, one texel of the filtered level apart.
+                let (du, dv) = match tex {
+                    Texture::Image(img) => {
+                        let mip = self.mip_map(bump.texture);
+                        let lod = mip.map_or(0.0, |mm| mm.lod(duv_dx, duv_dy));
+                        let s = lod.exp2();
+                        (s / img.width.max(1) as f32, s / img.height.max(1) as f32)
+                    }
+                    Texture::Procedural(p) => {
+                        let e = 1e-3 / p.scale.abs().max(1e-6);
+                        (e, e)
+                    }
+                };
+                let h = |d: Vec2| {
+                    let tc = TexCoord {
+                        uv: hit.uv + d,
+                        ..tc
+                    };
+                    let mip = match tex {
+                        Texture::Image(_) => self.mip_map(bump.texture),
+                        Texture::Procedural(_) => None,
+                    };
+                    eval_height(tex, mip, &tc)
+                };
+                let dh_du = (h(Vec2::new(du, 0.0)) - h(Vec2::new(-du, 0.0))) / (2.0 * du);
+                let dh_dv = (h(Vec2::new(0.0, dv)) - h(Vec2::new(0.0, -dv))) / (2.0 * dv);
+                uv_surface_gradient(n, dpdu, dpdv, bump.height * dh_du, bump.height * dh_dv)
+            }
+        };
+        if !grad.is_finite() {
+            return n;
+        }
+        bump_normal(n, grad)
     }
 }
 

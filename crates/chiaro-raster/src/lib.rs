@@ -17,4 +17,7 @@
 
 pub mod clip;
 pub mod raster;
+pub mod render;
 pub mod zbuffer;
+
+pub use render::{render, render_prepared, shade_mode_of};

@@ -1,9 +1,11 @@
-//! Texture evaluation: image textures (bilinear, mip-mapped) and procedural
-//! solid textures. Owned by the scan-conversion work (issue 3); the ray
-//! tracers call the same functions.
+//! Texture evaluation, shared by every technique: image textures (bilinear,
+//! and trilinear through [`MipMap`] pyramids), procedural solid textures
+//! (checker, wood, marble, noise, dimples, from Perlin noise and turbulence),
+//! bump mapping by the height gradient, tangent-space normal maps, and the
+//! lat-long environment map.
 
-use crate::scene::{ImageTexture, WrapMode};
-use glam::{Vec2, Vec4};
+use crate::scene::{ImageTexture, Procedural, ProceduralKind, Scene, Texture, WrapMode};
+use glam::{Vec2, Vec3, Vec4};
 
 /// Wraps a texel coordinate into `0..size`.
 #[inline]
@@ -42,6 +44,394 @@ pub fn bilinear(img: &ImageTexture, uv: Vec2) -> Vec4 {
     let top = t(0, 0).lerp(t(1, 0), fx);
     let bottom = t(0, 1).lerp(t(1, 1), fx);
     top.lerp(bottom, fy)
+}
+
+// ---------------------------------------------------------------------------
+// Mip-mapping (Williams 1983, "Pyramidal parametrics").
+
+/// A mip-map pyramid of an image texture: level 0 is the image, each next
+/// level halves both sides (rounding up) by a 2x2 box filter, down to 1x1.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MipMap {
+    /// The levels, finest first.
+    pub levels: Vec<ImageTexture>,
+}
+
+impl MipMap {
+    /// Builds the pyramid of `img`. An empty image gives a single empty level
+    /// (which samples as white, like [`bilinear`]).
+    pub fn new(img: &ImageTexture) -> Self {
+        let mut levels = vec![img.clone()];
+        while let Some(prev) = levels.last() {
+            if prev.texels.is_empty() || (prev.width <= 1 && prev.height <= 1) {
+                break;
+            }
+            let (w, h) = (
+                prev.width.div_ceil(2).max(1),
+                prev.height.div_ceil(2).max(1),
+            );
+            let mut texels = Vec::with_capacity((w * h) as usize);
+            for y in 0..h {
+                for x in 0..w {
+                    // Average the (up to) 2x2 parent texels; odd edges repeat the last one.
+                    let x0 = (2 * x).min(prev.width - 1);
+                    let x1 = (2 * x + 1).min(prev.width - 1);
+                    let y0 = (2 * y).min(prev.height - 1);
+                    let y1 = (2 * y + 1).min(prev.height - 1);
+                    let s = Vec4::from(prev.texel(x0, y0))
+                        + Vec4::from(prev.texel(x1, y0))
+                        + Vec4::from(prev.texel(x0, y1))
+                        + Vec4::from(prev.texel(x1, y1));
+                    texels.push((s * 0.25).to_array());
+                }
+            }
+            let next = ImageTexture {
+                source: prev.source.clone(),
+                width: w,
+                height: h,
+                texels,
+                wrap: prev.wrap,
+            };
+            levels.push(next);
+        }
+        Self { levels }
+    }
+
+    /// The level of detail for the screen-space derivatives of the texture
+    /// coordinates, `duv_dx` and `duv_dy` (uv units per pixel): `log2` of the
+    /// longer footprint side in level-0 texels (OpenGL 4.6 section 8.14.1,
+    /// equation 8.7), clamped to `[0, levels - 1]`. Non-finite input gives 0.
+    pub fn lod(&self, duv_dx: Vec2, duv_dy: Vec2) -> f32 {
+        let base = &self.levels[0];
+        let size = Vec2::new(base.width as f32, base.height as f32);
+        let rho = (duv_dx * size).length().max((duv_dy * size).length());
+        let lod = if rho > 0.0 { rho.log2() } else { 0.0 };
+        if !lod.is_finite() {
+            return 0.0;
+        }
+        lod.clamp(0.0, (self.levels.len() - 1) as f32)
+    }
+
+    /// Trilinear lookup: bilinear in the two levels around `lod`, blended
+    /// linearly. Linear RGBA.
+    pub fn sample(&self, uv: Vec2, lod: f32) -> Vec4 {
+        let max = (self.levels.len() - 1) as f32;
+        let lod = if lod.is_finite() {
+            lod.clamp(0.0, max)
+        } else {
+            0.0
+        };
+        let l0 = lod.floor() as usize;
+        let f = lod - l0 as f32;
+        let a = bilinear(&self.levels[l0], uv);
+        if f <= 0.0 || l0 + 1 >= self.levels.len() {
+            return a;
+        }
+        a.lerp(bilinear(&self.levels[l0 + 1], uv), f)
+    }
+
+    /// Trilinear lookup with the level chosen from the uv derivatives.
+    pub fn sample_footprint(&self, uv: Vec2, duv_dx: Vec2, duv_dy: Vec2) -> Vec4 {
+        self.sample(uv, self.lod(duv_dx, duv_dy))
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Perlin noise (Perlin 2002, "Improving noise") and turbulence (Perlin 1985).
+
+/// The permutation of 0..256, shuffled once by a fixed linear congruential
+/// generator (Fisher-Yates), doubled to avoid index wrapping.
+const PERM: [u8; 512] = {
+    let mut p = [0u8; 256];
+    let mut i = 0;
+    while i < 256 {
+        p[i] = i as u8;
+        i += 1;
+    }
+    let mut state: u64 = 0x2545_F491_4F6C_DD1D;
+    let mut i = 255;
+    while i > 0 {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        let j = ((state >> 33) % (i as u64 + 1)) as usize;
+        let t = p[i];
+        p[i] = p[j];
+        p[j] = t;
+        i -= 1;
+    }
+    let mut out = [0u8; 512];
+    let mut k = 0;
+    while k < 512 {
+        out[k] = p[k & 255];
+        k += 1;
+    }
+    out
+};
+
+#[inline]
+fn fade(t: f32) -> f32 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+#[inline]
+fn grad(hash: u8, x: f32, y: f32, z: f32) -> f32 {
+    // The 12 edge directions of a cube (Perlin 2002), with 4 repeated.
+    let h = hash & 15;
+    let u = if h < 8 { x } else { y };
+    let v = if h < 4 {
+        y
+    } else if h == 12 || h == 14 {
+        x
+    } else {
+        z
+    };
+    (if h & 1 == 0 { u } else { -u }) + (if h & 2 == 0 { v } else { -v })
+}
+
+/// Perlin's improved gradient noise at `p`: smooth, zero at integer lattice
+/// points, in about `[-1, 1]`; non-finite input gives 0.
+pub fn perlin_noise(p: Vec3) -> f32 {
+    if !p.is_finite() {
+        return 0.0;
+    }
+    let f = p.floor();
+    let (xi, yi, zi) = (
+        (f.x as i64 & 255) as usize,
+        (f.y as i64 & 255) as usize,
+        (f.z as i64 & 255) as usize,
+    );
+    let (x, y, z) = (p.x - f.x, p.y - f.y, p.z - f.z);
+    let (u, v, w) = (fade(x), fade(y), fade(z));
+    let a = PERM[xi] as usize + yi;
+    let aa = PERM[a] as usize + zi;
+    let ab = PERM[a + 1] as usize + zi;
+    let b = PERM[xi + 1] as usize + yi;
+    let ba = PERM[b] as usize + zi;
+    let bb = PERM[b + 1] as usize + zi;
+    let lerp = |t: f32, a: f32, b: f32| a + t * (b - a);
+    lerp(
+        w,
+        lerp(
+            v,
+            lerp(u, grad(PERM[aa], x, y, z), grad(PERM[ba], x - 1.0, y, z)),
+            lerp(
+                u,
+                grad(PERM[ab], x, y - 1.0, z),
+                grad(PERM[bb], x - 1.0, y - 1.0, z),
+            ),
+        ),
+        lerp(
+            v,
+            lerp(
+                u,
+                grad(PERM[aa + 1], x, y, z - 1.0),
+                grad(PERM[ba + 1], x - 1.0, y, z - 1.0),
+            ),
+            lerp(
+                u,
+                grad(PERM[ab + 1], x, y - 1.0, z - 1.0),
+                grad(PERM[bb + 1], x - 1.0, y - 1.0, z - 1.0),
+            ),
+        ),
+    )
+    .clamp(-1.0, 1.0)
+}
+
+/// Perlin's turbulence: `sum_i |noise(2^i p)| / 2^i` over `octaves` octaves,
+/// in `[0, 2)`.
+pub fn turbulence(p: Vec3, octaves: u32) -> f32 {
+    let mut sum = 0.0;
+    let mut scale = 1.0;
+    for _ in 0..octaves {
+        sum += perlin_noise(p * scale).abs() / scale;
+        scale *= 2.0;
+    }
+    sum
+}
+
+/// The value in `[0, 1]` of a procedural pattern at the point `q` (already
+/// scaled by the texture's `scale`):
+/// - checker: parity of `floor(x) + floor(y) + floor(z)`;
+/// - wood: rings `frac(r + 2 noise)` of the distance `r` to the y axis, sharpened;
+/// - marble: `0.5 + 0.5 sin(x + 5 turbulence)` (Perlin 1985);
+/// - noise: `0.5 + 0.5 noise`;
+/// - dimples: a height field with a spherical dent of radius 0.4 around every
+///   lattice point (1 on the flat surface, 0 at the bottom of a dent).
+pub fn pattern(kind: ProceduralKind, q: Vec3) -> f32 {
+    if !q.is_finite() {
+        return 0.0;
+    }
+    match kind {
+        ProceduralKind::Checker => {
+            let f = q.floor();
+            let s = f.x as i64 + f.y as i64 + f.z as i64;
+            if s.rem_euclid(2) == 0 { 0.0 } else { 1.0 }
+        }
+        ProceduralKind::Wood => {
+            let r = (q.x * q.x + q.z * q.z).sqrt() + 2.0 * perlin_noise(q * 0.5);
+            let t = r - r.floor();
+            // Early wood light, late wood a thin dark ring.
+            (t * t * (3.0 - 2.0 * t)).powf(3.0)
+        }
+        ProceduralKind::Marble => 0.5 + 0.5 * (q.x + 5.0 * turbulence(q, 5)).sin(),
+        ProceduralKind::Noise => 0.5 + 0.5 * perlin_noise(q),
+        ProceduralKind::Dimples => {
+            let c = q.round();
+            let d = (q - c).length();
+            const R: f32 = 0.4;
+            if d >= R {
+                1.0
+            } else {
+                1.0 - (R * R - d * d).sqrt() / R
+            }
+        }
+    }
+}
+
+/// The pattern value of a procedural texture at the object-space point
+/// `p_object` (or at `(u, v, 0)` when the texture uses uvs), in `[0, 1]`.
+pub fn procedural_value(t: &Procedural, p_object: Vec3, uv: Vec2) -> f32 {
+    let q = if t.use_uv { uv.extend(0.0) } else { p_object };
+    pattern(t.kind, q * t.scale)
+}
+
+/// The colour of a procedural texture: `color_a` at pattern 0 to `color_b` at 1.
+pub fn procedural_color(t: &Procedural, p_object: Vec3, uv: Vec2) -> Vec3 {
+    t.color_a.lerp(t.color_b, procedural_value(t, p_object, uv))
+}
+
+/// Where a texture is looked up: the uv with its screen-space derivatives
+/// (zero for "no footprint": the finest level), and the object-space point.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TexCoord {
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// d(uv)/dx per pixel.
+    pub duv_dx: Vec2,
+    /// d(uv)/dy per pixel.
+    pub duv_dy: Vec2,
+    /// Object-space point (solid textures).
+    pub p_object: Vec3,
+}
+
+/// Evaluates texture `t` at `tc` as linear RGBA: image textures through the
+/// mip-map `mip` when given (trilinear), else bilinear on the base image;
+/// procedural textures give their colour with alpha 1.
+pub fn eval_texture(t: &Texture, mip: Option<&MipMap>, tc: &TexCoord) -> Vec4 {
+    match t {
+        Texture::Image(img) => match mip {
+            Some(m) => m.sample_footprint(tc.uv, tc.duv_dx, tc.duv_dy),
+            None => bilinear(img, tc.uv),
+        },
+        Texture::Procedural(p) => procedural_color(p, tc.p_object, tc.uv).extend(1.0),
+    }
+}
+
+/// Scalar height of texture `t` at `tc` in `[0, 1]`: the pattern value of a
+/// procedural texture, the Rec. 709 luminance of an image.
+pub fn eval_height(t: &Texture, mip: Option<&MipMap>, tc: &TexCoord) -> f32 {
+    match t {
+        Texture::Procedural(p) => procedural_value(p, tc.p_object, tc.uv),
+        Texture::Image(_) => {
+            let c = eval_texture(t, mip, tc);
+            0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Environment maps (Blinn and Newell 1976; lat-long after Miller and Hoffman 1984).
+
+/// Lat-long texture coordinates of the unit direction `d`: `+y` maps to the
+/// top row (`v = 0`), `-z` to the centre column (`u = 0.5`), `u` increasing
+/// towards `+x` (so `+x` is at `u = 0.75`).
+#[inline]
+pub fn latlong_uv(d: Vec3) -> Vec2 {
+    let u = 0.5 + d.x.atan2(-d.z) / std::f32::consts::TAU;
+    let v = d.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI;
+    Vec2::new(u, v)
+}
+
+/// Radiance of the scene's environment map in world direction `dir` (need not
+/// be unit): the lat-long image (rotated by `rotate_y_degrees` about +y)
+/// times `intensity`, linear RGB. Zero when the scene has no environment or
+/// its texture is missing or not an image. Uses the base level (bilinear).
+pub fn environment_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
+    let Some(env) = &scene.environment else {
+        return Vec3::ZERO;
+    };
+    let Some(Texture::Image(img)) = scene.textures.get(env.texture.index()) else {
+        return Vec3::ZERO;
+    };
+    let Some(d) = dir.try_normalize() else {
+        return Vec3::ZERO;
+    };
+    // Rotating the map by +a about y is looking up the direction rotated by -a.
+    let d = glam::Quat::from_rotation_y(-env.rotate_y_degrees.to_radians()) * d;
+    let mut uv = latlong_uv(d);
+    uv.x = uv.x.rem_euclid(1.0);
+    bilinear(img, uv).truncate() * env.intensity
+}
+
+/// What the camera sees in direction `dir` where no surface is hit: the
+/// environment map when it is drawn as background, else `scene.background`.
+pub fn background_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
+    match &scene.environment {
+        Some(env) if env.as_background => environment_radiance(scene, dir),
+        _ => scene.background,
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Bump and normal mapping.
+
+/// Bump mapping with a height-field gradient (Blinn 1978, in the "surface
+/// gradient" form of Mikkelsen 2010, "Bump mapping unparametrized
+/// surfaces"): the surface displaced by `h` along `n` has the normal
+/// `normalize(n - grad_s h)`, where `grad_s h` is the gradient of `h` (scene
+/// units per scene unit) projected into the tangent plane.
+///
+/// `grad_h` is the world-space gradient of the displacement; `n` must be unit.
+#[inline]
+pub fn bump_normal(n: Vec3, grad_h: Vec3) -> Vec3 {
+    let gs = grad_h - grad_h.dot(n) * n;
+    (n - gs).try_normalize().unwrap_or(n)
+}
+
+/// The world-space surface gradient of a function of uv with partial
+/// derivatives `dh_du`, `dh_dv`, on a surface with position derivatives
+/// `dpdu`, `dpdv` and unit normal `n`: `dh_du grad u + dh_dv grad v`, where
+/// `grad u = (dpdv x n) / (dpdu . (dpdv x n))` and
+/// `grad v = (n x dpdu) / (dpdv . (n x dpdu))`. Zero for a degenerate
+/// parametrisation.
+pub fn uv_surface_gradient(n: Vec3, dpdu: Vec3, dpdv: Vec3, dh_du: f32, dh_dv: f32) -> Vec3 {
+    let a = dpdv.cross(n);
+    let b = n.cross(dpdu);
+    let da = dpdu.dot(a);
+    let db = dpdv.dot(b);
+    if da.abs() < 1e-20 || db.abs() < 1e-20 {
+        return Vec3::ZERO;
+    }
+    let g = a * (dh_du / da) + b * (dh_dv / db);
+    if g.is_finite() { g } else { Vec3::ZERO }
+}
+
+/// Tangent-space normal mapping (glTF 2.0 `normalTexture`): the texel `rgb`
+/// in `[0, 1]` encodes `t = 2 rgb - 1`, and the perturbed normal is
+/// `normalize(t.x T + t.y B + t.z N)` with `B = sign (N x T)`.
+/// `tangent` is the tangent with the bitangent sign in `w`; `n` must be unit.
+/// Falls back to `n` when the tangent is degenerate.
+pub fn normal_map_normal(n: Vec3, tangent: Vec4, rgb: Vec3) -> Vec3 {
+    let t = tangent.truncate();
+    // Gram-Schmidt: the interpolated tangent need not be orthogonal to n.
+    let Some(t) = (t - n * n.dot(t)).try_normalize() else {
+        return n;
+    };
+    let sign = if tangent.w < 0.0 { -1.0 } else { 1.0 };
+    let b = n.cross(t) * sign;
+    let m = rgb * 2.0 - Vec3::ONE;
+    (t * m.x + b * m.y + n * m.z).try_normalize().unwrap_or(n)
 }
 
 #[cfg(test)]

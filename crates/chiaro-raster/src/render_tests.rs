@@ -1,0 +1,559 @@
+//! Tests of the scan-conversion renderer against ray casting and closed forms.
+
+use super::*;
+use chiaro_core::accel::Accelerator;
+use chiaro_core::accel::list::ListAccel;
+use chiaro_core::geometry::{Ray, primitives};
+use chiaro_core::progress::NoProgress;
+use chiaro_core::scene::{
+    Attenuation, Camera, DepthCue, Environment, Geometry, ImageTexture, Light, Object,
+    ReflectanceModel, SpotLight, Texture, Transform, WrapMode,
+};
+
+fn settings(technique: Technique, w: u32, h: u32) -> RenderSettings {
+    RenderSettings {
+        technique,
+        width: w,
+        height: h,
+        ..RenderSettings::default()
+    }
+}
+
+/// A sphere on a floor, lit by two point lights, a spotlight, a directional
+/// light and ambient light; Blinn, Phong and Torrance-Sparrow materials.
+fn test_scene() -> Scene {
+    let mut s = Scene::default();
+    let shiny = s.add_material(Material {
+        name: "shiny".into(),
+        diffuse: Vec3::new(0.7, 0.3, 0.2),
+        specular: Vec3::splat(0.4),
+        shininess: 30.0,
+        model: ReflectanceModel::Blinn,
+        ..Material::default()
+    });
+    let floor = s.add_material(Material {
+        name: "floor".into(),
+        diffuse: Vec3::new(0.3, 0.6, 0.3),
+        specular: Vec3::splat(0.3),
+        model: ReflectanceModel::TorranceSparrow,
+        roughness: 0.3,
+        ..Material::default()
+    });
+    let plane = s.add_mesh(primitives::plane(3.0, 4));
+    s.objects.push(Object {
+        geometry: Geometry::Sphere { radius: 1.0 },
+        material: shiny,
+        ..Object::default()
+    });
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(plane),
+        material: floor,
+        transform: Transform {
+            translate: Vec3::new(0.0, -1.0, 0.0),
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
+    s.lights = vec![
+        Light::Ambient {
+            color: Vec3::ONE,
+            intensity: 0.2,
+        },
+        Light::Point {
+            position: Vec3::new(2.0, 3.0, 2.0),
+            color: Vec3::new(1.0, 0.9, 0.8),
+            intensity: 10.0,
+            attenuation: Attenuation::InverseSquare,
+        },
+        Light::Point {
+            position: Vec3::new(-3.0, 2.0, 1.0),
+            color: Vec3::new(0.3, 0.4, 1.0),
+            intensity: 1.0,
+            attenuation: Attenuation::Empirical {
+                c1: 1.0,
+                c2: 0.1,
+                c3: 0.01,
+            },
+        },
+        Light::Spot(SpotLight {
+            position: Vec3::new(0.0, 4.0, 0.0),
+            direction: Vec3::NEG_Y,
+            color: Vec3::ONE,
+            intensity: 8.0,
+            attenuation: Attenuation::InverseSquare,
+            exponent: 4.0,
+            cone_degrees: 30.0,
+            cone_softness_degrees: 5.0,
+            flaps: Vec::new(),
+        }),
+        Light::Directional {
+            direction: Vec3::new(-1.0, -1.0, -0.5).normalize(),
+            color: Vec3::ONE,
+            intensity: 0.3,
+        },
+    ];
+    s.camera = Camera {
+        eye: Vec3::new(0.5, 1.5, 5.0),
+        look_at: Vec3::new(0.0, -0.3, 0.0),
+        fov_y_degrees: 40.0,
+        ..Camera::default()
+    };
+    s
+}
+
+/// The per-pixel ray cast of the same prepared scene, shaded by the same
+/// function: the oracle of the cross-technique invariant.
+fn ray_cast(ps: &PreparedScene<'_>, w: u32, h: u32) -> Vec<Option<(u32, Vec3)>> {
+    let accel = ListAccel::new(ps);
+    let cam = &ps.scene.camera;
+    let env = LocalLighting {
+        lights: &ps.lights,
+        area_samples: 16,
+        ambient: true,
+    };
+    let mut out = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let d = cam.ray_direction(x as f32 + 0.5, y as f32 + 0.5, w, h);
+            let ray = Ray::new(cam.eye, d);
+            out.push(accel.intersect(&ray).map(|hit| {
+                let s = ps.surface(&ray, &hit);
+                let m = ps.surface_material(&s);
+                let wo = (cam.eye - s.p).normalize();
+                let sp = ShadingPoint {
+                    p: s.p,
+                    n: s.ns,
+                    ng: s.ng,
+                    wo,
+                };
+                let c = shade_local(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
+                (hit.prim, c)
+            }));
+        }
+    }
+    out
+}
+
+#[test]
+fn phong_mode_equals_ray_cast_shading() {
+    let scene = test_scene();
+    let (w, h) = (48, 40);
+    let st = settings(Technique::Phong, w, h);
+    let film = render(&scene, &st, &NoProgress).expect("render");
+    assert!(film.is_clean());
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let reference = ray_cast(&ps, w, h);
+    let mut compared = 0;
+    for (i, r) in reference.iter().enumerate() {
+        match r {
+            None => {
+                assert_eq!(film.depth[i], f32::INFINITY, "pixel {i}");
+                assert_eq!(film.color[i], scene.background);
+            }
+            Some((_, c)) => {
+                // Same surface: the depth agrees.
+                let cam = &scene.camera;
+                let d = cam.ray_direction(
+                    (i as u32 % w) as f32 + 0.5,
+                    (i as u32 / w) as f32 + 0.5,
+                    w,
+                    h,
+                );
+                let t = ListAccel::new(&ps)
+                    .intersect(&Ray::new(cam.eye, d))
+                    .map_or(f32::INFINITY, |hh| hh.t);
+                if (film.depth[i] - t).abs() > 1e-3 * t {
+                    continue;
+                }
+                let diff = (film.color[i] - *c).abs().max_element();
+                assert!(
+                    diff <= 1e-4 + 1e-4 * c.max_element(),
+                    "pixel {i}: {} vs {c}",
+                    film.color[i]
+                );
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared > (w * h / 2) as usize, "compared {compared}");
+}
+
+#[test]
+fn flat_is_constant_per_polygon_and_gouraud_interpolates_vertex_colours() {
+    // One quad facing the camera, a near point light (a strong gradient).
+    let mut s = Scene::default();
+    let m = s.add_material(Material {
+        specular: Vec3::splat(0.5),
+        ..Material::default()
+    });
+    let q = s.add_mesh(primitives::quad(
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+    ));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(q),
+        material: m,
+        smooth: false,
+        ..Object::default()
+    });
+    s.lights.push(Light::Point {
+        position: Vec3::new(0.5, 0.3, 1.0),
+        color: Vec3::ONE,
+        intensity: 1.0,
+        attenuation: Attenuation::InverseSquare,
+    });
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 0.0, 2.0),
+        fov_y_degrees: 60.0,
+        ..Camera::default()
+    };
+    let (w, h) = (32, 32);
+    let flat = render(&s, &settings(Technique::Flat, w, h), &NoProgress).expect("flat");
+    let ps = PreparedScene::new(&s, PrepareOptions::default());
+    let mut colours: Vec<[u32; 3]> = flat
+        .color
+        .iter()
+        .zip(&flat.depth)
+        .filter(|(_, d)| d.is_finite())
+        .map(|(c, _)| c.to_array().map(f32::to_bits))
+        .collect();
+    colours.sort_unstable();
+    colours.dedup();
+    assert_eq!(colours.len(), 2, "one colour per triangle");
+
+    let g = render(&s, &settings(Technique::Gouraud, w, h), &NoProgress).expect("gouraud");
+    let env = LocalLighting {
+        lights: &s.lights,
+        area_samples: 1,
+        ambient: true,
+    };
+    let vertex = |p: Vec3| {
+        let sp = ShadingPoint {
+            p,
+            n: Vec3::Z,
+            ng: Vec3::Z,
+            wo: (s.camera.eye - p).normalize(),
+        };
+        let sm = SurfaceMaterial::from_material(&s.materials[0]);
+        shade_local(&sm, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE)
+    };
+    let accel = ListAccel::new(&ps);
+    let mut checked = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let d = s.camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, w, h);
+            let Some(hit) = accel.intersect(&Ray::new(s.camera.eye, d)) else {
+                continue;
+            };
+            let [a, b, c] = ps.triangles[hit.prim as usize].map(|i| ps.positions[i as usize]);
+            let expect = vertex(a) * (1.0 - hit.u - hit.v) + vertex(b) * hit.u + vertex(c) * hit.v;
+            let got = g.color[(y * w + x) as usize];
+            assert!(
+                (got - expect).abs().max_element() < 1e-4,
+                "{x},{y}: {got} vs {expect}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 200);
+    // Phong differs from Gouraud under a near light (the highlight is not missed).
+    let p = render(&s, &settings(Technique::Phong, w, h), &NoProgress).expect("phong");
+    let max_diff = p
+        .color
+        .iter()
+        .zip(&g.color)
+        .map(|(a, b)| (*a - *b).abs().max_element())
+        .fold(0.0f32, f32::max);
+    assert!(max_diff > 0.01);
+}
+
+/// A plane seen at a grazing angle whose emission texture is a ramp in u:
+/// the rendered value must be the u of the ray-plane hit (no affine distortion).
+#[test]
+fn textures_are_interpolated_perspective_correctly() {
+    let mut s = Scene::default();
+    let n = 64u32;
+    let ramp = ImageTexture {
+        source: "ramp".into(),
+        width: 1,
+        height: n,
+        texels: (0..n)
+            .map(|i| [(i as f32 + 0.5) / n as f32, 0.0, 0.0, 1.0])
+            .collect(),
+        wrap: WrapMode::Clamp,
+    };
+    let tex = s.add_texture(Texture::Image(ramp));
+    let m = s.add_material(Material {
+        diffuse: Vec3::ZERO,
+        ambient: Vec3::ZERO,
+        emission: Vec3::ONE,
+        emission_texture: Some(tex),
+        ..Material::default()
+    });
+    // Two big triangles, uv u along the depth axis.
+    let q = s.add_mesh(primitives::quad(
+        Vec3::new(-2.0, 0.0, 2.0),
+        Vec3::new(4.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -40.0),
+    ));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(q),
+        material: m,
+        ..Object::default()
+    });
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 0.5, 2.5),
+        look_at: Vec3::new(0.0, 0.0, -5.0),
+        ..Camera::default()
+    };
+    let (w, h) = (32, 32);
+    let film = render(&s, &settings(Technique::Phong, w, h), &NoProgress).expect("render");
+    let mut checked = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let d = s.camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, w, h);
+            if d.y >= -1e-3 {
+                continue;
+            }
+            let t = -s.camera.eye.y / d.y;
+            let p = s.camera.eye + d * t;
+            if p.x.abs() > 1.9 || p.z < -37.0 || p.z > 1.9 {
+                continue;
+            }
+            // quad uvs: v = 1 at the corner (z = 2), 0 at z = -38.
+            let u = (p.z + 38.0) / 40.0;
+            let got = film.color[(y * w + x) as usize].x;
+            // Mip-mapping a linear ramp keeps it linear away from the ends.
+            if u > 0.05 && u < 0.9 {
+                assert!((got - u).abs() < 2e-3, "{x},{y}: {got} vs {u}");
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 50, "{checked}");
+}
+
+#[test]
+fn distant_checker_is_filtered_to_its_mean_by_mip_mapping() {
+    let mut s = Scene::default();
+    let n = 256u32;
+    let checker = ImageTexture {
+        source: "checker".into(),
+        width: n,
+        height: n,
+        texels: (0..n * n)
+            .map(|i| {
+                let v = ((i % n + i / n) % 2) as f32;
+                [v, v, v, 1.0]
+            })
+            .collect(),
+        wrap: WrapMode::Repeat,
+    };
+    let tex = s.add_texture(Texture::Image(checker));
+    let m = s.add_material(Material {
+        diffuse: Vec3::ZERO,
+        ambient: Vec3::ZERO,
+        emission: Vec3::ONE,
+        emission_texture: Some(tex),
+        ..Material::default()
+    });
+    let q = s.add_mesh(primitives::quad(
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+    ));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(q),
+        material: m,
+        ..Object::default()
+    });
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 0.0, 2.5),
+        fov_y_degrees: 50.0,
+        ..Camera::default()
+    };
+    // 16x16 pixels over 256x256 texels: lod about 4, every pixel averages out.
+    let film = render(&s, &settings(Technique::Phong, 16, 16), &NoProgress).expect("render");
+    for (c, d) in film.color.iter().zip(&film.depth) {
+        if d.is_finite() {
+            assert!((c.x - 0.5).abs() < 0.02, "{}", c.x);
+        }
+    }
+}
+
+#[test]
+fn other_techniques_and_bad_sizes_are_refused() {
+    let s = test_scene();
+    for t in [Technique::Whitted, Technique::Path, Technique::Radiosity] {
+        assert!(matches!(
+            render(&s, &settings(t, 8, 8), &NoProgress),
+            Err(CoreError::Unsupported(_))
+        ));
+    }
+    assert!(render(&s, &settings(Technique::Phong, 0, 8), &NoProgress).is_err());
+}
+
+#[test]
+fn camera_inside_a_crossing_triangle_renders_the_visible_part() {
+    // The floor triangle extends behind the camera; the floor must be drawn
+    // below the horizon with finite, correct depths, nothing above.
+    let mut s = Scene::default();
+    s.add_material(Material::default());
+    let mesh = s.add_mesh(chiaro_core::scene::Mesh {
+        positions: vec![
+            Vec3::new(-50.0, -1.0, -50.0),
+            Vec3::new(0.0, -1.0, 50.0),
+            Vec3::new(50.0, -1.0, -50.0),
+        ],
+        indices: vec![[0, 1, 2]],
+        ..Default::default()
+    });
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(mesh),
+        ..Object::default()
+    });
+    s.lights.push(Light::Ambient {
+        color: Vec3::ONE,
+        intensity: 1.0,
+    });
+    s.camera = Camera {
+        eye: Vec3::ZERO,
+        look_at: Vec3::new(0.0, 0.0, -1.0),
+        near: 0.05,
+        ..Camera::default()
+    };
+    let (w, h) = (24, 24);
+    let film = render(&s, &settings(Technique::Phong, w, h), &NoProgress).expect("render");
+    assert!(film.is_clean());
+    for y in 0..h {
+        for x in 0..w {
+            let d = s.camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, w, h);
+            let i = (y * w + x) as usize;
+            let t = -1.0 / d.y;
+            let q = d * t;
+            let inside = q.z > -49.0 && q.x.abs() < 0.5 * (50.0 - q.z) - 1.0;
+            if d.y < -1e-3 && inside {
+                assert!((film.depth[i] - t).abs() < 1e-3 * t, "{x},{y}");
+                assert!((film.color[i].x - 0.08).abs() < 1e-5);
+            } else if d.y > 1e-3 {
+                assert_eq!(film.depth[i], f32::INFINITY);
+            }
+        }
+    }
+}
+
+#[test]
+fn supersampling_averages_edges_and_keeps_interiors() {
+    let s = test_scene();
+    let one = render(&s, &settings(Technique::Flat, 32, 32), &NoProgress).expect("1 spp");
+    let mut st = settings(Technique::Flat, 32, 32);
+    st.samples = 4;
+    let four = render(&s, &st, &NoProgress).expect("4 spp");
+    assert!(four.is_clean());
+    // Silhouette pixels get values strictly between sphere and background.
+    let bg = s.background;
+    let mixed = four
+        .color
+        .iter()
+        .zip(&one.color)
+        .filter(|(a, b)| (**a - **b).abs().max_element() > 1e-3 && **a != bg)
+        .count();
+    assert!(mixed > 10);
+    let mean_diff = (four.mean() - one.mean()).abs().max_element();
+    assert!(mean_diff < 0.02, "{mean_diff}");
+}
+
+#[test]
+fn environment_is_background_and_reflection() {
+    let mut s = test_scene();
+    let env_img = ImageTexture {
+        source: "env".into(),
+        width: 8,
+        height: 4,
+        texels: (0..32)
+            .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
+            .collect(),
+        wrap: WrapMode::Repeat,
+    };
+    let t = s.add_texture(Texture::Image(env_img));
+    s.environment = Some(Environment {
+        texture: t,
+        intensity: 2.0,
+        rotate_y_degrees: 0.0,
+        as_background: true,
+    });
+    let st = settings(Technique::Phong, 24, 24);
+    let plain = render(&s, &st, &NoProgress).expect("render");
+    let rays = Rays::new(&s, 24, 24);
+    for (i, d) in plain.depth.iter().enumerate() {
+        if !d.is_finite() {
+            let dir = rays.dir((i % 24) as f32 + 0.5, (i / 24) as f32 + 0.5);
+            let e = environment_radiance(&s, dir);
+            assert!((plain.color[i] - e).abs().max_element() < 1e-6);
+        }
+    }
+    // A mirror coefficient adds kr * environment on the sphere.
+    s.materials[0].reflect = Vec3::splat(0.5);
+    let mirror = render(&s, &st, &NoProgress).expect("render");
+    let brighter = plain
+        .color
+        .iter()
+        .zip(&mirror.color)
+        .filter(|(a, b)| b.z > a.z + 0.1)
+        .count();
+    assert!(brighter > 20);
+}
+
+#[test]
+fn two_sided_back_faces_are_lit_and_one_sided_are_culled() {
+    let mut s = Scene::default();
+    let m = s.add_material(Material::default());
+    // Quad facing -z, camera on +z: we see its back.
+    let q = s.add_mesh(primitives::quad(
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+    ));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(q),
+        material: m,
+        ..Object::default()
+    });
+    s.lights.push(Light::Point {
+        position: Vec3::new(0.0, 0.0, 2.0),
+        color: Vec3::ONE,
+        intensity: 4.0,
+        attenuation: Attenuation::InverseSquare,
+    });
+    let st = settings(Technique::Phong, 16, 16);
+    let culled = render(&s, &st, &NoProgress).expect("render");
+    assert!(culled.depth.iter().all(|d| d.is_infinite()));
+    s.materials[0].two_sided = true;
+    for t in [Technique::Flat, Technique::Gouraud, Technique::Phong] {
+        let lit = render(&s, &settings(t, 16, 16), &NoProgress).expect("render");
+        let c = lit.color[8 * 16 + 8];
+        assert!(c.x > 0.3, "{t:?}: {c}");
+        assert!(lit.normal[8 * 16 + 8].z > 0.99);
+    }
+}
+
+#[test]
+fn depth_cue_blends_with_distance() {
+    let s = test_scene();
+    let mut st = settings(Technique::Gouraud, 16, 16);
+    let plain = render(&s, &st, &NoProgress).expect("render");
+    st.depth_cue = Some(DepthCue {
+        color: Vec3::new(0.0, 0.0, 1.0),
+        near: 0.0,
+        far: 1.0,
+        max_scale: 0.0,
+        min_scale: 0.0,
+    });
+    let cued = render(&s, &st, &NoProgress).expect("render");
+    for i in 0..plain.color.len() {
+        if plain.depth[i].is_finite() {
+            assert_eq!(cued.color[i], Vec3::new(0.0, 0.0, 1.0));
+        }
+    }
+}
