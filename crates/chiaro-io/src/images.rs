@@ -1,1 +1,427 @@
-//! (in progress)
+//! Decoding image files into linear texels: PNG (8/16-bit), JPEG and
+//! Radiance HDR through the `image` crate, OpenEXR through the `exr` crate.
+//!
+//! - 8- and 16-bit **colour** textures are sRGB-encoded: with `srgb = true`
+//!   the sRGB EOTF (IEC 61966-2-1) turns them linear. Data textures (normal
+//!   and bump maps, roughness) pass `srgb = false` and get `code / max`.
+//! - HDR and EXR files hold linear floats already and are read as they are.
+//! - Alpha is always linear, 1 where the file has none.
+//! - NaN, infinite and negative colour values (possible in HDR/EXR files) are
+//!   read as 0; alpha is clamped to `[0, 1]`.
+//! - Images wider or taller than [`MAX_IMAGE_SIDE`] are refused before they
+//!   are decoded; undecodable files give an error naming the file.
+//!
+//! The format is found from the file's first bytes, not its extension.
+
+use crate::error::{IoError, Result};
+use chiaro_core::film::tonemap::{srgb_eotf, srgb8_to_linear_table};
+use chiaro_core::glam::Vec3;
+use chiaro_core::scene::{ImageTexture, WrapMode};
+use std::io::Cursor;
+use std::path::Path;
+
+/// The largest width or height (texels) of an image chiaro decodes.
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
+/// The four magic bytes that open every OpenEXR file.
+const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+
+/// Reads and decodes an image texture into linear RGBA texels (see the
+/// module docs for what `srgb` does).
+///
+/// # Errors
+/// [`IoError::Io`] if the file cannot be read; [`IoError::Format`] naming
+/// the file if it is not a PNG, JPEG, Radiance HDR or OpenEXR image, is
+/// corrupt, has no RGB or luminance channels (EXR), or is larger than
+/// [`MAX_IMAGE_SIDE`] on a side.
+pub fn load_texture(path: &Path, srgb: bool) -> Result<ImageTexture> {
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let img = decode_image(&bytes, path, srgb)?;
+    Ok(img.into_texture(path.display().to_string()))
+}
+
+/// Decodes an image held in memory (a glTF embedded or buffer-view image);
+/// `name` stands for the file in messages and becomes the texture's
+/// `source`. Otherwise as [`load_texture`].
+///
+/// # Errors
+/// As [`load_texture`], with `name` in place of the path.
+pub fn load_texture_bytes(bytes: &[u8], name: &str, srgb: bool) -> Result<ImageTexture> {
+    let img = decode_image(bytes, Path::new(name), srgb)?;
+    Ok(img.into_texture(name.to_string()))
+}
+
+/// A decoded image with whatever extra buffers its file had.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct DecodedImage {
+    pub width: u32,
+    pub height: u32,
+    /// Linear RGBA, row-major from the top-left.
+    pub texels: Vec<[f32; 4]>,
+    /// The `Z` channel of an EXR file.
+    pub depth: Option<Vec<f32>>,
+    /// The `N.X`, `N.Y`, `N.Z` channels of an EXR file.
+    pub normal: Option<Vec<Vec3>>,
+}
+
+impl DecodedImage {
+    fn into_texture(self, source: String) -> ImageTexture {
+        ImageTexture {
+            source,
+            width: self.width,
+            height: self.height,
+            texels: self.texels,
+            wrap: WrapMode::default(),
+        }
+    }
+}
+
+/// A colour channel read from a file: finite and non-negative.
+#[inline]
+fn clean(x: f32) -> f32 {
+    if x.is_finite() && x > 0.0 { x } else { 0.0 }
+}
+
+/// Alpha read from a file: in `[0, 1]`, NaN as 1.
+#[inline]
+fn clean_alpha(a: f32) -> f32 {
+    if a.is_nan() { 1.0 } else { a.clamp(0.0, 1.0) }
+}
+
+fn check_size(width: u32, height: u32, name: &Path) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(IoError::format(name, "the image is empty (0 pixels)"));
+    }
+    if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(IoError::format(
+            name,
+            format!(
+                "the image is {width}x{height}, larger than the {MAX_IMAGE_SIDE} pixels per side chiaro accepts"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Decodes any supported image from its bytes; `name` is for messages.
+pub(crate) fn decode_image(bytes: &[u8], name: &Path, srgb: bool) -> Result<DecodedImage> {
+    if bytes.starts_with(&EXR_MAGIC) {
+        decode_exr(bytes, name)
+    } else {
+        decode_with_image_crate(bytes, name, srgb)
+    }
+}
+
+fn decode_with_image_crate(bytes: &[u8], name: &Path, srgb: bool) -> Result<DecodedImage> {
+    use image::DynamicImage;
+    let bad =
+        |e: &dyn std::fmt::Display| IoError::format(name, format!("cannot decode the image: {e}"));
+    let reader = || {
+        image::ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| bad(&e))
+    };
+    if reader()?.format().is_none() {
+        return Err(IoError::format(
+            name,
+            "not a PNG, JPEG, Radiance HDR or OpenEXR image",
+        ));
+    }
+    // Check the header's size before allocating anything.
+    let (width, height) = reader()?.into_dimensions().map_err(|e| bad(&e))?;
+    check_size(width, height, name)?;
+    let mut r = reader()?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    // RGBA f32 at the largest size is 4 GiB; allow what the side limit allows.
+    limits.max_alloc = Some(u64::from(MAX_IMAGE_SIDE).pow(2) * 16);
+    r.limits(limits);
+    let img = r.decode().map_err(|e| bad(&e))?;
+
+    let texels: Vec<[f32; 4]> = match &img {
+        DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => img
+            .to_rgba32f()
+            .pixels()
+            .map(|p| {
+                let [r, g, b, a] = p.0;
+                [clean(r), clean(g), clean(b), clean_alpha(a)]
+            })
+            .collect(),
+        DynamicImage::ImageLuma16(_)
+        | DynamicImage::ImageLumaA16(_)
+        | DynamicImage::ImageRgb16(_)
+        | DynamicImage::ImageRgba16(_) => {
+            let decode = |v: u16| {
+                let x = f32::from(v) / 65535.0;
+                if srgb { srgb_eotf(x) } else { x }
+            };
+            img.to_rgba16()
+                .pixels()
+                .map(|p| {
+                    let [r, g, b, a] = p.0;
+                    [decode(r), decode(g), decode(b), f32::from(a) / 65535.0]
+                })
+                .collect()
+        }
+        _ => {
+            let table: [f32; 256] = if srgb {
+                srgb8_to_linear_table()
+            } else {
+                std::array::from_fn(|v| v as f32 / 255.0)
+            };
+            img.to_rgba8()
+                .pixels()
+                .map(|p| {
+                    let [r, g, b, a] = p.0;
+                    [
+                        table[usize::from(r)],
+                        table[usize::from(g)],
+                        table[usize::from(b)],
+                        f32::from(a) / 255.0,
+                    ]
+                })
+                .collect()
+        }
+    };
+    Ok(DecodedImage {
+        width,
+        height,
+        texels,
+        depth: None,
+        normal: None,
+    })
+}
+
+/// Reads the first valid layer of an OpenEXR file: `R`, `G`, `B` (or `Y`
+/// for luminance), optional `A`, `Z`, `N.X`/`N.Y`/`N.Z`. Channels may carry
+/// a layer prefix (`beauty.R`) for colour.
+fn decode_exr(bytes: &[u8], name: &Path) -> Result<DecodedImage> {
+    use exr::prelude::*;
+    let bad = |e: &dyn std::fmt::Display| {
+        IoError::format(name, format!("cannot decode the OpenEXR image: {e}"))
+    };
+    // Check the header's size before reading pixels.
+    let meta =
+        exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| bad(&e))?;
+    for h in &meta.headers {
+        let s = h.layer_size;
+        check_size(
+            u32::try_from(s.width()).unwrap_or(u32::MAX),
+            u32::try_from(s.height()).unwrap_or(u32::MAX),
+            name,
+        )?;
+    }
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(|e| bad(&e))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    let n = w * h;
+    let channels = &layer.channel_data.list;
+    let exact = |want: &str| {
+        channels
+            .iter()
+            .find(|c| c.name.to_string() == want)
+            .map(|c| c.sample_data.values_as_f32().collect::<Vec<f32>>())
+    };
+    let colour = |want: &str| {
+        exact(want).or_else(|| {
+            let suffix = format!(".{want}");
+            channels
+                .iter()
+                .find(|c| {
+                    c.name.to_string().ends_with(&suffix) && !c.name.to_string().starts_with("N.")
+                })
+                .map(|c| c.sample_data.values_as_f32().collect::<Vec<f32>>())
+        })
+    };
+    let (r, g, b) = match (colour("R"), colour("G"), colour("B"), exact("Y")) {
+        (Some(r), Some(g), Some(b), _) => (r, g, b),
+        (_, _, _, Some(y)) => (y.clone(), y.clone(), y),
+        _ => {
+            let names: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
+            return Err(IoError::format(
+                name,
+                format!(
+                    "the OpenEXR image has no R, G, B or Y channels (it has: {})",
+                    names.join(", ")
+                ),
+            ));
+        }
+    };
+    let a = colour("A");
+    if [&r, &g, &b].iter().any(|c| c.len() != n) {
+        return Err(bad(&"a channel has the wrong number of samples"));
+    }
+    let texels = (0..n)
+        .map(|i| {
+            [
+                clean(r[i]),
+                clean(g[i]),
+                clean(b[i]),
+                a.as_ref()
+                    .and_then(|a| a.get(i))
+                    .map_or(1.0, |&v| clean_alpha(v)),
+            ]
+        })
+        .collect();
+    let depth = exact("Z").filter(|z| z.len() == n).map(|z| {
+        z.into_iter()
+            .map(|d| if d.is_nan() { f32::INFINITY } else { d })
+            .collect()
+    });
+    let normal = match (exact("N.X"), exact("N.Y"), exact("N.Z")) {
+        (Some(x), Some(y), Some(z)) if x.len() == n && y.len() == n && z.len() == n => Some(
+            (0..n)
+                .map(|i| {
+                    let v = Vec3::new(x[i], y[i], z[i]);
+                    if v.is_finite() { v } else { Vec3::ZERO }
+                })
+                .collect(),
+        ),
+        _ => None,
+    };
+    Ok(DecodedImage {
+        width: w as u32,
+        height: h as u32,
+        texels,
+        depth,
+        normal,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png_bytes(img: &image::DynamicImage) -> Vec<u8> {
+        let mut out = Cursor::new(Vec::new());
+        img.write_to(&mut out, image::ImageFormat::Png)
+            .expect("encode png");
+        out.into_inner()
+    }
+
+    #[test]
+    fn png8_srgb_and_linear() {
+        let mut buf = image::RgbImage::new(2, 1);
+        buf.put_pixel(0, 0, image::Rgb([128, 0, 255]));
+        buf.put_pixel(1, 0, image::Rgb([10, 20, 30]));
+        let bytes = png_bytes(&image::DynamicImage::ImageRgb8(buf));
+        let t = load_texture_bytes(&bytes, "mem.png", true).expect("decodes");
+        assert_eq!((t.width, t.height), (2, 1));
+        assert!((t.texels[0][0] - 0.215_860_5).abs() < 1e-6);
+        assert_eq!(t.texels[0][1], 0.0);
+        assert_eq!(t.texels[0][2], 1.0);
+        assert_eq!(t.texels[0][3], 1.0);
+        let lin = load_texture_bytes(&bytes, "mem.png", false).expect("decodes");
+        assert!((lin.texels[0][0] - 128.0 / 255.0).abs() < 1e-7);
+        assert_eq!(lin.source, "mem.png");
+    }
+
+    #[test]
+    fn png16_keeps_precision() {
+        let mut buf: image::ImageBuffer<image::Rgba<u16>, Vec<u16>> = image::ImageBuffer::new(1, 1);
+        buf.put_pixel(0, 0, image::Rgba([1000, 40000, 65535, 32768]));
+        let bytes = png_bytes(&image::DynamicImage::ImageRgba16(buf));
+        let t = load_texture_bytes(&bytes, "mem16.png", false).expect("decodes");
+        assert!((t.texels[0][0] - 1000.0 / 65535.0).abs() < 1e-7);
+        assert!((t.texels[0][3] - 32768.0 / 65535.0).abs() < 1e-7);
+        let s = load_texture_bytes(&bytes, "mem16.png", true).expect("decodes");
+        assert!((s.texels[0][1] - srgb_eotf(40000.0 / 65535.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn garbage_is_an_error_naming_the_file() {
+        let e = load_texture_bytes(b"this is not an image", "bad.png", true).expect_err("garbage");
+        let msg = e.to_string();
+        assert!(msg.contains("bad.png"), "{msg}");
+        // A truncated PNG: the header survives, the data does not.
+        let mut buf = image::RgbImage::new(8, 8);
+        buf.put_pixel(3, 3, image::Rgb([1, 2, 3]));
+        let bytes = png_bytes(&image::DynamicImage::ImageRgb8(buf));
+        let e =
+            load_texture_bytes(&bytes[..bytes.len() / 2], "cut.png", true).expect_err("truncated");
+        assert!(e.to_string().contains("cut.png"));
+        // A truncated EXR.
+        let e = load_texture_bytes(&[0x76, 0x2f, 0x31, 0x01, 2, 0, 0], "cut.exr", false)
+            .expect_err("truncated exr");
+        assert!(e.to_string().contains("cut.exr"));
+        // A missing file.
+        let e = load_texture(Path::new("/nonexistent/dir/tex.png"), true).expect_err("missing");
+        assert!(e.to_string().contains("/nonexistent/dir/tex.png"));
+    }
+
+    #[test]
+    fn absurd_sizes_are_refused_before_decoding() {
+        // A PNG signature and an IHDR chunk claiming 20000 x 20000, no data.
+        let mut png = vec![0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+        let mut ihdr = b"IHDR".to_vec();
+        ihdr.extend_from_slice(&20000u32.to_be_bytes());
+        ihdr.extend_from_slice(&20000u32.to_be_bytes());
+        ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
+        png.extend_from_slice(&13u32.to_be_bytes());
+        png.extend_from_slice(&ihdr);
+        png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+        for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
+            png.extend_from_slice(&0u32.to_be_bytes());
+            png.extend_from_slice(chunk);
+            png.extend_from_slice(&crc32(chunk).to_be_bytes());
+        }
+        let e = load_texture_bytes(&png, "huge.png", true).expect_err("too big");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("huge.png") && msg.contains("20000x20000"),
+            "{msg}"
+        );
+    }
+
+    /// CRC-32 (ISO 3309, as PNG uses), bit by bit.
+    fn crc32(data: &[u8]) -> u32 {
+        let mut c = 0xffff_ffffu32;
+        for &b in data {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xedb8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+
+    #[test]
+    fn shipped_assets_decode() {
+        // Real files from the shared assets (a Poly Haven HDR, Mitsuba's
+        // museum.exr), when this checkout sits beside them.
+        let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets");
+        if !assets.is_dir() {
+            return;
+        }
+        for rel in [
+            "envmaps/polyhaven-via-drei-assets/studio_small_03_1k.hdr",
+            "mitsuba3-test-scenes/common/textures/museum.exr",
+        ] {
+            let t = load_texture(&assets.join(rel), false).expect("shipped image decodes");
+            assert!(
+                t.width > 16 && t.texels.len() == (t.width * t.height) as usize,
+                "{rel}"
+            );
+            assert!(
+                t.texels
+                    .iter()
+                    .all(|c| c.iter().all(|v| v.is_finite() && *v >= 0.0))
+            );
+            let mean: f32 =
+                t.texels.iter().map(|c| c[0] + c[1] + c[2]).sum::<f32>() / t.texels.len() as f32;
+            assert!(mean > 0.01, "{rel}: mean {mean}");
+        }
+    }
+}
