@@ -31,7 +31,7 @@ use crate::{Imported, ImportedObject, IoError, Result};
 use chiaro_core::scene::{Bump, Material, Mesh, Texture, TextureId};
 use chiaro_core::{Mat4, Vec2, Vec3};
 use std::collections::HashMap;
-use std::io::BufReader;
+use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 fn options() -> tobj::LoadOptions {
@@ -48,11 +48,16 @@ fn options() -> tobj::LoadOptions {
 /// per mesh, or an [`IoError`] naming the file when it cannot be read or
 /// parsed. A missing `.mtl` or texture is a warning in [`Imported::warnings`].
 pub fn load_obj_meshes(path: &Path) -> Result<Imported> {
-    let file = std::fs::File::open(path).map_err(|e| IoError::io(path, e))?;
-    let mut reader = BufReader::new(file);
+    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let (text, skipped) = without_points_and_lines(&String::from_utf8_lossy(&bytes));
     let dir = path.parent().unwrap_or_else(|| Path::new("."));
-    let loaded = tobj::load_obj_buf(&mut reader, &options(), |mtl| tobj::load_mtl(dir.join(mtl)));
-    build(loaded, Some(dir), path)
+    let loaded = tobj::load_obj_buf(&mut Cursor::new(text.as_bytes()), &options(), |mtl| {
+        tobj::load_mtl(dir.join(mtl))
+    });
+    let mut out = build(loaded, Some(dir), path)?;
+    note_skipped(&mut out, skipped, path);
+    note_undefined(&mut out, &text, path);
+    Ok(out)
 }
 
 /// Parses OBJ text held in memory, with the text of its material library
@@ -60,12 +65,72 @@ pub fn load_obj_meshes(path: &Path) -> Result<Imported> {
 /// maps cannot be resolved without a directory and are skipped with a
 /// warning.
 pub fn load_obj_str(obj: &str, mtl: Option<&str>, name: &str) -> Result<Imported> {
-    let mut reader = std::io::Cursor::new(obj.as_bytes());
-    let loaded = tobj::load_obj_buf(&mut reader, &options(), |_| match mtl {
-        Some(text) => tobj::load_mtl_buf(&mut std::io::Cursor::new(text.as_bytes())),
-        None => Err(tobj::LoadError::OpenFileFailed),
-    });
-    build(loaded, None, Path::new(name))
+    let (text, skipped) = without_points_and_lines(obj);
+    let loaded = tobj::load_obj_buf(
+        &mut Cursor::new(text.as_bytes()),
+        &options(),
+        |_| match mtl {
+            Some(text) => tobj::load_mtl_buf(&mut Cursor::new(text.as_bytes())),
+            None => Err(tobj::LoadError::OpenFileFailed),
+        },
+    );
+    let path = Path::new(name);
+    let mut out = build(loaded, None, path)?;
+    note_skipped(&mut out, skipped, path);
+    note_undefined(&mut out, &text, path);
+    Ok(out)
+}
+
+/// Drops `p` (point) and `l` (polyline) statements: tobj reads a polyline
+/// of 3 or 4 vertices as a polygon, which would draw faces that are not in
+/// the file. Returns the text and how many statements were dropped.
+fn without_points_and_lines(text: &str) -> (String, usize) {
+    let mut out = String::with_capacity(text.len());
+    let mut skipped = 0;
+    for line in text.lines() {
+        let first = line.split_whitespace().next();
+        if matches!(first, Some("l" | "p")) {
+            skipped += 1;
+            out.push('#');
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    (out, skipped)
+}
+
+/// Warns about `usemtl` names that no loaded material has (tobj drops them
+/// silently and the faces get the default material).
+fn note_undefined(out: &mut Imported, text: &str, path: &Path) {
+    let mut missing: Vec<&str> = Vec::new();
+    for line in text.lines() {
+        let line = line.trim_start();
+        if let Some(name) = line.strip_prefix("usemtl") {
+            let name = name.trim();
+            if !name.is_empty()
+                && !out.materials.iter().any(|m| m.name == name)
+                && !missing.contains(&name)
+            {
+                missing.push(name);
+            }
+        }
+    }
+    if !missing.is_empty() {
+        out.warnings.push(format!(
+            "{}: material(s) {} not defined: the default material is used",
+            path.display(),
+            missing.join(", ")
+        ));
+    }
+}
+
+fn note_skipped(out: &mut Imported, skipped: usize, path: &Path) {
+    if skipped > 0 {
+        out.warnings.push(format!(
+            "{}: {skipped} point/line statement(s) skipped (only faces are drawn)",
+            path.display()
+        ));
+    }
 }
 
 fn build(loaded: tobj::LoadResult, dir: Option<&Path>, path: &Path) -> Result<Imported> {

@@ -32,7 +32,7 @@ fn walk(dir: &Path, exts: &[&str], out: &mut Vec<PathBuf>) {
             walk(&p, exts, out);
         } else if let Some(e) = p.extension().and_then(|e| e.to_str()) {
             let e = e.to_ascii_lowercase();
-            let small = std::fs::metadata(&p).map_or(false, |m| m.len() <= MAX_BYTES);
+            let small = std::fs::metadata(&p).is_ok_and(|m| m.len() <= MAX_BYTES);
             if exts.contains(&e.as_str()) && small {
                 out.push(p);
             }

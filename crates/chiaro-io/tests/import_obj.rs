@@ -1,0 +1,180 @@
+//! OBJ + MTL import: the tinyobjloader edge cases load or fail cleanly
+//! (never panic), the McGuire Cornell boxes (negative indices) load as whole
+//! scenes with their emissive light, and the MTL mapping holds.
+
+use chiaro_core::scene::Geometry;
+use chiaro_io::load_scene;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets");
+
+fn assets() -> Option<PathBuf> {
+    let p = PathBuf::from(ASSETS);
+    if p.is_dir() {
+        Some(p)
+    } else {
+        println!("skipped: ../shared/assets not present");
+        None
+    }
+}
+
+fn objs_in(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| rd.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    v.retain(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")));
+    v.sort();
+    v
+}
+
+fn triangles(l: &chiaro_io::Loaded) -> usize {
+    l.scene
+        .objects
+        .iter()
+        .map(|o| match o.geometry {
+            Geometry::Mesh(m) => l.scene.meshes[m.index()].indices.len(),
+            Geometry::Sphere { .. } => 0,
+        })
+        .sum()
+}
+
+#[test]
+fn obj_edge_cases_load_or_fail_without_panicking() {
+    let Some(root) = assets() else { return };
+    let files = objs_in(&root.join("obj-edge-cases/tinyobjloader-models"));
+    assert!(files.len() >= 30, "found {}", files.len());
+    static PANICS: AtomicUsize = AtomicUsize::new(0);
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        PANICS.fetch_add(1, Ordering::SeqCst);
+        previous(info);
+    }));
+    let mut report = Vec::new();
+    for f in &files {
+        let name = f
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        match std::panic::catch_unwind(|| load_scene(f)) {
+            Ok(Ok(l)) => report.push(format!("{name}: ok, {} triangles", triangles(&l))),
+            Ok(Err(e)) => report.push(format!("{name}: error: {e}")),
+            Err(_) => report.push(format!("{name}: PANIC")),
+        }
+    }
+    let _ = std::panic::take_hook();
+    println!("{}", report.join("\n"));
+    assert_eq!(PANICS.load(Ordering::SeqCst), 0, "{}", report.join("\n"));
+    // Specific expectations.
+    let find = |n: &str| {
+        report
+            .iter()
+            .find(|r| r.starts_with(n))
+            .cloned()
+            .unwrap_or_default()
+    };
+    assert!(
+        find("cube.obj:").contains("ok, 12 triangles"),
+        "{}",
+        find("cube.obj:")
+    );
+    assert!(find("missing_material_file.obj:").contains("ok"));
+    assert!(
+        find("test-nan.obj:").contains("error"),
+        "{}",
+        find("test-nan.obj:")
+    );
+    assert!(
+        find("line-prim.obj:").contains("ok, 0 triangles"),
+        "{}",
+        find("line-prim.obj:")
+    );
+    assert!(find("issue-140-zero-face-idx.obj:").contains("error"));
+}
+
+#[test]
+fn missing_mtl_gives_a_warning_and_default_material() {
+    let dir = std::env::temp_dir().join(format!("chiaro-io-obj-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let f = dir.join("tri.obj");
+    std::fs::write(
+        &f,
+        "mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\nl 1 2 3\n",
+    )
+    .expect("write");
+    let l = load_scene(&f).expect("loads");
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        l.warnings.iter().any(|w| w.contains("material library")),
+        "{:?}",
+        l.warnings
+    );
+    assert!(
+        l.warnings.iter().any(|w| w.contains("point/line")),
+        "{:?}",
+        l.warnings
+    );
+    assert_eq!(triangles(&l), 1, "the polyline adds no face");
+    assert_eq!(
+        l.scene.materials[l.scene.objects[0].material.index()].name,
+        "default"
+    );
+}
+
+#[test]
+fn mcguire_cornell_boxes_load_with_negative_indices() {
+    let Some(root) = assets() else { return };
+    let files = objs_in(&root.join("mcguire-archive/CornellBox"));
+    assert!(files.len() >= 8);
+    for f in &files {
+        let l = load_scene(f).unwrap_or_else(|e| panic!("{e}"));
+        assert!(triangles(&l) >= 10, "{}", f.display());
+        // The camera frames the box: it looks at the centre of the bounds.
+        let b = chiaro_io::world_bounds(&l.scene);
+        assert!((l.scene.camera.look_at - b.center()).length() < 1e-3);
+        let name = f
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        // The ceiling light is emissive (Ke), except in the variants whose
+        // .mtl lacks the "light" material (Glossy, Glossy-Floor): there the
+        // loader must say so.
+        if name.starts_with("CornellBox-") {
+            let emissive = l.scene.materials.iter().any(|m| m.is_emissive());
+            let warned = l
+                .warnings
+                .iter()
+                .any(|w| w.contains("light") && w.contains("not defined"));
+            assert!(emissive || warned, "{name}: {:?}", l.warnings);
+        }
+    }
+    let original = load_scene(&root.join("mcguire-archive/CornellBox/CornellBox-Original.obj"))
+        .expect("loads");
+    assert!(
+        original
+            .scene
+            .materials
+            .iter()
+            .any(|m| m.name == "light" && m.is_emissive())
+    );
+    // The original box: Kd of the red wall and its ambient relative to it.
+    let l = load_scene(&root.join("mcguire-archive/CornellBox/CornellBox-Original.obj"))
+        .expect("loads");
+    let red = l
+        .scene
+        .materials
+        .iter()
+        .find(|m| m.name == "leftWall")
+        .expect("leftWall");
+    assert!(
+        red.diffuse.x > 0.5 && red.diffuse.y < 0.2,
+        "{:?}",
+        red.diffuse
+    );
+    // Ka = Kd in this file, so ka (relative to kd) is 1.
+    assert!(
+        (red.ambient - chiaro_core::Vec3::ONE).length() < 1e-5,
+        "{:?}",
+        red.ambient
+    );
+}

@@ -1,0 +1,332 @@
+//! The `.toml` scene format: every section of DESIGN.md section 2 builds the
+//! expected scene, and every kind of bad input gives an error at the exact
+//! line and column of the offending value.
+
+use chiaro_core::Vec3;
+use chiaro_core::scene::{
+    AreaShape, Attenuation, Geometry, Light, ProceduralKind, ReflectanceModel, ShadeMode,
+    Technique, Texture,
+};
+use chiaro_io::{IoError, load_scene_str};
+use std::path::Path;
+
+/// Parses `text` and returns the error's (line, column, message).
+fn error_at(text: &str) -> (usize, usize, String) {
+    match load_scene_str(text, Path::new("/nonexistent-dir"), "t.toml") {
+        Ok(_) => panic!("expected an error for:\n{text}"),
+        Err(IoError::At {
+            line,
+            column,
+            message,
+            path,
+        }) => {
+            assert_eq!(path, Path::new("t.toml"));
+            (line, column, message)
+        }
+        Err(other) => panic!("expected a positioned error, got {other}"),
+    }
+}
+
+#[test]
+fn unknown_key_is_refused_at_its_position() {
+    let (l, c, m) = error_at("[camera]\neye = [0, 0, 5]\nfocal = 3\n");
+    assert_eq!((l, c), (3, 1), "{m}");
+    assert!(m.contains("unknown field `focal`"), "{m}");
+    let (l, c, m) = error_at("[material.a]\ndiffuse = 0.5\nshiny = 3\n");
+    assert_eq!((l, c), (3, 1), "{m}");
+    assert!(
+        m.contains("shininess"),
+        "the message lists the expected keys: {m}"
+    );
+}
+
+#[test]
+fn wrong_type_is_refused_at_its_position() {
+    let (l, c, m) = error_at("[render]\nwidth = \"wide\"\n");
+    assert_eq!((l, c), (2, 9), "{m}");
+    assert!(m.contains("u32"), "{m}");
+    let (l, c, m) = error_at("[material.a]\ndiffuse = [1, 2]\n");
+    assert_eq!((l, c), (2, 11), "{m}");
+    assert!(m.contains("3 numbers"), "{m}");
+}
+
+#[test]
+fn unknown_material_lists_the_known_ones() {
+    let text = "[material.matte]\n[material.glass]\ntransmit = 0.9\n\n[[object]]\nprimitive = \"box\"\nmaterial = \"glas\"\n";
+    let (l, c, m) = error_at(text);
+    assert_eq!((l, c), (7, 12), "{m}");
+    assert_eq!(m, r#"unknown material "glas" (known: matte, glass)"#);
+}
+
+#[test]
+fn nan_and_infinity_are_refused() {
+    let (l, c, m) = error_at("[camera]\nfov = nan\n");
+    assert_eq!((l, c), (2, 7), "{m}");
+    assert!(m.contains("finite"), "{m}");
+    let (l, c, m) = error_at("[[light]]\ntype = \"point\"\nposition = [0, -inf, 0]\n");
+    assert_eq!((l, c), (3, 16), "{m}");
+    let (l, c, m) = error_at("[material.a]\ndiffuse = 1e300\n");
+    assert_eq!((l, c), (2, 11), "{m}");
+    assert!(m.contains("too large"), "{m}");
+}
+
+#[test]
+fn zero_and_huge_resolutions_are_refused() {
+    let (l, c, m) = error_at("[render]\nwidth = 0\n");
+    assert_eq!((l, c), (2, 9), "{m}");
+    assert!(m.contains("1..=16384"), "{m}");
+    let (l, c, m) = error_at("[render]\nwidth = 64\nheight = 100000\n");
+    assert_eq!((l, c), (3, 10), "{m}");
+    // Each side within the limit but too many pixels in all.
+    let (l, c, m) = error_at("[render]\nwidth = 16000\nheight = 16000\n");
+    assert_eq!((l, c), (3, 10), "{m}");
+    assert!(m.contains("pixels"), "{m}");
+    let (l, c, m) = error_at("[render]\n[render.shadow_map]\nresolution = 0\n");
+    assert_eq!((l, c), (3, 14), "{m}");
+}
+
+#[test]
+fn missing_mesh_file_names_the_file_and_line() {
+    let text = "[[object]]\nname = \"pot\"\nmesh = \"models/teapot.obj\"\n";
+    let (l, c, m) = error_at(text);
+    assert_eq!((l, c), (3, 8), "{m}");
+    assert!(
+        m.contains("models/teapot.obj") && m.contains("not found"),
+        "{m}"
+    );
+    let (l, c, m) = error_at("[material.a]\ntexture = \"wood.png\"\n");
+    assert_eq!((l, c), (2, 11), "{m}");
+    assert!(m.contains("wood.png"), "{m}");
+}
+
+#[test]
+fn semantic_errors_point_at_the_value() {
+    // A field that does not apply to the light type.
+    let (l, c, m) =
+        error_at("[[light]]\ntype = \"directional\"\ndirection = [0, -1, 0]\ncone = 30\n");
+    assert_eq!((l, c), (4, 8), "{m}");
+    // Unknown enum value.
+    let (l, c, m) = error_at("[render]\ntechnique = \"raytrace\"\n");
+    assert_eq!((l, c), (2, 13), "{m}");
+    assert!(m.contains("whitted"), "{m}");
+    // Unknown primitive, and fov out of range.
+    let (l, c, _) = error_at("[[object]]\nprimitive = \"torus\"\n");
+    assert_eq!((l, c), (2, 13));
+    let (l, c, _) = error_at("[camera]\nfov = 180\n");
+    assert_eq!((l, c), (2, 7));
+    // Syntax error.
+    let (l, c, _) = error_at("[render]\nwidth = = 3\n");
+    assert_eq!(l, 2, "col {c}");
+}
+
+#[test]
+fn every_design_section_maps_onto_the_scene() {
+    let text = r#"
+background = 0.05
+
+[render]
+technique = "whitted"
+width = 32
+height = 24
+samples = 4
+shadows = "map"
+exposure = 0.5
+[render.shadow_map]
+resolution = 512
+[render.whitted]
+max_depth = 3
+[render.path]
+max_depth = 2
+[render.radiosity]
+solver = "gauss-seidel"
+formfactor = "hemicube"
+[render.depth_cue]
+color = [0.1, 0.1, 0.2]
+near = 1
+far = 10
+
+[camera]
+eye = [278, 273, -800]
+look_at = [278, 273, 0]
+up = [0, 1, 0]
+fov = 39.3
+
+[[light]]
+type = "point"
+position = [278, 548, 279]
+color = [1, 1, 1]
+intensity = 1.0
+attenuation = { c1 = 1, c2 = 0, c3 = 0.0001 }
+
+[[light]]
+type = "spot"
+position = [0, 5, 0]
+look_at = [0, 0, 0]
+exponent = 8
+cone = 30
+cone_softness = 5
+attenuation = "none"
+flaps = [{ axis = [1, 0, 0], min = -1, max = 1 }]
+
+[[light]]
+type = "area"
+shape = "quad"
+corner = [0, 5, 0]
+edge_u = [1, 0, 0]
+edge_v = [0, 0, 1]
+intensity = 10
+
+[[light]]
+type = "ambient"
+color = 0.2
+
+[material.white]
+ambient = 0.1
+diffuse = [0.73, 0.73, 0.73]
+specular = 0.0
+shininess = 20
+model = "phong"
+reflect = 0.0
+transmit = 0.0
+ior = 1.5
+transparency = "filtered"
+texture = { procedural = "marble", scale = 4.0, color_a = [0.9, 0.9, 0.9], color_b = [0.2, 0.2, 0.3] }
+bump = { procedural = "dimples", height = 0.02 }
+emission = [0, 0, 0]
+
+[material.metal]
+model = "torrance-sparrow"
+roughness = 0.2
+specular = [0.9, 0.6, 0.3]
+
+[[object]]
+primitive = "teapot"
+material = "white"
+transform = { translate = [0, 0, 0], rotate_y = 30, scale = 1 }
+smooth = true
+crease_angle = 30
+
+[[object]]
+primitive = "cylinder"
+radius = 0.5
+height = 2
+material = "metal"
+shade = "flat"
+transform = { rotate = [0, 90, 0], scale = [1, 2, 1] }
+
+[[object]]
+primitive = "sphere"
+radius = 2
+"#;
+    let l = load_scene_str(text, Path::new("."), "all.toml").expect("loads");
+    let s = &l.scene;
+    assert_eq!(s.background, Vec3::splat(0.05));
+    assert_eq!(s.render.technique, Technique::Whitted);
+    assert_eq!(
+        (s.render.width, s.render.height, s.render.samples),
+        (32, 24, 4)
+    );
+    assert_eq!(s.render.shadow_map.resolution, 512);
+    assert_eq!(s.render.whitted.max_depth, 3);
+    assert_eq!(s.render.path.max_depth, 2);
+    assert_eq!(s.render.radiosity.solver, "gauss-seidel");
+    assert_eq!(s.render.depth_cue.map(|d| d.far), Some(10.0));
+    assert!((s.camera.fov_y_degrees - 39.3).abs() < 1e-5);
+    assert_eq!(s.lights.len(), 4);
+    match &s.lights[0] {
+        Light::Point { attenuation, .. } => assert_eq!(
+            *attenuation,
+            Attenuation::Empirical {
+                c1: 1.0,
+                c2: 0.0,
+                c3: 0.0001
+            }
+        ),
+        other => panic!("{other:?}"),
+    }
+    match &s.lights[1] {
+        Light::Spot(sp) => {
+            assert!((sp.direction - Vec3::NEG_Y).length() < 1e-6);
+            assert_eq!(
+                (sp.exponent, sp.cone_degrees, sp.cone_softness_degrees),
+                (8.0, 30.0, 5.0)
+            );
+            assert_eq!(sp.flaps.len(), 1);
+            assert_eq!(sp.attenuation, Attenuation::None);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(matches!(
+        s.lights[2],
+        Light::Area {
+            shape: AreaShape::Quad { .. },
+            ..
+        }
+    ));
+    assert_eq!(s.lights[3].power_rgb(), Vec3::splat(0.2));
+    let white = &s.materials[s.material_by_name("white").expect("white").index()];
+    let tex = white.texture.expect("texture");
+    assert!(matches!(
+        s.textures[tex.index()],
+        Texture::Procedural(p) if p.kind == ProceduralKind::Marble && p.scale == 4.0
+    ));
+    let bump = white.bump.expect("bump");
+    assert_eq!(bump.height, 0.02);
+    let metal = &s.materials[s.material_by_name("metal").expect("metal").index()];
+    assert_eq!(metal.model, ReflectanceModel::TorranceSparrow);
+    assert_eq!(metal.roughness, 0.2);
+    assert_eq!(s.objects.len(), 3);
+    assert_eq!(
+        s.objects[0].transform.rotate_degrees,
+        Vec3::new(0.0, 30.0, 0.0)
+    );
+    assert!(matches!(s.objects[0].geometry, Geometry::Mesh(_)));
+    assert_eq!(s.objects[1].shade_mode, Some(ShadeMode::Flat));
+    assert_eq!(s.objects[1].transform.scale, Vec3::new(1.0, 2.0, 1.0));
+    assert_eq!(s.objects[2].geometry, Geometry::Sphere { radius: 2.0 });
+    // The sphere has no material: it gets the default one.
+    assert_eq!(s.materials[s.objects[2].material.index()].name, "default");
+}
+
+#[test]
+fn obj_and_gltf_as_objects_inside_a_toml_scene() {
+    let assets = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/assets"
+    ));
+    if !assets.is_dir() {
+        println!("skipped: ../shared/assets not present");
+        return;
+    }
+    let text = r#"
+[material.gold]
+diffuse = [0.8, 0.6, 0.2]
+
+[[object]]
+mesh = "mcguire-archive/CornellBox/CornellBox-Original.obj"
+
+[[object]]
+name = "duck"
+mesh = "khronos-gltf-sample-assets/Duck/glTF-Binary/Duck.glb"
+material = "gold"
+transform = { translate = [0, 1, 0], scale = 0.01 }
+"#;
+    let l = load_scene_str(text, assets, "mixed.toml").expect("loads");
+    let s = &l.scene;
+    let gold = s.material_by_name("gold").expect("gold");
+    let duck: Vec<_> = s
+        .objects
+        .iter()
+        .filter(|o| o.name.starts_with("duck/"))
+        .collect();
+    assert!(!duck.is_empty());
+    assert!(duck.iter().all(|o| o.material == gold));
+    // The Cornell box keeps its own materials, including the emissive light.
+    assert!(
+        s.materials
+            .iter()
+            .any(|m| m.name == "light" && m.is_emissive())
+    );
+    let box_objects = s.objects.len() - duck.len();
+    assert!(box_objects >= 5, "{box_objects}");
+}
