@@ -13,7 +13,7 @@ use chiaro_core::geometry::teapot::teapot;
 use chiaro_core::glam::Vec3;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::scene::{Material, Object, Scene};
-use chiaro_io::output::{OutputOptions, read_image_as_film, write_film};
+use chiaro_io::output::{OutputOptions, PaletteMode, read_image_as_film, write_film};
 
 #[test]
 fn teapot_ray_cast_faces_the_camera_and_writes() {
@@ -80,7 +80,41 @@ fn teapot_ray_cast_faces_the_camera_and_writes() {
     let back = read_image_as_film(&path).expect("read png");
     let err = (back.mean() - film.mean()).abs().max_element();
     assert!(err < 2e-3, "mean changed by {err}");
-    if let Ok(keep) = std::env::var("CHIARO_TEAPOT_PNG") {
+
+    // The seed's VGA bands (one band for the pot's colour) and a dithered
+    // 16-colour median cut: both decode to pictures close to the original.
+    let variants = [
+        (
+            "vga",
+            PaletteMode::Vga {
+                band_colors: vec![Vec3::new(0.9, 0.55, 0.3), Vec3::new(0.05, 0.06, 0.1)],
+            },
+        ),
+        (
+            "mc16",
+            PaletteMode::MedianCut {
+                colors: 16,
+                dither: true,
+            },
+        ),
+    ];
+    let keep = std::env::var("CHIARO_TEAPOT_PNG").ok();
+    for (name, mode) in variants {
+        let opts = OutputOptions {
+            palette: Some(mode),
+            ..OutputOptions::default()
+        };
+        let p = dir.join(format!("teapot-{name}.png"));
+        write_film(&film, &p, &opts).expect("write indexed png");
+        let back = read_image_as_film(&p).expect("read indexed png");
+        let err = (back.mean() - film.mean()).abs().max_element();
+        assert!(err < 0.02, "{name}: mean changed by {err}");
+        if let Some(keep) = &keep {
+            let kept = keep.replace(".png", &format!("-{name}.png"));
+            write_film(&film, std::path::Path::new(&kept), &opts).expect("write kept png");
+        }
+    }
+    if let Some(keep) = keep {
         write_film(
             &film,
             std::path::Path::new(&keep),
