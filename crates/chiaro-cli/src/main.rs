@@ -1,1 +1,24 @@
-fn main() {}
+//! The `chiaro` command: parses arguments and wires the facade to files.
+//! Exit codes: 0 success, 1 bad input or failed render, 2 usage.
+
+mod cli;
+mod commands;
+mod progress;
+
+use clap::Parser;
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    let result = match args.command {
+        cli::Command::Render(r) => commands::render(r),
+        cli::Command::Info { scene } => commands::info(&scene),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

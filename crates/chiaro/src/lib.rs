@@ -52,7 +52,14 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// The techniques this build can render, in the order they are listed.
 pub fn available_techniques() -> &'static [Technique] {
-    &[Technique::Preview]
+    &[
+        Technique::Preview,
+        Technique::Flat,
+        Technique::Gouraud,
+        Technique::Phong,
+        Technique::Whitted,
+        Technique::Path,
+    ]
 }
 
 /// Statistics of one render.
@@ -75,8 +82,10 @@ pub fn check_settings(settings: &RenderSettings) -> Result<(), CoreError> {
             available: technique_list(),
         });
     }
-    let mut probe = Scene::default();
-    probe.render = settings.clone();
+    let probe = Scene {
+        render: settings.clone(),
+        ..Scene::default()
+    };
     let issues: Vec<String> = probe
         .validate()
         .into_iter()
@@ -130,9 +139,23 @@ pub fn render_with_stats(
         return Err(CoreError::InvalidScene { issues: errors }.into());
     }
     let start = Instant::now();
-    let film = match settings.technique {
-        Technique::Preview => {
-            chiaro_ray::preview::render_with(scene, settings, progress, &accelerator)?
+    let pixels = u64::from(settings.width) * u64::from(settings.height);
+    let (film, rays) = match settings.technique {
+        Technique::Preview => (
+            chiaro_ray::preview::render_with(scene, settings, progress, &accelerator)?,
+            pixels * u64::from(settings.samples.max(1)),
+        ),
+        Technique::Flat | Technique::Gouraud | Technique::Phong => {
+            (chiaro_raster::render(scene, settings, progress)?, 0)
+        }
+        Technique::Whitted => {
+            let (film, stats) = chiaro_ray::whitted::render_with_stats(scene, settings, progress)?;
+            (film, stats.rays)
+        }
+        Technique::Path => {
+            let (film, stats) =
+                chiaro_ray::path::render_with(scene, settings, progress, &accelerator)?;
+            (film, stats.rays)
         }
         other => {
             return Err(CoreError::UnknownTechnique {
@@ -145,7 +168,7 @@ pub fn render_with_stats(
     let stats = RenderStats {
         elapsed: start.elapsed(),
         triangles: scene.triangle_count() as u64,
-        rays: 0,
+        rays,
     };
     debug_assert!(film.is_clean());
     Ok((film, stats))

@@ -1,0 +1,103 @@
+//! Command-line arguments (clap derive).
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// chiaro — one scene, every classic illumination and shading technique.
+#[derive(Debug, Parser)]
+#[command(name = "chiaro", version, about, long_about = None, after_help = EXAMPLES)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+const EXAMPLES: &str = "Examples:
+  chiaro render scenes/cornell-box.toml -o cornell.png
+  chiaro render scenes/teapot.toml --technique gouraud --width 320 --height 240 -o teapot.png
+  chiaro render scenes/whitted.toml --set whitted.max_depth=3 --samples 4 -o whitted.exr
+  chiaro info scenes/cornell-box.toml";
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Render a scene (.toml, .obj, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
+    Render(RenderArgs),
+    /// Describe a scene: objects, triangles, lights, materials, textures, bounds, warnings.
+    Info {
+        /// The scene file.
+        scene: PathBuf,
+    },
+}
+
+/// Palette output modes (8-bit indexed PNG).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PaletteArg {
+    /// The seeds' 256-entry palette of 64-level colour bands (make_range).
+    Vga,
+    /// Heckbert's median-cut palette with Floyd-Steinberg dithering.
+    MedianCut,
+}
+
+/// Tone-mapping operators.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ToneMapArg {
+    /// Clamp to [0, 1].
+    Clamp,
+    /// Reinhard x / (1 + x).
+    Reinhard,
+    /// ACES filmic fit.
+    Filmic,
+}
+
+/// Options shared by every command that renders.
+#[derive(Debug, Args, Clone)]
+pub struct RenderOptions {
+    /// Technique: preview, flat, gouraud, phong, whitted, radiosity, hybrid, path
+    /// (only those built in are accepted; see `chiaro render --help`).
+    #[arg(short, long)]
+    pub technique: Option<String>,
+    /// Image width in pixels.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Samples per pixel.
+    #[arg(long)]
+    pub samples: Option<u32>,
+    /// Random seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Override any render setting, e.g. `--set shadows=map --set whitted.max_depth=3`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+/// `chiaro render`.
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// The scene file.
+    pub scene: PathBuf,
+    /// Output image; the extension picks the format (.png, .exr, .hdr, .ppm).
+    #[arg(short, long, default_value = "out.png")]
+    pub output: PathBuf,
+    /// Render options.
+    #[command(flatten)]
+    pub opts: RenderOptions,
+    /// Write an 8-bit palette PNG.
+    #[arg(long, value_enum)]
+    pub palette: Option<PaletteArg>,
+    /// Tone mapping for 8-bit output.
+    #[arg(long, value_enum)]
+    pub tonemap: Option<ToneMapArg>,
+    /// Exposure in stops before tone mapping.
+    #[arg(long)]
+    pub exposure: Option<f32>,
+    /// Write 16-bit PNG.
+    #[arg(long)]
+    pub png16: bool,
+}

@@ -1,0 +1,176 @@
+//! The subcommands: load, render, write, describe.
+
+use crate::cli::{PaletteArg, RenderArgs, RenderOptions, ToneMapArg};
+use anyhow::{Context, Result, anyhow};
+use chiaro::io::output::{OutputOptions, PaletteMode};
+use chiaro::scene::{Geometry, Light, Scene, Texture, ToneMap};
+use chiaro::{RenderSettings, Technique};
+use std::path::Path;
+
+/// Loads a scene, printing its warnings to stderr.
+fn load(path: &Path) -> Result<Scene> {
+    let loaded = chiaro::io::load_scene(path)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(loaded.scene)
+}
+
+/// The scene's settings with the command-line options applied.
+pub fn settings_from(scene: &Scene, opts: &RenderOptions) -> Result<RenderSettings> {
+    let mut s = scene.render.clone();
+    if let Some(t) = &opts.technique {
+        s.technique = Technique::from_name(t).ok_or_else(|| {
+            anyhow!(
+                "unknown technique `{t}` (available: {})",
+                chiaro::technique_list()
+            )
+        })?;
+    }
+    if let Some(w) = opts.width {
+        s.width = w;
+    }
+    if let Some(h) = opts.height {
+        s.height = h;
+    }
+    if let Some(n) = opts.samples {
+        s.samples = n;
+    }
+    if let Some(seed) = opts.seed {
+        s.seed = seed;
+    }
+    for kv in &opts.set {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--set expects KEY=VALUE, got `{kv}`"))?;
+        chiaro::settings::apply_override(&mut s, k.trim(), v.trim())?;
+    }
+    chiaro::check_settings(&s)?;
+    Ok(s)
+}
+
+/// `chiaro render`.
+pub fn render(args: RenderArgs) -> Result<()> {
+    let scene = load(&args.scene)?;
+    let mut settings = settings_from(&scene, &args.opts)?;
+    if let Some(t) = args.tonemap {
+        settings.tonemap = match t {
+            ToneMapArg::Clamp => ToneMap::Clamp,
+            ToneMapArg::Reinhard => ToneMap::Reinhard,
+            ToneMapArg::Filmic => ToneMap::Filmic,
+        };
+    }
+    if let Some(e) = args.exposure {
+        settings.exposure = e;
+    }
+    if let Some(n) = args.opts.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .context("setting the thread count")?;
+    }
+    let bar = crate::progress::Bar::new();
+    let result = chiaro::render_with_stats(&scene, &settings, &bar);
+    bar.finish();
+    let (film, stats) = result?;
+    let palette = args.palette.map(|p| match p {
+        PaletteArg::Vga => PaletteMode::Vga {
+            band_colors: band_colors(&scene),
+        },
+        PaletteArg::MedianCut => PaletteMode::MedianCut {
+            colors: 256,
+            dither: true,
+        },
+    });
+    let out = OutputOptions {
+        tonemap: settings.tonemap,
+        exposure: settings.exposure,
+        bit_depth16: args.png16,
+        palette,
+    };
+    chiaro::io::output::write_film(&film, &args.output, &out)?;
+    let secs = stats.elapsed.as_secs_f64().max(1e-9);
+    let mut line = format!(
+        "{}: {} {}x{} {} spp in {:.3} s",
+        args.output.display(),
+        settings.technique.name(),
+        settings.width,
+        settings.height,
+        settings.samples,
+        secs
+    );
+    if stats.rays > 0 {
+        line += &format!(", {:.2} Mrays/s", stats.rays as f64 / secs / 1e6);
+    } else {
+        line += &format!(", {:.2} Mtriangles/s", stats.triangles as f64 / secs / 1e6);
+    }
+    eprintln!("{line}");
+    Ok(())
+}
+
+/// Band colours for the VGA palette: the diffuse colours of the materials in
+/// the order they appear.
+fn band_colors(scene: &Scene) -> Vec<chiaro::Vec3> {
+    scene.materials.iter().map(|m| m.diffuse).collect()
+}
+
+/// `chiaro info`.
+pub fn info(path: &Path) -> Result<()> {
+    let loaded = chiaro::io::load_scene(path)?;
+    let s = &loaded.scene;
+    let prepared = chiaro::scene_bounds(s);
+    println!("scene      {}", path.display());
+    println!("objects    {}", s.objects.len());
+    let spheres = s
+        .objects
+        .iter()
+        .filter(|o| matches!(o.geometry, Geometry::Sphere { .. }))
+        .count();
+    println!(
+        "triangles  {} (+{spheres} analytic spheres)",
+        s.triangle_count()
+    );
+    println!("meshes     {}", s.meshes.len());
+    println!(
+        "materials  {}: {}",
+        s.materials.len(),
+        s.materials
+            .iter()
+            .map(|m| m.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let lights: Vec<&str> = s.lights.iter().map(Light::kind).collect();
+    println!("lights     {}: {}", lights.len(), lights.join(", "));
+    let images = s
+        .textures
+        .iter()
+        .filter(|t| matches!(t, Texture::Image(_)))
+        .count();
+    println!(
+        "textures   {} ({images} images, {} procedural)",
+        s.textures.len(),
+        s.textures.len() - images
+    );
+    println!("bounds     {} .. {}", prepared.min, prepared.max);
+    let r = &s.render;
+    println!(
+        "render     {} {}x{} {} spp, shadows {:?}",
+        r.technique.name(),
+        r.width,
+        r.height,
+        r.samples,
+        r.shadows
+    );
+    println!(
+        "camera     eye {} look_at {} fov {}",
+        s.camera.eye, s.camera.look_at, s.camera.fov_y_degrees
+    );
+    for w in &loaded.warnings {
+        println!("warning    {w}");
+    }
+    for i in s.validate() {
+        println!("{i}");
+    }
+    Ok(())
+}
