@@ -819,46 +819,7 @@ impl Builder<'_> {
                 }
             }
         };
-        let img =
-            image::load_from_memory(&bytes).map_err(|e| format!("cannot decode image: {e}"))?;
-        Ok(to_texture(&img, srgb, source))
-    }
-}
-
-/// Converts a decoded image to linear RGBA `f32` texels (sRGB removed when `srgb`).
-pub(crate) fn to_texture(img: &image::DynamicImage, srgb: bool, source: String) -> ImageTexture {
-    let rgba = img.to_rgba32f();
-    let (width, height) = rgba.dimensions();
-    let eight_bit = !matches!(
-        img,
-        image::DynamicImage::ImageRgb32F(_) | image::DynamicImage::ImageRgba32F(_)
-    );
-    let texels = rgba
-        .pixels()
-        .map(|p| {
-            let [r, g, b, a] = p.0;
-            if srgb && eight_bit {
-                [srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a]
-            } else {
-                [r, g, b, a]
-            }
-        })
-        .collect();
-    ImageTexture {
-        source,
-        width,
-        height,
-        texels,
-        wrap: WrapMode::Repeat,
-    }
-}
-
-/// The sRGB electro-optical transfer function (IEC 61966-2-1).
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
+        crate::images::load_texture_bytes(&bytes, &source, srgb).map_err(|e| e.to_string())
     }
 }
 
@@ -929,12 +890,5 @@ mod tests {
     fn bad_percent_encoding_is_refused() {
         assert!(check_uri("a%20b.bin").is_ok());
         assert!(check_uri("a%ff.bin").is_err());
-    }
-
-    #[test]
-    fn srgb_endpoints() {
-        assert_eq!(srgb_to_linear(0.0), 0.0);
-        assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
-        assert!((srgb_to_linear(0.5) - 0.214).abs() < 1e-3);
     }
 }

@@ -431,20 +431,3 @@ pub fn transform_light(light: &Light, m: Mat4) -> Light {
         }
     }
 }
-
-/// Decodes an image texture file to linear RGBA (`srgb`: remove the sRGB
-/// curve from 8-bit colour data). Delegates to the image decoder of this
-/// crate; returns an error naming the file when it cannot be read or decoded.
-pub(crate) fn load_texture_file(
-    path: &Path,
-    srgb: bool,
-) -> Result<chiaro_core::scene::ImageTexture> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
-    let img = image::load_from_memory(&bytes)
-        .map_err(|e| IoError::format(path, format!("cannot decode image: {e}")))?;
-    Ok(gltf_import::to_texture(
-        &img,
-        srgb,
-        path.display().to_string(),
-    ))
-}

@@ -331,7 +331,7 @@ fn material(
         if let Some(id) = images.get(&(full.clone(), srgb)) {
             return (*id, bm);
         }
-        let id = match crate::load_texture_file(&full, srgb) {
+        let id = match crate::images::load_texture(&full, srgb) {
             Ok(img) => {
                 out.textures.push(Texture::Image(img));
                 Some(TextureId(out.textures.len() as u32 - 1))

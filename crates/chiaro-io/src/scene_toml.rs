@@ -715,7 +715,7 @@ impl Ctx<'_> {
                 ),
             ));
         }
-        let mut img = crate::load_texture_file(&path, srgb)
+        let mut img = crate::images::load_texture(&path, srgb)
             .map_err(|e| self.at(rel.span(), format!("cannot load texture: {e}")))?;
         img.wrap = wrap;
         let id = scene.add_texture(Texture::Image(img));
