@@ -445,4 +445,126 @@ mod tests {
         assert_eq!(wrap_index(4, 4, WrapMode::Mirror), 3);
         assert_eq!(wrap_index(-1, 4, WrapMode::Mirror), 0);
     }
+
+    fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> f32) -> ImageTexture {
+        ImageTexture {
+            source: "t".into(),
+            width: w,
+            height: h,
+            texels: (0..w * h)
+                .map(|i| {
+                    let v = f(i % w, i / w);
+                    [v, v, v, 1.0]
+                })
+                .collect(),
+            wrap: WrapMode::Repeat,
+        }
+    }
+
+    #[test]
+    fn mip_pyramid_sizes_means_and_lod() {
+        let img = image(8, 4, |x, y| ((x + y) % 2) as f32);
+        let m = MipMap::new(&img);
+        let sizes: Vec<(u32, u32)> = m.levels.iter().map(|l| (l.width, l.height)).collect();
+        assert_eq!(sizes, vec![(8, 4), (4, 2), (2, 1), (1, 1)]);
+        // Box filtering keeps the mean: a checker becomes uniform grey.
+        assert!((m.levels[1].texel(1, 1)[0] - 0.5).abs() < 1e-6);
+        // One texel per pixel is level 0; four texels per pixel is level 2.
+        assert_eq!(m.lod(Vec2::new(1.0 / 8.0, 0.0), Vec2::ZERO), 0.0);
+        assert!((m.lod(Vec2::new(4.0 / 8.0, 0.0), Vec2::new(0.0, 1.0 / 4.0)) - 2.0).abs() < 1e-6);
+        assert_eq!(m.lod(Vec2::splat(f32::NAN), Vec2::ZERO), 0.0);
+        assert!((m.sample(Vec2::splat(0.3), 3.0).x - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn perlin_noise_is_bounded_smooth_and_zero_on_the_lattice() {
+        let mut max = 0.0f32;
+        for i in 0..2000 {
+            let p = Vec3::new(
+                i as f32 * 0.173,
+                (i % 37) as f32 * 0.311,
+                (i % 11) as f32 * 0.77,
+            );
+            let n = perlin_noise(p);
+            assert!((-1.0..=1.0).contains(&n));
+            max = max.max(n.abs());
+            // Continuity: a tiny step changes little.
+            assert!((perlin_noise(p + Vec3::splat(1e-4)) - n).abs() < 1e-2);
+        }
+        assert!(max > 0.3, "noise is not flat");
+        assert_eq!(perlin_noise(Vec3::new(3.0, -2.0, 7.0)), 0.0);
+        assert!(turbulence(Vec3::new(0.3, 0.4, 0.5), 4) >= 0.0);
+    }
+
+    #[test]
+    fn patterns_are_in_range_and_checker_alternates() {
+        assert_eq!(
+            pattern(ProceduralKind::Checker, Vec3::new(0.5, 0.5, 0.5)),
+            0.0
+        );
+        assert_eq!(
+            pattern(ProceduralKind::Checker, Vec3::new(1.5, 0.5, 0.5)),
+            1.0
+        );
+        assert_eq!(
+            pattern(ProceduralKind::Checker, Vec3::new(-0.5, 0.5, 0.5)),
+            1.0
+        );
+        assert_eq!(
+            pattern(ProceduralKind::Dimples, Vec3::new(0.5, 0.5, 0.5)),
+            1.0
+        );
+        assert!(pattern(ProceduralKind::Dimples, Vec3::new(1.0, 2.0, 3.0)).abs() < 1e-6);
+        for kind in [
+            ProceduralKind::Wood,
+            ProceduralKind::Marble,
+            ProceduralKind::Noise,
+            ProceduralKind::Dimples,
+        ] {
+            for i in 0..200 {
+                let v = pattern(kind, Vec3::new(i as f32 * 0.37, 0.2, i as f32 * 0.11));
+                assert!((0.0..=1.0).contains(&v), "{kind:?}: {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn bump_and_normal_map_closed_forms() {
+        let n = Vec3::Z;
+        // A linear height h = s x on the plane z = 0: normal (-s, 0, 1)/|..|.
+        let s = 0.5;
+        let g = uv_surface_gradient(n, Vec3::X, Vec3::Y, s, 0.0);
+        let b = bump_normal(n, g);
+        assert!((b - Vec3::new(-s, 0.0, 1.0).normalize()).length() < 1e-6);
+        // The flat normal-map texel leaves the normal unchanged; (1, .5, .5)
+        // tilts it onto the tangent.
+        let t = Vec4::new(1.0, 0.0, 0.0, 1.0);
+        assert!((normal_map_normal(n, t, Vec3::new(0.5, 0.5, 1.0)) - n).length() < 1e-6);
+        assert!((normal_map_normal(n, t, Vec3::new(1.0, 0.5, 0.5)) - Vec3::X).length() < 1e-6);
+        // The bitangent sign flips y.
+        let up = normal_map_normal(n, t, Vec3::new(0.5, 1.0, 0.5));
+        let down = normal_map_normal(n, Vec4::new(1.0, 0.0, 0.0, -1.0), Vec3::new(0.5, 1.0, 0.5));
+        assert!((up + down).length() < 1e-6);
+    }
+
+    #[test]
+    fn latlong_convention() {
+        assert!((latlong_uv(Vec3::NEG_Z) - Vec2::new(0.5, 0.5)).length() < 1e-6);
+        assert!((latlong_uv(Vec3::X) - Vec2::new(0.75, 0.5)).length() < 1e-6);
+        assert!(latlong_uv(Vec3::Y).y.abs() < 1e-6);
+        let mut scene = Scene::default();
+        let t = scene.add_texture(Texture::Image(image(4, 2, |x, _| x as f32)));
+        scene.environment = Some(crate::scene::Environment {
+            texture: t,
+            intensity: 2.0,
+            rotate_y_degrees: 0.0,
+            as_background: true,
+        });
+        // -z is u = 0.5: between texels 1 and 2 (values 1 and 2) -> 1.5, times 2.
+        assert!((environment_radiance(&scene, Vec3::NEG_Z).x - 3.0).abs() < 1e-5);
+        assert_eq!(
+            background_radiance(&scene, Vec3::NEG_Z),
+            environment_radiance(&scene, Vec3::NEG_Z)
+        );
+    }
 }
