@@ -227,8 +227,12 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path) -> Result<Imported> {
         }
     };
     let mut visited = vec![false; doc.nodes().len()];
-    let mut stack: Vec<(gltf::Node, Mat4)> =
-        roots.into_iter().map(|n| (n, Mat4::IDENTITY)).collect();
+    // Reversed so that popping visits nodes in document order.
+    let mut stack: Vec<(gltf::Node, Mat4)> = roots
+        .into_iter()
+        .rev()
+        .map(|n| (n, Mat4::IDENTITY))
+        .collect();
     // Depth-first with an explicit stack; a node is visited once even if a
     // (malformed) file makes it the child of several parents or of itself.
     while let Some((node, parent)) = stack.pop() {
@@ -243,7 +247,8 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path) -> Result<Imported> {
             continue;
         }
         b.node(&node, world)?;
-        for c in node.children() {
+        let children: Vec<gltf::Node> = node.children().collect();
+        for c in children.into_iter().rev() {
             stack.push((c, world));
         }
     }
@@ -878,6 +883,134 @@ fn decode_base64(s: &str) -> std::result::Result<Vec<u8>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A triangle, a perspective camera, a point and a spot light, a
+    /// metallic material, all in one embedded file.
+    const SCENE: &str = r#"{
+      "asset": {"version": "2.0"},
+      "extensionsUsed": ["KHR_lights_punctual"],
+      "extensions": {"KHR_lights_punctual": {"lights": [
+        {"type": "point", "intensity": 3.14159265, "color": [1, 0.5, 0.25]},
+        {"type": "spot", "intensity": 6.2831853,
+         "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}}
+      ]}},
+      "scene": 0,
+      "scenes": [{"nodes": [0, 1, 2, 3]}],
+      "nodes": [
+        {"mesh": 0, "translation": [0, 0, -2]},
+        {"camera": 0, "translation": [0, 0, 3]},
+        {"extensions": {"KHR_lights_punctual": {"light": 0}}, "translation": [0, 4, 0]},
+        {"extensions": {"KHR_lights_punctual": {"light": 1}},
+         "rotation": [-0.7071068, 0, 0, 0.7071068], "translation": [0, 5, 0]}
+      ],
+      "cameras": [{"type": "perspective", "perspective": {"yfov": 0.5, "znear": 0.1}}],
+      "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [1, 0.5, 0, 1],
+        "metallicFactor": 1.0, "roughnessFactor": 0.5}, "doubleSided": true}],
+      "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
+      "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+        "min": [0, 0, 0], "max": [1, 1, 0]}],
+      "bufferViews": [{"buffer": 0, "byteLength": 36}],
+      "buffers": [{"byteLength": 36,
+        "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]
+    }"#;
+
+    #[test]
+    fn cameras_lights_and_materials_convert() {
+        let imp = load_gltf_slice(SCENE.as_bytes(), None, Path::new("s.gltf")).expect("loads");
+        assert_eq!(imp.meshes.len(), 1);
+        assert_eq!(imp.meshes[0].indices, vec![[0, 1, 2]]);
+        let o = &imp.objects[0];
+        assert!(
+            (o.matrix.transform_point3(Vec3::ZERO) - Vec3::new(0.0, 0.0, -2.0)).length() < 1e-6
+        );
+        // yfov in radians becomes degrees; the camera looks down -z from z = 3.
+        let c = imp.cameras[0];
+        assert!((c.fov_y_degrees - 0.5f32.to_degrees()).abs() < 1e-4);
+        assert!((c.eye - Vec3::new(0.0, 0.0, 3.0)).length() < 1e-6);
+        assert!((c.look_at - c.eye - Vec3::NEG_Z).length() < 1e-6);
+        // Candela / pi = Ip.
+        match &imp.lights[0] {
+            Light::Point {
+                position,
+                color,
+                intensity,
+                ..
+            } => {
+                assert!((*intensity - 1.0).abs() < 1e-6);
+                assert_eq!(*color, Vec3::new(1.0, 0.5, 0.25));
+                assert!((*position - Vec3::new(0.0, 4.0, 0.0)).length() < 1e-6);
+            }
+            other => panic!("{other:?}"),
+        }
+        match &imp.lights[1] {
+            Light::Spot(s) => {
+                assert!((s.intensity - 2.0).abs() < 1e-6);
+                // Rotated -90 degrees about x: -z turns into -y.
+                assert!(
+                    (s.direction - Vec3::NEG_Y).length() < 1e-5,
+                    "{}",
+                    s.direction
+                );
+                assert!((s.cone_degrees - 0.5f32.to_degrees()).abs() < 1e-4);
+                assert!((s.cone_softness_degrees - 0.3f32.to_degrees()).abs() < 1e-4);
+            }
+            other => panic!("{other:?}"),
+        }
+        // Metal: no diffuse, F0 = base colour, alpha = roughness^2.
+        let m = &imp.materials[0];
+        assert_eq!(m.diffuse, Vec3::ZERO);
+        assert_eq!(m.specular, Vec3::new(1.0, 0.5, 0.0));
+        assert_eq!(m.roughness, 0.25);
+        assert!(m.two_sided);
+    }
+
+    #[test]
+    fn out_of_range_index_is_an_error_not_a_panic() {
+        // u8 indices 0, 1, 7 in a second buffer: 7 is past the 3 vertices.
+        let bad = SCENE
+            .replace(
+                r#""attributes": {"POSITION": 0}, "material": 0"#,
+                r#""attributes": {"POSITION": 0}, "material": 0, "indices": 1"#,
+            )
+            .replace(
+                r#""bufferViews": [{"buffer": 0, "byteLength": 36}]"#,
+                r#""bufferViews": [{"buffer": 0, "byteLength": 36}, {"buffer": 1, "byteLength": 3}]"#,
+            )
+            .replace(
+                r#""min": [0, 0, 0], "max": [1, 1, 0]}]"#,
+                r#""min": [0, 0, 0], "max": [1, 1, 0]},
+                   {"bufferView": 1, "componentType": 5121, "count": 3, "type": "SCALAR"}]"#,
+            )
+            .replace(
+                r#"AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]"#,
+                r#"AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"},
+                   {"byteLength": 4, "uri": "data:application/octet-stream;base64,AAEHAA=="}]"#,
+            );
+        let e = load_gltf_slice(bad.as_bytes(), None, Path::new("bad.gltf")).expect_err("index 7");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("meshes[0].primitives[0].indices") && msg.contains("index 7"),
+            "{msg}"
+        );
+        // An accessor that claims more data than its buffer view holds.
+        let short = SCENE.replace(
+            r#""count": 3, "type": "VEC3""#,
+            r#""count": 300, "type": "VEC3""#,
+        );
+        let e = load_gltf_slice(short.as_bytes(), None, Path::new("g.gltf")).expect_err("short");
+        assert!(e.to_string().contains("accessors[0]"), "{e}");
+        // Bad JSON gives line and column.
+        let e =
+            load_gltf_slice(b"{\n  \"asset\": ,\n}", None, Path::new("j.gltf")).expect_err("json");
+        assert!(matches!(e, IoError::At { line: 2, .. }), "{e}");
+        // A truncated GLB header.
+        let e = load_gltf_slice(
+            b"glTF\x02\x00\x00\x00\x04\x00\x00\x00",
+            None,
+            Path::new("h.glb"),
+        );
+        assert!(e.is_err());
+    }
 
     #[test]
     fn base64_round_trip() {
