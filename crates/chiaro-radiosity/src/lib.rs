@@ -1,1 +1,642 @@
 //! Radiosity for chiaro: patches, form factors, solvers, view-independent solutions.
+//!
+//! [`solve`] meshes every surface and area light into triangular elements
+//! ([`mesh`]), computes form factors ([`formfactor`], [`hemicube`]), solves
+//! the radiosity system with the chosen solver ([`solver`],
+//! [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
+//! draws it from the scene's camera with Gouraud interpolation of the vertex
+//! radiance through chiaro-raster's z-buffer (item buffer); [`render`] does
+//! both.
+//!
+//! # Conventions (decided here, DESIGN.md section 3)
+//! - Every quantity a solver stores is **radiance** `L` (W sr^-1 m^-2), not
+//!   radiosity `B = pi L`: the displayed pixel is then exactly what a
+//!   converged path tracer returns for the same Lambertian surface. The
+//!   equation is `L_j = E_j + rho_j sum_i F_ji L_i`.
+//! - `rho` is the material's `diffuse` kd (times vertex colours and texture
+//!   at the element centre), clamped to `[0, 1]`; emission is the material's
+//!   `emission` (radiance, front side only) or an area light's
+//!   `color * intensity`; area lights become elements (`rho = 0`; two-sided
+//!   lights get a back-to-back pair) but do not occlude visibility rays.
+//! - Point, spot and directional lights are a first "unshot gather": each
+//!   element gets `rho * f_att * Ip * spot * cos_theta * V` (the reflected
+//!   radiance of irradiance `pi Ip f_att cos / d^2`) added to `E`, with shadow
+//!   rays. Ambient lights are ignored.
+//! - Elements are one-sided: light leaves the front (the side of the
+//!   counter-clockwise normal). Two-sided materials are treated as
+//!   one-sided. The display shows an element's radiance from either side.
+//!
+//! # Glossary
+//! - **source triangle**: a triangle of the prepared scene (or of a meshed
+//!   area light) before subdivision.
+//! - **element / patch**: one of the `k x k` triangles a source triangle is
+//!   cut into; constant albedo, emission and radiance.
+//! - **F_ij**: the form factor, the fraction of the energy leaving `i` that
+//!   reaches `j`; `A_i F_ij = A_j F_ji` (reciprocity).
+//! - **unshot fraction**: power not yet distributed over emitted power, the
+//!   stop criterion of every solver (`radiosity.tolerance`).
+//! - **link** (hierarchical): an interaction between two quadtree nodes at
+//!   the level where its form factor is accurate enough.
+
+pub mod formfactor;
+pub mod hemicube;
+pub mod hierarchical;
+pub mod mesh;
+pub mod solution;
+pub mod solver;
+
+pub use formfactor::{FormFactor, disc_to_disc, perpendicular_rectangles, point_to_polygon};
+pub use solution::{RadiositySolution, SolveStats, fingerprint};
+
+use chiaro_core::accel::Accelerator;
+use chiaro_core::error::CoreError;
+use chiaro_core::film::Film;
+use chiaro_core::prepared::{PrepareOptions, PreparedScene};
+use chiaro_core::progress::Progress;
+use chiaro_core::scene::{RadiositySettings, RenderSettings, Scene, Severity};
+use formfactor::{PairFormFactor, PairRule, Visibility, pair, point_light_direct};
+use glam::Vec3;
+use mesh::{Element, ElementMesh, SourceKind, material_at};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// The radiosity solvers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Solver {
+    /// Full matrix, Jacobi iteration.
+    Jacobi,
+    /// Full matrix, Gauss-Seidel iteration.
+    GaussSeidel,
+    /// Progressive refinement (shooting).
+    Progressive,
+    /// Hierarchical radiosity.
+    Hierarchical,
+}
+
+impl Solver {
+    /// Valid names, for messages.
+    pub const NAMES: &'static str = "jacobi, gauss-seidel, progressive, hierarchical";
+
+    /// Parses a solver name.
+    pub fn from_name(s: &str) -> Option<Self> {
+        Some(match s {
+            "jacobi" => Self::Jacobi,
+            "gauss-seidel" => Self::GaussSeidel,
+            "progressive" => Self::Progressive,
+            "hierarchical" => Self::Hierarchical,
+            _ => return None,
+        })
+    }
+
+    /// The name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Jacobi => "jacobi",
+            Self::GaussSeidel => "gauss-seidel",
+            Self::Progressive => "progressive",
+            Self::Hierarchical => "hierarchical",
+        }
+    }
+}
+
+/// The form-factor methods.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Hemicube on the scan converter's item buffer.
+    Hemicube,
+    /// Exact point-to-polygon factors with ray-cast visibility.
+    Raycast,
+    /// Exact point-to-polygon factors, no visibility (unoccluded scenes).
+    Analytic,
+}
+
+impl Method {
+    /// Valid names, for messages.
+    pub const NAMES: &'static str = "hemicube, raycast, analytic";
+
+    /// Parses a method name.
+    pub fn from_name(s: &str) -> Option<Self> {
+        Some(match s {
+            "hemicube" => Self::Hemicube,
+            "raycast" => Self::Raycast,
+            "analytic" => Self::Analytic,
+            _ => return None,
+        })
+    }
+
+    /// The name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Hemicube => "hemicube",
+            Self::Raycast => "raycast",
+            Self::Analytic => "analytic",
+        }
+    }
+}
+
+/// Checked radiosity settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Config {
+    /// The solver.
+    pub solver: Solver,
+    /// The form-factor method.
+    pub method: Method,
+    /// Patch size, 0 for automatic.
+    pub patch_size: f32,
+    /// Hemicube resolution.
+    pub hemicube_resolution: u32,
+    /// Stop tolerance (unshot fraction).
+    pub tolerance: f32,
+    /// Iteration cap.
+    pub max_iterations: u32,
+}
+
+fn bad(key: &str, message: String) -> CoreError {
+    CoreError::BadSetting {
+        key: format!("radiosity.{key}"),
+        message,
+    }
+}
+
+impl Config {
+    /// Checks `settings`.
+    ///
+    /// # Errors
+    /// [`CoreError::BadSetting`] naming the field, with the valid values.
+    pub fn from_settings(s: &RadiositySettings) -> Result<Self, CoreError> {
+        let solver = Solver::from_name(&s.solver).ok_or_else(|| {
+            bad(
+                "solver",
+                format!("unknown solver `{}` (valid: {})", s.solver, Solver::NAMES),
+            )
+        })?;
+        let method = Method::from_name(&s.formfactor).ok_or_else(|| {
+            bad(
+                "formfactor",
+                format!(
+                    "unknown form-factor method `{}` (valid: {})",
+                    s.formfactor,
+                    Method::NAMES
+                ),
+            )
+        })?;
+        if solver == Solver::Hierarchical && method == Method::Hemicube {
+            return Err(bad(
+                "formfactor",
+                "the hierarchical solver needs area-to-area link form factors: use `raycast` or `analytic`".into(),
+            ));
+        }
+        if !(s.patch_size.is_finite() && s.patch_size >= 0.0) {
+            return Err(bad(
+                "patch_size",
+                format!(
+                    "must be a finite number >= 0 (0 = automatic), got {}",
+                    s.patch_size
+                ),
+            ));
+        }
+        if !(2..=4096).contains(&s.hemicube_resolution) {
+            return Err(bad(
+                "hemicube_resolution",
+                format!("must be in 2..=4096, got {}", s.hemicube_resolution),
+            ));
+        }
+        if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
+            return Err(bad(
+                "tolerance",
+                format!("must be in (0, 1), got {}", s.tolerance),
+            ));
+        }
+        if s.max_iterations == 0 {
+            return Err(bad("max_iterations", "must be at least 1".into()));
+        }
+        Ok(Self {
+            solver,
+            method,
+            patch_size: s.patch_size,
+            hemicube_resolution: s.hemicube_resolution,
+            tolerance: s.tolerance,
+            max_iterations: s.max_iterations,
+        })
+    }
+}
+
+/// The ray accelerator used for visibility (one line to switch).
+fn make_accel(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+    Box::new(chiaro_core::accel::bvh::SceneBvh::new(ps))
+}
+
+fn check_scene(scene: &Scene) -> Result<(), CoreError> {
+    let issues: Vec<String> = scene
+        .validate()
+        .into_iter()
+        .filter(|i| i.severity == Severity::Error)
+        .map(|i| i.to_string())
+        .collect();
+    if issues.is_empty() {
+        Ok(())
+    } else {
+        Err(CoreError::InvalidScene { issues })
+    }
+}
+
+/// Reflected radiance at each element due to *direct* light: point-like
+/// lights (`point_direct`) plus every emissive source triangle, gathered
+/// with ray-cast form factors (16 visibility rays per receiver point).
+fn direct_light(
+    ps: &PreparedScene<'_>,
+    mesh: &ElementMesh,
+    point_direct: &[Vec3],
+    vis: &Visibility<'_>,
+    tol: f32,
+) -> Vec<Vec3> {
+    let emitters: Vec<Element> = mesh
+        .sources
+        .iter()
+        .enumerate()
+        .filter_map(|(si, s)| {
+            let (_, le) = material_at(ps, s, 1.0 / 3.0, 1.0 / 3.0);
+            (le.max_element() > 0.0)
+                .then(|| Element::new(s.p, s.n, Vec3::ZERO, le, [0; 3], si as u32))
+        })
+        .collect();
+    let rule = PairRule {
+        far_m: 2,
+        near_m: 4,
+        vis_m: 4,
+    };
+    mesh.elements
+        .par_iter()
+        .zip(point_direct.par_iter())
+        .map(|(e, pd)| {
+            if e.rho == Vec3::ZERO {
+                return Vec3::ZERO;
+            }
+            let mut sum = Vec3::ZERO;
+            for s in &emitters {
+                if s.source == e.source {
+                    continue;
+                }
+                sum += s.le * pair(e, s, rule, Some(vis), tol);
+            }
+            *pd + e.rho * sum
+        })
+        .collect()
+}
+
+/// Solves the radiosity of `scene` with `settings.radiosity` and returns the
+/// view-independent solution (radiance per element and per vertex).
+///
+/// # Errors
+/// [`CoreError::BadSetting`] for unknown solver or form-factor names (the
+/// message lists the valid ones) or out-of-range numbers;
+/// [`CoreError::InvalidScene`] when the scene does not validate;
+/// [`CoreError::Unsupported`] when the mesh is too large for the solver;
+/// [`CoreError::Cancelled`] when `progress` asks.
+pub fn solve(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> Result<RadiositySolution, CoreError> {
+    let cfg = Config::from_settings(&settings.radiosity)?;
+    check_scene(scene)?;
+    let start = Instant::now();
+    let ps = PreparedScene::new(scene, PrepareOptions::default());
+    let patch = if cfg.patch_size > 0.0 {
+        cfg.patch_size
+    } else {
+        mesh::default_patch_size(&ps)
+    };
+    let size = ps.bounds.diagonal().max(1e-6);
+    let tol = size * 1e-6;
+    let accel = make_accel(&ps);
+    let vis = Visibility {
+        accel: accel.as_ref(),
+        eps: size * 1e-4,
+    };
+    progress.begin("radiosity meshing", 1);
+    let mesh = mesh::build(&ps, patch, cfg.solver == Solver::Hierarchical)?;
+    progress.advance(1);
+    let n = mesh.elements.len();
+    progress.message(&format!(
+        "radiosity: {n} elements (patch size {patch}), solver {}, form factors {}",
+        cfg.solver.name(),
+        cfg.method.name()
+    ));
+    let point_direct: Vec<Vec3> = mesh
+        .elements
+        .par_iter()
+        .map(|e| point_light_direct(e, &scene.lights, &vis))
+        .collect();
+    let e: Vec<Vec3> = mesh
+        .elements
+        .iter()
+        .zip(&point_direct)
+        .map(|(el, d)| el.le + *d)
+        .collect();
+    let mut stats = SolveStats {
+        solver: cfg.solver.name().into(),
+        formfactor: cfg.method.name().into(),
+        patch_size: patch,
+        elements: n,
+        ..SolveStats::default()
+    };
+    let hemi;
+    let pairs;
+    let ff: &dyn FormFactor = match cfg.method {
+        Method::Hemicube => {
+            hemi = hemicube::HemicubeFormFactor::new(
+                &mesh.elements,
+                &mesh.vertices,
+                cfg.hemicube_resolution,
+                size,
+            );
+            &hemi
+        }
+        Method::Raycast => {
+            pairs = PairFormFactor::raycast(
+                &mesh.elements,
+                Visibility {
+                    accel: accel.as_ref(),
+                    eps: vis.eps,
+                },
+                tol,
+            );
+            &pairs
+        }
+        Method::Analytic => {
+            pairs = PairFormFactor::analytic(&mesh.elements, tol);
+            &pairs
+        }
+    };
+    let l = match cfg.solver {
+        Solver::Jacobi | Solver::GaussSeidel => {
+            let m = solver::build_matrix(&mesh.elements, ff, progress)?;
+            let out = if cfg.solver == Solver::Jacobi {
+                solver::jacobi(
+                    &mesh.elements,
+                    &e,
+                    &m,
+                    cfg.tolerance,
+                    cfg.max_iterations,
+                    progress,
+                )?
+            } else {
+                solver::gauss_seidel(
+                    &mesh.elements,
+                    &e,
+                    &m,
+                    cfg.tolerance,
+                    cfg.max_iterations,
+                    progress,
+                )?
+            };
+            stats.iterations = out.iterations;
+            stats.unshot = out.unshot;
+            out.l
+        }
+        Solver::Progressive => {
+            let out = solver::progressive(
+                &mesh.elements,
+                &e,
+                ff,
+                cfg.tolerance,
+                cfg.max_iterations,
+                progress,
+            )?;
+            stats.iterations = out.iterations;
+            stats.unshot = out.unshot;
+            out.l
+        }
+        Solver::Hierarchical => {
+            let (rule, v) = match cfg.method {
+                Method::Analytic => (PairFormFactor::analytic(&[], tol).rule, None),
+                _ => (
+                    PairFormFactor::raycast(
+                        &[],
+                        Visibility {
+                            accel: accel.as_ref(),
+                            eps: vis.eps,
+                        },
+                        tol,
+                    )
+                    .rule,
+                    Some(&vis),
+                ),
+            };
+            let (l, hs) = hierarchical::solve(
+                &ps,
+                &mesh,
+                &e,
+                v,
+                rule,
+                tol,
+                cfg.tolerance,
+                cfg.max_iterations,
+                progress,
+            )?;
+            stats.iterations = hs.iterations;
+            stats.unshot = hs.unshot;
+            stats.nodes = hs.nodes;
+            stats.leaves = hs.leaves;
+            stats.links = hs.links;
+            l
+        }
+    };
+    let l: Vec<Vec3> = l.into_iter().map(chiaro_core::shading::sanitize).collect();
+    // Indirect irradiance for the hybrid: pi (L - Le - direct) / rho.
+    let direct = direct_light(&ps, &mesh, &point_direct, &vis, tol);
+    let indirect: Vec<Vec3> = mesh
+        .elements
+        .iter()
+        .zip(&l)
+        .zip(&direct)
+        .map(|((el, l), d)| {
+            let refl = (*l - el.le - *d).max(Vec3::ZERO);
+            let f = |r: f32, rho: f32| {
+                if rho > 1e-4 {
+                    std::f32::consts::PI * r / rho
+                } else {
+                    0.0
+                }
+            };
+            Vec3::new(
+                f(refl.x, el.rho.x),
+                f(refl.y, el.rho.y),
+                f(refl.z, el.rho.z),
+            )
+        })
+        .collect();
+    stats.seconds = start.elapsed().as_secs_f64();
+    progress.message(&format!(
+        "radiosity: solved in {:.2} s ({} iterations, unshot {:.3e})",
+        stats.seconds, stats.iterations, stats.unshot
+    ));
+    Ok(build_solution(scene, &ps, &mesh, l, indirect, stats))
+}
+
+fn build_solution(
+    scene: &Scene,
+    ps: &PreparedScene<'_>,
+    mesh: &ElementMesh,
+    l: Vec<Vec3>,
+    indirect: Vec<Vec3>,
+    stats: SolveStats,
+) -> RadiositySolution {
+    let nv = mesh.vertices.len();
+    let mut vr = vec![Vec3::ZERO; nv];
+    let mut vi = vec![Vec3::ZERO; nv];
+    let mut w = vec![0.0f32; nv];
+    for ((el, l), ind) in mesh.elements.iter().zip(&l).zip(&indirect) {
+        for &v in &el.verts {
+            vr[v as usize] += *l * el.area;
+            vi[v as usize] += *ind * el.area;
+            w[v as usize] += el.area;
+        }
+    }
+    for ((r, i), w) in vr.iter_mut().zip(vi.iter_mut()).zip(&w) {
+        if *w > 0.0 {
+            *r /= *w;
+            *i /= *w;
+        }
+    }
+    RadiositySolution {
+        version: solution::FORMAT_VERSION,
+        fingerprint: fingerprint(scene, stats.patch_size),
+        stats,
+        vertices: mesh.vertices.clone(),
+        vertex_radiance: vr,
+        vertex_indirect: vi,
+        elements: mesh.elements.iter().map(|e| e.verts).collect(),
+        element_radiance: l,
+        element_emission: mesh.elements.iter().map(|e| e.le).collect(),
+        source_corners: mesh.sources.iter().map(|s| s.p).collect(),
+        source_object: mesh.sources.iter().map(|s| s.object).collect(),
+        source_k: mesh.k.clone(),
+        source_first: mesh.first.clone(),
+        prepared_triangles: (mesh
+            .sources
+            .iter()
+            .filter(|s| matches!(s.kind, SourceKind::Prepared(_)))
+            .count() as u32)
+            .min(ps.triangles.len() as u32),
+    }
+}
+
+/// Draws `solution` from `scene`'s camera: the display mesh is scan
+/// converted into chiaro-raster's item buffer (z-buffer) at
+/// `round(sqrt(samples))^2` samples per pixel, and each visible sample gets
+/// the Gouraud interpolation of its element's vertex radiance (exact
+/// barycentrics on the element's plane along the pixel ray). Background:
+/// `scene.background`. Fills the film's depth and normal buffers.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the solution belongs to another scene;
+/// [`CoreError::Cancelled`] when `progress` asks.
+pub fn render_solution(
+    scene: &Scene,
+    solution: &RadiositySolution,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> Result<Film, CoreError> {
+    solution.check_scene(scene)?;
+    let (w, h) = (settings.width.max(1), settings.height.max(1));
+    let ss = (settings.samples.max(1) as f32)
+        .sqrt()
+        .round()
+        .clamp(1.0, 8.0) as u32;
+    let (sw, sh) = (w * ss, h * ss);
+    progress.begin("radiosity display", 1);
+    if progress.cancelled() {
+        return Err(CoreError::Cancelled);
+    }
+    let cam = &scene.camera;
+    let clip_from_world = cam.projection_matrix(w as f32 / h as f32) * cam.view_matrix();
+    let buf = chiaro_raster::zbuffer::item_buffer(
+        clip_from_world,
+        sw,
+        sh,
+        &solution.vertices,
+        &solution.elements,
+        &[],
+    );
+    let normals: Vec<Vec3> = solution
+        .elements
+        .iter()
+        .map(|t| {
+            let c = t.map(|i| solution.vertices[i as usize]);
+            (c[1] - c[0]).cross(c[2] - c[0]).normalize_or_zero()
+        })
+        .collect();
+    let mut film = Film::new(w, h);
+    let rows: Vec<Vec<(Vec3, f32, Vec3)>> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            (0..w)
+                .map(|x| {
+                    let (mut col, mut depth, mut normal) = (Vec3::ZERO, f32::INFINITY, Vec3::ZERO);
+                    for sy in 0..ss {
+                        for sx in 0..ss {
+                            let (px, py) = (x * ss + sx, y * ss + sy);
+                            let id = buf.id[(py * sw + px) as usize];
+                            if id == chiaro_raster::zbuffer::NO_ITEM {
+                                col += scene.background;
+                                continue;
+                            }
+                            let e = id as usize;
+                            let d = cam.ray_direction(px as f32 + 0.5, py as f32 + 0.5, sw, sh);
+                            let n = normals[e];
+                            let c = solution.elements[e].map(|i| solution.vertices[i as usize]);
+                            let denom = n.dot(d);
+                            let t = if denom.abs() > 1e-12 {
+                                n.dot(c[0] - cam.eye) / denom
+                            } else {
+                                0.0
+                            };
+                            let p = cam.eye + d * t;
+                            let (a, b) = mesh::barycentric(&c, p);
+                            let (a, b) = (a.clamp(0.0, 1.0), b.clamp(0.0, 1.0));
+                            let s = (a + b).max(1.0);
+                            let wts = [1.0 - (a + b) / s, a / s, b / s];
+                            let v = solution.elements[e];
+                            col += solution.vertex_radiance[v[0] as usize] * wts[0]
+                                + solution.vertex_radiance[v[1] as usize] * wts[1]
+                                + solution.vertex_radiance[v[2] as usize] * wts[2];
+                            if t.is_finite() && t < depth {
+                                depth = t;
+                                normal = n;
+                            }
+                        }
+                    }
+                    (col / (ss * ss) as f32, depth, normal)
+                })
+                .collect()
+        })
+        .collect();
+    for (y, row) in rows.into_iter().enumerate() {
+        for (x, (c, d, n)) in row.into_iter().enumerate() {
+            film.set(x as u32, y as u32, c);
+            let i = film.index(x as u32, y as u32);
+            film.depth[i] = d;
+            film.normal[i] = n;
+        }
+    }
+    progress.advance(1);
+    Ok(film)
+}
+
+/// Solves and displays: [`solve`] then [`render_solution`].
+///
+/// # Errors
+/// Those of [`solve`] and [`render_solution`].
+pub fn render(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> Result<Film, CoreError> {
+    let s = solve(scene, settings, progress)?;
+    render_solution(scene, &s, settings, progress)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,334 @@
+//! Hierarchical radiosity (Hanrahan, Salzman and Aupperle 1991).
+//!
+//! Every source triangle is the root of a quadtree of triangles (4-way
+//! midpoint subdivision, down to the depth where it matches the element
+//! mesh). Energy flows along *links* between nodes at whatever level is
+//! accurate enough: a link from `q` to receiver `p` is refined (the larger
+//! of the two is subdivided) while the "BF" oracle
+//! `rho_p * max(B_q) * A_q / (pi r^2 + A_q)` (the disc upper bound of the
+//! form factor times the source's radiance) exceeds `eps`. The system is
+//! then solved by Jacobi-style gathers along links followed by a push-pull
+//! over each quadtree; links are refined again with the new radiances
+//! (BF refinement) until nothing changes. The number of links grows about
+//! linearly with the number of leaves, instead of quadratically.
+
+use crate::formfactor::{PairRule, Visibility, facing, pair, point_light_direct};
+use crate::mesh::{Element, ElementMesh, barycentric, material_at};
+use chiaro_core::error::CoreError;
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::progress::Progress;
+use chiaro_core::scene::Light;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// Statistics of a hierarchical solution.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct HrStats {
+    pub nodes: usize,
+    pub leaves: usize,
+    pub links: usize,
+    pub iterations: u32,
+    pub unshot: f32,
+}
+
+struct Tree<'a, 's> {
+    ps: &'a PreparedScene<'s>,
+    mesh: &'a ElementMesh,
+    lights: &'a [Light],
+    vis: Option<&'a Visibility<'a>>,
+    rule: PairRule,
+    tol: f32,
+    el: Vec<Element>,
+    e: Vec<Vec3>,
+    b: Vec<Vec3>,
+    g: Vec<Vec3>,
+    incident: Vec<Vec3>,
+    children: Vec<Option<[u32; 4]>>,
+    depth: Vec<u32>,
+    links: Vec<Vec<(u32, f32)>>,
+    roots: Vec<u32>,
+    eps: f32,
+}
+
+impl Tree<'_, '_> {
+    fn make_node(&mut self, source: u32, p: [Vec3; 3], depth: u32) -> u32 {
+        let s = &self.mesh.sources[source as usize];
+        let c = (p[0] + p[1] + p[2]) / 3.0;
+        let (u, v) = barycentric(&s.p, c);
+        let (rho, le) = material_at(self.ps, s, u, v);
+        let el = Element::new(p, s.n, rho, le, [0; 3], source);
+        let direct = match self.vis {
+            Some(vis) => point_light_direct(&el, self.lights, vis),
+            None => Vec3::ZERO,
+        };
+        self.el.push(el);
+        self.e.push(le + direct);
+        self.b.push(le + direct);
+        self.g.push(Vec3::ZERO);
+        self.incident.push(Vec3::ZERO);
+        self.children.push(None);
+        self.depth.push(depth);
+        self.links.push(Vec::new());
+        self.el.len() as u32 - 1
+    }
+
+    fn max_depth(&self, node: u32) -> u32 {
+        let k = self.mesh.k[self.el[node as usize].source as usize];
+        k.trailing_zeros()
+    }
+
+    fn can_subdivide(&self, node: u32) -> bool {
+        self.depth[node as usize] < self.max_depth(node)
+    }
+
+    fn subdivide(&mut self, node: u32) -> [u32; 4] {
+        if let Some(c) = self.children[node as usize] {
+            return c;
+        }
+        let [a, b, c] = self.el[node as usize].p;
+        let (ab, bc, ca) = ((a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5);
+        let (s, d) = (self.el[node as usize].source, self.depth[node as usize] + 1);
+        let kids = [
+            self.make_node(s, [a, ab, ca], d),
+            self.make_node(s, [ab, b, bc], d),
+            self.make_node(s, [ca, bc, c], d),
+            self.make_node(s, [ab, bc, ca], d),
+        ];
+        // Children start from their parent's radiance so the oracle sees light.
+        let pb = self.b[node as usize];
+        for &k in &kids {
+            self.b[k as usize] = self.b[k as usize].max(pb);
+        }
+        self.children[node as usize] = Some(kids);
+        kids
+    }
+
+    fn oracle(&self, p: u32, q: u32) -> bool {
+        let (ep, eq) = (&self.el[p as usize], &self.el[q as usize]);
+        let r2 = ep.c.distance_squared(eq.c);
+        let f = eq.area / (PI * r2 + eq.area);
+        ep.rho.max_element() * self.b[q as usize].max_element() * f > self.eps
+    }
+
+    /// Links `q -> p` at the right level (p receives).
+    fn refine(&mut self, p: u32, q: u32) {
+        if !facing(&self.el[p as usize], &self.el[q as usize], self.tol) {
+            return;
+        }
+        let (sp, sq) = (self.can_subdivide(p), self.can_subdivide(q));
+        if (sp || sq) && self.oracle(p, q) {
+            let split_q = sq && (!sp || self.el[q as usize].area > self.el[p as usize].area);
+            if split_q {
+                for c in self.subdivide(q) {
+                    self.refine(p, c);
+                }
+            } else {
+                for c in self.subdivide(p) {
+                    self.refine(c, q);
+                }
+            }
+        } else {
+            self.links[p as usize].push((q, f32::NAN));
+        }
+    }
+
+    /// Computes the form factors of new links (marked NaN), in parallel.
+    fn evaluate_links(&mut self) {
+        let (el, rule, vis, tol) = (&self.el, self.rule, self.vis, self.tol);
+        self.links.par_iter_mut().enumerate().for_each(|(p, ls)| {
+            for (q, f) in ls.iter_mut() {
+                if f.is_nan() {
+                    *f = pair(&el[p], &el[*q as usize], rule, vis, tol);
+                }
+            }
+            ls.retain(|(_, f)| *f > 0.0);
+        });
+    }
+
+    /// Re-examines every link with the current radiances; returns whether any changed.
+    fn refine_existing(&mut self) -> bool {
+        let mut changed = false;
+        for p in 0..self.el.len() as u32 {
+            let old = std::mem::take(&mut self.links[p as usize]);
+            let mut keep = Vec::with_capacity(old.len());
+            for (q, f) in old {
+                let subdividable = self.can_subdivide(p) || self.can_subdivide(q);
+                if subdividable && self.oracle(p, q) {
+                    changed = true;
+                    self.refine(p, q);
+                } else {
+                    keep.push((q, f));
+                }
+            }
+            self.links[p as usize].extend(keep);
+        }
+        changed
+    }
+
+    fn push_pull(&mut self, node: u32, down: Vec3) -> Vec3 {
+        let i = node as usize;
+        let d = down + self.g[i];
+        let b = match self.children[i] {
+            None => {
+                self.incident[i] = d;
+                self.e[i] + self.el[i].rho * d
+            }
+            Some(kids) => {
+                let mut sum = Vec3::ZERO;
+                for k in kids {
+                    sum += self.push_pull(k, d) * self.el[k as usize].area;
+                }
+                sum / self.el[i].area.max(f32::MIN_POSITIVE)
+            }
+        };
+        self.b[i] = b;
+        b
+    }
+
+    fn leaf_power_change(&self, old: &[Vec3]) -> f32 {
+        (0..self.el.len())
+            .filter(|&i| self.children[i].is_none())
+            .map(|i| self.el[i].area * (self.b[i] - old[i]).abs().element_sum())
+            .sum()
+    }
+
+    fn iterate(
+        &mut self,
+        tol: f32,
+        max_iter: u32,
+        p0: f32,
+        stats: &mut HrStats,
+        progress: &dyn Progress,
+    ) -> Result<(), CoreError> {
+        for _ in 0..max_iter {
+            if progress.cancelled() {
+                return Err(CoreError::Cancelled);
+            }
+            let old = self.b.clone();
+            let b = &self.b;
+            self.g = self
+                .links
+                .par_iter()
+                .map(|ls| ls.iter().map(|&(q, f)| b[q as usize] * f).sum())
+                .collect();
+            for r in 0..self.roots.len() {
+                let root = self.roots[r];
+                self.push_pull(root, Vec3::ZERO);
+            }
+            stats.iterations += 1;
+            stats.unshot = self.leaf_power_change(&old) / p0;
+            progress.message(&format!(
+                "hierarchical: iteration {}, residual {:.3e}, {} links",
+                stats.iterations,
+                stats.unshot,
+                self.links.iter().map(Vec::len).sum::<usize>()
+            ));
+            if stats.unshot < tol {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// The deepest node of the tree of `source` containing point `x`.
+    fn locate(&self, source: u32, x: Vec3) -> u32 {
+        let mut node = self.roots[source as usize];
+        while let Some(kids) = self.children[node as usize] {
+            let (u, v) = barycentric(&self.el[node as usize].p, x);
+            let w = 1.0 - u - v;
+            node = if w >= 0.5 {
+                kids[0]
+            } else if u >= 0.5 {
+                kids[1]
+            } else if v >= 0.5 {
+                kids[2]
+            } else {
+                kids[3]
+            };
+        }
+        node
+    }
+}
+
+/// Solves by hierarchical radiosity and returns the radiance of every
+/// element of `mesh` (whose subdivisions must be powers of two) and the
+/// statistics. `e_elem` is each element's emitted plus point-light direct
+/// radiance: an element smaller than its leaf gets `E_elem + rho * incident(leaf)`.
+pub(crate) fn solve(
+    ps: &PreparedScene<'_>,
+    mesh: &ElementMesh,
+    e_elem: &[Vec3],
+    vis: Option<&Visibility<'_>>,
+    rule: PairRule,
+    tol_geom: f32,
+    tolerance: f32,
+    max_iter: u32,
+    progress: &dyn Progress,
+) -> Result<(Vec<Vec3>, HrStats), CoreError> {
+    let mut t = Tree {
+        ps,
+        mesh,
+        lights: &ps.scene.lights,
+        vis,
+        rule,
+        tol: tol_geom,
+        el: Vec::new(),
+        e: Vec::new(),
+        b: Vec::new(),
+        g: Vec::new(),
+        incident: Vec::new(),
+        children: Vec::new(),
+        depth: Vec::new(),
+        links: Vec::new(),
+        roots: Vec::new(),
+        eps: 0.0,
+    };
+    progress.begin("radiosity hierarchical", max_iter as u64);
+    for (si, s) in mesh.sources.iter().enumerate() {
+        let r = t.make_node(si as u32, s.p, 0);
+        t.roots.push(r);
+    }
+    let p0: f32 = e_elem
+        .iter()
+        .zip(&mesh.elements)
+        .map(|(e, el)| el.area * e.abs().element_sum())
+        .sum();
+    let mut stats = HrStats::default();
+    if p0 <= 0.0 {
+        return Ok((e_elem.to_vec(), stats));
+    }
+    let max_e = t.e.iter().map(|e| e.max_element()).fold(0.0f32, f32::max);
+    // BF threshold: a fraction of the brightest emitter, scaled by the tolerance.
+    t.eps = (0.5 * tolerance * max_e).max(f32::MIN_POSITIVE);
+    let roots = t.roots.clone();
+    for &p in &roots {
+        for &q in &roots {
+            if p != q {
+                t.refine(p, q);
+            }
+        }
+    }
+    t.evaluate_links();
+    t.iterate(tolerance, max_iter, p0, &mut stats, progress)?;
+    for _ in 0..6 {
+        if !t.refine_existing() {
+            break;
+        }
+        t.evaluate_links();
+        t.iterate(tolerance, max_iter, p0, &mut stats, progress)?;
+    }
+    stats.nodes = t.el.len();
+    stats.leaves = t.children.iter().filter(|c| c.is_none()).count();
+    stats.links = t.links.iter().map(Vec::len).sum();
+    let l = mesh
+        .elements
+        .iter()
+        .zip(e_elem)
+        .map(|(el, e)| {
+            let leaf = t.locate(el.source, el.c) as usize;
+            *e + el.rho * t.incident[leaf]
+        })
+        .collect();
+    Ok((l, stats))
+}

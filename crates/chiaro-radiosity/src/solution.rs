@@ -1,0 +1,316 @@
+//! [`RadiositySolution`]: the view-independent result of a radiosity solve
+//! (per-element and per-vertex radiance on the display mesh), its look-ups
+//! for display and for the hybrid technique, and its serialisation.
+
+use crate::mesh::{barycentric, element_at};
+use chiaro_core::error::CoreError;
+use chiaro_core::scene::Scene;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::io::{Read, Write};
+
+/// Format version written by [`RadiositySolution::save`].
+pub const FORMAT_VERSION: u32 = 1;
+
+/// How a solution was computed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct SolveStats {
+    /// Solver name (`"progressive"`, ...).
+    pub solver: String,
+    /// Form-factor method (`"raycast"`, ...).
+    pub formfactor: String,
+    /// Patch size used for meshing, scene units.
+    pub patch_size: f32,
+    /// Number of display elements.
+    pub elements: usize,
+    /// Iterations (sweeps, shots, or hierarchical gathers).
+    pub iterations: u32,
+    /// Final unshot-energy (or residual) fraction.
+    pub unshot: f32,
+    /// Hierarchical radiosity: quadtree nodes (0 for other solvers).
+    pub nodes: usize,
+    /// Hierarchical radiosity: leaves of the quadtrees.
+    pub leaves: usize,
+    /// Hierarchical radiosity: links.
+    pub links: usize,
+    /// Wall-clock seconds of the solve (meshing, form factors, iterations).
+    pub seconds: f64,
+}
+
+/// A radiosity solution: the display mesh (the elements of every surface
+/// and area light) with the outgoing radiance of each element and each
+/// vertex.
+///
+/// Units: *radiance* (W sr^-1 m^-2 in the scene's relative units), the
+/// same quantity a path tracer returns for a Lambertian surface; radiosity
+/// B (W/m^2) is `pi` times it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RadiositySolution {
+    pub(crate) version: u32,
+    pub(crate) fingerprint: u64,
+    /// How it was computed.
+    pub stats: SolveStats,
+    pub(crate) vertices: Vec<Vec3>,
+    pub(crate) vertex_radiance: Vec<Vec3>,
+    pub(crate) vertex_indirect: Vec<Vec3>,
+    pub(crate) elements: Vec<[u32; 3]>,
+    pub(crate) element_radiance: Vec<Vec3>,
+    pub(crate) element_emission: Vec<Vec3>,
+    pub(crate) source_corners: Vec<[Vec3; 3]>,
+    pub(crate) source_object: Vec<u32>,
+    pub(crate) source_k: Vec<u32>,
+    pub(crate) source_first: Vec<u32>,
+    /// Number of sources that are prepared-scene triangles (the rest are area lights).
+    pub(crate) prepared_triangles: u32,
+}
+
+/// FNV-1a over bytes.
+fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// The fingerprint of what a solution depends on: meshes, objects,
+/// materials, lights (their serde form) and the patch size. Textures are
+/// not hashed (only their ids, through the materials).
+pub fn fingerprint(scene: &Scene, patch_size: f32) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let parts = [
+        serde_json::to_vec(&scene.meshes),
+        serde_json::to_vec(&scene.objects),
+        serde_json::to_vec(&scene.materials),
+        serde_json::to_vec(&scene.lights),
+    ];
+    for p in parts {
+        h = fnv1a(&p.unwrap_or_default(), h);
+    }
+    fnv1a(&patch_size.to_le_bytes(), h)
+}
+
+impl RadiositySolution {
+    /// Number of display elements.
+    pub fn element_count(&self) -> usize {
+        self.elements.len()
+    }
+
+    /// Number of display vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.vertices.len()
+    }
+
+    /// Display mesh: vertex positions (world space).
+    pub fn vertices(&self) -> &[Vec3] {
+        &self.vertices
+    }
+
+    /// Display mesh: triangles over [`Self::vertices`], counter-clockwise from the front.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.elements
+    }
+
+    /// Outgoing radiance of each vertex (area-weighted mean of the elements
+    /// around it), linear RGB: the colours Gouraud shading interpolates.
+    pub fn vertex_radiance(&self) -> &[Vec3] {
+        &self.vertex_radiance
+    }
+
+    /// Outgoing radiance of each element (constant over it).
+    pub fn element_radiance(&self) -> &[Vec3] {
+        &self.element_radiance
+    }
+
+    /// Emitted radiance of each element.
+    pub fn element_emission(&self) -> &[Vec3] {
+        &self.element_emission
+    }
+
+    /// Display element `e` at barycentrics `(u, v)` (weights of its corners
+    /// 1 and 2) of source triangle `t`, and the Gouraud weights of its
+    /// vertices at the point of the source triangle.
+    fn locate(&self, t: usize, u: f32, v: f32) -> Option<(usize, [f32; 3])> {
+        let k = *self.source_k.get(t)?;
+        let e = *self.source_first.get(t)? as usize + element_at(k, u, v) as usize;
+        let tri = self.elements.get(e)?;
+        let c = self.source_corners[t];
+        let p = c[0] + u * (c[1] - c[0]) + v * (c[2] - c[0]);
+        let corners = tri.map(|i| self.vertices[i as usize]);
+        let (a, b) = barycentric(&corners, p);
+        let (a, b) = (a.clamp(0.0, 1.0), b.clamp(0.0, 1.0));
+        let s = (a + b).max(1.0);
+        let (a, b) = (a / s, b / s);
+        Some((e, [1.0 - a - b, a, b]))
+    }
+
+    fn interpolate(&self, values: &[Vec3], e: usize, w: [f32; 3]) -> Vec3 {
+        let tri = self.elements[e];
+        values[tri[0] as usize] * w[0]
+            + values[tri[1] as usize] * w[1]
+            + values[tri[2] as usize] * w[2]
+    }
+
+    /// Outgoing radiance (W sr^-1 m^-2, emission included) at barycentrics
+    /// `(u, v)` (weights of corners 1 and 2, as in
+    /// [`chiaro_core::accel::Hit`]) of triangle `triangle` of the
+    /// [`chiaro_core::prepared::PreparedScene`] built with
+    /// `PrepareOptions::default()` (tessellated spheres), Gouraud-interpolated
+    /// from the vertices. `None` if the triangle is out of range. O(1).
+    pub fn radiance_at_triangle(&self, triangle: u32, u: f32, v: f32) -> Option<Vec3> {
+        if triangle >= self.prepared_triangles {
+            return None;
+        }
+        let (e, w) = self.locate(triangle as usize, u, v)?;
+        Some(self.interpolate(&self.vertex_radiance, e, w))
+    }
+
+    /// Incident *indirect* irradiance (W/m^2: light that has been reflected
+    /// at least once, i.e. neither emitted light nor the direct light of
+    /// lights and emitters) at the same place as [`Self::radiance_at_triangle`].
+    /// A technique that computes direct light itself (the hybrid) adds
+    /// `kd / pi` times this to its Lambertian term in place of the ambient term.
+    pub fn indirect_irradiance_at_triangle(&self, triangle: u32, u: f32, v: f32) -> Option<Vec3> {
+        if triangle >= self.prepared_triangles {
+            return None;
+        }
+        let (e, w) = self.locate(triangle as usize, u, v)?;
+        Some(self.interpolate(&self.vertex_indirect, e, w))
+    }
+
+    /// The source triangle of `object` nearest to `p` (on the side `n` faces
+    /// if `n` is nonzero), with the barycentrics of `p` in it.
+    fn find(&self, object: u32, p: Vec3, n: Vec3) -> Option<(usize, f32, f32)> {
+        let mut best: Option<(f32, usize, f32, f32)> = None;
+        for t in 0..self.prepared_triangles as usize {
+            if self.source_object[t] != object {
+                continue;
+            }
+            let c = self.source_corners[t];
+            let nt = (c[1] - c[0]).cross(c[2] - c[0]).normalize_or_zero();
+            if n != Vec3::ZERO && nt.dot(n) < 0.0 {
+                continue;
+            }
+            let (u, v) = barycentric(&c, p);
+            // Distance outside the triangle (in barycentric units) plus off-plane distance.
+            let out = (-u).max(0.0) + (-v).max(0.0) + (u + v - 1.0).max(0.0);
+            let scale = (c[1] - c[0]).length().max((c[2] - c[0]).length());
+            let d = out * scale + nt.dot(p - c[0]).abs();
+            if best.is_none_or(|b| d < b.0) {
+                best = Some((d, t, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0)));
+            }
+        }
+        best.map(|(_, t, u, v)| (t, u, v))
+    }
+
+    /// Outgoing radiance (W sr^-1 m^-2, emission included) at point `p` on
+    /// object `object` (the index in `Scene::objects`, as in
+    /// [`chiaro_core::prepared::SurfaceHit::object`]), on the side facing
+    /// `n` (pass the geometric normal; `Vec3::ZERO` for either side).
+    /// Works for analytic spheres too (the nearest facet of the tessellated
+    /// sphere). `None` when the object has no surface in the solution.
+    /// Cost: linear in the object's triangle count; prefer
+    /// [`Self::radiance_at_triangle`] when the triangle is known.
+    pub fn radiance_at(&self, object: u32, p: Vec3, n: Vec3) -> Option<Vec3> {
+        let (t, u, v) = self.find(object, p, n)?;
+        self.radiance_at_triangle(t as u32, u, v)
+    }
+
+    /// Incident indirect irradiance (W/m^2, see
+    /// [`Self::indirect_irradiance_at_triangle`]) at point `p` on object
+    /// `object`, found as in [`Self::radiance_at`].
+    pub fn indirect_irradiance_at(&self, object: u32, p: Vec3, n: Vec3) -> Option<Vec3> {
+        let (t, u, v) = self.find(object, p, n)?;
+        self.indirect_irradiance_at_triangle(t as u32, u, v)
+    }
+
+    /// Area-weighted mean outgoing radiance of `object`'s elements, or
+    /// `None` if it has none (for tests and per-wall comparisons).
+    pub fn object_mean_radiance(&self, object: u32) -> Option<Vec3> {
+        let (mut sum, mut area) = (Vec3::ZERO, 0.0f32);
+        for t in 0..self.prepared_triangles as usize {
+            if self.source_object[t] != object {
+                continue;
+            }
+            let k = self.source_k[t] as usize;
+            let first = self.source_first[t] as usize;
+            for e in first..first + k * k {
+                let c = self.elements[e].map(|i| self.vertices[i as usize]);
+                let a = 0.5 * (c[1] - c[0]).cross(c[2] - c[0]).length();
+                sum += self.element_radiance[e] * a;
+                area += a;
+            }
+        }
+        (area > 0.0).then(|| sum / area)
+    }
+
+    /// Writes the solution as JSON.
+    ///
+    /// # Errors
+    /// [`CoreError::Unsupported`] with the I/O or encoding error.
+    pub fn save(&self, w: impl Write) -> Result<(), CoreError> {
+        serde_json::to_writer(std::io::BufWriter::new(w), self)
+            .map_err(|e| CoreError::Unsupported(format!("cannot save radiosity solution: {e}")))
+    }
+
+    /// Reads a solution written by [`Self::save`] and checks that it belongs
+    /// to `scene` (same geometry, materials, lights and patch size).
+    ///
+    /// # Errors
+    /// [`CoreError::Unsupported`] for unreadable data, another format
+    /// version, or a solution of a different scene.
+    pub fn load(r: impl Read, scene: &Scene) -> Result<Self, CoreError> {
+        let s: RadiositySolution = serde_json::from_reader(std::io::BufReader::new(r))
+            .map_err(|e| CoreError::Unsupported(format!("cannot read radiosity solution: {e}")))?;
+        if s.version != FORMAT_VERSION {
+            return Err(CoreError::Unsupported(format!(
+                "radiosity solution has format version {} (this build reads {FORMAT_VERSION})",
+                s.version
+            )));
+        }
+        s.check_scene(scene)?;
+        Ok(s)
+    }
+
+    /// Checks that the solution was computed for `scene`.
+    ///
+    /// # Errors
+    /// [`CoreError::Unsupported`] when the scene's geometry, materials or
+    /// lights differ from those the solution was computed for, or the data
+    /// is inconsistent.
+    pub fn check_scene(&self, scene: &Scene) -> Result<(), CoreError> {
+        let f = fingerprint(scene, self.stats.patch_size);
+        if f != self.fingerprint {
+            return Err(CoreError::Unsupported(format!(
+                "radiosity solution does not match this scene (fingerprint {:016x}, scene {f:016x}): \
+                 geometry, materials, lights or patch size differ; solve again",
+                self.fingerprint
+            )));
+        }
+        let nv = self.vertices.len();
+        let ne = self.elements.len();
+        let ok = self.vertex_radiance.len() == nv
+            && self.vertex_indirect.len() == nv
+            && self.element_radiance.len() == ne
+            && self.element_emission.len() == ne
+            && self
+                .elements
+                .iter()
+                .all(|t| t.iter().all(|&i| (i as usize) < nv))
+            && self.source_k.len() == self.source_corners.len()
+            && self.source_first.len() == self.source_corners.len()
+            && self.source_object.len() == self.source_corners.len()
+            && (self.prepared_triangles as usize) <= self.source_corners.len()
+            && self
+                .source_k
+                .iter()
+                .zip(&self.source_first)
+                .all(|(&k, &f)| k >= 1 && f as u64 + k as u64 * k as u64 <= ne as u64);
+        if !ok {
+            return Err(CoreError::Unsupported(
+                "radiosity solution is inconsistent (corrupt file?)".into(),
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,289 @@
+//! The full-matrix solvers (Jacobi, Gauss-Seidel) and progressive
+//! refinement (shooting).
+//!
+//! All of them solve the radiosity equation in *radiance* units (see the
+//! crate docs): `L_j = E_j + rho_j sum_i F_ji L_i`, with `E_j` the emitted
+//! radiance plus the reflected direct light of point-like lights. The stop
+//! criterion is the same for all: the *unshot fraction*
+//! `sum_j A_j |dL_j|_1 / sum_j A_j |E_j|_1`, i.e. the power still to be
+//! distributed (the last update for the iterative solvers, the unshot
+//! radiosity for shooting) over the emitted power.
+
+use crate::formfactor::FormFactor;
+use crate::mesh::Element;
+use chiaro_core::error::CoreError;
+use chiaro_core::progress::Progress;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Largest element count for which a full `N x N` matrix is stored (1 GiB of f32).
+pub const MAX_MATRIX_ELEMENTS: usize = 16_384;
+
+/// What a solver returns.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct SolveOutput {
+    /// Radiance of each element.
+    pub l: Vec<Vec3>,
+    /// Iterations (sweeps or shots).
+    pub iterations: u32,
+    /// The final unshot fraction.
+    pub unshot: f32,
+}
+
+fn power(elements: &[Element], v: &[Vec3]) -> f32 {
+    elements
+        .iter()
+        .zip(v)
+        .map(|(e, x)| e.area * x.abs().element_sum())
+        .sum()
+}
+
+/// The form-factor matrix `m[j * n + i] = F_ji`. Column methods are made
+/// exactly reciprocal by averaging the two estimates of each pair:
+/// `A_j F_ji = A_i F_ij = (A_j F~_ji + A_i F~_ij) / 2`; row methods (the
+/// hemicube) are used as they are (their rows sum to one).
+///
+/// # Errors
+/// [`CoreError::Unsupported`] above [`MAX_MATRIX_ELEMENTS`];
+/// [`CoreError::Cancelled`] when the progress asks.
+pub(crate) fn build_matrix(
+    elements: &[Element],
+    ff: &dyn FormFactor,
+    progress: &dyn Progress,
+) -> Result<Vec<f32>, CoreError> {
+    let n = elements.len();
+    if n > MAX_MATRIX_ELEMENTS {
+        return Err(CoreError::Unsupported(format!(
+            "radiosity: {n} elements is too many for a full form-factor matrix \
+             (at most {MAX_MATRIX_ELEMENTS}); use solver \"progressive\" or \"hierarchical\", \
+             or raise radiosity.patch_size"
+        )));
+    }
+    progress.begin("radiosity form factors", n as u64);
+    let mut m = vec![0.0f32; n * n];
+    if ff.row(0, &mut m[..n]) {
+        // Row methods (hemicube): use the rows as they are, so they sum to one.
+        for (j, row) in m.chunks_mut(n).enumerate() {
+            if progress.cancelled() {
+                return Err(CoreError::Cancelled);
+            }
+            ff.row(j, row);
+            progress.advance(1);
+        }
+        return Ok(m);
+    }
+    // k[i * n + j] = A_j F_ji (column i of F scaled to a coupling).
+    let mut k = vec![0.0f32; n * n];
+    let mut col = vec![0.0f32; n];
+    for i in 0..n {
+        if progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
+        ff.column(i, &mut col);
+        for (j, c) in col.iter().enumerate() {
+            k[i * n + j] = elements[j].area * c;
+        }
+        progress.advance(1);
+    }
+    m.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+        let aj = elements[j].area;
+        for (i, r) in row.iter_mut().enumerate() {
+            let kij = 0.5 * (k[i * n + j] + k[j * n + i]);
+            *r = if aj > 0.0 { kij / aj } else { 0.0 };
+        }
+    });
+    Ok(m)
+}
+
+/// Jacobi iteration `L <- E + rho (F L)` from `L = E`.
+pub(crate) fn jacobi(
+    elements: &[Element],
+    e: &[Vec3],
+    m: &[f32],
+    tol: f32,
+    max_iter: u32,
+    progress: &dyn Progress,
+) -> Result<SolveOutput, CoreError> {
+    let n = elements.len();
+    let p0 = power(elements, e);
+    let mut l = e.to_vec();
+    let mut out = SolveOutput {
+        l: Vec::new(),
+        iterations: 0,
+        unshot: 0.0,
+    };
+    if p0 <= 0.0 {
+        out.l = l;
+        return Ok(out);
+    }
+    progress.begin("radiosity jacobi", max_iter as u64);
+    for it in 1..=max_iter {
+        if progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
+        let next: Vec<Vec3> = (0..n)
+            .into_par_iter()
+            .map(|j| {
+                let row = &m[j * n..(j + 1) * n];
+                let g: Vec3 = row.iter().zip(&l).map(|(f, x)| *f * *x).sum();
+                e[j] + elements[j].rho * g
+            })
+            .collect();
+        let diff: Vec<Vec3> = next.iter().zip(&l).map(|(a, b)| *a - *b).collect();
+        out.unshot = power(elements, &diff) / p0;
+        l = next;
+        out.iterations = it;
+        progress.advance(1);
+        progress.message(&format!(
+            "jacobi: iteration {it}, residual {:.3e}",
+            out.unshot
+        ));
+        if out.unshot < tol {
+            break;
+        }
+    }
+    out.l = l;
+    Ok(out)
+}
+
+/// Gauss-Seidel iteration: like [`jacobi`] but each `L_j` is updated in
+/// place, so later rows already use the new values (about twice as fast).
+pub(crate) fn gauss_seidel(
+    elements: &[Element],
+    e: &[Vec3],
+    m: &[f32],
+    tol: f32,
+    max_iter: u32,
+    progress: &dyn Progress,
+) -> Result<SolveOutput, CoreError> {
+    let n = elements.len();
+    let p0 = power(elements, e);
+    let mut l = e.to_vec();
+    let mut out = SolveOutput {
+        l: Vec::new(),
+        iterations: 0,
+        unshot: 0.0,
+    };
+    if p0 <= 0.0 {
+        out.l = l;
+        return Ok(out);
+    }
+    progress.begin("radiosity gauss-seidel", max_iter as u64);
+    for it in 1..=max_iter {
+        if progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
+        let mut change = 0.0f32;
+        for j in 0..n {
+            let row = &m[j * n..(j + 1) * n];
+            let g: Vec3 = row.iter().zip(&l).map(|(f, x)| *f * *x).sum();
+            let v = e[j] + elements[j].rho * g;
+            change += elements[j].area * (v - l[j]).abs().element_sum();
+            l[j] = v;
+        }
+        out.unshot = change / p0;
+        out.iterations = it;
+        progress.advance(1);
+        progress.message(&format!(
+            "gauss-seidel: iteration {it}, residual {:.3e}",
+            out.unshot
+        ));
+        if out.unshot < tol {
+            break;
+        }
+    }
+    out.l = l;
+    Ok(out)
+}
+
+/// Progressive refinement (Cohen, Chen, Wallace and Greenberg 1988): shoot
+/// the unshot radiosity of the element with the most unshot power, until
+/// the unshot fraction falls below `tol`. Form factors are computed one
+/// column at a time (no matrix), so memory is O(N). The result includes
+/// the paper's ambient correction `rho_j * R * sum_i A_i dL_i / sum_i A_i`,
+/// `R = 1 / (1 - rho_avg)`, which estimates the light not yet shot.
+pub(crate) fn progressive(
+    elements: &[Element],
+    e: &[Vec3],
+    ff: &dyn FormFactor,
+    tol: f32,
+    max_iter: u32,
+    progress: &dyn Progress,
+) -> Result<SolveOutput, CoreError> {
+    let n = elements.len();
+    let p0 = power(elements, e);
+    let mut l = e.to_vec();
+    let mut unshot = e.to_vec();
+    let mut out = SolveOutput {
+        l: Vec::new(),
+        iterations: 0,
+        unshot: 0.0,
+    };
+    if p0 <= 0.0 {
+        out.l = l;
+        return Ok(out);
+    }
+    let mut col = vec![0.0f32; n];
+    progress.begin("radiosity progressive", max_iter as u64);
+    out.unshot = 1.0;
+    for it in 1..=max_iter {
+        if progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
+        // The shooter: most unshot power.
+        let (mut best, mut best_p, mut total) = (0usize, -1.0f32, 0.0f32);
+        for (i, (el, u)) in elements.iter().zip(&unshot).enumerate() {
+            let p = el.area * u.element_sum();
+            total += p;
+            if p > best_p {
+                (best, best_p) = (i, p);
+            }
+        }
+        out.unshot = total / p0;
+        if out.unshot < tol {
+            break;
+        }
+        ff.column(best, &mut col);
+        let du = unshot[best];
+        unshot[best] = Vec3::ZERO;
+        l.par_iter_mut()
+            .zip(unshot.par_iter_mut())
+            .zip(elements.par_iter())
+            .zip(col.par_iter())
+            .for_each(|(((lj, uj), el), f)| {
+                let d = el.rho * (*f * du);
+                *lj += d;
+                *uj += d;
+            });
+        out.iterations = it;
+        progress.advance(1);
+        if it % 64 == 0 {
+            progress.message(&format!(
+                "progressive: shot {it}, unshot energy {:.3e}",
+                out.unshot
+            ));
+        }
+    }
+    // Ambient correction (Cohen et al. 1988, section 4).
+    let area: f32 = elements.iter().map(|e| e.area).sum();
+    if area > 0.0 {
+        let rho_avg: Vec3 = elements.iter().map(|e| e.rho * e.area).sum::<Vec3>() / area;
+        let unshot_avg: Vec3 = elements
+            .iter()
+            .zip(&unshot)
+            .map(|(e, u)| *u * e.area)
+            .sum::<Vec3>()
+            / area;
+        let r = Vec3::ONE / (Vec3::ONE - rho_avg).max(Vec3::splat(1e-3));
+        let ambient = r * unshot_avg;
+        for (lj, el) in l.iter_mut().zip(elements) {
+            *lj += el.rho * ambient;
+        }
+    }
+    progress.message(&format!(
+        "progressive: {} shots, unshot energy {:.3e}",
+        out.iterations, out.unshot
+    ));
+    out.l = l;
+    Ok(out)
+}
