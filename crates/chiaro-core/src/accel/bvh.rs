@@ -130,13 +130,20 @@ impl PrimRef {
     }
 }
 
+/// Two sibling nodes in one 64-byte cache line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C, align(64))]
+struct NodePair([BvhNode; 2]);
+
 /// A binary BVH over primitive boxes. It knows nothing about the
 /// primitives themselves: queries call back with *slots*, positions in
 /// [`Bvh::prim_order`], which maps each slot to the index of the box given
 /// to [`Bvh::build`].
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
-    nodes: Vec<BvhNode>,
+    /// Node `i` is `pairs[i / 2].0[i % 2]`; the root is node 0 (node 1 is
+    /// unused padding), so every pair of siblings shares a cache line.
+    pairs: Vec<NodePair>,
     prim_order: Vec<u32>,
 }
 
@@ -151,15 +158,14 @@ const EMPTY_BIN: Bin = Bin {
     count: 0,
 };
 
-type Bins = [[Bin; MAX_BINS]; 3];
-
 /// How to cut a node's references.
 enum Split {
     Leaf,
-    /// Partition along `axis`: bins `0..=bin` go left.
+    /// Partition along `axis` into `bins` bins: bins `0..=bin` go left.
     Binned {
         axis: usize,
         bin: usize,
+        bins: usize,
     },
     /// Split at the object median along `axis` (degenerate centroids or a
     /// deep node).
@@ -203,13 +209,35 @@ impl Bvh {
             return Self::default();
         }
         let nodes = build_subtree(&mut refs, 0, 0, &opts);
+        let pairs = nodes
+            .chunks(2)
+            .map(|c| NodePair([c[0], c.get(1).copied().unwrap_or(BvhNode::EMPTY)]))
+            .collect();
         let prim_order = refs.iter().map(|r| r.index).collect();
-        Self { nodes, prim_order }
+        Self { pairs, prim_order }
     }
 
-    /// The nodes, root first (empty for an empty BVH).
-    pub fn nodes(&self) -> &[BvhNode] {
-        &self.nodes
+    /// Number of node slots (node 1 is padding; 0 for an empty BVH).
+    pub fn node_count(&self) -> usize {
+        self.pairs.len() * 2
+    }
+
+    /// Node `i` (the root is node 0; the children of an interior node `n`
+    /// are `n.offset` and `n.offset + 1`).
+    ///
+    /// # Panics
+    /// If `i >= self.node_count()`.
+    #[inline(always)]
+    pub fn node(&self, i: usize) -> &BvhNode {
+        &self.pairs[i >> 1].0[i & 1]
+    }
+
+    /// Every node reachable from the root, in storage order.
+    pub fn nodes(&self) -> impl Iterator<Item = &BvhNode> + '_ {
+        self.pairs
+            .iter()
+            .enumerate()
+            .flat_map(|(k, p)| p.0.iter().take(if k == 0 { 1 } else { 2 }))
     }
 
     /// For each slot, the index of its primitive in the `bounds` given to
@@ -220,23 +248,23 @@ impl Bvh {
 
     /// Bounds of everything (empty for an empty BVH).
     pub fn bounds(&self) -> Aabb {
-        self.nodes.first().map_or(Aabb::EMPTY, BvhNode::bounds)
+        self.pairs.first().map_or(Aabb::EMPTY, |p| p.0[0].bounds())
     }
 
     /// Depth of the tree (a single leaf has depth 1; 0 when empty).
     pub fn depth(&self) -> usize {
-        fn rec(nodes: &[BvhNode], i: usize) -> usize {
-            let n = &nodes[i];
+        fn rec(b: &Bvh, i: usize) -> usize {
+            let n = b.node(i);
             if n.is_leaf() {
                 1
             } else {
-                1 + rec(nodes, n.offset as usize).max(rec(nodes, n.offset as usize + 1))
+                1 + rec(b, n.offset as usize).max(rec(b, n.offset as usize + 1))
             }
         }
-        if self.nodes.is_empty() {
+        if self.pairs.is_empty() {
             0
         } else {
-            rec(&self.nodes, 0)
+            rec(self, 0)
         }
     }
 
@@ -252,7 +280,7 @@ impl Bvh {
         mut test: impl FnMut(usize, f32) -> Option<f32>,
     ) -> f32 {
         let mut t_max = ray.t_max;
-        if self.nodes.is_empty() {
+        if self.pairs.is_empty() {
             return t_max;
         }
         let org = Vec3A::from(ray.origin);
@@ -260,13 +288,12 @@ impl Bvh {
         let t_min = ray.t_min;
         let mut stack = [0u32; STACK];
         let mut sp = 0usize;
-        let nodes = &self.nodes[..];
-        if slab(&nodes[0], org, inv, t_min, t_max).is_none() {
+        if slab(self.node(0), org, inv, t_min, t_max).is_none() {
             return t_max;
         }
         let mut node = 0usize;
         loop {
-            let n = &nodes[node];
+            let n = self.node(node);
             if n.count > 0 {
                 let first = n.offset as usize;
                 for slot in first..first + n.count as usize {
@@ -276,8 +303,8 @@ impl Bvh {
                 }
             } else {
                 let l = n.offset as usize;
-                let hl = slab(&nodes[l], org, inv, t_min, t_max);
-                let hr = slab(&nodes[l + 1], org, inv, t_min, t_max);
+                let hl = slab(self.node(l), org, inv, t_min, t_max);
+                let hr = slab(self.node(l + 1), org, inv, t_min, t_max);
                 match (hl, hr) {
                     (Some(a), Some(b)) => {
                         let (near, far) = if a <= b { (l, l + 1) } else { (l + 1, l) };
@@ -306,7 +333,7 @@ impl Bvh {
                 }
                 sp -= 1;
                 let i = stack[sp] as usize;
-                if slab(&nodes[i], org, inv, t_min, t_max).is_some() {
+                if slab(self.node(i), org, inv, t_min, t_max).is_some() {
                     node = i;
                     break;
                 }
@@ -319,7 +346,7 @@ impl Bvh {
     /// particular order, until it returns true. Returns true if it did.
     #[inline]
     pub fn traverse_any(&self, ray: &Ray, mut test: impl FnMut(usize) -> bool) -> bool {
-        if self.nodes.is_empty() {
+        if self.pairs.is_empty() {
             return false;
         }
         let org = Vec3A::from(ray.origin);
@@ -327,13 +354,12 @@ impl Bvh {
         let (t_min, t_max) = (ray.t_min, ray.t_max);
         let mut stack = [0u32; STACK];
         let mut sp = 0usize;
-        let nodes = &self.nodes[..];
-        if slab(&nodes[0], org, inv, t_min, t_max).is_none() {
+        if slab(self.node(0), org, inv, t_min, t_max).is_none() {
             return false;
         }
         let mut node = 0usize;
         loop {
-            let n = &nodes[node];
+            let n = self.node(node);
             if n.count > 0 {
                 let first = n.offset as usize;
                 for slot in first..first + n.count as usize {
@@ -343,8 +369,8 @@ impl Bvh {
                 }
             } else {
                 let l = n.offset as usize;
-                let hl = slab(&nodes[l], org, inv, t_min, t_max).is_some();
-                let hr = slab(&nodes[l + 1], org, inv, t_min, t_max).is_some();
+                let hl = slab(self.node(l), org, inv, t_min, t_max).is_some();
+                let hr = slab(self.node(l + 1), org, inv, t_min, t_max).is_some();
                 if hl && hr {
                     if sp < STACK {
                         stack[sp] = (l + 1) as u32;
@@ -421,38 +447,48 @@ fn bin_of(c: f32, lo: f32, scale: f32, bins: usize) -> usize {
     b.clamp(0, bins as i64 - 1) as usize
 }
 
-fn bin_refs(refs: &[PrimRef], cb: &Aabb, scale: Vec3, bins: usize, parallel: bool) -> Box<Bins> {
-    let one = |refs: &[PrimRef]| {
-        let mut out = Box::new([[EMPTY_BIN; MAX_BINS]; 3]);
+/// Bins the references' centroids and boxes into `out` (`3 * bins`
+/// entries: axis-major).
+fn bin_refs(
+    refs: &[PrimRef],
+    cb: &Aabb,
+    scale: Vec3,
+    bins: usize,
+    parallel: bool,
+    out: &mut [Bin],
+) {
+    let one = |refs: &[PrimRef], out: &mut [Bin]| {
         for r in refs {
             let c = r.centroid();
             let rb = Aabb {
                 min: r.min,
                 max: r.max,
             };
-            for (axis, row) in out.iter_mut().enumerate() {
-                let b = bin_of(c[axis], cb.min[axis], scale[axis], bins);
-                row[b].bounds = row[b].bounds.union(rb);
-                row[b].count += 1;
+            for axis in 0..3 {
+                let b = &mut out[axis * bins + bin_of(c[axis], cb.min[axis], scale[axis], bins)];
+                b.bounds = b.bounds.union(rb);
+                b.count += 1;
             }
         }
-        out
     };
+    out.fill(EMPTY_BIN);
     if parallel {
-        refs.par_chunks(16 * 1024).map(one).reduce(
-            || Box::new([[EMPTY_BIN; MAX_BINS]; 3]),
-            |mut a, b| {
-                for axis in 0..3 {
-                    for i in 0..bins {
-                        a[axis][i].bounds = a[axis][i].bounds.union(b[axis][i].bounds);
-                        a[axis][i].count += b[axis][i].count;
-                    }
-                }
-                a
-            },
-        )
+        let parts: Vec<Vec<Bin>> = refs
+            .par_chunks(16 * 1024)
+            .map(|chunk| {
+                let mut v = vec![EMPTY_BIN; 3 * bins];
+                one(chunk, &mut v);
+                v
+            })
+            .collect();
+        for part in parts {
+            for (o, b) in out.iter_mut().zip(part) {
+                o.bounds = o.bounds.union(b.bounds);
+                o.count += b.count;
+            }
+        }
     } else {
-        one(refs)
+        one(refs, out);
     }
 }
 
@@ -464,6 +500,7 @@ fn choose_split(
     depth: u32,
     opts: &BvhOptions,
     parallel: bool,
+    scratch: &mut Vec<Bin>,
 ) -> Split {
     let n = refs.len();
     if n <= 1 {
@@ -485,18 +522,21 @@ fn choose_split(
             axis: cb.longest_axis(),
         };
     }
-    let bins = opts.bins;
+    // Small nodes need fewer bins.
+    let bins = opts.bins.min((n / 2).max(4));
+    scratch.resize(3 * bins, EMPTY_BIN);
     let scale = Vec3::select(
         ext.cmpgt(Vec3::ZERO),
         Vec3::splat(bins as f32 * (1.0 - 1e-6)) / ext,
         Vec3::ZERO,
     );
-    let binned = bin_refs(refs, cb, scale, bins, parallel);
+    bin_refs(refs, cb, scale, bins, parallel, &mut scratch[..3 * bins]);
+    let binned = scratch[..3 * bins].chunks(bins);
     // Sweep each axis: SAH cost of splitting after bin i (Wald 2007, eq. 1).
     let mut best = (f32::INFINITY, 0usize, 0usize);
     let mut right_area = [0.0f32; MAX_BINS];
     let mut right_count = [0u32; MAX_BINS];
-    for (axis, row) in binned.iter().enumerate() {
+    for (axis, row) in binned.enumerate() {
         if ext[axis] <= 0.0 {
             continue;
         }
@@ -533,11 +573,12 @@ fn choose_split(
     Split::Binned {
         axis: best.1,
         bin: best.2,
+        bins,
     }
 }
 
 /// Applies a split; returns the size of the left part (always in `1..n`).
-fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb, opts: &BvhOptions) -> usize {
+fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb) -> usize {
     let n = refs.len();
     match *split {
         Split::Leaf => n,
@@ -548,8 +589,7 @@ fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb, opts: &BvhOptions) 
             });
             mid
         }
-        Split::Binned { axis, bin } => {
-            let bins = opts.bins;
+        Split::Binned { axis, bin, bins } => {
             let ext = cb.extent()[axis];
             let scale = bins as f32 * (1.0 - 1e-6) / ext;
             let lo = cb.min[axis];
@@ -582,30 +622,37 @@ fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb, opts: &BvhOptions) 
 }
 
 /// Builds the subtree over `refs` (whose first slot is `base`) and returns
-/// its nodes, root first, child indices relative to the returned vector.
+/// its nodes laid out as `[root, padding, sibling pairs...]` (an even
+/// number of nodes, every pair at an even index), child indices relative to
+/// the returned vector.
 fn build_subtree(refs: &mut [PrimRef], base: u32, depth: u32, opts: &BvhOptions) -> Vec<BvhNode> {
     let n = refs.len();
+    let mut scratch = Vec::new();
     if n < opts.parallel_threshold {
-        let mut out = Vec::with_capacity(2 * n.div_ceil(2) + 1);
+        let mut out = Vec::with_capacity(2 * n + 2);
         out.push(BvhNode::EMPTY);
-        build_serial(refs, base, 0, depth, &mut out, opts);
+        out.push(BvhNode::EMPTY);
+        build_serial(refs, base, 0, depth, &mut out, opts, &mut scratch);
         return out;
     }
     let (bounds, cb) = ref_bounds(refs, true);
-    let split = choose_split(refs, &bounds, &cb, depth, opts, true);
+    let split = choose_split(refs, &bounds, &cb, depth, opts, true, &mut scratch);
     if let Split::Leaf = split {
-        return vec![BvhNode::new(&bounds, base, n as u32)];
+        return vec![BvhNode::new(&bounds, base, n as u32), BvhNode::EMPTY];
     }
-    let mid = partition(refs, &split, &cb, opts);
+    let mid = partition(refs, &split, &cb);
     let (left, right) = refs.split_at_mut(mid);
     let (ln, rn) = rayon::join(
         || build_subtree(left, base, depth + 1, opts),
         || build_subtree(right, base + mid as u32, depth + 1, opts),
     );
-    // Lay out [root, L0, R0, L1.., R1..] and renumber the children.
+    // Lay out [root, pad, L0, R0, L2.., R2..] and renumber the children:
+    // left nodes move by 2, right ones by |L|, both even, so pairs stay at
+    // even indices.
     let nl = ln.len();
-    let mut out = Vec::with_capacity(1 + nl + rn.len());
-    out.push(BvhNode::new(&bounds, 1, 0));
+    let mut out = Vec::with_capacity(nl + rn.len());
+    out.push(BvhNode::new(&bounds, 2, 0));
+    out.push(BvhNode::EMPTY);
     let remap = |mut node: BvhNode, shift: usize| {
         if !node.is_leaf() {
             node.offset += shift as u32;
@@ -613,9 +660,9 @@ fn build_subtree(refs: &mut [PrimRef], base: u32, depth: u32, opts: &BvhOptions)
         node
     };
     out.push(remap(ln[0], 2));
-    out.push(remap(rn[0], nl + 1));
-    out.extend(ln[1..].iter().map(|&x| remap(x, 2)));
-    out.extend(rn[1..].iter().map(|&x| remap(x, nl + 1)));
+    out.push(remap(rn[0], nl));
+    out.extend(ln[2..].iter().map(|&x| remap(x, 2)));
+    out.extend(rn[2..].iter().map(|&x| remap(x, nl)));
     out
 }
 
@@ -626,22 +673,31 @@ fn build_serial(
     depth: u32,
     out: &mut Vec<BvhNode>,
     opts: &BvhOptions,
+    scratch: &mut Vec<Bin>,
 ) {
     let n = refs.len();
     let (bounds, cb) = ref_bounds(refs, false);
-    let split = choose_split(refs, &bounds, &cb, depth, opts, false);
+    let split = choose_split(refs, &bounds, &cb, depth, opts, false, scratch);
     if let Split::Leaf = split {
         out[index] = BvhNode::new(&bounds, base, n as u32);
         return;
     }
-    let mid = partition(refs, &split, &cb, opts);
+    let mid = partition(refs, &split, &cb);
     let left = out.len();
     out.push(BvhNode::EMPTY);
     out.push(BvhNode::EMPTY);
     out[index] = BvhNode::new(&bounds, left as u32, 0);
     let (l, r) = refs.split_at_mut(mid);
-    build_serial(l, base, left, depth + 1, out, opts);
-    build_serial(r, base + mid as u32, left + 1, depth + 1, out, opts);
+    build_serial(l, base, left, depth + 1, out, opts, scratch);
+    build_serial(
+        r,
+        base + mid as u32,
+        left + 1,
+        depth + 1,
+        out,
+        opts,
+        scratch,
+    );
 }
 
 /// A primitive stored in BVH slot order.
@@ -1001,7 +1057,7 @@ mod tests {
             .build()
             .expect("pool");
         let b = serial.install(|| Bvh::build_with(&boxes, &opts));
-        assert_eq!(a.nodes, b.nodes);
+        assert!(a.nodes().eq(b.nodes()));
         assert_eq!(a.prim_order, b.prim_order);
         // Every prim appears once; every leaf box contains its prims; every
         // parent box contains its children; leaves are small.
@@ -1021,7 +1077,7 @@ mod tests {
                 }
             } else {
                 for c in [n.offset, n.offset + 1] {
-                    let cb = a.nodes()[c as usize].bounds();
+                    let cb = a.node(c as usize).bounds();
                     assert_eq!(nb.union(cb), nb);
                 }
             }
@@ -1032,7 +1088,7 @@ mod tests {
 
     #[test]
     fn degenerate_inputs() {
-        assert!(Bvh::build(&[]).nodes().is_empty());
+        assert_eq!(Bvh::build(&[]).nodes().count(), 0);
         let r = Ray::new(Vec3::ZERO, Vec3::X);
         assert!(!Bvh::build(&[]).traverse_any(&r, |_| true));
         // Many identical boxes (coincident centroids) still build and are all found.
