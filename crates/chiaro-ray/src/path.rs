@@ -23,18 +23,20 @@
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::error::{CoreError, Result};
-use chiaro_core::film::{render_tiles, Film, TilePixels};
-use chiaro_core::geometry::{offset_ray_origin, Frame, Ray};
+use chiaro_core::film::{Film, TilePixels, render_tiles_in};
+use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{
-    cosine_hemisphere_pdf, phong_lobe_pdf, pixel_rng, power_heuristic, sample_cosine_hemisphere, sample_phong_lobe,
-    uniform, uniform2, Rng,
+    Rng, cosine_hemisphere_pdf, phong_lobe_pdf, pixel_rng, power_heuristic,
+    sample_cosine_hemisphere, sample_phong_lobe, uniform, uniform2,
 };
 use chiaro_core::scene::{AreaShape, Distribution, Light, ReflectanceModel, RenderSettings, Scene};
 use chiaro_core::shading::brdf::eval_brdf_cos;
 use chiaro_core::shading::microfacet;
-use chiaro_core::shading::{fresnel_dielectric, reflect, refract, sample_light, sanitize, SurfaceMaterial};
+use chiaro_core::shading::{
+    SurfaceMaterial, fresnel_dielectric, reflect, refract, sample_light, sanitize,
+};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -60,10 +62,19 @@ pub fn render_with(
     make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
 ) -> Result<(Film, PathStats)> {
     if settings.path.max_depth == 0 {
-        return Err(CoreError::BadSetting { key: "path.max_depth".into(), message: "must be at least 1".into() });
+        return Err(CoreError::BadSetting {
+            key: "path.max_depth".into(),
+            message: "must be at least 1".into(),
+        });
     }
     progress.begin("prepare", 1);
-    let prepared = PreparedScene::new(scene, PrepareOptions { analytic_spheres: true, ..PrepareOptions::default() });
+    let prepared = PreparedScene::new(
+        scene,
+        PrepareOptions {
+            analytic_spheres: true,
+            ..PrepareOptions::default()
+        },
+    );
     let accel = make_accel(&prepared);
     let tracer = PathTracer::new(&prepared, accel.as_ref(), settings);
     progress.advance(1);
@@ -71,7 +82,7 @@ pub fn render_with(
     let (w, h) = (settings.width, settings.height);
     let spp = settings.samples.max(1);
     let cam = &scene.camera;
-    let film = render_tiles(w, h, TILE, "path", progress, |rect| {
+    let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
         let mut tile = TilePixels::new(rect);
         let mut count = 0u64;
         for ty in 0..rect.height {
@@ -98,7 +109,12 @@ pub fn render_with(
         rays.fetch_add(count, Ordering::Relaxed);
         tile
     })?;
-    Ok((film, PathStats { rays: rays.into_inner() }))
+    Ok((
+        film,
+        PathStats {
+            rays: rays.into_inner(),
+        },
+    ))
 }
 
 /// The path tracer over one prepared scene.
@@ -131,8 +147,16 @@ fn luminance(c: Vec3) -> f32 {
 }
 
 impl<'a, 's> PathTracer<'a, 's> {
-    fn new(prepared: &'a PreparedScene<'s>, accel: &'a dyn Accelerator, settings: &RenderSettings) -> Self {
-        let lights: Vec<&Light> = prepared.lights.iter().filter(|l| !matches!(l, Light::Ambient { .. })).collect();
+    fn new(
+        prepared: &'a PreparedScene<'s>,
+        accel: &'a dyn Accelerator,
+        settings: &RenderSettings,
+    ) -> Self {
+        let lights: Vec<&Light> = prepared
+            .lights
+            .iter()
+            .filter(|l| !matches!(l, Light::Ambient { .. }))
+            .collect();
         // Select lights in proportion to a rough power estimate.
         let scene_radius = 0.5 * prepared.bounds.diagonal().max(1e-3);
         let power: Vec<f32> = lights
@@ -140,7 +164,9 @@ impl<'a, 's> PathTracer<'a, 's> {
             .map(|l| {
                 let p = luminance(l.power_rgb()).max(0.0);
                 match l {
-                    Light::Area { shape, two_sided, .. } => p * shape.area() * PI * if *two_sided { 2.0 } else { 1.0 },
+                    Light::Area {
+                        shape, two_sided, ..
+                    } => p * shape.area() * PI * if *two_sided { 2.0 } else { 1.0 },
                     Light::Directional { .. } => p * PI * scene_radius * scene_radius,
                     _ => p * 4.0 * PI,
                 }
@@ -151,18 +177,31 @@ impl<'a, 's> PathTracer<'a, 's> {
         let light_cdf = power
             .iter()
             .map(|&p| {
-                acc += if total > 0.0 { p / total } else { 1.0 / lights.len() as f32 };
+                acc += if total > 0.0 {
+                    p / total
+                } else {
+                    1.0 / lights.len() as f32
+                };
                 acc
             })
             .collect();
         // Emissive triangle lights follow the scene's lights in `prepared.lights`,
         // in the order of `prepared.emissive_triangles` (skipping degenerate ones).
         let mut triangle_light = std::collections::HashMap::new();
-        let first_tri_light = lights.iter().position(|l| matches!(l, Light::Area { shape: AreaShape::Triangle { .. }, .. }));
+        let first_tri_light = lights.iter().position(|l| {
+            matches!(
+                l,
+                Light::Area {
+                    shape: AreaShape::Triangle { .. },
+                    ..
+                }
+            )
+        });
         if let Some(first) = first_tri_light {
             let mut k = first;
             for &t in &prepared.emissive_triangles {
-                let [a, b, c] = prepared.triangles[t as usize].map(|i| prepared.positions[i as usize]);
+                let [a, b, c] =
+                    prepared.triangles[t as usize].map(|i| prepared.positions[i as usize]);
                 if chiaro_core::geometry::face_normal(a, b, c).is_some() && k < lights.len() {
                     triangle_light.insert(t, k);
                     k += 1;
@@ -225,7 +264,11 @@ impl<'a, 's> PathTracer<'a, 's> {
             }
             // Shading frame on the side of the viewer.
             let front = surf.ng.dot(wo) >= 0.0;
-            let (n, ng) = if front { (surf.ns, surf.ng) } else { (-surf.ns, -surf.ng) };
+            let (n, ng) = if front {
+                (surf.ns, surf.ng)
+            } else {
+                (-surf.ns, -surf.ng)
+            };
             let last = depth + 1 >= self.max_depth;
             // Next-event estimation.
             l += beta * self.direct(&surf, &m, n, ng, wo, !last, rng, rays);
@@ -233,7 +276,9 @@ impl<'a, 's> PathTracer<'a, 's> {
                 break;
             }
             // Continue the path.
-            let Some(s) = self.sample_scatter(&m, mat.fresnel, n, ng, wo, front, rng) else { break };
+            let Some(s) = self.sample_scatter(&m, mat.fresnel, n, ng, wo, front, rng) else {
+                break;
+            };
             beta *= s.weight;
             if !beta.is_finite() || beta.max_element() <= 0.0 {
                 break;
@@ -260,13 +305,28 @@ impl<'a, 's> PathTracer<'a, 's> {
         if let Some(env) = &scene.environment {
             return environment_radiance(scene, env, ray.dir.normalize());
         }
-        if direct_view { scene.background } else { Vec3::ZERO }
+        if direct_view {
+            scene.background
+        } else {
+            Vec3::ZERO
+        }
     }
 
     /// MIS weight of emission found by BSDF sampling from `from` with pdf `bsdf_pdf`.
-    fn emitter_mis_weight(&self, prim: u32, from: Vec3, surf: &SurfaceHit, wo: Vec3, bsdf_pdf: f32) -> f32 {
-        let Some(&li) = self.triangle_light.get(&prim) else { return 1.0 };
-        let Light::Area { shape, .. } = self.lights[li] else { return 1.0 };
+    fn emitter_mis_weight(
+        &self,
+        prim: u32,
+        from: Vec3,
+        surf: &SurfaceHit,
+        wo: Vec3,
+        bsdf_pdf: f32,
+    ) -> f32 {
+        let Some(&li) = self.triangle_light.get(&prim) else {
+            return 1.0;
+        };
+        let Light::Area { shape, .. } = self.lights[li] else {
+            return 1.0;
+        };
         let d2 = (surf.p - from).length_squared();
         let cos_l = surf.ng.dot(wo).abs();
         if cos_l <= 0.0 {
@@ -279,7 +339,9 @@ impl<'a, 's> PathTracer<'a, 's> {
     /// Solid-angle pdf of sampling direction `wi` towards sample point `q`
     /// (normal `nl`) on area light `light` from `p`; `None` for delta lights.
     fn light_solid_angle_pdf(light: &Light, p: Vec3, q: Vec3) -> Option<f32> {
-        let Light::Area { shape, .. } = light else { return None };
+        let Light::Area { shape, .. } = light else {
+            return None;
+        };
         match *shape {
             AreaShape::Sphere { center, radius } => {
                 let dc2 = (center - p).length_squared();
@@ -288,7 +350,9 @@ impl<'a, 's> PathTracer<'a, 's> {
             }
             _ => {
                 let nl = match *shape {
-                    AreaShape::Quad { edge_u, edge_v, .. } => edge_u.cross(edge_v).normalize_or_zero(),
+                    AreaShape::Quad { edge_u, edge_v, .. } => {
+                        edge_u.cross(edge_v).normalize_or_zero()
+                    }
                     AreaShape::Disk { normal, .. } => normal.normalize_or_zero(),
                     AreaShape::Triangle { a, b, c } => (b - a).cross(c - a).normalize_or_zero(),
                     AreaShape::Sphere { .. } => Vec3::ZERO,
@@ -305,16 +369,30 @@ impl<'a, 's> PathTracer<'a, 's> {
     /// its visibility by a shadow ray; MIS-weighted against BSDF sampling
     /// when the path continues (`mis`).
     #[allow(clippy::too_many_arguments)]
-    fn direct(&self, surf: &SurfaceHit, m: &SurfaceMaterial, n: Vec3, ng: Vec3, wo: Vec3, mis: bool, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+    fn direct(
+        &self,
+        surf: &SurfaceHit,
+        m: &SurfaceMaterial,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        mis: bool,
+        rng: &mut Rng,
+        rays: &mut u64,
+    ) -> Vec3 {
         let u_pick = uniform(rng);
         let u = uniform2(rng);
-        let Some(li) = self.pick_light(u_pick) else { return Vec3::ZERO };
+        let Some(li) = self.pick_light(u_pick) else {
+            return Vec3::ZERO;
+        };
         let light = self.lights[li];
         let pick = self.light_pick_pdf(li);
         if pick <= 0.0 {
             return Vec3::ZERO;
         }
-        let Some(s) = sample_light(light, surf.p, u) else { return Vec3::ZERO };
+        let Some(s) = sample_light(light, surf.p, u) else {
+            return Vec3::ZERO;
+        };
         let f_cos = eval_brdf_cos(m, n, wo, s.wi);
         if f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
             return Vec3::ZERO;
@@ -342,7 +420,11 @@ impl<'a, 's> PathTracer<'a, 's> {
     /// Lobe selection weights: diffuse, glossy, mirror, transmission.
     fn lobe_weights(m: &SurfaceMaterial, fresnel: bool) -> [f32; 4] {
         let t = luminance(m.kt);
-        let r = if fresnel && t > 0.0 { 0.0 } else { luminance(m.kr) };
+        let r = if fresnel && t > 0.0 {
+            0.0
+        } else {
+            luminance(m.kr)
+        };
         [luminance(m.kd), luminance(m.ks), r, t]
     }
 
@@ -367,7 +449,16 @@ impl<'a, 's> PathTracer<'a, 's> {
 
     /// Samples the next direction.
     #[allow(clippy::too_many_arguments)]
-    fn sample_scatter(&self, m: &SurfaceMaterial, fresnel: bool, n: Vec3, ng: Vec3, wo: Vec3, front: bool, rng: &mut Rng) -> Option<ScatterSample> {
+    fn sample_scatter(
+        &self,
+        m: &SurfaceMaterial,
+        fresnel: bool,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        front: bool,
+        rng: &mut Rng,
+    ) -> Option<ScatterSample> {
         let weights = Self::lobe_weights(m, fresnel);
         let total: f32 = weights.iter().sum();
         if total <= 0.0 {
@@ -392,14 +483,24 @@ impl<'a, 's> PathTracer<'a, 's> {
                 return None;
             }
             let f_cos = eval_brdf_cos(m, n, wo, wi);
-            return Some(ScatterSample { wi, weight: f_cos / pdf, pdf, delta: false });
+            return Some(ScatterSample {
+                wi,
+                weight: f_cos / pdf,
+                pdf,
+                delta: false,
+            });
         }
         let p_r = wr / total;
         let p_t = wt / total;
         if pick < wd + ws + wr {
             // Fixed-weight mirror.
             let wi = reflect(wo, n);
-            return Some(ScatterSample { wi, weight: m.kr / p_r, pdf: 0.0, delta: true });
+            return Some(ScatterSample {
+                wi,
+                weight: m.kr / p_r,
+                pdf: 0.0,
+                delta: true,
+            });
         }
         // Transmission: entering when on the front side.
         let (n1, n2) = if front { (1.0, m.ior) } else { (m.ior, 1.0) };
@@ -410,14 +511,34 @@ impl<'a, 's> PathTracer<'a, 's> {
             // internal reflection), else refract tinted by kt.
             let f = fresnel_dielectric(cos_o, n1, n2);
             return match refracted {
-                Some(wi) if uniform(rng) >= f => Some(ScatterSample { wi, weight: m.kt / p_t, pdf: 0.0, delta: true }),
-                _ => Some(ScatterSample { wi: reflect(wo, n), weight: Vec3::ONE / p_t, pdf: 0.0, delta: true }),
+                Some(wi) if uniform(rng) >= f => Some(ScatterSample {
+                    wi,
+                    weight: m.kt / p_t,
+                    pdf: 0.0,
+                    delta: true,
+                }),
+                _ => Some(ScatterSample {
+                    wi: reflect(wo, n),
+                    weight: Vec3::ONE / p_t,
+                    pdf: 0.0,
+                    delta: true,
+                }),
             };
         }
         match refracted {
-            Some(wi) => Some(ScatterSample { wi, weight: m.kt / p_t, pdf: 0.0, delta: true }),
+            Some(wi) => Some(ScatterSample {
+                wi,
+                weight: m.kt / p_t,
+                pdf: 0.0,
+                delta: true,
+            }),
             // Total internal reflection: the reflection takes everything.
-            None => Some(ScatterSample { wi: reflect(wo, n), weight: m.kt / p_t, pdf: 0.0, delta: true }),
+            None => Some(ScatterSample {
+                wi: reflect(wo, n),
+                weight: m.kt / p_t,
+                pdf: 0.0,
+                delta: true,
+            }),
         }
     }
 }
@@ -436,7 +557,8 @@ fn sample_glossy(m: &SurfaceMaterial, n: Vec3, wo: Vec3, u: Vec2) -> Option<Vec3
         }
         ReflectanceModel::TorranceSparrow => {
             let alpha = m.roughness.max(1e-3);
-            let h = Frame::from_normal(n).to_world(sample_microfacet_normal(m.distribution, alpha, u));
+            let h =
+                Frame::from_normal(n).to_world(sample_microfacet_normal(m.distribution, alpha, u));
             Some(reflect(wo, h))
         }
     }
@@ -447,7 +569,9 @@ fn glossy_pdf(m: &SurfaceMaterial, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
     match m.model {
         ReflectanceModel::Phong => phong_lobe_pdf(reflect(wo, n).dot(wi), m.shininess),
         ReflectanceModel::Blinn | ReflectanceModel::TorranceSparrow => {
-            let Some(h) = (wo + wi).try_normalize() else { return 0.0 };
+            let Some(h) = (wo + wi).try_normalize() else {
+                return 0.0;
+            };
             let cos_h = n.dot(h);
             let o_h = wo.dot(h);
             if cos_h <= 0.0 || o_h <= 0.0 {
@@ -479,7 +603,10 @@ fn sample_microfacet_normal(dist: Distribution, alpha: f32, u: Vec2) -> Vec3 {
 /// Radiance of the lat-long environment map in direction `d` (unit): `+y` is
 /// up and `u = 0.5` looks down `-z` (see [`chiaro_core::scene::Environment`]).
 fn environment_radiance(scene: &Scene, env: &chiaro_core::scene::Environment, d: Vec3) -> Vec3 {
-    let Some(chiaro_core::scene::Texture::Image(img)) = scene.textures.get(env.texture.index()) else { return Vec3::ZERO };
+    let Some(chiaro_core::scene::Texture::Image(img)) = scene.textures.get(env.texture.index())
+    else {
+        return Vec3::ZERO;
+    };
     let phi = d.x.atan2(-d.z) - env.rotate_y_degrees.to_radians();
     let u = (0.5 + phi / (2.0 * PI)).rem_euclid(1.0);
     let v = d.y.clamp(-1.0, 1.0).acos() / PI;
@@ -500,13 +627,26 @@ mod tests {
 
     fn furnace(geometry: Option<u32>) -> Scene {
         let mut s = Scene::default();
-        s.add_material(Material { emission: Vec3::splat(1.0), two_sided: true, ..Material::diffuse("furnace", Vec3::splat(0.5)) });
+        s.add_material(Material {
+            emission: Vec3::splat(1.0),
+            two_sided: true,
+            ..Material::diffuse("furnace", Vec3::splat(0.5))
+        });
         let geometry = match geometry {
             None => Geometry::Sphere { radius: 10.0 },
-            Some(slices) => Geometry::Mesh(s.add_mesh(primitives::uv_sphere(10.0, slices, slices / 2))),
+            Some(slices) => {
+                Geometry::Mesh(s.add_mesh(primitives::uv_sphere(10.0, slices, slices / 2)))
+            }
         };
-        s.objects.push(Object { geometry, ..Default::default() });
-        s.camera = Camera { eye: Vec3::new(0.0, 1.0, 0.0), look_at: Vec3::new(0.0, 0.0, 5.0), ..Camera::default() };
+        s.objects.push(Object {
+            geometry,
+            ..Default::default()
+        });
+        s.camera = Camera {
+            eye: Vec3::new(0.0, 1.0, 0.0),
+            look_at: Vec3::new(0.0, 0.0, 5.0),
+            ..Camera::default()
+        };
         s.render.technique = Technique::Path;
         s.render.width = 16;
         s.render.height = 16;
@@ -543,7 +683,10 @@ mod tests {
         let mean = film.mean().x;
         let var = film.color.iter().map(|c| (c.x - mean).powi(2)).sum::<f32>() / (n - 1.0);
         let stderr = (var / n).sqrt();
-        assert!((mean - 2.0).abs() < 4.0 * stderr + 0.01, "mean {mean} stderr {stderr}");
+        assert!(
+            (mean - 2.0).abs() < 4.0 * stderr + 0.01,
+            "mean {mean} stderr {stderr}"
+        );
     }
 
     #[test]
@@ -552,10 +695,27 @@ mod tests {
         let mut s = Scene::default();
         s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
         let plane = s.add_mesh(primitives::plane(2.0, 1));
-        s.objects.push(Object { geometry: Geometry::Mesh(plane), smooth: false, ..Default::default() });
-        s.lights.push(Light::Point { position: Vec3::new(0.0, 2.0, 0.0), color: Vec3::ONE, intensity: 8.0, attenuation: Attenuation::InverseSquare });
-        s.lights.push(Light::Ambient { color: Vec3::ONE, intensity: 1.0 });
-        s.camera = Camera { eye: Vec3::new(0.0, 3.0, -0.001), look_at: Vec3::ZERO, fov_y_degrees: 1.0, ..Camera::default() };
+        s.objects.push(Object {
+            geometry: Geometry::Mesh(plane),
+            smooth: false,
+            ..Default::default()
+        });
+        s.lights.push(Light::Point {
+            position: Vec3::new(0.0, 2.0, 0.0),
+            color: Vec3::ONE,
+            intensity: 8.0,
+            attenuation: Attenuation::InverseSquare,
+        });
+        s.lights.push(Light::Ambient {
+            color: Vec3::ONE,
+            intensity: 1.0,
+        });
+        s.camera = Camera {
+            eye: Vec3::new(0.0, 3.0, -0.001),
+            look_at: Vec3::ZERO,
+            fov_y_degrees: 1.0,
+            ..Camera::default()
+        };
         s.render.width = 4;
         s.render.height = 4;
         s.render.samples = 4;
@@ -574,17 +734,44 @@ mod tests {
         // the image equals the image without it (up to ray offsets).
         let mut s = Scene::default();
         s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
-        let glass = s.add_material(Material { diffuse: Vec3::ZERO, transmit: Vec3::ONE, ior: 1.0, fresnel: true, ..Material::default() });
+        let glass = s.add_material(Material {
+            diffuse: Vec3::ZERO,
+            transmit: Vec3::ONE,
+            ior: 1.0,
+            fresnel: true,
+            ..Material::default()
+        });
         let plane = s.add_mesh(primitives::plane(5.0, 1));
-        s.objects.push(Object { geometry: Geometry::Mesh(plane), smooth: false, ..Default::default() });
-        s.lights.push(Light::Point { position: Vec3::new(0.0, 4.0, 0.0), color: Vec3::ONE, intensity: 10.0, attenuation: Attenuation::InverseSquare });
-        s.camera = Camera { eye: Vec3::new(0.0, 3.0, -3.0), look_at: Vec3::ZERO, ..Camera::default() };
+        s.objects.push(Object {
+            geometry: Geometry::Mesh(plane),
+            smooth: false,
+            ..Default::default()
+        });
+        s.lights.push(Light::Point {
+            position: Vec3::new(0.0, 4.0, 0.0),
+            color: Vec3::ONE,
+            intensity: 10.0,
+            attenuation: Attenuation::InverseSquare,
+        });
+        s.camera = Camera {
+            eye: Vec3::new(0.0, 3.0, -3.0),
+            look_at: Vec3::ZERO,
+            ..Camera::default()
+        };
         s.render.width = 12;
         s.render.height = 12;
         s.render.samples = 2;
         s.render.path.max_depth = 4;
         let (without, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
-        s.objects.push(Object { geometry: Geometry::Sphere { radius: 0.7 }, material: glass, transform: chiaro_core::scene::Transform { translate: Vec3::new(0.0, 0.8, -0.5), ..Default::default() }, ..Default::default() });
+        s.objects.push(Object {
+            geometry: Geometry::Sphere { radius: 0.7 },
+            material: glass,
+            transform: chiaro_core::scene::Transform {
+                translate: Vec3::new(0.0, 0.8, -0.5),
+                ..Default::default()
+            },
+            ..Default::default()
+        });
         // Shadow rays are blocked by glass (no caustics through NEE), so look only at
         // pixels whose camera ray passes through the sphere and lands outside its shadow:
         // compare the means instead of pixels, restricted to the lit far region.

@@ -5,13 +5,13 @@
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::error::{CoreError, Result};
-use chiaro_core::film::{render_tiles, Film, TilePixels};
+use chiaro_core::film::{Film, TilePixels, render_tiles_in};
 use chiaro_core::geometry::Ray;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{pixel_rng, uniform2};
 use chiaro_core::scene::{Attenuation, Light, RenderSettings, Scene};
-use chiaro_core::shading::{sanitize, shade_local, LocalLighting, ShadingPoint};
+use chiaro_core::shading::{LocalLighting, ShadingPoint, sanitize, shade_local};
 use glam::{Vec2, Vec3};
 
 /// Tile side in pixels.
@@ -30,57 +30,102 @@ pub fn render_with(
     make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
 ) -> Result<Film> {
     if settings.width == 0 || settings.height == 0 {
-        return Err(CoreError::BadSetting { key: "width/height".into(), message: "image size must be at least 1x1".into() });
+        return Err(CoreError::BadSetting {
+            key: "width/height".into(),
+            message: "image size must be at least 1x1".into(),
+        });
     }
     progress.begin("prepare", 1);
-    let prepared = PreparedScene::new(scene, PrepareOptions { analytic_spheres: true, ..PrepareOptions::default() });
+    let prepared = PreparedScene::new(
+        scene,
+        PrepareOptions {
+            analytic_spheres: true,
+            ..PrepareOptions::default()
+        },
+    );
     let accel = make_accel(&prepared);
     progress.advance(1);
     let cam = &scene.camera;
     let eye_light = [
-        Light::Point { position: cam.eye, color: Vec3::ONE, intensity: 1.0, attenuation: Attenuation::None },
-        Light::Ambient { color: Vec3::ONE, intensity: 0.2 },
+        Light::Point {
+            position: cam.eye,
+            color: Vec3::ONE,
+            intensity: 1.0,
+            attenuation: Attenuation::None,
+        },
+        Light::Ambient {
+            color: Vec3::ONE,
+            intensity: 0.2,
+        },
     ];
-    let lighting = LocalLighting { lights: &eye_light, area_samples: 1, ambient: true };
+    let lighting = LocalLighting {
+        lights: &eye_light,
+        area_samples: 1,
+        ambient: true,
+    };
     let (w, h) = (settings.width, settings.height);
     let spp = settings.samples.max(1);
-    render_tiles(w, h, TILE, "preview", progress, |rect| {
-        let mut tile = TilePixels::new(rect);
-        for ty in 0..rect.height {
-            for tx in 0..rect.width {
-                let (px, py) = (rect.x + tx, rect.y + ty);
-                let mut sum = Vec3::ZERO;
-                for s in 0..spp {
-                    let offset = if spp == 1 {
-                        Vec2::splat(0.5)
-                    } else {
-                        let mut rng = pixel_rng(settings.seed, px, py, s);
-                        uniform2(&mut rng)
-                    };
-                    let dir = cam.ray_direction(px as f32 + offset.x, py as f32 + offset.y, w, h);
-                    let ray = Ray::new(cam.eye, dir);
-                    let Some(hit) = accel.intersect(&ray) else {
-                        sum += scene.background;
-                        continue;
-                    };
-                    let surf = prepared.surface(&ray, &hit);
-                    let wo = -dir;
-                    // Face the viewer: the eye light lights whatever side we see.
-                    let (n, ng) = if surf.ng.dot(wo) < 0.0 { (-surf.ns, -surf.ng) } else { (surf.ns, surf.ng) };
-                    let sp = ShadingPoint { p: surf.p, n, ng, wo };
-                    let m = prepared.surface_material(&surf);
-                    sum += shade_local(&m, &sp, &lighting, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
-                    if s == 0 {
-                        let i = (ty * rect.width + tx) as usize;
-                        tile.depth[i] = hit.t * dir.length();
-                        tile.normal[i] = n;
+    render_tiles_in(
+        w,
+        h,
+        settings.crop_rect(),
+        TILE,
+        "preview",
+        progress,
+        |rect| {
+            let mut tile = TilePixels::new(rect);
+            for ty in 0..rect.height {
+                for tx in 0..rect.width {
+                    let (px, py) = (rect.x + tx, rect.y + ty);
+                    let mut sum = Vec3::ZERO;
+                    for s in 0..spp {
+                        let offset = if spp == 1 {
+                            Vec2::splat(0.5)
+                        } else {
+                            let mut rng = pixel_rng(settings.seed, px, py, s);
+                            uniform2(&mut rng)
+                        };
+                        let dir =
+                            cam.ray_direction(px as f32 + offset.x, py as f32 + offset.y, w, h);
+                        let ray = Ray::new(cam.eye, dir);
+                        let Some(hit) = accel.intersect(&ray) else {
+                            sum += scene.background;
+                            continue;
+                        };
+                        let surf = prepared.surface(&ray, &hit);
+                        let wo = -dir;
+                        // Face the viewer: the eye light lights whatever side we see.
+                        let (n, ng) = if surf.ng.dot(wo) < 0.0 {
+                            (-surf.ns, -surf.ng)
+                        } else {
+                            (surf.ns, surf.ng)
+                        };
+                        let sp = ShadingPoint {
+                            p: surf.p,
+                            n,
+                            ng,
+                            wo,
+                        };
+                        let m = prepared.surface_material(&surf);
+                        sum += shade_local(
+                            &m,
+                            &sp,
+                            &lighting,
+                            |_, _| Vec2::splat(0.5),
+                            |_, _| Vec3::ONE,
+                        );
+                        if s == 0 {
+                            let i = (ty * rect.width + tx) as usize;
+                            tile.depth[i] = hit.t * dir.length();
+                            tile.normal[i] = n;
+                        }
                     }
+                    tile.color[(ty * rect.width + tx) as usize] = sanitize(sum / spp as f32);
                 }
-                tile.color[(ty * rect.width + tx) as usize] = sanitize(sum / spp as f32);
             }
-        }
-        tile
-    })
+            tile
+        },
+    )
 }
 
 #[cfg(test)]
@@ -93,7 +138,10 @@ mod tests {
     fn sphere_scene() -> Scene {
         let mut s = Scene::default();
         s.add_material(Material::diffuse("white", Vec3::splat(0.8)));
-        s.objects.push(Object { geometry: Geometry::Sphere { radius: 1.0 }, ..Default::default() });
+        s.objects.push(Object {
+            geometry: Geometry::Sphere { radius: 1.0 },
+            ..Default::default()
+        });
         s.render.width = 32;
         s.render.height = 32;
         s
@@ -121,8 +169,13 @@ mod tests {
     fn same_image_for_any_thread_count() {
         let mut s = sphere_scene();
         s.render.samples = 4;
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
-        let a = one.install(|| render_with(&s, &s.render, &NoProgress, &list)).expect("renders");
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .expect("pool");
+        let a = one
+            .install(|| render_with(&s, &s.render, &NoProgress, &list))
+            .expect("renders");
         let b = render_with(&s, &s.render, &NoProgress, &list).expect("renders");
         assert_eq!(a, b);
     }

@@ -167,7 +167,61 @@ pub fn render_tiles<F>(
 where
     F: Fn(TileRect) -> TilePixels + Sync,
 {
-    let rects = tiles(width, height, tile_size);
+    render_tiles_in(
+        width,
+        height,
+        [0, 0, width, height],
+        tile_size,
+        stage,
+        progress,
+        render_tile,
+    )
+}
+
+/// [`render_tiles`] restricted to the pixels of `crop` (`[x0, y0, x1, y1]`,
+/// see `RenderSettings::crop_rect`): tiles are cut to the window, pixels
+/// outside it stay black with infinite depth. Because tiles are rendered
+/// independently, every pixel inside has its full-render value.
+pub fn render_tiles_in<F>(
+    width: u32,
+    height: u32,
+    crop: [u32; 4],
+    tile_size: u32,
+    stage: &str,
+    progress: &dyn Progress,
+    render_tile: F,
+) -> crate::error::Result<Film>
+where
+    F: Fn(TileRect) -> TilePixels + Sync,
+{
+    let [x0, y0, x1, y1] = crop;
+    let rects: Vec<TileRect> = tiles(width, height, tile_size)
+        .into_iter()
+        .filter_map(|t| {
+            let (ax, ay) = (t.x.max(x0), t.y.max(y0));
+            let (bx, by) = ((t.x + t.width).min(x1), (t.y + t.height).min(y1));
+            (ax < bx && ay < by).then(|| TileRect {
+                x: ax,
+                y: ay,
+                width: bx - ax,
+                height: by - ay,
+            })
+        })
+        .collect();
+    render_rects(width, height, rects, stage, progress, render_tile)
+}
+
+fn render_rects<F>(
+    width: u32,
+    height: u32,
+    rects: Vec<TileRect>,
+    stage: &str,
+    progress: &dyn Progress,
+    render_tile: F,
+) -> crate::error::Result<Film>
+where
+    F: Fn(TileRect) -> TilePixels + Sync,
+{
     progress.begin(stage, rects.len() as u64);
     let done: Vec<Option<TilePixels>> = rects
         .par_iter()
@@ -203,6 +257,30 @@ mod tests {
             }
         }
         assert!(count.iter().all(|&c| c == 1));
+    }
+
+    #[test]
+    fn cropped_tiles_match_the_full_render() {
+        let shade = |r: TileRect| {
+            let mut t = TilePixels::new(r);
+            for y in 0..r.height {
+                for x in 0..r.width {
+                    let (px, py) = (r.x + x, r.y + y);
+                    t.color[(y * r.width + x) as usize] = Vec3::new(px as f32, py as f32, 1.0);
+                }
+            }
+            t
+        };
+        let np = crate::progress::NoProgress;
+        let full = render_tiles(30, 20, 8, "t", &np, shade).expect("renders");
+        let crop = render_tiles_in(30, 20, [5, 3, 17, 19], 8, "t", &np, shade).expect("renders");
+        for y in 0..20 {
+            for x in 0..30 {
+                let inside = (5..17).contains(&x) && (3..19).contains(&y);
+                let want = if inside { full.get(x, y) } else { Vec3::ZERO };
+                assert_eq!(crop.get(x, y), want, "{x},{y}");
+            }
+        }
     }
 
     #[test]

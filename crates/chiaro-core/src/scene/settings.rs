@@ -293,6 +293,11 @@ pub struct RenderSettings {
     pub path: PathSettings,
     /// Radiosity options.
     pub radiosity: RadiositySettings,
+    /// Render only the pixels `x0 <= x < x1`, `y0 <= y < y1` (`[x0, y0, x1, y1]`);
+    /// the others stay black with infinite depth. Every pixel inside has
+    /// exactly the value it has in a full render (distributed rendering
+    /// relies on it).
+    pub crop: Option<[u32; 4]>,
 }
 
 impl Default for RenderSettings {
@@ -315,11 +320,24 @@ impl Default for RenderSettings {
             whitted: WhittedSettings::default(),
             path: PathSettings::default(),
             radiosity: RadiositySettings::default(),
+            crop: None,
         }
     }
 }
 
 impl RenderSettings {
+    /// The crop window clamped to the image, or the whole image.
+    pub fn crop_rect(&self) -> [u32; 4] {
+        match self.crop {
+            Some([x0, y0, x1, y1]) => {
+                let x1 = x1.min(self.width);
+                let y1 = y1.min(self.height);
+                [x0.min(x1), y0.min(y1), x1, y1]
+            }
+            None => [0, 0, self.width, self.height],
+        }
+    }
+
     /// Width over height.
     pub fn aspect(&self) -> f32 {
         self.width as f32 / self.height.max(1) as f32
