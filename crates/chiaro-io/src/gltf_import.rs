@@ -23,8 +23,9 @@
 //! - `specular` (F0) `= mix(0.04, baseColor, metallic)` and
 //!   `diffuse = baseColor * (1 - metallic)` (spec appendix B.3.5).
 //! - `baseColorTexture` -> `texture` (sRGB decoded); it multiplies the
-//!   diffuse colour only. The metallic-roughness and occlusion textures are
-//!   ignored (with a warning).
+//!   diffuse colour only. chiaro has no per-texel metallic or roughness: a
+//!   `metallicRoughnessTexture` is averaged (G = roughness, B = metallic)
+//!   into the factors, with a warning. Occlusion textures are ignored.
 //! - `normalTexture` -> `normal_map` (linear); `emissiveFactor *
 //!   KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
 //!   `emission_texture`; `doubleSided` -> `two_sided`; `alphaMode = BLEND`
@@ -701,8 +702,25 @@ impl Builder<'_> {
         };
         let pbr = gm.pbr_metallic_roughness();
         let base = Vec4::from(pbr.base_color_factor());
-        let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
-        let rough = pbr.roughness_factor().clamp(0.0, 1.0);
+        let mut metallic = pbr.metallic_factor().clamp(0.0, 1.0);
+        let mut rough = pbr.roughness_factor().clamp(0.0, 1.0);
+        // chiaro has no per-texel metallic/roughness: a metallic-roughness
+        // texture (roughness in G, metallic in B) is averaged into the factors.
+        if let Some(info) = pbr.metallic_roughness_texture() {
+            match self.decode_image(&info.texture().source(), false) {
+                Ok(img) if !img.texels.is_empty() => {
+                    let n = img.texels.len() as f32;
+                    let (g, b) = img
+                        .texels
+                        .iter()
+                        .fold((0.0f32, 0.0f32), |(g, b), t| (g + t[1], b + t[2]));
+                    rough *= (g / n).clamp(0.0, 1.0);
+                    metallic *= (b / n).clamp(0.0, 1.0);
+                    self.note("metallic-roughness textures are averaged into the factors");
+                }
+                _ => self.note("a metallic-roughness texture could not be read: factors only"),
+            }
+        }
         let base_rgb = base.truncate().max(Vec3::ZERO);
         let d = Material::default();
         let strength = gm.emissive_strength().unwrap_or(1.0).max(0.0);
@@ -730,9 +748,6 @@ impl Builder<'_> {
         }
         if let Some(nt) = gm.normal_texture() {
             mat.normal_map = self.texture_info(nt.texture(), nt.tex_coord(), false);
-        }
-        if pbr.metallic_roughness_texture().is_some() {
-            self.note("metallic-roughness textures are ignored (factors only)");
         }
         if gm.occlusion_texture().is_some() {
             self.note("occlusion textures are ignored");
