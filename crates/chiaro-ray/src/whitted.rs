@@ -202,7 +202,7 @@ impl std::fmt::Debug for Tracer<'_> {
         f.debug_struct("Tracer")
             .field("triangles", &self.prepared.triangles.len())
             .field("spheres", &self.prepared.spheres.len())
-            .field("bvh_nodes", &self.bvh.bvh().nodes().len())
+            .field("bvh_nodes", &self.bvh.bvh().node_count())
             .field("indirect", &self.indirect.is_some())
             .finish_non_exhaustive()
     }
@@ -894,8 +894,10 @@ mod tests {
 
     #[test]
     fn beer_absorption_through_slab() {
-        let mut s = Scene::default();
-        s.background = Vec3::new(1.0, 0.5, 0.25);
+        let mut s = Scene {
+            background: Vec3::new(1.0, 0.5, 0.25),
+            ..Scene::default()
+        };
         let g = s.add_material(Material {
             absorption: Vec3::new(0.5, 1.0, 0.0),
             ..glass(1.5, false)
@@ -1018,8 +1020,10 @@ mod tests {
 
     #[test]
     fn mirror_reflects_kr_of_what_it_sees_up_to_the_depth_limit() {
-        let mut s = Scene::default();
-        s.background = Vec3::new(0.2, 0.4, 0.8);
+        let mut s = Scene {
+            background: Vec3::new(0.2, 0.4, 0.8),
+            ..Scene::default()
+        };
         let mirror = s.add_material(Material {
             diffuse: Vec3::ZERO,
             reflect: Vec3::splat(0.75),

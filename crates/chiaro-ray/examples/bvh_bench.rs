@@ -1,0 +1,262 @@
+//! BVH benchmark on the workload of `shared/peers/embree_rays.py`: a 14 x 14
+//! grid of 5120-triangle icospheres (1,003,520 triangles), 1000 x 1000
+//! coherent pinhole camera rays and 1M incoherent random rays, closest hit,
+//! one ray at a time, on a rayon pool of `--threads` threads.
+//!
+//! ```text
+//! cargo run --release -p chiaro-ray --example bvh_bench -- [--threads 2] [--reps 5] [--dump DIR]
+//!     [--max-leaf 4] [--traversal-cost 1] [--bins 16] [--stats]
+//! ```
+//! `--dump DIR` writes the mesh and both ray sets as `DIR/wl_{V,F,O,D,Or,Dr}.bin`
+//! (raw little-endian f32 / u32 triples), the files `embree3_native` reads,
+//! so that Embree traces exactly the same rays.
+
+use chiaro_core::accel::Accelerator;
+use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
+use chiaro_core::geometry::Ray;
+use chiaro_core::prepared::{PrepareOptions, PreparedScene};
+use chiaro_core::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
+use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::io::Write;
+use std::time::Instant;
+
+/// Icosphere: an icosahedron subdivided `levels` times (each triangle into
+/// four, new vertices pushed onto the sphere), as trimesh builds it.
+fn icosphere(levels: u32, radius: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut v: Vec<Vec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut f: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut next = Vec::with_capacity(f.len() * 4);
+        for tri in &f {
+            let mut m = [0u32; 3];
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                let key = (a.min(b), a.max(b));
+                m[k] = *mid.entry(key).or_insert_with(|| {
+                    v.push(((v[a as usize] + v[b as usize]) * 0.5).normalize());
+                    v.len() as u32 - 1
+                });
+            }
+            next.push([tri[0], m[0], m[2]]);
+            next.push([tri[1], m[1], m[0]]);
+            next.push([tri[2], m[2], m[1]]);
+            next.push([m[0], m[1], m[2]]);
+        }
+        f = next;
+    }
+    (v.into_iter().map(|p| p * radius).collect(), f)
+}
+
+fn write_f32(dir: &str, name: &str, data: impl Iterator<Item = f32>) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(format!("{dir}/wl_{name}.bin"))?);
+    for x in data {
+        out.write_all(&x.to_le_bytes())?;
+    }
+    out.flush()
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let arg = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    let threads: usize = arg("--threads").map_or(Ok(2), |s| s.parse())?;
+    let reps: usize = arg("--reps").map_or(Ok(5), |s| s.parse())?;
+    let dump = arg("--dump");
+    let defaults = BvhOptions::default();
+    let opts = BvhOptions {
+        max_leaf: arg("--max-leaf").map_or(Ok(defaults.max_leaf), |s| s.parse())?,
+        traversal_cost: arg("--traversal-cost")
+            .map_or(Ok(defaults.traversal_cost), |s| s.parse())?,
+        bins: arg("--bins").map_or(Ok(defaults.bins), |s| s.parse())?,
+        ..defaults
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+
+    // The mesh: 14 x 14 icospheres of radius 0.45 on a unit grid.
+    const N: i32 = 14;
+    let (v0, f0) = icosphere(4, 0.45);
+    let mut mesh = Mesh::default();
+    for i in 0..N {
+        for j in 0..N {
+            let off = Vec3::new(
+                i as f32 - (N - 1) as f32 / 2.0,
+                j as f32 - (N - 1) as f32 / 2.0,
+                0.0,
+            );
+            let base = mesh.positions.len() as u32;
+            mesh.positions.extend(v0.iter().map(|&p| p + off));
+            mesh.normals.extend(v0.iter().map(|&p| p.normalize()));
+            mesh.indices.extend(f0.iter().map(|t| t.map(|k| k + base)));
+        }
+    }
+    let mut scene = Scene::default();
+    scene.add_material(Material::default());
+    let id = scene.add_mesh(mesh);
+    scene.objects.push(Object {
+        geometry: Geometry::Mesh(id),
+        ..Default::default()
+    });
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    println!(
+        "mesh: {} triangles, {} vertices; {threads} threads",
+        ps.triangles.len(),
+        ps.positions.len()
+    );
+
+    // Rays: the pinhole camera of embree_rays.py, and random rays.
+    let (w, h) = (1000usize, 1000usize);
+    let tan = (N as f32 / 2.0) / 20.0;
+    let coherent: Vec<Ray> = (0..w * h)
+        .map(|k| {
+            let (x, y) = (k % w, k / w);
+            let sx = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan;
+            let sy = -((y as f32 + 0.5) / h as f32 * 2.0 - 1.0) * tan;
+            Ray::new(
+                Vec3::new(0.0, 0.0, 20.0),
+                Vec3::new(sx, sy, -1.0).normalize(),
+            )
+        })
+        .collect();
+    let (lo, hi) = (ps.bounds.min, ps.bounds.max);
+    let incoherent: Vec<Ray> = (0..(w * h) as u32)
+        .map(|k| {
+            let mut rng = pixel_rng(1, k, 0, 0);
+            let u = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+            Ray::new(
+                lo + u * (hi - lo),
+                sample_uniform_sphere(uniform2(&mut rng)),
+            )
+        })
+        .collect();
+
+    if let Some(dir) = &dump {
+        std::fs::create_dir_all(dir)?;
+        write_f32(dir, "V", ps.positions.iter().flat_map(|p| p.to_array()))?;
+        let mut out = std::io::BufWriter::new(std::fs::File::create(format!("{dir}/wl_F.bin"))?);
+        for t in &ps.triangles {
+            for k in t {
+                out.write_all(&k.to_le_bytes())?;
+            }
+        }
+        out.flush()?;
+        write_f32(dir, "O", coherent.iter().flat_map(|r| r.origin.to_array()))?;
+        write_f32(dir, "D", coherent.iter().flat_map(|r| r.dir.to_array()))?;
+        write_f32(
+            dir,
+            "Or",
+            incoherent.iter().flat_map(|r| r.origin.to_array()),
+        )?;
+        write_f32(dir, "Dr", incoherent.iter().flat_map(|r| r.dir.to_array()))?;
+        println!("wrote the workload to {dir}/wl_*.bin");
+    }
+
+    // Build, median of `reps`.
+    let mut builds = Vec::new();
+    let mut bvh = None;
+    for _ in 0..reps.max(1) {
+        let t0 = Instant::now();
+        let b = pool.install(|| SceneBvh::with_options(&ps, &opts));
+        builds.push(t0.elapsed().as_secs_f64());
+        bvh = Some(b);
+    }
+    let bvh = bvh.ok_or("no build")?;
+    builds.sort_by(f64::total_cmp);
+    println!(
+        "chiaro BVH build: median {:.3}s (min {:.3}s), {} nodes, depth {}",
+        builds[builds.len() / 2],
+        builds[0],
+        bvh.bvh().node_count(),
+        bvh.bvh().depth()
+    );
+
+    if args.iter().any(|a| a == "--stats") {
+        for (name, rays) in [("coherent", &coherent), ("incoherent", &incoherent)] {
+            let mut tests = 0u64;
+            let b = bvh.bvh();
+            for r in rays.iter().step_by(100) {
+                b.traverse_closest(r, |_, _| {
+                    tests += 1;
+                    None
+                });
+            }
+            println!(
+                "{name}: {:.1} leaf prims tested per ray (no culling)",
+                tests as f64 / (rays.len() / 100) as f64
+            );
+        }
+    }
+    for (name, rays) in [
+        ("coherent(camera)", &coherent),
+        ("incoherent(random)", &incoherent),
+    ] {
+        let mut times = Vec::new();
+        let mut hits = 0usize;
+        for _ in 0..reps.max(1) {
+            let t0 = Instant::now();
+            hits = pool.install(|| {
+                rays.par_chunks(4096)
+                    .map(|c| c.iter().filter(|r| bvh.intersect(r).is_some()).count())
+                    .sum()
+            });
+            times.push(t0.elapsed().as_secs_f64());
+        }
+        times.sort_by(f64::total_cmp);
+        let med = times[times.len() / 2];
+        println!(
+            "{name:<20} intersect  threads={threads}: median {med:.4}s -> {:.2} Mrays/s (min {:.4} max {:.4}, hit rate {:.3})",
+            rays.len() as f64 / med / 1e6,
+            times[0],
+            times[times.len() - 1],
+            hits as f64 / rays.len() as f64
+        );
+    }
+    Ok(())
+}
