@@ -16,7 +16,8 @@ const EXAMPLES: &str = "Examples:
   chiaro render scenes/cornell-box.toml -o cornell.png
   chiaro render scenes/teapot.toml --technique gouraud --width 320 --height 240 -o teapot.png
   chiaro render scenes/whitted.toml --set whitted.max_depth=3 --samples 4 -o whitted.exr
-  chiaro info scenes/cornell-box.toml";
+  chiaro info scenes/cornell-box.toml
+  chiaro compare scenes/cornell-box.toml --techniques phong,whitted --reference path:64 -o sheet.png --report report.json";
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
@@ -28,6 +29,9 @@ pub enum Command {
         /// The scene file.
         scene: PathBuf,
     },
+    /// Render a scene with several techniques and measure each against a
+    /// reference: writes a contact sheet, prints a Markdown table.
+    Compare(CompareArgs),
 }
 
 /// Palette output modes (8-bit indexed PNG).
@@ -100,4 +104,34 @@ pub struct RenderArgs {
     /// Write 16-bit PNG.
     #[arg(long)]
     pub png16: bool,
+}
+
+/// `chiaro compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// The scene file.
+    pub scene: PathBuf,
+    /// Techniques to compare, comma separated (e.g. `phong,whitted`).
+    #[arg(long, value_delimiter = ',', required = true, num_args = 1..)]
+    pub techniques: Vec<String>,
+    /// The reference, TECHNIQUE:SPP. Its seed is derived from --seed, its
+    /// size and --set options are those of the techniques.
+    #[arg(long, default_value = "path:256", value_name = "TECHNIQUE:SPP")]
+    pub reference: String,
+    /// The contact sheet (.png): per row the image, its error against the
+    /// reference, and its time and metrics.
+    #[arg(short, long, default_value = "compare.png")]
+    pub output: PathBuf,
+    /// Also write the report as JSON to this file.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Where the reference is cached (default: `.chiaro-cache/` next to the output).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+    /// Render the reference even if it is cached, and do not cache it.
+    #[arg(long, conflicts_with = "cache_dir")]
+    pub no_cache: bool,
+    /// Render options (`--technique` is not allowed: use --techniques).
+    #[command(flatten)]
+    pub opts: RenderOptions,
 }

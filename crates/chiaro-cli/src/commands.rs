@@ -1,6 +1,6 @@
 //! The subcommands: load, render, write, describe.
 
-use crate::cli::{PaletteArg, RenderArgs, RenderOptions, ToneMapArg};
+use crate::cli::{CompareArgs, PaletteArg, RenderArgs, RenderOptions, ToneMapArg};
 use anyhow::{Context, Result, anyhow};
 use chiaro::io::output::{OutputOptions, PaletteMode};
 use chiaro::scene::{Geometry, Light, Scene, Texture, ToneMap};
@@ -172,5 +172,84 @@ pub fn info(path: &Path) -> Result<()> {
     for i in s.validate() {
         println!("{i}");
     }
+    Ok(())
+}
+
+/// `chiaro compare`: renders each technique and the reference (cached),
+/// writes the contact sheet and the optional JSON report, and prints the
+/// Markdown table on stdout.
+pub fn compare(args: CompareArgs) -> Result<()> {
+    if args.opts.technique.is_some() {
+        return Err(anyhow!(
+            "compare takes --techniques LIST (and --reference TECHNIQUE:SPP), not --technique"
+        ));
+    }
+    let techniques = args
+        .techniques
+        .iter()
+        .map(|t| t.trim())
+        .filter(|t| !t.is_empty())
+        .map(|t| {
+            Technique::from_name(t).ok_or_else(|| {
+                anyhow!(
+                    "unknown technique `{t}` (available: {})",
+                    chiaro::technique_list()
+                )
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let reference = chiaro::compare::ReferenceSpec::parse(&args.reference)?;
+    let scene = load(&args.scene)?;
+    let settings = settings_from(&scene, &args.opts)?;
+    if let Some(n) = args.opts.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .context("setting the thread count")?;
+    }
+    let cache_dir = if args.no_cache {
+        None
+    } else {
+        Some(args.cache_dir.clone().unwrap_or_else(|| {
+            args.output
+                .parent()
+                .unwrap_or(Path::new(""))
+                .join(".chiaro-cache")
+        }))
+    };
+    let bar = crate::progress::Bar::new();
+    let result = chiaro::compare::compare(
+        &scene,
+        &settings,
+        &techniques,
+        &reference,
+        cache_dir.as_deref(),
+        &bar,
+    );
+    bar.finish();
+    let comparison = result?;
+    use chiaro::compare::CacheStatus;
+    match &comparison.cache {
+        CacheStatus::Hit(p) => eprintln!("reference: reusing cached {}", p.display()),
+        CacheStatus::Stored(p) => eprintln!("reference: cached as {}", p.display()),
+        CacheStatus::StoreFailed(m) => eprintln!("warning: reference not cached: {m}"),
+        CacheStatus::Disabled => {}
+    }
+    let title = args.scene.display().to_string();
+    let sheet = chiaro::sheet::write_sheet(&comparison, &title, &args.output)?;
+    eprintln!(
+        "{}: contact sheet {}x{}, error scale {:.4}",
+        args.output.display(),
+        sheet.film.width,
+        sheet.film.height,
+        sheet.error_scale
+    );
+    if let Some(path) = &args.report {
+        let mut json = comparison.to_json(&title);
+        json.push('\n');
+        chiaro::io::output::write_atomically(path, json.as_bytes())?;
+        eprintln!("{}: report", path.display());
+    }
+    print!("{}", comparison.to_markdown());
     Ok(())
 }

@@ -13,6 +13,7 @@ fn main() -> ExitCode {
     let result = match args.command {
         cli::Command::Render(r) => commands::render(r),
         cli::Command::Info { scene } => commands::info(&scene),
+        cli::Command::Compare(c) => commands::compare(c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -20,7 +20,9 @@
 //! assert!(film.get(8, 8).x > 0.5);
 //! ```
 
+pub mod compare;
 pub mod settings;
+pub mod sheet;
 
 pub use chiaro_core::film::{self, Film};
 pub use chiaro_core::progress::{self, NoProgress, Progress};

@@ -1,0 +1,230 @@
+//! `chiaro::compare` and the contact sheet on a tiny scene: every technique
+//! is measured with finite numbers, the path tracer against itself differs
+//! only by noise, the sheet has the documented size, and the reference
+//! cache is hit on the second run.
+
+use chiaro::compare::{CacheStatus, ReferenceSpec, compare, reference_seed};
+use chiaro::scene::Technique;
+use chiaro::sheet::{contact_sheet, sheet_size, write_sheet};
+use chiaro::{NoProgress, RenderSettings, Scene};
+use chiaro_testkit::scenes;
+use std::path::PathBuf;
+
+const SIZE: u32 = 24;
+
+fn setup() -> (Scene, RenderSettings) {
+    let scene = scenes::shadow_test(SIZE);
+    let mut s = scene.render.clone();
+    s.width = SIZE;
+    s.height = SIZE;
+    s.samples = 4;
+    s.seed = 11;
+    (scene, s)
+}
+
+fn path16() -> ReferenceSpec {
+    ReferenceSpec {
+        technique: Technique::Path,
+        samples: 16,
+    }
+}
+
+/// A fresh, empty directory under the test output directory.
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("test output directory");
+    dir
+}
+
+#[test]
+fn phong_and_whitted_against_path_report_finite_metrics() {
+    let (scene, base) = setup();
+    let c = compare(
+        &scene,
+        &base,
+        &[Technique::Phong, Technique::Whitted],
+        &path16(),
+        None,
+        &NoProgress,
+    )
+    .expect("compares");
+    assert_eq!(c.cache, CacheStatus::Disabled);
+    assert_eq!(c.reference.technique, Technique::Path);
+    assert_eq!(c.reference.settings.samples, 16);
+    assert_eq!(c.reference.settings.seed, reference_seed(base.seed));
+    assert_eq!(c.reference.rmse, 0.0);
+    assert!(c.reference.psnr.is_infinite());
+    let names: Vec<_> = c.entries.iter().map(|e| e.technique).collect();
+    assert_eq!(names, [Technique::Phong, Technique::Whitted]);
+    for e in &c.entries {
+        assert_eq!(e.settings.samples, base.samples);
+        assert_eq!((e.film.width, e.film.height), (SIZE, SIZE));
+        for v in [e.rmse, e.psnr, e.mean_relative_error, e.seconds] {
+            assert!(v.is_finite() && v >= 0.0, "{:?}: {v}", e.technique);
+        }
+        assert!(
+            e.rmse > 0.0,
+            "{:?} cannot equal the path tracer",
+            e.technique
+        );
+    }
+
+    // The JSON report has every field the issue names, for every technique.
+    let json: serde_json::Value =
+        serde_json::from_str(&c.to_json("shadow_test")).expect("valid JSON");
+    assert_eq!(json["scene"], "shadow_test");
+    assert_eq!(json["width"], SIZE);
+    assert_eq!(json["reference"]["technique"], "path");
+    assert_eq!(json["reference"]["spp"], 16);
+    let rows = json["techniques"].as_array().expect("techniques array");
+    assert_eq!(rows.len(), 2);
+    for (row, name) in rows.iter().zip(["phong", "whitted"]) {
+        assert_eq!(row["technique"], name);
+        for key in ["rmse", "psnr", "mean_relative_error", "seconds"] {
+            let v = row[key].as_f64().unwrap_or(f64::NAN);
+            assert!(v.is_finite(), "{name}.{key} = {}", row[key]);
+        }
+    }
+
+    // The Markdown table has a header, a rule, and one line per image.
+    let md = c.to_markdown();
+    assert_eq!(md.lines().count(), 2 + 3);
+    assert!(
+        md.lines()
+            .nth(2)
+            .is_some_and(|l| l.starts_with("| phong |"))
+    );
+    assert!(md.contains("| path (reference) | 16 |"));
+}
+
+#[test]
+fn path_against_itself_at_another_seed_differs_only_by_noise() {
+    let (scene, mut base) = setup();
+    base.samples = 16;
+    let c = compare(
+        &scene,
+        &base,
+        &[Technique::Path, Technique::Phong],
+        &path16(),
+        None,
+        &NoProgress,
+    )
+    .expect("compares");
+    let (path, phong) = (&c.entries[0], &c.entries[1]);
+    // A different seed: not the same image ...
+    assert_ne!(path.settings.seed, c.reference.settings.seed);
+    assert!(path.rmse > 0.0);
+    // ... but the same estimate: a small error, and smaller than that of a
+    // different technique (Phong's ambient term instead of indirect light).
+    assert!(
+        path.rmse < phong.rmse,
+        "path {} phong {}",
+        path.rmse,
+        phong.rmse
+    );
+    let mean = f64::from(c.reference.film.mean().element_sum() / 3.0);
+    assert!(
+        path.rmse < 0.5 * mean.max(1e-3),
+        "path rmse {} vs mean {mean}",
+        path.rmse
+    );
+    assert!(path.psnr > 20.0, "path psnr {}", path.psnr);
+}
+
+#[test]
+fn reference_is_cached_and_reused() {
+    let (scene, base) = setup();
+    let dir = fresh_dir("compare-cache");
+    let run = || {
+        compare(
+            &scene,
+            &base,
+            &[Technique::Phong],
+            &path16(),
+            Some(&dir),
+            &NoProgress,
+        )
+        .expect("compares")
+    };
+    let first = run();
+    let CacheStatus::Stored(file) = &first.cache else {
+        panic!("first run should store the reference: {:?}", first.cache);
+    };
+    assert!(file.is_file());
+    assert_eq!(file.extension().and_then(|e| e.to_str()), Some("exr"));
+    let second = run();
+    assert_eq!(second.cache, CacheStatus::Hit(file.clone()));
+    // The cached reference is bit-identical (EXR f32), so are the metrics,
+    // and the report keeps the original render time.
+    assert_eq!(second.reference.film.color, first.reference.film.color);
+    assert_eq!(second.entries[0].rmse, first.entries[0].rmse);
+    assert_eq!(second.reference.seconds, first.reference.seconds);
+    assert!(second.report("s").reference.cached);
+
+    // Other reference settings miss the cache.
+    let mut other = base.clone();
+    other.seed += 1;
+    let third = compare(
+        &scene,
+        &other,
+        &[Technique::Phong],
+        &path16(),
+        Some(&dir),
+        &NoProgress,
+    )
+    .expect("compares");
+    assert!(matches!(third.cache, CacheStatus::Stored(ref f) if f != file));
+}
+
+#[test]
+fn sheet_has_the_documented_size_and_is_written() {
+    let (scene, base) = setup();
+    let c = compare(
+        &scene,
+        &base,
+        &[Technique::Phong, Technique::Whitted],
+        &path16(),
+        None,
+        &NoProgress,
+    )
+    .expect("compares");
+    let sheet = contact_sheet(&c, "shadow_test").expect("sheet");
+    let (w, h) = sheet_size(SIZE, SIZE, 3);
+    assert_eq!((sheet.film.width, sheet.film.height), (w, h));
+    assert!(w > 2 * SIZE && h > 3 * SIZE);
+    assert!(sheet.film.is_clean());
+    assert!(sheet.error_scale.is_finite() && sheet.error_scale > 0.0);
+
+    let dir = fresh_dir("compare-sheet");
+    let path = dir.join("sheet.png");
+    write_sheet(&c, "shadow_test", &path).expect("writes");
+    let back = chiaro::io::output::read_image_as_film(&path).expect("reads back");
+    assert_eq!((back.width, back.height), (w, h));
+}
+
+#[test]
+fn unavailable_techniques_and_bad_settings_fail() {
+    let (scene, base) = setup();
+    let run = |base: &RenderSettings, techniques: &[Technique]| {
+        compare(&scene, base, techniques, &path16(), None, &NoProgress)
+    };
+    // A technique this build does not have (if there is one left).
+    if let Some(&missing) = Technique::ALL
+        .iter()
+        .find(|t| !chiaro::available_techniques().contains(t))
+    {
+        let msg = run(&base, &[Technique::Phong, missing])
+            .expect_err("not built")
+            .to_string();
+        assert!(msg.contains(missing.name()), "{msg}");
+    }
+    let zero = RenderSettings {
+        width: 0,
+        ..base.clone()
+    };
+    let msg = run(&zero, &[Technique::Phong])
+        .expect_err("zero width")
+        .to_string();
+    assert!(msg.contains("image size"), "{msg}");
+}
