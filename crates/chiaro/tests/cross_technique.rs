@@ -1,0 +1,162 @@
+//! Invariants across techniques (DESIGN.md section 4): techniques that should
+//! agree do, pixel by pixel, on small images.
+
+use chiaro::scene::{Light, ShadowMethod, Technique};
+use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
+use chiaro_testkit::{diff_films, dump_ppm, scenes};
+
+fn render(scene: &Scene, settings: &RenderSettings) -> Film {
+    chiaro::render(scene, settings, &NoProgress).expect("renders")
+}
+
+/// Pixels where both films see a surface at the same depth with the same
+/// normal, away from silhouettes (all four neighbours agree too).
+fn same_surface(a: &Film, b: &Film) -> impl Fn(usize) -> bool {
+    let w = a.width as usize;
+    let h = a.height as usize;
+    let ok: Vec<bool> = (0..a.color.len())
+        .map(|i| {
+            let (da, db) = (a.depth[i], b.depth[i]);
+            da.is_finite()
+                && db.is_finite()
+                && (da - db).abs() <= 1e-3 * da.max(1.0)
+                && a.normal[i].dot(b.normal[i]) > 0.999
+        })
+        .collect();
+    move |i| {
+        let (x, y) = (i % w, i / w);
+        ok[i]
+            && x > 0
+            && y > 0
+            && x + 1 < w
+            && y + 1 < h
+            && ok[i - 1]
+            && ok[i + 1]
+            && ok[i - w]
+            && ok[i + w]
+    }
+}
+
+/// Pixels of `f` inside a surface: finite depth, and the four neighbours
+/// see nearly the same depth and normal (no silhouettes or creases).
+fn smooth_region(f: &Film) -> impl Fn(usize) -> bool + '_ {
+    let w = f.width as usize;
+    let h = f.height as usize;
+    move |i| {
+        let (x, y) = (i % w, i / w);
+        if x == 0 || y == 0 || x + 1 >= w || y + 1 >= h || !f.depth[i].is_finite() {
+            return false;
+        }
+        [i - 1, i + 1, i - w, i + w].iter().all(|&j| {
+            f.depth[j].is_finite()
+                && (f.depth[j] - f.depth[i]).abs() < 0.05 * f.depth[i]
+                && f.normal[j].dot(f.normal[i]) > 0.99
+        })
+    }
+}
+
+#[test]
+fn phong_scan_conversion_equals_whitted_at_depth_zero() {
+    let scene = scenes::shadow_test(64);
+    let mut s = scene.render.clone();
+    s.shadows = ShadowMethod::None;
+    s.technique = Technique::Phong;
+    let raster = render(&scene, &s);
+    s.technique = Technique::Whitted;
+    s.whitted.max_depth = 0;
+    let traced = render(&scene, &s);
+    let mask = same_surface(&raster, &traced);
+    let d = diff_films(&raster, &traced, 1e-3, &mask);
+    if d.over > 0 {
+        dump_ppm(&raster, "phong_vs_whitted_raster");
+        dump_ppm(&traced, "phong_vs_whitted_whitted");
+    }
+    assert!(d.compared > 64 * 64 / 3, "too few pixels compared: {d:?}");
+    assert_eq!(d.over, 0, "{d:?}");
+}
+
+#[test]
+fn gouraud_and_phong_agree_on_flat_lit_faces_only_where_they_should() {
+    // Gouraud interpolates vertex colours, Phong shades per pixel: on the
+    // specular sphere they must differ, on the diffuse faceted box (one
+    // normal per face, distant light) they nearly agree.
+    let scene = scenes::shadow_test(64);
+    let mut s = scene.render.clone();
+    s.technique = Technique::Phong;
+    let phong = render(&scene, &s);
+    s.technique = Technique::Gouraud;
+    let gouraud = render(&scene, &s);
+    let d = diff_films(&phong, &gouraud, 0.02, |_| true);
+    assert!(
+        d.over > 0,
+        "the specular sphere must shade differently: {d:?}"
+    );
+}
+
+#[test]
+fn path_tracer_at_depth_one_equals_direct_local_shading() {
+    // Direct light only, inverse-square point light, no ambient: the path
+    // tracer's mean per pixel equals Whitted's depth-0 shading with shadow rays.
+    let mut scene = scenes::shadow_test(48);
+    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    let mut s = scene.render.clone();
+    s.samples = 64;
+    s.shadows = ShadowMethod::Ray;
+    s.technique = Technique::Whitted;
+    s.whitted.max_depth = 0;
+    let whitted = render(&scene, &s);
+    s.technique = Technique::Path;
+    s.path.max_depth = 1;
+    let path = render(&scene, &s);
+    let mask = smooth_region(&whitted);
+    // Silhouettes and shadow edges inside a pixel are sampled differently
+    // (stratified vs random), so their pixel means differ by the coverage
+    // noise: compare only pixels away from image edges (every neighbour
+    // within 10% of the pixel), relative to brightness.
+    let w = whitted.width as usize;
+    let flat = |i: usize| {
+        let c = whitted.color[i].max_element().max(0.02);
+        [i - 1, i + 1, i - w, i + w]
+            .iter()
+            .all(|&j| (whitted.color[j] - whitted.color[i]).abs().max_element() <= 0.1 * c)
+    };
+    let mut compared = 0;
+    let mut bad = 0;
+    for i in 0..whitted.color.len() {
+        if !mask(i) || !flat(i) {
+            continue;
+        }
+        compared += 1;
+        let (a, b) = (whitted.color[i], path.color[i]);
+        if (a - b).abs().max_element() > 0.02 * a.max_element().max(0.05) {
+            bad += 1;
+        }
+    }
+    if bad > compared / 100 {
+        dump_ppm(&whitted, "depth1_whitted");
+        dump_ppm(&path, "depth1_path");
+    }
+    assert!(compared > 200, "{compared}");
+    assert!(
+        bad <= compared / 50,
+        "{bad} of {compared} pixels differ by more than 2%"
+    );
+}
+
+#[test]
+fn every_technique_renders_the_test_scene_without_nan() {
+    let scene = scenes::shadow_test(24);
+    for &t in chiaro::available_techniques() {
+        let mut s = scene.render.clone();
+        s.technique = t;
+        s.samples = 2;
+        let film = render(&scene, &s);
+        assert!(film.is_clean(), "{}", t.name());
+        assert!(
+            film.mean().max_element() > 0.01,
+            "{} rendered black",
+            t.name()
+        );
+        let _ = Vec3::ZERO;
+    }
+}
