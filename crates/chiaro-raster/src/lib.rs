@@ -18,6 +18,10 @@
 pub mod clip;
 pub mod raster;
 pub mod render;
+pub mod shadow;
 pub mod zbuffer;
 
-pub use render::{render, render_prepared, shade_mode_of};
+pub use render::{
+    RasterOptions, dither_threshold, render, render_prepared, render_prepared_with, shade_mode_of,
+};
+pub use shadow::VolumeCounting;

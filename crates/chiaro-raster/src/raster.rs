@@ -93,14 +93,6 @@ impl Viewport {
         [(sx * k).round() as i32, (sy * k).round() as i32]
     }
 
-    #[inline]
-    fn key(&self, c: Vec4) -> f32 {
-        match self.depth_key {
-            DepthKey::InvW => 1.0 / c.w,
-            DepthKey::ZOverW => -c.z / c.w,
-        }
-    }
-
     /// Clips the clip-space triangle `clip` (counter-clockwise seen from its
     /// front) and appends the resulting screen triangles to `out`.
     /// `scratch` is reused between calls. Degenerate (zero-area) pieces and,
@@ -112,12 +104,35 @@ impl Viewport {
         scratch: &mut Vec<ClipVertex>,
         out: &mut Vec<RasterTri>,
     ) {
+        self.setup_homogeneous(clip, [1.0; 3], id, scratch, out);
+    }
+
+    /// [`Viewport::setup`] for vertices given in homogeneous world
+    /// coordinates `(x, y, z, w_h)`: `clip` is `clip_from_world * (x, y, z,
+    /// w_h)` and `w_h` the vertices' homogeneous weights, 0 for points at
+    /// infinity (the far ends of shadow volumes, Crow 1977; Everitt and
+    /// Kilgard 2002). With [`DepthKey::InvW`] the key of a vertex is
+    /// `w_h / w_clip`, the reciprocal view depth of the point it stands for
+    /// (0 at infinity); [`DepthKey::ZOverW`] ignores `w_h`.
+    pub fn setup_homogeneous(
+        &self,
+        clip: [Vec4; 3],
+        w_h: [f32; 3],
+        id: u32,
+        scratch: &mut Vec<ClipVertex>,
+        out: &mut Vec<RasterTri>,
+    ) {
         clip_triangle(clip, scratch);
         if scratch.len() < 3 {
             return;
         }
+        let wh = glam::Vec3::from_array(w_h);
+        let key = |v: &ClipVertex| match self.depth_key {
+            DepthKey::InvW => v.bary.dot(wh) / v.clip.w,
+            DepthKey::ZOverW => -v.clip.z / v.clip.w,
+        };
         let first = self.snap(scratch[0].clip);
-        let k0 = self.key(scratch[0].clip);
+        let k0 = key(&scratch[0]);
         for i in 1..scratch.len() - 1 {
             let (b, c) = (scratch[i].clip, scratch[i + 1].clip);
             let (sb, sc) = (self.snap(b), self.snap(c));
@@ -131,7 +146,7 @@ impl Viewport {
             if back && self.cull_back {
                 continue;
             }
-            let (kb, kc) = (self.key(b), self.key(c));
+            let (kb, kc) = (key(&scratch[i]), key(&scratch[i + 1]));
             let tri = if area > 0 {
                 RasterTri {
                     v: [first, sb, sc],

@@ -21,8 +21,26 @@
 //! [`PreparedScene`] within float noise. The same intersection one pixel to
 //! the right and below gives the screen-space uv derivatives for mip-mapping.
 //!
-//! Illumination is always [`shade_local`] with every light sample visible
-//! (no shadows yet), area lights sampled at the strata centres.
+//! Illumination is always [`shade_local`], area lights sampled at the strata
+//! centres; the visibility of each light sample comes from the shadow method
+//! ([`crate::shadow`]): shadow rays, shadow maps, or shadow volumes counted
+//! per sample between steps 3 and 5 (Phong shading; flat and Gouraud shading
+//! evaluate shadow rays and maps at their vertices or polygon centre, and
+//! ignore shadow volumes, which only exist per sample).
+//!
+//! Transparency without refraction (the seeds' three models) is chosen per
+//! material (`Material::transparency`, overridden by
+//! `RenderSettings::transparency`) for surfaces with `transmit > 0`:
+//! - *screen-door*: an 8x8 ordered-dither mask (Bayer) keeps the surface in
+//!   a fraction `1 - kt` of the samples, inside the ordinary z-buffer;
+//! - *interpolated* and *filtered*: the visibility pass keeps, per sample,
+//!   a list of every transparent fragment in front of the nearest opaque one
+//!   (an A-buffer, Carpenter 1984), sorted by depth per sample, so the order
+//!   is right even where transparent surfaces intersect; shading composites
+//!   back to front with `I = (1 - kt) I_diffuse + I_specular + kt I_behind`
+//!   (interpolated, the front surface's specular kept) or
+//!   `I = I_front + kt I_behind` (filtered, `kt` the RGB transmit colour).
+//!
 //! Flat and Gouraud illumination is split into a part linear in the diffuse
 //! colour and the rest (specular, emission), so that a diffuse texture can
 //! modulate the interpolated diffuse light per pixel while the illumination
@@ -30,17 +48,22 @@
 //! colour).
 
 use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize, sample_offsets};
+use crate::shadow::{ShadowVolumes, Shadows, VolumeCounting};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::{Material, RenderSettings, Scene, Severity, ShadeMode, Technique};
+use chiaro_core::scene::{
+    Material, RenderSettings, Scene, Severity, ShadeMode, ShadowMethod, Technique, TransparencyMode,
+};
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
-    LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize, shade_local,
+    LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
+    samples_for_light, sanitize, shade_local,
 };
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
+use std::cell::Cell;
 use std::collections::HashMap;
 
 /// Side of the square screen tiles, in pixels.
@@ -201,6 +224,53 @@ struct Ctx<'a, 's> {
     rays: Rays,
     lighting: LocalLighting<'a>,
     object_mode: Vec<ShadeMode>,
+    shadows: Shadows,
+    /// Per material: how it is drawn ([`Class`]).
+    class: Vec<Class>,
+}
+
+/// How the visibility pass treats a material.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Class {
+    /// Opaque (or `transmit = 0`).
+    Opaque,
+    /// Screen-door: covers the samples whose dither threshold is at least `kt`.
+    ScreenDoor(f32),
+    /// A fragment composited over what is behind it.
+    Blend(TransparencyMode),
+}
+
+impl Class {
+    fn of(m: &Material, settings: &RenderSettings) -> Class {
+        if !m.is_transparent() {
+            return Class::Opaque;
+        }
+        match settings.transparency.unwrap_or(m.transparency) {
+            TransparencyMode::ScreenDoor => {
+                let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
+                Class::ScreenDoor((kt.x + kt.y + kt.z) / 3.0)
+            }
+            mode => Class::Blend(mode),
+        }
+    }
+}
+
+/// The 8x8 ordered-dither (Bayer) threshold in `(0, 1)` of sample `s` of
+/// pixel `(x, y)`: over any 8x8 block each of the 64 values occurs once, so
+/// a surface drawn where `threshold >= kt` covers a fraction `1 - kt`.
+#[inline]
+pub fn dither_threshold(x: u32, y: u32, s: u32) -> f32 {
+    const BAYER: [u8; 64] = [
+        0, 32, 8, 40, 2, 34, 10, 42, 48, 16, 56, 24, 50, 18, 58, 26, 12, 44, 4, 36, 14, 46, 6, 38,
+        60, 28, 52, 20, 62, 30, 54, 22, 3, 35, 11, 43, 1, 33, 9, 41, 51, 19, 59, 27, 49, 17, 57,
+        25, 15, 47, 7, 39, 13, 45, 5, 37, 63, 31, 55, 23, 61, 29, 53, 21,
+    ];
+    // Samples of one pixel use shifted masks so they cover different levels.
+    let (xs, ys) = (
+        x.wrapping_add(s.wrapping_mul(5)),
+        y.wrapping_add(s.wrapping_mul(3)),
+    );
+    (f32::from(BAYER[((ys % 8) * 8 + xs % 8) as usize]) + 0.5) / 64.0
 }
 
 impl Ctx<'_, '_> {
@@ -223,27 +293,59 @@ impl Ctx<'_, '_> {
         self.ps.face_normal(t).dot(self.rays.eye - p0) < 0.0
     }
 
-    /// `shade_local` with every light visible and area lights sampled at the
-    /// strata centres.
+    /// `shade_local` with area lights sampled at the strata centres and the
+    /// visibility of the shadow method; `counts` are the shadow-volume
+    /// counts of this sample, one per light (absent: no volume shadows).
     #[inline]
-    fn illuminate(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> Vec3 {
+    fn illuminate(&self, m: &SurfaceMaterial, sp: &ShadingPoint, counts: Option<&[i32]>) -> Vec3 {
+        let current = Cell::new(0u32);
         shade_local(
             m,
             sp,
             &self.lighting,
-            |_, _| Vec2::splat(0.5),
-            |_, _| Vec3::ONE,
+            |_, i| {
+                current.set(i);
+                Vec2::splat(0.5)
+            },
+            |li, s| self.visibility(li, current.get(), sp, s, counts),
         )
+    }
+
+    /// Visibility of sample `i` of light `li` from the shading point.
+    fn visibility(
+        &self,
+        li: usize,
+        i: u32,
+        sp: &ShadingPoint,
+        s: &LightSample,
+        counts: Option<&[i32]>,
+    ) -> Vec3 {
+        match &self.shadows {
+            Shadows::None => Vec3::ONE,
+            Shadows::Ray(r) => r.visibility(sp.p, sp.ng, s),
+            Shadows::Map(m) => {
+                let count = self
+                    .ps
+                    .lights
+                    .get(li)
+                    .map_or(1, |l| samples_for_light(l, self.lighting.area_samples));
+                m.visibility(li, i, count, sp.p, sp.ng, s)
+            }
+            Shadows::Volume => match counts.and_then(|c| c.get(li)) {
+                Some(&c) if c != 0 => Vec3::ZERO,
+                _ => Vec3::ONE,
+            },
+        }
     }
 
     /// The illumination split for flat and Gouraud shading.
     fn illuminate_split(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> Split {
-        let total = self.illuminate(m, sp);
+        let total = self.illuminate(m, sp, None);
         let no_diffuse = SurfaceMaterial {
             kd: Vec3::ZERO,
             ..*m
         };
-        let rest = self.illuminate(&no_diffuse, sp);
+        let rest = self.illuminate(&no_diffuse, sp, None);
         Split {
             diffuse: total - rest,
             rest,
@@ -323,10 +425,39 @@ struct PolyShading {
     corners: HashMap<u32, [Split; 3]>,
 }
 
-/// One tile's visibility: the triangle id of each sample.
+/// One tile's visibility: the nearest opaque triangle of each sample, the
+/// transparent fragments in front of it, and the shadow-volume counts.
 struct TileVis {
     rect: TileRect,
+    /// Nearest opaque (or screen-door) triangle per sample.
     ids: Vec<u32>,
+    /// Its closeness key (`1 / w`), `NEG_INFINITY` on the background.
+    keys: Vec<f32>,
+    /// Transparent fragments of sample `i`: `frags[start[i]..start[i + 1]]`,
+    /// nearest first (empty `start` when there are none).
+    start: Vec<u32>,
+    /// `(triangle, key)` of each transparent fragment.
+    frags: Vec<(u32, f32)>,
+    /// Shadow-volume counts, `lights` per point: points are the samples,
+    /// then the fragments (empty without shadow volumes).
+    counts: Vec<i32>,
+}
+
+impl TileVis {
+    fn frag_range(&self, i: usize) -> std::ops::Range<usize> {
+        if self.start.is_empty() {
+            0..0
+        } else {
+            self.start[i] as usize..self.start[i + 1] as usize
+        }
+    }
+}
+
+/// Options of [`render_prepared_with`] that are not render settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RasterOptions {
+    /// How shadow-volume faces are counted (z-fail by default).
+    pub volume_counting: VolumeCounting,
 }
 
 /// Renders an already prepared scene with the default shading `mode`.
@@ -335,14 +466,32 @@ struct TileVis {
 ///
 /// # Errors
 /// [`CoreError::Cancelled`] when the progress asks to stop;
-/// [`CoreError::InvalidScene`] for a bad image size.
+/// [`CoreError::InvalidScene`] for a bad image size;
+/// [`CoreError::Unsupported`] for `shadows = object | scanline`.
 pub fn render_prepared(
     ps: &PreparedScene<'_>,
     settings: &RenderSettings,
     mode: ShadeMode,
     progress: &dyn Progress,
 ) -> Result<Film, CoreError> {
+    render_prepared_with(ps, settings, mode, &RasterOptions::default(), progress)
+}
+
+/// [`render_prepared`] with extra `options` (the shadow-volume counting).
+///
+/// # Errors
+/// As [`render_prepared`].
+pub fn render_prepared_with(
+    ps: &PreparedScene<'_>,
+    settings: &RenderSettings,
+    mode: ShadeMode,
+    options: &RasterOptions,
+    progress: &dyn Progress,
+) -> Result<Film, CoreError> {
     check_size(settings)?;
+    progress.begin("shadows", 1);
+    let shadows = Shadows::new(ps, settings)?;
+    progress.advance(1);
     let scene = ps.scene;
     let (w, h) = (settings.width, settings.height);
     let spp = settings.samples.clamp(1, 64);
@@ -377,10 +526,6 @@ pub fn render_prepared(
         .collect();
     let nt = ps.triangles.len();
     let chunk = nt.div_ceil(256).max(4096);
-    struct Bins {
-        tris: Vec<RasterTri>,
-        bins: Vec<Vec<u32>>,
-    }
     progress.begin("setup", 1);
     let chunks: Vec<Bins> = ps
         .triangles
@@ -420,6 +565,50 @@ pub fn render_prepared(
         })
         .collect();
     drop(clip);
+    let class: Vec<Class> = scene
+        .materials
+        .iter()
+        .map(|m| Class::of(m, settings))
+        .collect();
+    let class_of = |t: u32| {
+        class
+            .get(ps.tri_material[t as usize].index())
+            .copied()
+            .unwrap_or(Class::Opaque)
+    };
+    // Shadow-volume polygons, clipped and binned like the scene's triangles
+    // (their id is the light index).
+    let nl = ps.lights.len();
+    let vol_bins: Option<Bins> = (settings.shadows == ShadowMethod::Volume).then(|| {
+        let vols = ShadowVolumes::new(ps);
+        let mut out = Vec::new();
+        let mut scratch = Vec::new();
+        let mut bins: Vec<Vec<u32>> = vec![Vec::new(); rects.len()];
+        for (li, tris) in vols.per_light.iter().enumerate() {
+            for tri in tris {
+                let c = tri.map(|p| clip_from_world * p);
+                let first = out.len();
+                vp_all.setup_homogeneous(c, tri.map(|p| p.w), li as u32, &mut scratch, &mut out);
+                for (j, rt) in out.iter().enumerate().skip(first) {
+                    let b = rt.pixel_bounds();
+                    if b[2] < 0 || b[3] < 0 || b[0] >= w as i32 || b[1] >= h as i32 {
+                        continue;
+                    }
+                    let tx0 = (b[0].max(0) as u32) / TILE_SIZE;
+                    let ty0 = (b[1].max(0) as u32) / TILE_SIZE;
+                    let tx1 = (b[2].min(w as i32 - 1) as u32) / TILE_SIZE;
+                    let ty1 = (b[3].min(h as i32 - 1) as u32) / TILE_SIZE;
+                    for ty in ty0..=ty1 {
+                        for tx in tx0..=tx1 {
+                            bins[(ty * tiles_x + tx) as usize].push(j as u32);
+                        }
+                    }
+                }
+            }
+        }
+        Bins { tris: out, bins }
+    });
+    let counting = options.volume_counting;
     progress.advance(1);
 
     // 3. Visibility per tile.
@@ -442,20 +631,70 @@ pub fn render_prepared(
                 y1: rect.y + rect.height,
             };
             let tw = rect.width as usize;
+            let index = |x: u32, y: u32, s: usize| {
+                (((y - rect.y) as usize) * tw + (x - rect.x) as usize) * spp_us + s
+            };
+            // Opaque and screen-door surfaces: the z-buffer.
+            let mut blend: Vec<&RasterTri> = Vec::new();
             for c in &chunks {
                 for &j in &c.bins[ti] {
                     let rt = &c.tris[j as usize];
+                    match class_of(rt.id) {
+                        Class::Opaque => rasterize(rt, r, &offsets, |x, y, s, k| {
+                            let i = index(x, y, s);
+                            if k > key[i] {
+                                key[i] = k;
+                                ids[i] = rt.id;
+                            }
+                        }),
+                        Class::ScreenDoor(kt) => rasterize(rt, r, &offsets, |x, y, s, k| {
+                            let i = index(x, y, s);
+                            if k > key[i] && dither_threshold(x, y, s as u32) >= kt {
+                                key[i] = k;
+                                ids[i] = rt.id;
+                            }
+                        }),
+                        Class::Blend(_) => blend.push(rt),
+                    }
+                }
+            }
+            // Transparent fragments in front of the opaque surface, sorted
+            // per sample nearest first.
+            let (start, frags) = if blend.is_empty() {
+                (Vec::new(), Vec::new())
+            } else {
+                let mut list: Vec<(u32, f32, u32)> = Vec::new();
+                for rt in blend {
                     rasterize(rt, r, &offsets, |x, y, s, k| {
-                        let i = (((y - rect.y) as usize) * tw + (x - rect.x) as usize) * spp_us + s;
+                        let i = index(x, y, s);
                         if k > key[i] {
-                            key[i] = k;
-                            ids[i] = rt.id;
+                            list.push((i as u32, k, rt.id));
                         }
                     });
                 }
+                list.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)));
+                let mut start = vec![0u32; n + 1];
+                for e in &list {
+                    start[e.0 as usize + 1] += 1;
+                }
+                for i in 0..n {
+                    start[i + 1] += start[i];
+                }
+                (start, list.into_iter().map(|e| (e.2, e.1)).collect())
+            };
+            let mut tv = TileVis {
+                rect,
+                ids,
+                keys: key,
+                start,
+                frags,
+                counts: Vec::new(),
+            };
+            if let Some(vb) = &vol_bins {
+                count_volumes(&mut tv, vb, ti, r, &offsets, nl, counting);
             }
             progress.advance(1);
-            Some(TileVis { rect, ids })
+            Some(tv)
         })
         .collect();
     drop(chunks);
@@ -478,6 +717,8 @@ pub fn render_prepared(
             .iter()
             .map(|o| o.shade_mode.unwrap_or(mode))
             .collect(),
+        shadows,
+        class,
     };
 
     // 4. Per-polygon and per-vertex illumination of visible flat/Gouraud triangles.
@@ -501,6 +742,64 @@ pub fn render_prepared(
         film.write_tile(&t.ok_or(CoreError::Cancelled)?);
     }
     Ok(film)
+}
+
+/// Triangles binned to tiles: `bins[tile]` indexes `tris`.
+struct Bins {
+    tris: Vec<RasterTri>,
+    bins: Vec<Vec<u32>>,
+}
+
+/// Relative tolerance of the shadow-volume depth comparison: a volume face
+/// within it of a sample's depth counts as behind the sample, so the front
+/// cap lying on a lit surface does not shadow it.
+const VOLUME_EPS: f32 = 2e-5;
+
+/// Counts, per point of the tile (opaque samples and transparent
+/// fragments) and per light, the shadow-volume faces between the eye and
+/// the point (z-pass) or between the point and infinity (z-fail); a point
+/// is in shadow where its count is not zero.
+fn count_volumes(
+    tv: &mut TileVis,
+    vb: &Bins,
+    ti: usize,
+    r: Rect,
+    offsets: &[[i32; 2]],
+    nl: usize,
+    counting: VolumeCounting,
+) {
+    let spp = offsets.len();
+    let n = tv.ids.len();
+    let points = n + tv.frags.len();
+    let mut counts = vec![0i32; points * nl];
+    let tw = tv.rect.width as usize;
+    for &j in &vb.bins[ti] {
+        let rt = &vb.tris[j as usize];
+        let li = rt.id as usize;
+        rasterize(rt, r, offsets, |x, y, s, k| {
+            let i = (((y - r.y0) as usize) * tw + (x - r.x0) as usize) * spp + s;
+            let mut bump = |p: usize, key: f32| {
+                if key == f32::NEG_INFINITY {
+                    return;
+                }
+                let behind = k <= key * (1.0 + VOLUME_EPS);
+                let d =
+                    match (counting, behind, rt.back) {
+                        (VolumeCounting::ZFail, true, true)
+                        | (VolumeCounting::ZPass, false, false) => 1,
+                        (VolumeCounting::ZFail, true, false)
+                        | (VolumeCounting::ZPass, false, true) => -1,
+                        _ => 0,
+                    };
+                counts[p * nl + li] += d;
+            };
+            bump(i, tv.keys[i]);
+            for f in tv.frag_range(i) {
+                bump(n + f, tv.frags[f].1);
+            }
+        });
+    }
+    tv.counts = counts;
 }
 
 /// Step 4: finds the visible flat and Gouraud triangles and illuminates their
@@ -601,6 +900,9 @@ struct SampleResult {
     color: Vec3,
     depth: f32,
     normal: Vec3,
+    /// The part of `color` from specular reflection (and emission), when
+    /// asked for: what interpolated transparency keeps unattenuated.
+    specular: Vec3,
 }
 
 /// Step 5 for one tile.
@@ -624,17 +926,45 @@ fn shade_tile(
             for (s, o) in offsets.iter().enumerate() {
                 let sx = (rect.x + px) as f32 + o[0] as f32 / sub;
                 let sy = (rect.y + py) as f32 + o[1] as f32 / sub;
-                let id = tv.ids[pi * spp + s];
+                let i = pi * spp + s;
+                let id = tv.ids[i];
                 let dir = ctx.rays.dir(sx, sy);
-                let r = if id == NONE {
+                let nl = ctx.ps.lights.len();
+                let counts_of = |p: usize| tv.counts.get(p * nl..(p + 1) * nl);
+                let mut r = if id == NONE {
                     SampleResult {
                         color: background_radiance(ctx.ps.scene, dir),
                         depth: f32::INFINITY,
                         normal: Vec3::ZERO,
+                        specular: Vec3::ZERO,
                     }
                 } else {
-                    shade_sample(ctx, poly, id, sx, sy, dir)
+                    shade_sample(ctx, poly, id, sx, sy, dir, counts_of(i), false)
                 };
+                // Transparent fragments, composited back to front.
+                let n = tv.ids.len();
+                for f in tv.frag_range(i).rev() {
+                    let t = tv.frags[f].0;
+                    let m = ctx.material_of(t);
+                    let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
+                    let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
+                        == Some(&Class::Blend(TransparencyMode::Interpolated));
+                    let front =
+                        shade_sample(ctx, poly, t, sx, sy, dir, counts_of(n + f), interpolated);
+                    let behind = sanitize(r.color);
+                    r.color = if interpolated {
+                        // Foley et al. 16.5.1: I = (1 - kt) I_front + kt I_behind,
+                        // with the front surface's specular highlight kept whole.
+                        (Vec3::ONE - kt) * (front.color - front.specular)
+                            + front.specular
+                            + kt * behind
+                    } else {
+                        // Filtered: I = I_front + kt Ot I_behind.
+                        front.color + kt * behind
+                    };
+                    r.depth = front.depth;
+                    r.normal = front.normal;
+                }
                 sum += sanitize(r.color);
                 if r.depth < best_depth {
                     best_depth = r.depth;
@@ -650,7 +980,10 @@ fn shade_tile(
 }
 
 /// Shades the sample at film position `(sx, sy)` (direction `dir`) where
-/// triangle `t` is visible, by the triangle's shading mode.
+/// triangle `t` is visible, by the triangle's shading mode. `counts` are the
+/// point's shadow-volume counts per light; with `want_specular` the result
+/// also holds its non-diffuse part.
+#[allow(clippy::too_many_arguments)]
 fn shade_sample(
     ctx: &Ctx<'_, '_>,
     poly: &PolyShading,
@@ -658,6 +991,8 @@ fn shade_sample(
     sx: f32,
     sy: f32,
     dir: Vec3,
+    counts: Option<&[i32]>,
+    want_specular: bool,
 ) -> SampleResult {
     let ps = ctx.ps;
     let eye = ctx.rays.eye;
@@ -690,6 +1025,7 @@ fn shade_sample(
     let wo = (eye - hit.p).normalize_or_zero();
     let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
     let sign = if flip { -1.0 } else { 1.0 };
+    let mut specular = Vec3::ZERO;
     let (color, n, kr) = match ctx.mode(t) {
         ShadeMode::Phong => {
             let sm = ps.surface_material_lod(&hit, duv_dx, duv_dy);
@@ -705,7 +1041,16 @@ fn shade_sample(
                 ng: hit.ng * sign,
                 wo,
             };
-            (ctx.illuminate(&sm, &sp), n, sm.kr)
+            let c = ctx.illuminate(&sm, &sp, counts);
+            if want_specular {
+                let diffuse_only = SurfaceMaterial {
+                    ks: Vec3::ZERO,
+                    emission: Vec3::ZERO,
+                    ..sm
+                };
+                specular = c - ctx.illuminate(&diffuse_only, &sp, counts);
+            }
+            (c, n, sm.kr)
         }
         ShadeMode::Gouraud => {
             let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
@@ -723,6 +1068,7 @@ fn shade_sample(
             };
             let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
             let tex = ps.diffuse_texture_factor(hit.material, &tc);
+            specular = split.rest;
             (
                 split.diffuse * tex + split.rest,
                 hit.ns * sign,
@@ -737,6 +1083,7 @@ fn shade_sample(
             } else {
                 Vec3::ONE
             };
+            specular = split.rest;
             (
                 split.diffuse * tex + split.rest,
                 hit.ng * sign,
@@ -757,9 +1104,14 @@ fn shade_sample(
         color,
         depth,
         normal: n,
+        specular,
     }
 }
 
 #[cfg(test)]
 #[path = "render_tests.rs"]
 mod tests;
+
+#[cfg(test)]
+#[path = "shadow_tests.rs"]
+mod shadow_tests;

@@ -15,6 +15,7 @@ fn settings(technique: Technique, w: u32, h: u32) -> RenderSettings {
         technique,
         width: w,
         height: h,
+        shadows: ShadowMethod::None,
         ..RenderSettings::default()
     }
 }

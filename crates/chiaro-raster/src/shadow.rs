@@ -1,0 +1,821 @@
+//! Light visibility for the scan converter: the one thing a technique
+//! supplies to [`chiaro_core::shading::shade_local`].
+//!
+//! Three methods, chosen by [`ShadowMethod`]:
+//! - **Shadow rays** ([`ShadowMethod::Ray`]): a segment from the point to the
+//!   light sample against the scene BVH; transparent surfaces multiply the
+//!   light by their transmit colour (as the Whitted tracer does).
+//! - **Shadow z-buffers** ([`ShadowMethod::Map`], Williams 1978, the seeds'
+//!   "two-pass z-buffer"): a depth image of the scene from each light
+//!   (orthographic for directional lights, perspective for narrow spots, a
+//!   cube of six 90-degree views for point lights and wide spots), and for
+//!   area lights one cube map per light sample so that the penumbra is the
+//!   average of several hard shadows (the "several shadow maps over the
+//!   light's area" of Heckbert and Herf 1997). See [`ShadowMaps`].
+//! - **Shadow volumes** ([`ShadowMethod::Volume`], Crow 1977): built here
+//!   ([`ShadowVolumes`]) and counted per visible sample by the renderer.
+//!
+//! Objects with `casts_shadows = false` cast no shadow in any method.
+
+use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize};
+use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::accel::{Accelerator, Hit};
+use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::scene::{AreaShape, Light, RenderSettings, ShadowMapSettings, ShadowMethod};
+use chiaro_core::shading::{LightSample, samples_for_light, stratum};
+use glam::{Mat4, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// How a triangle blocks light.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Blocker {
+    /// Casts no shadow (its object has `casts_shadows = false`).
+    Ignore,
+    /// Blocks all light.
+    Opaque,
+    /// Lets through this RGB fraction (the material's transmit colour).
+    Filter(Vec3),
+}
+
+/// Per-triangle blocker classes of a prepared scene.
+pub(crate) fn blockers(ps: &PreparedScene<'_>) -> Vec<Blocker> {
+    let casts: Vec<bool> = ps.scene.objects.iter().map(|o| o.casts_shadows).collect();
+    (0..ps.triangles.len())
+        .map(|t| {
+            let o = ps.tri_object[t] as usize;
+            if !casts.get(o).copied().unwrap_or(true) {
+                return Blocker::Ignore;
+            }
+            let m = ps.material(ps.tri_material[t]);
+            let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
+            if kt.max_element() > 0.0 {
+                Blocker::Filter(kt)
+            } else {
+                Blocker::Opaque
+            }
+        })
+        .collect()
+}
+
+/// The light visibility of one render.
+pub(crate) enum Shadows {
+    /// Every light sample is visible.
+    None,
+    /// Shadow rays through the BVH.
+    Ray(RayShadows),
+    /// Shadow z-buffers.
+    Map(ShadowMaps),
+    /// Shadow volumes: the per-sample counts live in the renderer's tiles.
+    Volume,
+}
+
+impl Shadows {
+    /// Builds the structures of `settings.shadows` for `ps`.
+    ///
+    /// # Errors
+    /// [`chiaro_core::error::CoreError::Unsupported`] for the object-precision and
+    /// scan-line methods, which the scan converter does not implement yet.
+    pub(crate) fn new(
+        ps: &PreparedScene<'_>,
+        settings: &RenderSettings,
+    ) -> Result<Self, chiaro_core::error::CoreError> {
+        Ok(match settings.shadows {
+            ShadowMethod::None => Shadows::None,
+            ShadowMethod::Ray => Shadows::Ray(RayShadows::new(ps)),
+            ShadowMethod::Map => Shadows::Map(ShadowMaps::new(
+                ps,
+                &settings.shadow_map,
+                settings.light_samples.max(1),
+            )),
+            ShadowMethod::Volume => Shadows::Volume,
+            ShadowMethod::Object => {
+                return Err(chiaro_core::error::CoreError::Unsupported(
+                    "shadows=object is not implemented yet".into(),
+                ));
+            }
+            ShadowMethod::Scanline => {
+                return Err(chiaro_core::error::CoreError::Unsupported(
+                    "shadows=scanline is not implemented yet".into(),
+                ));
+            }
+        })
+    }
+}
+
+/// Shadow rays against a BVH of the scene's triangles.
+pub(crate) struct RayShadows {
+    bvh: SceneBvh,
+    blockers: Vec<Blocker>,
+    all_opaque: bool,
+}
+
+impl RayShadows {
+    fn new(ps: &PreparedScene<'_>) -> Self {
+        let blockers = blockers(ps);
+        let all_opaque = blockers.iter().all(|b| *b == Blocker::Opaque);
+        Self {
+            bvh: SceneBvh::new(ps),
+            blockers,
+            all_opaque,
+        }
+    }
+
+    /// RGB transmittance from `p` (unit geometric normal `ng`) to the sample:
+    /// 0 behind an opaque caster, the product of the transmit colours of the
+    /// transparent surfaces crossed otherwise.
+    pub(crate) fn visibility(&self, p: Vec3, ng: Vec3, s: &LightSample) -> Vec3 {
+        let origin = offset_ray_origin(p, ng, s.wi);
+        let ray = Ray::segment(origin, s.point);
+        if self.all_opaque {
+            return if self.bvh.occluded(&ray) {
+                Vec3::ZERO
+            } else {
+                Vec3::ONE
+            };
+        }
+        let mut tr = Vec3::ONE;
+        // Crossings already counted: a ray through an edge shared by two
+        // triangles of a surface (reported on both) must tint once.
+        let mut seen = [f32::NAN; 16];
+        let mut nseen = 0usize;
+        let blocked =
+            self.bvh
+                .visit_hits(&ray, |h: &Hit| match self.blockers.get(h.prim as usize) {
+                    Some(Blocker::Ignore) => false,
+                    Some(Blocker::Filter(kt)) => {
+                        let tol = 1e-5 * h.t.abs().max(1e-3);
+                        if seen[..nseen].iter().any(|&t| (t - h.t).abs() <= tol) {
+                            return false;
+                        }
+                        if nseen < seen.len() {
+                            seen[nseen] = h.t;
+                            nseen += 1;
+                        }
+                        tr *= *kt;
+                        tr.max_element() <= 0.0
+                    }
+                    _ => true,
+                });
+        if blocked { Vec3::ZERO } else { tr }
+    }
+}
+
+/// One depth image from a light position (or direction).
+struct MapView {
+    /// `view_from_world`: the light looks down `-z`.
+    view: Mat4,
+    /// `clip_from_world`.
+    clip_from_world: Mat4,
+    /// Orthographic half-extent in scene units; 0 for a perspective view.
+    ortho_half: f32,
+    /// `tan(fov / 2)` of a perspective view.
+    tan_half: f32,
+    /// Texels per side.
+    res: u32,
+    /// Distance along the view axis of the nearest opaque caster, per texel
+    /// (`INFINITY` where none).
+    depth: Vec<f32>,
+    /// Distance of the nearest transparent caster in front of the opaque
+    /// one, and the product of the transmit colours of all transparent
+    /// casters in front of it (empty when the scene has none).
+    trans_depth: Vec<f32>,
+    trans_tint: Vec<Vec3>,
+}
+
+impl MapView {
+    fn perspective(eye: Vec3, forward: Vec3, up_hint: Vec3, fov_deg: f32, res: u32) -> Self {
+        let cam = chiaro_core::scene::Camera {
+            eye,
+            look_at: eye + forward,
+            up: up_hint,
+            fov_y_degrees: fov_deg,
+            near: 1e-4,
+            far: 1e30,
+        };
+        let view = cam.view_matrix();
+        Self {
+            view,
+            clip_from_world: cam.projection_matrix(1.0) * view,
+            ortho_half: 0.0,
+            tan_half: (fov_deg.to_radians() * 0.5).tan(),
+            res,
+            depth: Vec::new(),
+            trans_depth: Vec::new(),
+            trans_tint: Vec::new(),
+        }
+    }
+
+    fn orthographic(center: Vec3, dir: Vec3, radius: f32, res: u32) -> Self {
+        let eye = center - dir * (2.0 * radius);
+        let cam = chiaro_core::scene::Camera {
+            eye,
+            look_at: center,
+            ..Default::default()
+        };
+        let view = cam.view_matrix();
+        let s = 1.0 / radius;
+        // x, y scaled to [-1, 1]; z_clip = -z_view (the distance along the
+        // axis, >= 0 in front), w = 1.
+        let proj = Mat4::from_cols(
+            Vec4::new(s, 0.0, 0.0, 0.0),
+            Vec4::new(0.0, s, 0.0, 0.0),
+            Vec4::new(0.0, 0.0, -1.0, 0.0),
+            Vec4::new(0.0, 0.0, 0.0, 1.0),
+        );
+        Self {
+            view,
+            clip_from_world: proj * view,
+            ortho_half: radius,
+            tan_half: 0.0,
+            res,
+            depth: Vec::new(),
+            trans_depth: Vec::new(),
+            trans_tint: Vec::new(),
+        }
+    }
+
+    /// Rasterizes the casters, one sample at each texel centre.
+    fn render(&mut self, ps: &PreparedScene<'_>, blockers: &[Blocker], any_filter: bool) {
+        let res = self.res;
+        let n = (res * res) as usize;
+        let ortho = self.ortho_half > 0.0;
+        let vp = Viewport {
+            width: res,
+            height: res,
+            cull_back: false,
+            depth_key: if ortho {
+                DepthKey::ZOverW
+            } else {
+                DepthKey::InvW
+            },
+        };
+        let rect = Rect {
+            x0: 0,
+            y0: 0,
+            x1: res,
+            y1: res,
+        };
+        let centre = [[
+            (crate::raster::SUBPIXEL / 2) as i32,
+            (crate::raster::SUBPIXEL / 2) as i32,
+        ]];
+        let m = self.clip_from_world;
+        let mut key = vec![f32::NEG_INFINITY; n];
+        let mut scratch = Vec::new();
+        let mut tris: Vec<RasterTri> = Vec::new();
+        let mut filters: Vec<(u32, Vec3)> = Vec::new();
+        for (t, tri) in ps.triangles.iter().enumerate() {
+            let b = blockers[t];
+            if b == Blocker::Ignore {
+                continue;
+            }
+            let c = tri.map(|i| m * ps.positions[i as usize].extend(1.0));
+            tris.clear();
+            vp.setup(c, t as u32, &mut scratch, &mut tris);
+            match b {
+                Blocker::Opaque => {
+                    for rt in &tris {
+                        rasterize(rt, rect, &centre, |x, y, _, k| {
+                            let i = (y * res + x) as usize;
+                            if k > key[i] {
+                                key[i] = k;
+                            }
+                        });
+                    }
+                }
+                Blocker::Filter(kt) => {
+                    // Deferred until the opaque depth is complete.
+                    filters.push((t as u32, kt));
+                }
+                Blocker::Ignore => {}
+            }
+        }
+        let to_depth = |k: f32| {
+            if k == f32::NEG_INFINITY {
+                f32::INFINITY
+            } else if ortho {
+                -k
+            } else {
+                1.0 / k
+            }
+        };
+        if any_filter && !filters.is_empty() {
+            let mut tkey = vec![f32::NEG_INFINITY; n];
+            let mut tint = vec![Vec3::ONE; n];
+            for &(t, kt) in &filters {
+                let c = ps.triangles[t as usize].map(|i| m * ps.positions[i as usize].extend(1.0));
+                tris.clear();
+                vp.setup(c, t, &mut scratch, &mut tris);
+                for rt in &tris {
+                    rasterize(rt, rect, &centre, |x, y, _, k| {
+                        let i = (y * res + x) as usize;
+                        if k > key[i] {
+                            tint[i] *= kt;
+                            if k > tkey[i] {
+                                tkey[i] = k;
+                            }
+                        }
+                    });
+                }
+            }
+            self.trans_depth = tkey.into_iter().map(to_depth).collect();
+            self.trans_tint = tint;
+        }
+        self.depth = key.into_iter().map(to_depth).collect();
+    }
+
+    /// Percentage-closer filtered visibility (Reeves, Salesin and Cook 1987)
+    /// of the point `p` with unit geometric normal `ng`. Each tap compares
+    /// the stored depth with the depth of the receiver's tangent plane along
+    /// the tap's own light ray ("receiver plane depth bias"), plus a
+    /// constant and a slope-scaled bias in texels of world size.
+    fn lookup(&self, p: Vec3, ng: Vec3, wi: Vec3, sm: &ShadowMapSettings) -> Vec3 {
+        let pv = self.view.transform_point3(p);
+        let nv = self.view.transform_vector3(ng);
+        let depth = -pv.z;
+        if depth <= 0.0 {
+            return Vec3::ONE;
+        }
+        let res = self.res as f32;
+        let ortho = self.ortho_half > 0.0;
+        // Position in texel units, and the world size of one texel there.
+        let (ndc, texel) = if ortho {
+            (
+                Vec2::new(pv.x, pv.y) / self.ortho_half,
+                2.0 * self.ortho_half / res,
+            )
+        } else {
+            (
+                Vec2::new(pv.x, pv.y) / (depth * self.tan_half),
+                2.0 * depth * self.tan_half / res,
+            )
+        };
+        let tx = (ndc.x * 0.5 + 0.5) * res;
+        let ty = (0.5 - ndc.y * 0.5) * res;
+        if !(tx.is_finite() && ty.is_finite()) {
+            return Vec3::ONE;
+        }
+        let cos = ng.dot(wi).abs().max(0.05);
+        let tan = (1.0 - cos * cos).max(0.0).sqrt() / cos;
+        let bias = texel * (sm.bias + sm.slope_bias * tan.min(10.0));
+        let r = sm.pcf_radius.min(8) as i32;
+        let (cx, cy) = (tx.floor() as i32, ty.floor() as i32);
+        let nz = nv.dot(pv);
+        let mut sum = Vec3::ZERO;
+        let mut taps = 0.0f32;
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let (x, y) = (cx + dx, cy + dy);
+                let (xc, yc) = (
+                    x.clamp(0, self.res as i32 - 1),
+                    y.clamp(0, self.res as i32 - 1),
+                );
+                // Receiver plane depth along the ray through the texel centre.
+                let u = Vec2::new(
+                    (x as f32 + 0.5) / res * 2.0 - 1.0,
+                    1.0 - (y as f32 + 0.5) / res * 2.0,
+                );
+                let d = if ortho {
+                    let o = Vec3::new(u.x * self.ortho_half, u.y * self.ortho_half, 0.0);
+                    let denom = -nv.z;
+                    let t = nv.dot(pv - o) / denom;
+                    if denom.abs() > 1e-6 && t.is_finite() {
+                        t
+                    } else {
+                        depth
+                    }
+                } else {
+                    let dir = Vec3::new(u.x * self.tan_half, u.y * self.tan_half, -1.0);
+                    let denom = nv.dot(dir);
+                    let t = nz / denom;
+                    if denom.abs() > 1e-6 && t.is_finite() && t > 0.0 {
+                        t
+                    } else {
+                        depth
+                    }
+                };
+                // Never trust the plane more than a few texels away.
+                let d = d.clamp(depth - 4.0 * bias - texel, depth + 4.0 * bias + texel);
+                let i = (yc as u32 * self.res + xc as u32) as usize;
+                let lit_opaque = d - bias <= self.depth[i];
+                sum += if !lit_opaque {
+                    Vec3::ZERO
+                } else if !self.trans_depth.is_empty() && d - bias > self.trans_depth[i] {
+                    self.trans_tint[i]
+                } else {
+                    Vec3::ONE
+                };
+                taps += 1.0;
+            }
+        }
+        sum / taps
+    }
+}
+
+/// The shadow maps of one light: a single view (directional light, narrow
+/// spot), a cube (six views: point light, wide spot), or for an area light
+/// several cubes over its surface.
+struct LightMaps {
+    /// Views, grouped by 6 for cubes.
+    views: Vec<MapView>,
+    /// Cube centres (one per group of six views); empty for a single view.
+    cube_centres: Vec<Vec3>,
+    /// For area lights: samples per side of the map grid (`k x k` maps).
+    grid: u32,
+}
+
+/// Shadow z-buffers of every light of a scene.
+pub(crate) struct ShadowMaps {
+    lights: Vec<Option<LightMaps>>,
+    settings: ShadowMapSettings,
+}
+
+/// The most cube maps built over one area light.
+const MAX_AREA_MAPS_PER_SIDE: u32 = 4;
+/// The most area-light cube maps built in total (beyond that, one per light).
+const MAX_AREA_MAPS: usize = 64;
+
+/// A point of an area light's surface for the 2D sample `u` (the same
+/// parameterisation as [`chiaro_core::shading::sample_light`]; a sphere
+/// gives its centre).
+fn area_point(shape: &AreaShape, u: Vec2) -> Vec3 {
+    match *shape {
+        AreaShape::Quad {
+            corner,
+            edge_u,
+            edge_v,
+        } => corner + u.x * edge_u + u.y * edge_v,
+        AreaShape::Disk {
+            center,
+            normal,
+            radius,
+        } => {
+            let d = chiaro_core::sampling::sample_concentric_disk(u) * radius;
+            let f = Frame::from_normal(normal.normalize_or_zero());
+            center + f.to_world(Vec3::new(d.x, d.y, 0.0))
+        }
+        AreaShape::Sphere { center, .. } => center,
+        AreaShape::Triangle { a, b, c } => {
+            let bary = chiaro_core::sampling::sample_uniform_triangle(u);
+            a * bary.x + b * bary.y + c * (1.0 - bary.x - bary.y)
+        }
+    }
+}
+
+/// The six 90-degree views of a cube map centred at `c`, in the order
+/// `+x, -x, +y, -y, +z, -z` (see [`cube_face`]).
+fn cube_views(c: Vec3, res: u32) -> Vec<MapView> {
+    let faces = [
+        (Vec3::X, Vec3::Y),
+        (Vec3::NEG_X, Vec3::Y),
+        (Vec3::Y, Vec3::Z),
+        (Vec3::NEG_Y, Vec3::Z),
+        (Vec3::Z, Vec3::Y),
+        (Vec3::NEG_Z, Vec3::Y),
+    ];
+    faces
+        .iter()
+        .map(|&(f, up)| MapView::perspective(c, f, up, 90.0, res))
+        .collect()
+}
+
+/// The cube face whose view contains direction `d`.
+fn cube_face(d: Vec3) -> usize {
+    let a = d.abs();
+    if a.x >= a.y && a.x >= a.z {
+        if d.x >= 0.0 { 0 } else { 1 }
+    } else if a.y >= a.z {
+        if d.y >= 0.0 { 2 } else { 3 }
+    } else if d.z >= 0.0 {
+        4
+    } else {
+        5
+    }
+}
+
+impl ShadowMaps {
+    /// Builds (in parallel over views) the maps of every light of `ps`.
+    /// `area_samples` is the `light_samples` setting: an area light gets a
+    /// grid of up to 4 x 4 cube maps at the strata of its samples, at a
+    /// quarter of `settings.resolution`.
+    fn new(ps: &PreparedScene<'_>, settings: &ShadowMapSettings, area_samples: u32) -> Self {
+        let res = settings.resolution.clamp(16, 8192);
+        let centre = (ps.bounds.min + ps.bounds.max) * 0.5;
+        let radius = ((ps.bounds.max - ps.bounds.min).length() * 0.5).max(1e-3);
+        let radius = if radius.is_finite() { radius } else { 1.0 };
+        let area_lights = ps
+            .lights
+            .iter()
+            .filter(|l| matches!(l, Light::Area { .. }))
+            .count();
+        let mut lights: Vec<Option<LightMaps>> = ps
+            .lights
+            .iter()
+            .map(|light| match light {
+                Light::Ambient { .. } => None,
+                Light::Directional { direction, .. } => Some(LightMaps {
+                    views: vec![MapView::orthographic(
+                        centre,
+                        direction.normalize_or(Vec3::NEG_Y),
+                        radius,
+                        res,
+                    )],
+                    cube_centres: Vec::new(),
+                    grid: 0,
+                }),
+                Light::Point { position, .. } => Some(LightMaps {
+                    views: cube_views(*position, res),
+                    cube_centres: vec![*position],
+                    grid: 0,
+                }),
+                Light::Spot(s) if s.cone_degrees <= 60.0 => Some(LightMaps {
+                    views: vec![MapView::perspective(
+                        s.position,
+                        s.direction.normalize_or(Vec3::NEG_Y),
+                        if s.direction.normalize_or(Vec3::NEG_Y).y.abs() > 0.9 {
+                            Vec3::Z
+                        } else {
+                            Vec3::Y
+                        },
+                        2.0 * s.cone_degrees + 2.0,
+                        res,
+                    )],
+                    cube_centres: Vec::new(),
+                    grid: 0,
+                }),
+                Light::Spot(s) => Some(LightMaps {
+                    views: cube_views(s.position, res),
+                    cube_centres: vec![s.position],
+                    grid: 0,
+                }),
+                Light::Area { shape, .. } => {
+                    let count = samples_for_light(light, area_samples);
+                    let k = (count as f32).sqrt().round().max(1.0) as u32;
+                    let mut g = k.min(MAX_AREA_MAPS_PER_SIDE);
+                    if matches!(shape, AreaShape::Sphere { .. })
+                        || area_lights * (g * g) as usize > MAX_AREA_MAPS
+                    {
+                        g = 1;
+                    }
+                    let ares = (res / 4).max(64);
+                    let mut views = Vec::new();
+                    let mut cube_centres = Vec::new();
+                    for j in 0..g * g {
+                        let c = area_point(shape, stratum(j, g * g, Vec2::splat(0.5)));
+                        cube_centres.push(c);
+                        views.extend(cube_views(c, ares));
+                    }
+                    Some(LightMaps {
+                        views,
+                        cube_centres,
+                        grid: g,
+                    })
+                }
+            })
+            .collect();
+        let blockers = blockers(ps);
+        let any_filter = blockers.iter().any(|b| matches!(b, Blocker::Filter(_)));
+        lights
+            .par_iter_mut()
+            .flatten()
+            .flat_map(|l| l.views.par_iter_mut())
+            .for_each(|v| v.render(ps, &blockers, any_filter));
+        Self {
+            lights,
+            settings: *settings,
+        }
+    }
+
+    /// Visibility of sample `sample` (of `count`) of light `li` from the
+    /// point `p` with unit geometric normal `ng`.
+    pub(crate) fn visibility(
+        &self,
+        li: usize,
+        sample: u32,
+        count: u32,
+        p: Vec3,
+        ng: Vec3,
+        s: &LightSample,
+    ) -> Vec3 {
+        let Some(Some(maps)) = self.lights.get(li) else {
+            return Vec3::ONE;
+        };
+        if maps.cube_centres.is_empty() {
+            return maps.views[0].lookup(p, ng, s.wi, &self.settings);
+        }
+        // The cube of this sample's stratum (area lights), else the only one.
+        let cube = if maps.grid > 1 {
+            let k = (count as f32).sqrt().round().max(1.0) as u32;
+            let (sx, sy) = (sample % k, sample / k);
+            let g = maps.grid;
+            ((sy * g / k) * g + sx * g / k) as usize
+        } else {
+            0
+        };
+        let c = maps.cube_centres[cube.min(maps.cube_centres.len() - 1)];
+        let face = cube_face(p - c);
+        maps.views[cube * 6 + face].lookup(p, ng, s.wi, &self.settings)
+    }
+}
+
+/// How shadow-volume faces are counted per sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum VolumeCounting {
+    /// Crow's count from the eye to the sample: +1 for each front face of a
+    /// volume in front of the sample, -1 for each back face (the seeds'
+    /// parity count). Wrong when the eye is itself inside a shadow volume.
+    ZPass,
+    /// Carmack's reverse (Everitt and Kilgard 2002): count from the sample
+    /// to infinity, +1 for each back face behind the sample, -1 for each
+    /// front face. Needs capped volumes; right wherever the eye is.
+    #[default]
+    ZFail,
+}
+
+/// The shadow-volume polygons of every light, as triangles with homogeneous
+/// world vertices (`w = 0` at infinity), outward-facing (counter-clockwise
+/// seen from outside the volume).
+pub(crate) struct ShadowVolumes {
+    /// Per light: the volume triangles (empty for ambient lights).
+    pub(crate) per_light: Vec<Vec<[Vec4; 3]>>,
+}
+
+impl ShadowVolumes {
+    /// Builds the capped shadow volumes of every opaque caster for every
+    /// light (area lights from their centre).
+    ///
+    /// A mesh object whose edges are each shared by exactly two triangles
+    /// with opposite orientations is *closed*: only its silhouette edges
+    /// (between a triangle facing the light and one facing away) are
+    /// extruded, capped by its light-facing triangles (front cap) and those
+    /// triangles projected to infinity (back cap). Any other object is open:
+    /// every triangle is its own occluder (turned to face the light), with
+    /// its own three sides and two caps; shared sides of neighbours cancel in
+    /// the count. Transparent casters cast no volume (a count cannot carry a
+    /// colour).
+    pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
+        let blockers = blockers(ps);
+        // Triangles per object, and whether each object is closed.
+        let nobj = ps.scene.objects.len().max(1);
+        let mut by_object: Vec<Vec<u32>> = vec![Vec::new(); nobj];
+        for (t, &o) in ps.tri_object.iter().enumerate() {
+            if blockers[t] == Blocker::Opaque {
+                by_object[(o as usize).min(nobj - 1)].push(t as u32);
+            }
+        }
+        let closed: Vec<bool> = by_object.iter().map(|tris| is_closed(ps, tris)).collect();
+        let per_light = ps
+            .lights
+            .par_iter()
+            .map(|light| {
+                let from = match light {
+                    Light::Ambient { .. } => return Vec::new(),
+                    Light::Point { position, .. } => position.extend(1.0),
+                    Light::Spot(s) => s.position.extend(1.0),
+                    Light::Directional { direction, .. } => {
+                        (-direction.normalize_or(Vec3::NEG_Y)).extend(0.0)
+                    }
+                    Light::Area { shape, .. } => shape.center().extend(1.0),
+                };
+                let mut out = Vec::new();
+                for (o, tris) in by_object.iter().enumerate() {
+                    extrude(ps, tris, closed[o], from, &mut out);
+                }
+                out
+            })
+            .collect();
+        Self { per_light }
+    }
+}
+
+/// True if every edge of `tris` is shared by exactly two of them, in
+/// opposite directions (a closed, consistently oriented 2-manifold).
+fn is_closed(ps: &PreparedScene<'_>, tris: &[u32]) -> bool {
+    if tris.is_empty() {
+        return false;
+    }
+    // Vertices are welded by position: meshes split at seams for uvs or
+    // creases still close.
+    let mut ids: HashMap<[u32; 3], u32> = HashMap::new();
+    let mut vid = |p: Vec3| {
+        let k = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+        let n = ids.len() as u32;
+        *ids.entry(k).or_insert(n)
+    };
+    let mut edges: HashMap<(u32, u32), i32> = HashMap::new();
+    for &t in tris {
+        let v = ps.triangles[t as usize].map(|i| vid(ps.positions[i as usize]));
+        for k in 0..3 {
+            let (a, b) = (v[k], v[(k + 1) % 3]);
+            if a == b {
+                return false;
+            }
+            *edges.entry((a, b)).or_insert(0) += 1;
+        }
+    }
+    edges
+        .iter()
+        .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
+}
+
+/// Appends the shadow volume of the triangles `tris` (one object) for a light
+/// at homogeneous position `from` (`w = 0`: a direction towards the light).
+fn extrude(
+    ps: &PreparedScene<'_>,
+    tris: &[u32],
+    closed: bool,
+    from: Vec4,
+    out: &mut Vec<[Vec4; 3]>,
+) {
+    let l3 = from.truncate();
+    // Direction of extrusion of a point away from the light, as a point at infinity.
+    let inf = |p: Vec3| -> Vec4 {
+        if from.w == 0.0 {
+            (-l3).extend(0.0)
+        } else {
+            (p - l3).extend(0.0)
+        }
+    };
+    let faces_light = |a: Vec3, b: Vec3, c: Vec3| -> bool {
+        let n = (b - a).cross(c - a);
+        let to_light = if from.w == 0.0 { l3 } else { l3 - a };
+        n.dot(to_light) > 0.0
+    };
+    let tri = |t: u32| ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+    let push_cap_and_back = |a: Vec3, b: Vec3, c: Vec3, out: &mut Vec<[Vec4; 3]>| {
+        out.push([a.extend(1.0), b.extend(1.0), c.extend(1.0)]);
+        out.push([inf(a), inf(c), inf(b)]);
+    };
+    let side = |a: Vec3, b: Vec3, out: &mut Vec<[Vec4; 3]>| {
+        // Edge a -> b of a light-facing triangle: the quad (b, a, a_inf, b_inf).
+        let (ai, bi) = (inf(a), inf(b));
+        out.push([b.extend(1.0), a.extend(1.0), ai]);
+        out.push([b.extend(1.0), ai, bi]);
+    };
+    if !closed {
+        for &t in tris {
+            let [a, b, c] = tri(t);
+            if (b - a).cross(c - a).length_squared() == 0.0 {
+                continue;
+            }
+            let [a, b, c] = if faces_light(a, b, c) {
+                [a, b, c]
+            } else {
+                [a, c, b]
+            };
+            push_cap_and_back(a, b, c, out);
+            side(a, b, out);
+            side(b, c, out);
+            side(c, a, out);
+        }
+        return;
+    }
+    // Closed: silhouette edges between light-facing and other triangles.
+    let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+    let mut facing: HashMap<([u32; 3], [u32; 3]), bool> = HashMap::new();
+    let mut lit = Vec::new();
+    for &t in tris {
+        let [a, b, c] = tri(t);
+        let f = faces_light(a, b, c);
+        for (p, q) in [(a, b), (b, c), (c, a)] {
+            facing.insert((key(p), key(q)), f);
+        }
+        if f {
+            lit.push([a, b, c]);
+        }
+    }
+    for [a, b, c] in lit {
+        push_cap_and_back(a, b, c, out);
+        for (p, q) in [(a, b), (b, c), (c, a)] {
+            // The twin edge q -> p belongs to a triangle facing away.
+            if facing.get(&(key(q), key(p))) == Some(&false) {
+                side(p, q, out);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cube_faces_cover_their_directions() {
+        let views = cube_views(Vec3::ZERO, 16);
+        for d in [
+            Vec3::new(1.0, 0.3, -0.2),
+            Vec3::new(-0.2, -1.0, 0.5),
+            Vec3::new(0.1, 0.2, -0.9),
+        ] {
+            let v = &views[cube_face(d)];
+            let c = v.clip_from_world * d.extend(1.0);
+            assert!(c.w > 0.0);
+            assert!(
+                (c.x / c.w).abs() <= 1.0 && (c.y / c.w).abs() <= 1.0,
+                "{d} {c}"
+            );
+        }
+    }
+}
