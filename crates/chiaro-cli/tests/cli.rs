@@ -1,0 +1,212 @@
+//! End-to-end tests of the `chiaro` binary: rendering, `info`, `compare`,
+//! and the exit codes (0 success, 1 bad input, 2 usage) with one-line
+//! error messages.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn chiaro(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_chiaro"))
+        .args(args)
+        .output()
+        .expect("the chiaro binary runs")
+}
+
+fn cornell() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenes/cornell-box.toml")
+        .display()
+        .to_string()
+}
+
+/// A fresh, empty directory for one test.
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("test directory");
+    dir
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Exit code 1 and exactly one line on stderr, starting `error:`.
+fn assert_one_line_error(o: &Output, expect: &str) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(1), "stderr: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "one line expected: {err}");
+    assert!(lines[0].starts_with("error: "), "{err}");
+    assert!(lines[0].contains(expect), "`{expect}` not in: {err}");
+}
+
+#[test]
+fn render_writes_a_png_of_the_requested_size() {
+    let dir = fresh_dir("render");
+    let out = dir.join("cornell.png");
+    let o = chiaro(&[
+        "render",
+        &cornell(),
+        "--technique",
+        "phong",
+        "--width",
+        "20",
+        "--height",
+        "12",
+        "-o",
+        out.to_str().expect("utf-8 path"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let film = chiaro::io::output::read_image_as_film(&out).expect("a readable PNG");
+    assert_eq!((film.width, film.height), (20, 12));
+    assert!(film.mean().element_sum() > 0.0, "not black");
+    assert!(stderr(&o).contains("phong 20x12"), "{}", stderr(&o));
+}
+
+#[test]
+fn info_describes_the_scene() {
+    let o = chiaro(&["info", &cornell()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    for key in ["objects", "triangles", "lights", "materials", "camera"] {
+        assert!(text.lines().any(|l| l.starts_with(key)), "{key}: {text}");
+    }
+}
+
+#[test]
+fn bad_scenes_exit_1_with_one_line() {
+    let dir = fresh_dir("bad-scene");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[camera]\neye = [0, 0\n").expect("writes");
+    let out = dir.join("x.png");
+    let out = out.to_str().expect("utf-8 path");
+    let o = chiaro(&["render", bad.to_str().expect("utf-8"), "-o", out]);
+    assert_one_line_error(&o, "bad.toml:");
+    let missing = dir.join("missing.toml");
+    let o = chiaro(&["info", missing.to_str().expect("utf-8")]);
+    assert_one_line_error(&o, "missing.toml");
+    assert!(!Path::new(out).exists());
+}
+
+#[test]
+fn unknown_setting_and_technique_exit_1_with_one_line() {
+    let dir = fresh_dir("unknown");
+    let out = dir.join("x.png");
+    let out = out.to_str().expect("utf-8 path");
+    let scene = cornell();
+    let o = chiaro(&["render", &scene, "-o", out, "--set", "whitted.max_dept=3"]);
+    assert_one_line_error(&o, "whitted.max_dept");
+    let o = chiaro(&["render", &scene, "-o", out, "--technique", "raytrace"]);
+    assert_one_line_error(&o, "raytrace");
+    let o = chiaro(&["compare", &scene, "-o", out, "--techniques", "phong,gourd"]);
+    assert_one_line_error(&o, "gourd");
+    let o = chiaro(&[
+        "compare",
+        &scene,
+        "-o",
+        out,
+        "--techniques",
+        "phong",
+        "--reference",
+        "path:zero",
+    ]);
+    assert_one_line_error(&o, "path:zero");
+    assert!(!Path::new(out).exists());
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    for args in [
+        &[][..],
+        &["render"][..],
+        &["render", "x.toml", "--widht", "3"][..],
+        &["frobnicate"][..],
+        &["compare", "x.toml"][..],
+        &["render", "x.toml", "--width", "wide"][..],
+    ] {
+        let o = chiaro(args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
+fn compare_writes_sheet_and_report_and_reuses_the_reference() {
+    let dir = fresh_dir("compare");
+    let sheet = dir.join("sheet.png");
+    let report = dir.join("report.json");
+    let scene = cornell();
+    let args = [
+        "compare",
+        &scene,
+        "--techniques",
+        "phong,whitted",
+        "--reference",
+        "path:4",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--samples",
+        "1",
+        "-o",
+        sheet.to_str().expect("utf-8"),
+        "--report",
+        report.to_str().expect("utf-8"),
+    ];
+    let o = chiaro(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    // Markdown table on stdout: header, rule, two techniques, the reference.
+    let md = stdout(&o);
+    let rows: Vec<&str> = md.lines().filter(|l| l.starts_with('|')).collect();
+    assert_eq!(rows.len(), 5, "{md}");
+    assert!(rows[2].starts_with("| phong |") && rows[3].starts_with("| whitted |"));
+    assert!(rows[4].starts_with("| path (reference) | 4 |"), "{md}");
+
+    // The report names every technique with finite numbers.
+    let text = std::fs::read_to_string(&report).expect("report written");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
+    assert_eq!(json["width"], 16);
+    assert_eq!(json["reference"]["spp"], 4);
+    assert_eq!(json["reference"]["cached"], false);
+    let techniques = json["techniques"].as_array().expect("array");
+    assert_eq!(techniques.len(), 2);
+    for (t, name) in techniques.iter().zip(["phong", "whitted"]) {
+        assert_eq!(t["technique"], name);
+        for key in ["rmse", "psnr", "mean_relative_error", "seconds"] {
+            assert!(
+                t[key].as_f64().is_some_and(f64::is_finite),
+                "{name}.{key}: {text}"
+            );
+        }
+    }
+
+    // The sheet: three rows of 16x16 images, so taller than 3 * 16.
+    let film = chiaro::io::output::read_image_as_film(&sheet).expect("sheet written");
+    let (w, h) = chiaro::sheet::sheet_size(16, 16, 3);
+    assert_eq!((film.width, film.height), (w, h));
+
+    // The reference was cached next to the sheet, and is reused.
+    assert!(dir.join(".chiaro-cache").is_dir());
+    let again = chiaro(&args);
+    assert!(again.status.success(), "{}", stderr(&again));
+    assert!(
+        stderr(&again).contains("reusing cached"),
+        "{}",
+        stderr(&again)
+    );
+    let text = std::fs::read_to_string(&report).expect("report rewritten");
+    assert!(text.contains("\"cached\": true"), "{text}");
+
+    // --no-cache renders it again.
+    let mut fresh = args.to_vec();
+    fresh.push("--no-cache");
+    let o = chiaro(&fresh);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("cached"), "{}", stderr(&o));
+}
