@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! cargo run --release -p chiaro-ray --example whitted_render -- SCENE.toml OUT.png \
-//!     [--size 640x480] [--samples N] [--adaptive] [--light-samples N] [--threads N]
+//!     [--size 640x480] [--samples N] [--adaptive] [--threshold T] [--light-samples N] [--threads N]
 //! ```
 
 use chiaro_core::progress::NoProgress;
@@ -40,6 +40,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Some(n) = arg("--light-samples") {
         settings.light_samples = n.parse()?;
+    }
+    if let Some(t) = arg("--threshold") {
+        settings.whitted.adaptive_threshold = t.parse()?;
     }
     if args.iter().any(|a| a == "--adaptive") {
         settings.aa = AaMode::Adaptive;
