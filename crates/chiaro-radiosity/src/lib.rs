@@ -262,6 +262,7 @@ fn direct_light(
         .collect();
     let rule = PairRule {
         far_m: 2,
+        mid_m: 2,
         near_m: 4,
         vis_m: 4,
     };
