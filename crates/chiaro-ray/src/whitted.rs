@@ -35,7 +35,7 @@
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::error::{CoreError, Result};
-use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles};
+use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles_in};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
@@ -481,8 +481,8 @@ impl<'s> Tracer<'s> {
         }
     }
 
-    /// Renders the whole image with the tracer's settings, tiles in
-    /// parallel. Returns the film (colour, plus depth and normal of the
+    /// Renders the image (or its `settings.crop` window; pixels outside stay
+    /// black) with the tracer's settings, tiles in parallel. Returns the film (colour, plus depth and normal of the
     /// first sample of each pixel, or of its top-left corner for adaptive
     /// sampling) and the ray counts.
     pub fn render(&self, progress: &dyn Progress) -> Result<(Film, RenderStats)> {
@@ -502,16 +502,26 @@ impl<'s> Tracer<'s> {
         }
         let rays = AtomicU64::new(0);
         let primary = AtomicU64::new(0);
-        let film = render_tiles(s.width, s.height, TILE, "whitted", progress, |rect| {
-            let mut count = (0u64, 0u64);
-            let tile = match s.aa {
-                AaMode::Adaptive => self.adaptive_tile(rect, &mut count),
-                _ => self.supersample_tile(rect, &mut count),
-            };
-            rays.fetch_add(count.0, Ordering::Relaxed);
-            primary.fetch_add(count.1, Ordering::Relaxed);
-            tile
-        })?;
+        // Tiles are cut to the crop window; every pixel depends only on its
+        // own position, so a cropped render equals the full one inside it.
+        let film = render_tiles_in(
+            s.width,
+            s.height,
+            s.crop_rect(),
+            TILE,
+            "whitted",
+            progress,
+            |rect| {
+                let mut count = (0u64, 0u64);
+                let tile = match s.aa {
+                    AaMode::Adaptive => self.adaptive_tile(rect, &mut count),
+                    _ => self.supersample_tile(rect, &mut count),
+                };
+                rays.fetch_add(count.0, Ordering::Relaxed);
+                primary.fetch_add(count.1, Ordering::Relaxed);
+                tile
+            },
+        )?;
         Ok((
             film,
             RenderStats {
@@ -1170,6 +1180,32 @@ mod tests {
         let column: Vec<Vec3> = (0..10).map(|y| f.get(10, y)).collect();
         assert!(column.iter().any(|c| (*c - bg).abs().max_element() < 1e-6));
         assert!(column.iter().any(|c| (*c - bg).abs().max_element() > 1e-3));
+    }
+
+    #[test]
+    fn crop_window_matches_the_full_render() {
+        let mut s = floor_scene();
+        let g = s.add_material(glass(1.5, true));
+        add_sphere(&mut s, Vec3::new(0.0, 1.0, 0.0), 0.8, g);
+        for aa in [AaMode::Supersample, AaMode::Adaptive] {
+            let full_s = RenderSettings {
+                aa,
+                samples: 2,
+                ..settings(40, 30)
+            };
+            let crop_s = RenderSettings {
+                crop: Some([7, 5, 29, 23]),
+                ..full_s.clone()
+            };
+            let full = render(&s, &full_s, &NoProgress).expect("render");
+            let crop = render(&s, &crop_s, &NoProgress).expect("render");
+            for y in 5..23 {
+                for x in 7..29 {
+                    assert_eq!(full.get(x, y), crop.get(x, y), "{aa:?} at {x},{y}");
+                }
+            }
+            assert_eq!(crop.get(0, 0), Vec3::ZERO);
+        }
     }
 
     #[test]
