@@ -375,6 +375,28 @@ fn write_cache(dir: &Path, exr: &Path, meta: &Path, film: &Film, m: &CacheMeta) 
     Ok(())
 }
 
+/// Forwards to another [`Progress`], naming the technique in each stage
+/// (`"phong: tiles"`), so a front end shows which render is running.
+struct Labelled<'a> {
+    inner: &'a dyn Progress,
+    label: &'a str,
+}
+
+impl Progress for Labelled<'_> {
+    fn begin(&self, stage: &str, total: u64) {
+        self.inner.begin(&format!("{}: {stage}", self.label), total);
+    }
+    fn advance(&self, n: u64) {
+        self.inner.advance(n);
+    }
+    fn message(&self, text: &str) {
+        self.inner.message(text);
+    }
+    fn cancelled(&self) -> bool {
+        self.inner.cancelled()
+    }
+}
+
 /// Measures `film` against `reference`.
 fn measure(
     technique: Technique,
@@ -444,12 +466,12 @@ pub fn compare(
     let (ref_film, ref_seconds, cache) = match (cached, &paths) {
         (Some((film, secs)), Some((_, exr, _))) => (film, secs, CacheStatus::Hit(exr.clone())),
         _ => {
-            progress.message(&format!(
-                "reference: {} {} spp",
-                ref_settings.technique.name(),
-                ref_settings.samples
-            ));
-            let (film, stats) = render_with_stats(scene, &ref_settings, progress)?;
+            let label = format!("reference {}", ref_settings.technique.name());
+            let labelled = Labelled {
+                inner: progress,
+                label: &label,
+            };
+            let (film, stats) = render_with_stats(scene, &ref_settings, &labelled)?;
             let secs = stats.elapsed.as_secs_f64();
             let cache = match &paths {
                 None => CacheStatus::Disabled,
@@ -483,7 +505,11 @@ pub fn compare(
             technique: t,
             ..base.clone()
         };
-        let (film, stats) = render_with_stats(scene, &settings, progress)?;
+        let labelled = Labelled {
+            inner: progress,
+            label: t.name(),
+        };
+        let (film, stats) = render_with_stats(scene, &settings, &labelled)?;
         entries.push(measure(
             t,
             settings,
@@ -552,6 +578,34 @@ mod tests {
         let mut other = scene.clone();
         other.background = chiaro_core::Vec3::splat(0.5);
         assert_ne!(k, cache_key(&other, &s));
+    }
+
+    #[test]
+    fn labelled_progress_names_the_technique_and_forwards_cancel() {
+        use std::sync::Mutex;
+        #[derive(Default)]
+        struct Record(Mutex<Vec<String>>, std::sync::atomic::AtomicBool);
+        impl Progress for Record {
+            fn begin(&self, stage: &str, total: u64) {
+                if let Ok(mut v) = self.0.lock() {
+                    v.push(format!("{stage}/{total}"));
+                }
+            }
+            fn advance(&self, _n: u64) {}
+            fn cancelled(&self) -> bool {
+                self.1.load(std::sync::atomic::Ordering::Relaxed)
+            }
+        }
+        let rec = Record::default();
+        let l = Labelled {
+            inner: &rec,
+            label: "phong",
+        };
+        l.begin("tiles", 9);
+        assert!(!l.cancelled());
+        rec.1.store(true, std::sync::atomic::Ordering::Relaxed);
+        assert!(l.cancelled());
+        assert_eq!(*rec.0.lock().expect("not poisoned"), ["phong: tiles/9"]);
     }
 
     #[test]

@@ -162,6 +162,12 @@ fn reference_is_cached_and_reused() {
     assert_eq!(second.reference.seconds, first.reference.seconds);
     assert!(second.report("s").reference.cached);
 
+    // A damaged cache file is rendered again and replaced.
+    std::fs::write(file, b"not an EXR").expect("damages the cache");
+    let repaired = run();
+    assert_eq!(repaired.cache, CacheStatus::Stored(file.clone()));
+    assert_eq!(run().cache, CacheStatus::Hit(file.clone()));
+
     // Other reference settings miss the cache.
     let mut other = base.clone();
     other.seed += 1;
