@@ -988,7 +988,7 @@ mod tests {
         // A patch of the real mesh for the 100k-ray comparison (brute force
         // is O(rays x triangles)), then the whole bunny with fewer rays.
         let mut patch = mesh.clone();
-        patch.indices.truncate(4000);
+        patch.indices.truncate(2500);
         let s = scene_of(patch, &[]);
         let ps = PreparedScene::new(&s, PrepareOptions::default());
         check_against_oracle(&ps, &random_rays(&ps, 100_000, 1));
@@ -1000,7 +1000,7 @@ mod tests {
                 ..Default::default()
             },
         );
-        check_against_oracle(&ps, &random_rays(&ps, 3_000, 2));
+        check_against_oracle(&ps, &random_rays(&ps, 2_000, 2));
     }
 
     #[test]
