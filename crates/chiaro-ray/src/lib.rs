@@ -5,5 +5,6 @@
 //!   supersampling; its [`whitted::Tracer`] is reused by the hybrid technique.
 //! - [`preview`]: the eye-light preview.
 
+pub mod path;
 pub mod preview;
 pub mod whitted;

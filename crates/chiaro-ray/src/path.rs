@@ -95,12 +95,12 @@ pub fn render_with(
                     let dir = cam.ray_direction(px as f32 + j.x, py as f32 + j.y, w, h);
                     let (l, first) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
                     sum += sanitize(l);
-                    if s == 0 {
-                        if let Some((t, n)) = first {
-                            let i = (ty * rect.width + tx) as usize;
-                            tile.depth[i] = t;
-                            tile.normal[i] = n;
-                        }
+                    if s == 0
+                        && let Some((t, n)) = first
+                    {
+                        let i = (ty * rect.width + tx) as usize;
+                        tile.depth[i] = t;
+                        tile.normal[i] = n;
                     }
                 }
                 tile.color[(ty * rect.width + tx) as usize] = sum / spp as f32;
@@ -408,11 +408,12 @@ impl<'a, 's> PathTracer<'a, 's> {
             return Vec3::ZERO;
         }
         let mut w = 1.0;
-        if mis && !s.is_delta {
-            if let Some(light_pdf) = Self::light_solid_angle_pdf(light, surf.p, s.point) {
-                let bsdf_pdf = self.scatter_pdf(m, n, wo, s.wi);
-                w = power_heuristic(light_pdf * pick, bsdf_pdf);
-            }
+        if mis
+            && !s.is_delta
+            && let Some(light_pdf) = Self::light_solid_angle_pdf(light, surf.p, s.point)
+        {
+            let bsdf_pdf = self.scatter_pdf(m, n, wo, s.wi);
+            w = power_heuristic(light_pdf * pick, bsdf_pdf);
         }
         PI * f_cos * s.intensity * (w / pick)
     }

@@ -21,6 +21,7 @@
 //! ```
 
 pub mod compare;
+pub mod hybrid;
 pub mod settings;
 pub mod sheet;
 
@@ -60,6 +61,8 @@ pub fn available_techniques() -> &'static [Technique] {
         Technique::Gouraud,
         Technique::Phong,
         Technique::Whitted,
+        Technique::Radiosity,
+        Technique::Hybrid,
         Technique::Path,
     ]
 }
@@ -154,17 +157,15 @@ pub fn render_with_stats(
             let (film, stats) = chiaro_ray::whitted::render_with_stats(scene, settings, progress)?;
             (film, stats.rays)
         }
+        Technique::Radiosity => (chiaro_radiosity::render(scene, settings, progress)?, 0),
+        Technique::Hybrid => {
+            let (film, stats) = hybrid::render(scene, settings, progress)?;
+            (film, stats.rays)
+        }
         Technique::Path => {
             let (film, stats) =
                 chiaro_ray::path::render_with(scene, settings, progress, &accelerator)?;
             (film, stats.rays)
-        }
-        other => {
-            return Err(CoreError::UnknownTechnique {
-                name: other.name().into(),
-                available: technique_list(),
-            }
-            .into());
         }
     };
     let stats = RenderStats {
