@@ -29,7 +29,8 @@ fn start() -> SocketAddr {
 /// Sends raw bytes and returns the whole response.
 fn raw(addr: SocketAddr, request: &[u8]) -> String {
     let mut s = TcpStream::connect(addr).expect("connect");
-    s.set_read_timeout(Some(Duration::from_secs(30))).expect("timeout");
+    s.set_read_timeout(Some(Duration::from_secs(30)))
+        .expect("timeout");
     s.write_all(request).expect("write");
     let mut out = Vec::new();
     let _ = s.read_to_end(&mut out);
@@ -37,7 +38,10 @@ fn raw(addr: SocketAddr, request: &[u8]) -> String {
 }
 
 fn get(addr: SocketAddr, path: &str) -> String {
-    raw(addr, format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes())
+    raw(
+        addr,
+        format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes(),
+    )
 }
 
 type Ws = WebSocket<tungstenite::stream::MaybeTlsStream<TcpStream>>;
@@ -57,7 +61,9 @@ enum Got {
 fn next(ws: &mut Ws) -> Got {
     loop {
         match ws.read() {
-            Ok(Message::Text(t)) => return Got::Text(serde_json::from_str(t.as_str()).expect("JSON")),
+            Ok(Message::Text(t)) => {
+                return Got::Text(serde_json::from_str(t.as_str()).expect("JSON"));
+            }
             Ok(Message::Binary(b)) => {
                 let n = u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize;
                 let h: Value = serde_json::from_slice(&b[4..4 + n]).expect("header JSON");
@@ -106,14 +112,23 @@ fn http_routes_and_bad_requests() {
     let body = info.split("\r\n\r\n").nth(1).expect("body");
     let v: Value = serde_json::from_str(body).expect("JSON");
     assert_eq!(v["scene"], "cornell-box");
-    assert!(v["techniques"].as_array().expect("list").iter().any(|t| t == "whitted"));
+    assert!(
+        v["techniques"]
+            .as_array()
+            .expect("list")
+            .iter()
+            .any(|t| t == "whitted")
+    );
     assert!(get(addr, "/../../etc/passwd").starts_with("HTTP/1.1 404"));
     assert!(get(addr, "/scenes/cornell-box.toml").starts_with("HTTP/1.1 404"));
     assert!(raw(addr, b"POST / HTTP/1.1\r\nContent-Length: 0\r\n\r\n").starts_with("HTTP/1.1 405"));
     assert!(raw(addr, b"\x00\x01 garbage \xff\r\n\r\n").starts_with("HTTP/1.1 400"));
     let huge = format!("GET / HTTP/1.1\r\nX: {}\r\n\r\n", "a".repeat(40_000));
     assert!(raw(addr, huge.as_bytes()).starts_with("HTTP/1.1 431"));
-    assert!(get(addr, "/ws").starts_with("HTTP/1.1 400"), "no upgrade headers");
+    assert!(
+        get(addr, "/ws").starts_with("HTTP/1.1 400"),
+        "no upgrade headers"
+    );
     // A client that connects and says nothing, or closes half-way, is harmless.
     drop(TcpStream::connect(addr).expect("connect"));
     let mut half = TcpStream::connect(addr).expect("connect");
@@ -131,18 +146,27 @@ fn renders_bands_and_answers_done() {
     assert_eq!(done["id"], 7);
     assert_eq!(done["technique"], "preview");
     assert!(frames.len() >= 2, "progressive bands ({})", frames.len());
-    let rows: u64 = frames.iter().map(|(h, _)| h["h"].as_u64().expect("h")).sum();
+    let rows: u64 = frames
+        .iter()
+        .map(|(h, _)| h["h"].as_u64().expect("h"))
+        .sum();
     assert_eq!(rows, 32, "bands cover the image once");
     for (h, png) in &frames {
         assert_eq!(h["kind"], "tile");
         assert!(png.starts_with(PNG_MAGIC));
     }
     // Whole-frame (non-progressive) renders send one tile.
-    send(&mut c, json!({"type": "render", "id": 8, "width": 16, "height": 12,
-        "views": [{"technique": "phong", "shadows": "map", "model": "blinn"}]}));
+    send(
+        &mut c,
+        json!({"type": "render", "id": 8, "width": 16, "height": 12,
+        "views": [{"technique": "phong", "shadows": "map", "model": "blinn"}]}),
+    );
     let (done, frames) = until(&mut c, "done");
     assert_eq!((done["id"].as_u64(), frames.len()), (Some(8), 1));
-    assert_eq!((frames[0].0["w"].as_u64(), frames[0].0["h"].as_u64()), (Some(16), Some(12)));
+    assert_eq!(
+        (frames[0].0["w"].as_u64(), frames[0].0["h"].as_u64()),
+        (Some(16), Some(12))
+    );
 }
 
 #[test]
@@ -186,7 +210,10 @@ fn bad_json_and_absurd_requests_get_errors_and_the_connection_survives() {
 fn oversized_message_closes_only_that_connection() {
     let addr = start();
     let mut c = ws(addr);
-    let big = format!("{{\"type\":\"render\",\"pad\":\"{}\"}}", "x".repeat(200_000));
+    let big = format!(
+        "{{\"type\":\"render\",\"pad\":\"{}\"}}",
+        "x".repeat(200_000)
+    );
     let _ = c.send(Message::text(big));
     let mut closed = false;
     for _ in 0..4 {
@@ -199,7 +226,10 @@ fn oversized_message_closes_only_that_connection() {
             Got::Frame(..) => panic!("no frames expected"),
         }
     }
-    assert!(closed, "the server drops a connection that sends oversized messages");
+    assert!(
+        closed,
+        "the server drops a connection that sends oversized messages"
+    );
     let mut d = ws(addr);
     send(&mut d, small_render(1, "preview"));
     assert_eq!(until(&mut d, "done").0["id"], 1);
@@ -211,8 +241,11 @@ fn closing_the_tab_mid_render_cancels_it_and_the_server_goes_on() {
     for _ in 0..3 {
         let mut c = ws(addr);
         // A render far longer than the test: path tracing at the page limits.
-        send(&mut c, json!({"type": "render", "id": 1, "width": 1024, "height": 1024,
-            "progressive": true, "views": [{"technique": "path", "samples": 256}]}));
+        send(
+            &mut c,
+            json!({"type": "render", "id": 1, "width": 1024, "height": 1024,
+            "progressive": true, "views": [{"technique": "path", "samples": 256}]}),
+        );
         std::thread::sleep(Duration::from_millis(50));
         drop(c);
     }
@@ -223,7 +256,10 @@ fn closing_the_tab_mid_render_cancels_it_and_the_server_goes_on() {
     let n = s.read(&mut buf).expect("read");
     let reply = String::from_utf8_lossy(&buf[..n]);
     assert!(reply.starts_with("HTTP/1.1 101"), "{reply}");
-    assert!(reply.contains("s3pPLMBiTxaQ9kYGzzhZRbK+xOo="), "RFC 6455 example accept key: {reply}");
+    assert!(
+        reply.contains("s3pPLMBiTxaQ9kYGzzhZRbK+xOo="),
+        "RFC 6455 example accept key: {reply}"
+    );
     drop(s);
     // The cancelled renders give the CPU back: a new page renders.
     let mut c = ws(addr);
@@ -235,26 +271,45 @@ fn closing_the_tab_mid_render_cancels_it_and_the_server_goes_on() {
 fn a_newer_request_supersedes_the_running_one() {
     let addr = start();
     let mut c = ws(addr);
-    send(&mut c, json!({"type": "render", "id": 1, "width": 1024, "height": 1024,
-        "progressive": true, "views": [{"technique": "path", "samples": 256}]}));
+    send(
+        &mut c,
+        json!({"type": "render", "id": 1, "width": 1024, "height": 1024,
+        "progressive": true, "views": [{"technique": "path", "samples": 256}]}),
+    );
     send(&mut c, small_render(2, "preview"));
     let (done, _) = until(&mut c, "done");
-    assert_eq!(done["id"], 2, "the long render was cancelled, not finished first");
+    assert_eq!(
+        done["id"], 2,
+        "the long render was cancelled, not finished first"
+    );
 }
 
 #[test]
 fn split_view_sends_difference_and_metrics_and_saves() {
     let addr = start();
     let mut c = ws(addr);
-    send(&mut c, json!({"type": "render", "id": 3, "width": 24, "height": 24,
-        "views": [{"technique": "phong"}, {"technique": "path", "samples": 4}]}));
+    send(
+        &mut c,
+        json!({"type": "render", "id": 3, "width": 24, "height": 24,
+        "views": [{"technique": "phong"}, {"technique": "path", "samples": 4}]}),
+    );
     let (m, frames) = until(&mut c, "metrics");
     assert_eq!(m["id"], 3);
-    let psnr = m["psnr"].as_f64().expect("finite PSNR between different techniques");
+    let psnr = m["psnr"]
+        .as_f64()
+        .expect("finite PSNR between different techniques");
     assert!(psnr > 5.0 && psnr < 60.0, "{psnr}");
     assert!(m["rmse"].as_f64().expect("rmse") > 0.0);
-    assert!(frames.iter().any(|(h, p)| h["kind"] == "diff" && p.starts_with(PNG_MAGIC)));
-    assert!(frames.iter().any(|(h, _)| h["view"] == 1 && h["kind"] == "tile"));
+    assert!(
+        frames
+            .iter()
+            .any(|(h, p)| h["kind"] == "diff" && p.starts_with(PNG_MAGIC))
+    );
+    assert!(
+        frames
+            .iter()
+            .any(|(h, _)| h["view"] == 1 && h["kind"] == "tile")
+    );
     send(&mut c, json!({"type": "save", "view": 1, "format": "exr"}));
     match next(&mut c) {
         Got::Frame(h, bytes) => {
@@ -272,13 +327,20 @@ fn split_view_sends_difference_and_metrics_and_saves() {
         }
         _ => panic!("expected a file"),
     }
-    send(&mut c, json!({"type": "save", "view": 0, "format": "../../x"}));
+    send(
+        &mut c,
+        json!({"type": "save", "view": 0, "format": "../../x"}),
+    );
     assert!(matches!(next(&mut c), Got::Text(v) if v["type"] == "error"));
 }
 
 #[test]
 fn hosts_are_ip_addresses_and_loopback_by_default() {
-    assert!(parse_host(&ServeOptions::default().host).expect("valid").is_loopback());
+    assert!(
+        parse_host(&ServeOptions::default().host)
+            .expect("valid")
+            .is_loopback()
+    );
     assert!(parse_host("localhost").expect("valid").is_loopback());
     assert!(parse_host("0.0.0.0").is_ok(), "asked for explicitly");
     assert!(parse_host("example.com").is_err());
