@@ -312,8 +312,11 @@ def write(
         depth = getattr(image, "depth", None)
     if normal is None:
         normal = getattr(image, "normal", None)
+    arr = np.asarray(image, dtype=np.float32)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise ValueError(f"image: expected an array of shape (H, W, 3), got {arr.shape}")
     _chiaro.write(
-        os.fspath(path), np.asarray(image, dtype=np.float32), depth, normal,
+        os.fspath(path), arr, depth, normal,
         tonemap, exposure, bit_depth16,
     )
 
