@@ -104,6 +104,12 @@ pub struct RenderArgs {
     /// Write 16-bit PNG.
     #[arg(long)]
     pub png16: bool,
+    /// Radiosity/hybrid: save the view-independent solution to this file.
+    #[arg(long, value_name = "FILE")]
+    pub save_solution: Option<PathBuf>,
+    /// Radiosity/hybrid: render from this saved solution instead of solving.
+    #[arg(long, value_name = "FILE")]
+    pub solution: Option<PathBuf>,
 }
 
 /// `chiaro compare`.

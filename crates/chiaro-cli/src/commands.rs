@@ -70,7 +70,11 @@ pub fn render(args: RenderArgs) -> Result<()> {
             .context("setting the thread count")?;
     }
     let bar = crate::progress::Bar::new();
-    let result = chiaro::render_with_stats(&scene, &settings, &bar);
+    let files = chiaro::SolutionFiles {
+        load: args.solution.as_deref(),
+        save: args.save_solution.as_deref(),
+    };
+    let result = chiaro::render_with_solution_files(&scene, &settings, &bar, files);
     bar.finish();
     let (film, stats) = result?;
     let palette = args.palette.map(|p| match p {
@@ -102,7 +106,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
     if stats.rays > 0 {
         line += &format!(", {:.2} Mrays/s", stats.rays as f64 / secs / 1e6);
     } else {
-        line += &format!(", {:.2} Mtriangles/s", stats.triangles as f64 / secs / 1e6);
+        line += &format!(", {} triangles", stats.triangles);
     }
     eprintln!("{line}");
     Ok(())

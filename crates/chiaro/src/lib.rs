@@ -188,3 +188,70 @@ pub fn scene_bounds(scene: &Scene) -> chiaro_core::geometry::Aabb {
     )
     .bounds
 }
+
+/// Where a radiosity solution comes from and goes to, for the techniques
+/// that solve radiosity (`radiosity`, `hybrid`): a solution is view
+/// independent, so it can be solved once, saved, and rendered from other
+/// cameras without solving again.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SolutionFiles<'a> {
+    /// Read the solution from this file instead of solving (refused with a
+    /// clear error when it belongs to another scene).
+    pub load: Option<&'a std::path::Path>,
+    /// Write the solution to this file (atomically) after solving.
+    pub save: Option<&'a std::path::Path>,
+}
+
+/// [`render_with_stats`] for `radiosity` and `hybrid` with a saved or
+/// to-be-saved solution. Other techniques with a file given are an error.
+pub fn render_with_solution_files(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    files: SolutionFiles<'_>,
+) -> Result<(Film, RenderStats)> {
+    if files.load.is_none() && files.save.is_none() {
+        return render_with_stats(scene, settings, progress);
+    }
+    if !matches!(settings.technique, Technique::Radiosity | Technique::Hybrid) {
+        return Err(CoreError::BadSetting {
+            key: "solution".into(),
+            message: format!(
+                "a radiosity solution file needs --technique radiosity or hybrid, not {}",
+                settings.technique.name()
+            ),
+        }
+        .into());
+    }
+    check_settings(settings)?;
+    let start = Instant::now();
+    let solution = match files.load {
+        Some(path) => {
+            let file = std::fs::File::open(path).map_err(|e| chiaro_io::IoError::io(path, e))?;
+            chiaro_radiosity::RadiositySolution::load(std::io::BufReader::new(file), scene)
+                .map_err(|e| Error::Io(chiaro_io::IoError::format(path, e.to_string())))?
+        }
+        None => chiaro_radiosity::solve(scene, settings, progress)?,
+    };
+    if let Some(path) = files.save {
+        let mut bytes = Vec::new();
+        solution.save(&mut bytes)?;
+        chiaro_io::output::write_atomically(path, &bytes)?;
+    }
+    let (film, rays) = match settings.technique {
+        Technique::Hybrid => {
+            let (film, stats) = hybrid::render_with_solution(scene, solution, settings, progress)?;
+            (film, stats.rays)
+        }
+        _ => (
+            chiaro_radiosity::render_solution(scene, &solution, settings, progress)?,
+            0,
+        ),
+    };
+    let stats = RenderStats {
+        elapsed: start.elapsed(),
+        triangles: scene.triangle_count() as u64,
+        rays,
+    };
+    Ok((film, stats))
+}
