@@ -5,17 +5,75 @@
 //! and the peak resident memory; writes PNGs of the frames to `$OUT_DIR` or
 //! /tmp when given `--png`.
 //!
-//! `cargo run --release -p chiaro-raster --example raster_bench -- [frames] [--png] [--no-cull]`
+//! Shadows are off (the peer draws none); `--issue4` instead times every
+//! shadow method and transparency mode (issue 4). Each line also splits the
+//! median frame into the renderer's passes (the `Progress` stages).
+//!
+//! `cargo run --release -p chiaro-raster --example raster_bench -- [frames] [--png] [--no-cull] [--issue4] [--crop] [--only NAME]`
 
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
-use chiaro_core::progress::NoProgress;
+use chiaro_core::progress::Progress;
 use chiaro_core::scene::{
     Attenuation, Camera, Geometry, Light, Material, Mesh, Object, RenderSettings, Scene, ShadeMode,
-    Technique, Transform,
+    ShadowMethod, Technique, Transform, TransparencyMode,
 };
 use chiaro_core::{Vec2, Vec3};
 use std::collections::HashMap;
+use std::sync::Mutex;
 use std::time::Instant;
+
+/// A [`Progress`] that timestamps the start of every stage, so a frame's
+/// time splits into the renderer's passes.
+#[derive(Default)]
+struct PhaseTimer {
+    marks: Mutex<Vec<(String, Instant)>>,
+}
+
+impl Progress for PhaseTimer {
+    fn begin(&self, stage: &str, _total: u64) {
+        if let Ok(mut m) = self.marks.lock() {
+            m.push((stage.to_owned(), Instant::now()));
+        }
+    }
+    fn advance(&self, _n: u64) {}
+}
+
+impl PhaseTimer {
+    /// `(stage, ms)` from each stage's start to the next one's (the last
+    /// stage ends at `end`).
+    fn phases(&self, end: Instant) -> Vec<(String, f64)> {
+        let m = self.marks.lock().map(|m| m.clone()).unwrap_or_default();
+        m.iter()
+            .enumerate()
+            .map(|(i, (name, t))| {
+                let next = m.get(i + 1).map_or(end, |n| n.1);
+                (name.clone(), (next - *t).as_secs_f64() * 1e3)
+            })
+            .collect()
+    }
+}
+
+/// CPU time of the whole process so far (user + system, all threads), in
+/// ms, from /proc/self/stat (10 ms ticks); NaN where unavailable. Unlike
+/// wall time it does not grow when other processes take the cores.
+fn cpu_ms() -> f64 {
+    std::fs::read_to_string("/proc/self/stat")
+        .ok()
+        .and_then(|s| {
+            // Fields after the parenthesised command name; utime and stime
+            // are fields 14 and 15 of the whole line.
+            let rest = s.rsplit_once(')')?.1;
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+            Some(ticks * 10.0)
+        })
+        .unwrap_or(f64::NAN)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
 
 /// An icosphere: the icosahedron subdivided `levels` times, projected to the
 /// sphere (20 * 4^levels triangles), with exact sphere normals.
@@ -151,54 +209,183 @@ fn peak_rss_mib() -> f64 {
         .map_or(f64::NAN, |kb| kb / 1024.0)
 }
 
+/// One benchmark case: a name, the scene, the shading mode and settings.
+struct Case {
+    name: String,
+    scene: usize,
+    mode: ShadeMode,
+    settings: RenderSettings,
+}
+
+fn settings(technique: Technique, cull: bool) -> RenderSettings {
+    RenderSettings {
+        technique,
+        width: 1920,
+        height: 1080,
+        cull_backfaces: cull,
+        // The peer draws no shadows.
+        shadows: ShadowMethod::None,
+        ..RenderSettings::default()
+    }
+}
+
+/// The scene with every third sphere transparent (`kt = 0.6`).
+fn transparent_scene() -> Scene {
+    let mut s = scene();
+    let glass = s.add_material(Material {
+        ambient: Vec3::splat(0.1),
+        diffuse: Vec3::new(0.2, 0.4, 0.7),
+        specular: Vec3::ONE,
+        shininess: 32.0,
+        transmit: Vec3::splat(0.6),
+        ..Material::default()
+    });
+    for (k, o) in s.objects.iter_mut().enumerate() {
+        if k % 3 == 0 {
+            o.material = glass;
+        }
+    }
+    s
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let frames: usize = args.iter().find_map(|a| a.parse().ok()).unwrap_or(5).max(1);
     let png = args.iter().any(|a| a == "--png");
     let cull = !args.iter().any(|a| a == "--no-cull");
-    let s = scene();
+    let issue4 = args.iter().any(|a| a == "--issue4");
+    let crop = args.iter().any(|a| a == "--crop");
+    let scenes = [scene(), transparent_scene()];
     let t0 = Instant::now();
-    let ps = PreparedScene::new(&s, PrepareOptions::default());
-    let prep = t0.elapsed().as_secs_f64() * 1e3;
+    let prepared: Vec<PreparedScene<'_>> = scenes
+        .iter()
+        .map(|s| PreparedScene::new(s, PrepareOptions::default()))
+        .collect();
+    let prep = t0.elapsed().as_secs_f64() * 1e3 / 2.0;
     println!(
         "scene: {} triangles, {} vertices; prepare {prep:.1} ms; threads {}; cull {cull}",
-        ps.triangle_count(),
-        ps.positions.len(),
+        prepared[0].triangle_count(),
+        prepared[0].positions.len(),
         rayon::current_num_threads()
     );
-    for (name, mode, technique) in [
-        ("phong", ShadeMode::Phong, Technique::Phong),
-        ("gouraud", ShadeMode::Gouraud, Technique::Gouraud),
-        ("flat", ShadeMode::Flat, Technique::Flat),
-    ] {
-        let st = RenderSettings {
-            technique,
-            width: 1920,
-            height: 1080,
-            cull_backfaces: cull,
-            ..RenderSettings::default()
-        };
-        let mut times = Vec::new();
-        let mut film = None;
-        for _ in 0..=frames {
-            let t = Instant::now();
-            let f = chiaro_raster::render_prepared(&ps, &st, mode, &NoProgress);
-            times.push(t.elapsed().as_secs_f64() * 1e3);
-            film = f.ok();
+    let mut cases = Vec::new();
+    if issue4 {
+        for (name, sh) in [
+            ("phong, shadows none", ShadowMethod::None),
+            ("phong, shadow rays", ShadowMethod::Ray),
+            ("phong, shadow maps", ShadowMethod::Map),
+            ("phong, shadow volumes", ShadowMethod::Volume),
+        ] {
+            cases.push(Case {
+                name: name.into(),
+                scene: 0,
+                mode: ShadeMode::Phong,
+                settings: RenderSettings {
+                    shadows: sh,
+                    ..settings(Technique::Phong, cull)
+                },
+            });
         }
-        times.remove(0);
-        times.sort_by(f64::total_cmp);
+        cases.push(Case {
+            name: "phong, 1/3 of spheres kt=0.6 drawn opaque".into(),
+            scene: 0,
+            mode: ShadeMode::Phong,
+            settings: settings(Technique::Phong, cull),
+        });
+        for (name, t) in [
+            ("screen-door", TransparencyMode::ScreenDoor),
+            ("interpolated", TransparencyMode::Interpolated),
+            ("filtered", TransparencyMode::Filtered),
+        ] {
+            cases.push(Case {
+                name: format!("phong, 1/3 of spheres kt=0.6, {name}"),
+                scene: 1,
+                mode: ShadeMode::Phong,
+                settings: RenderSettings {
+                    transparency: Some(t),
+                    ..settings(Technique::Phong, cull)
+                },
+            });
+        }
+    } else {
+        for (name, mode, technique) in [
+            ("phong", ShadeMode::Phong, Technique::Phong),
+            ("gouraud", ShadeMode::Gouraud, Technique::Gouraud),
+            ("flat", ShadeMode::Flat, Technique::Flat),
+        ] {
+            cases.push(Case {
+                name: name.into(),
+                scene: 0,
+                mode,
+                settings: RenderSettings {
+                    crop: crop.then_some([640, 270, 1280, 810]),
+                    ..settings(technique, cull)
+                },
+            });
+        }
+    }
+    let only: Option<&String> = args
+        .iter()
+        .position(|a| a == "--only")
+        .and_then(|i| args.get(i + 1));
+    for case in cases
+        .iter()
+        .filter(|c| only.is_none_or(|o| c.name.starts_with(o.as_str())))
+    {
+        let ps = &prepared[case.scene];
+        let mut times = Vec::new();
+        let mut cpu = Vec::new();
+        let mut phases: Vec<(String, Vec<f64>)> = Vec::new();
+        let mut film = None;
+        for frame in 0..=frames {
+            let timer = PhaseTimer::default();
+            let c0 = cpu_ms();
+            let t = Instant::now();
+            let f = chiaro_raster::render_prepared(ps, &case.settings, case.mode, &timer);
+            let end = Instant::now();
+            let c1 = cpu_ms();
+            film = f.ok();
+            if frame == 0 {
+                continue; // warm-up
+            }
+            times.push((end - t).as_secs_f64() * 1e3);
+            cpu.push(c1 - c0);
+            for (k, (stage, ms)) in timer.phases(end).into_iter().enumerate() {
+                if phases.len() <= k {
+                    phases.push((stage, Vec::new()));
+                }
+                phases[k].1.push(ms);
+            }
+        }
         let Some(film) = film else {
-            eprintln!("{name}: render failed");
+            eprintln!("{}: render failed", case.name);
             continue;
         };
+        let (min, max) = (
+            times.iter().copied().fold(f64::INFINITY, f64::min),
+            times.iter().copied().fold(0.0, f64::max),
+        );
         let covered =
             film.depth.iter().filter(|d| d.is_finite()).count() as f64 / film.depth.len() as f64;
+        // FNV-1a over the bits of every colour, depth and normal: equal
+        // checksums mean bit-identical pictures.
+        let mut hash = 0xcbf2_9ce4_8422_2325u64;
+        for i in 0..film.depth.len() {
+            let (c, n) = (film.color[i], film.normal[i]);
+            for v in [c.x, c.y, c.z, film.depth[i], n.x, n.y, n.z] {
+                hash = (hash ^ u64::from(v.to_bits())).wrapping_mul(0x100_0000_01b3);
+            }
+        }
+        let split: Vec<String> = phases
+            .iter_mut()
+            .map(|(stage, v)| format!("{stage} {:.1}", median(v)))
+            .collect();
         println!(
-            "{name}: median {:.1} ms/frame (min {:.1}, max {:.1}, n={frames}); covered {:.1}%; peak RSS {:.0} MiB",
-            times[times.len() / 2],
-            times[0],
-            times[times.len() - 1],
+            "{}: median {:.1} ms/frame (min {min:.1}, max {max:.1}, n={frames}) [{}]; cpu {:.0} ms/frame; covered {:.1}%; film {hash:016x}; peak RSS {:.0} MiB",
+            case.name,
+            median(&mut times),
+            split.join(", "),
+            median(&mut cpu),
             covered * 100.0,
             peak_rss_mib()
         );
@@ -209,7 +396,12 @@ fn main() {
                 let e = |v: f32| (v.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0 + 0.5) as u8;
                 image::Rgb([e(c.x), e(c.y), e(c.z)])
             });
-            let path = format!("{dir}/raster_{name}.png");
+            let file: String = case
+                .name
+                .chars()
+                .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                .collect();
+            let path = format!("{dir}/raster_{file}.png");
             if let Err(e) = img.save(&path) {
                 eprintln!("{path}: {e}");
             }

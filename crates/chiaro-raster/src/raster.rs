@@ -85,12 +85,48 @@ pub struct Viewport {
 impl Viewport {
     /// Snapped screen position of a clip-space point (which must have `w > 0`).
     #[inline]
-    fn snap(&self, c: Vec4) -> [i32; 2] {
+    pub(crate) fn snap(&self, c: Vec4) -> [i32; 2] {
         let inv_w = 1.0 / c.w;
         let sx = (c.x * inv_w * 0.5 + 0.5) * self.width as f32;
         let sy = (0.5 - c.y * inv_w * 0.5) * self.height as f32;
         let k = SUBPIXEL as f32;
-        [(sx * k).round() as i32, (sy * k).round() as i32]
+        [round_to_i32(sx * k), round_to_i32(sy * k)]
+    }
+
+    /// Appends the screen triangle with snapped vertices `s` (in the
+    /// source triangle's winding) and closeness keys `key`, unless it is
+    /// degenerate or (with `cull_back`) back-facing. Every setup path ends
+    /// here, so a triangle set up from precomputed vertices is bit for bit
+    /// the one [`Viewport::setup`] makes.
+    #[inline]
+    pub fn emit(&self, s: [[i32; 2]; 3], key: [f32; 3], id: u32, out: &mut Vec<RasterTri>) {
+        let [first, sb, sc] = s;
+        let area = edge_area(first, sb, sc);
+        if area == 0 {
+            return;
+        }
+        // Counter-clockwise in the world (front) is clockwise on a y-down
+        // screen, i.e. negative doubled area.
+        let back = area > 0;
+        if back && self.cull_back {
+            return;
+        }
+        let [k0, kb, kc] = key;
+        out.push(if back {
+            RasterTri {
+                v: [first, sb, sc],
+                key: [k0, kb, kc],
+                id,
+                back,
+            }
+        } else {
+            RasterTri {
+                v: [first, sc, sb],
+                key: [k0, kc, kb],
+                id,
+                back,
+            }
+        });
     }
 
     /// Clips the clip-space triangle `clip` (counter-clockwise seen from its
@@ -135,35 +171,30 @@ impl Viewport {
         let k0 = key(&scratch[0]);
         for i in 1..scratch.len() - 1 {
             let (b, c) = (scratch[i].clip, scratch[i + 1].clip);
-            let (sb, sc) = (self.snap(b), self.snap(c));
-            let area = edge_area(first, sb, sc);
-            if area == 0 {
-                continue;
-            }
-            // Counter-clockwise in the world (front) is clockwise on a y-down
-            // screen, i.e. negative doubled area.
-            let back = area > 0;
-            if back && self.cull_back {
-                continue;
-            }
-            let (kb, kc) = (key(&scratch[i]), key(&scratch[i + 1]));
-            let tri = if area > 0 {
-                RasterTri {
-                    v: [first, sb, sc],
-                    key: [k0, kb, kc],
-                    id,
-                    back,
-                }
-            } else {
-                RasterTri {
-                    v: [first, sc, sb],
-                    key: [k0, kc, kb],
-                    id,
-                    back,
-                }
-            };
-            out.push(tri);
+            let s = [first, self.snap(b), self.snap(c)];
+            self.emit(s, [k0, key(&scratch[i]), key(&scratch[i + 1])], id, out);
         }
+    }
+}
+
+/// `x.round() as i32` (ties away from zero, saturating, NaN to 0), without
+/// the libm call `f32::round` becomes on baseline x86-64: below 2^22 the
+/// truncation and the fraction `x - trunc(x)` are exact, so the result is
+/// the same integer.
+#[inline]
+pub(crate) fn round_to_i32(x: f32) -> i32 {
+    if x.abs() < 4_194_304.0 {
+        let t = x as i32;
+        let f = x - t as f32;
+        if f >= 0.5 {
+            t + 1
+        } else if f <= -0.5 {
+            t - 1
+        } else {
+            t
+        }
+    } else {
+        x.round() as i32
     }
 }
 
@@ -227,6 +258,21 @@ pub fn rasterize<F: FnMut(u32, u32, usize, f32)>(
     t: &RasterTri,
     rect: Rect,
     samples: &[[i32; 2]],
+    frag: F,
+) {
+    rasterize_window(t, rect, rect, samples, frag);
+}
+
+/// [`rasterize`] in `rect`, calling `frag` only for the pixels inside
+/// `window` as well. The keys (rounded from an origin in `rect`) are bit
+/// for bit those [`rasterize`] gives in `rect`: a crop window draws exactly
+/// the samples of the full render.
+#[inline]
+pub fn rasterize_window<F: FnMut(u32, u32, usize, f32)>(
+    t: &RasterTri,
+    rect: Rect,
+    window: Rect,
+    samples: &[[i32; 2]],
     mut frag: F,
 ) {
     let b = t.pixel_bounds();
@@ -284,11 +330,20 @@ pub fn rasterize<F: FnMut(u32, u32, usize, f32)>(
         }
         let key_s = k_origin + dkdx * ox as f64 + dkdy * oy as f64;
         let kx = (dkdx * step as f64) as f32;
-        for y in y0..y1 {
+        // The part of the box inside the window.
+        let (wx0, wx1) = (x0.max(window.x0 as i32), x1.min(window.x1 as i32));
+        let (wy0, wy1) = (y0.max(window.y0 as i32), y1.min(window.y1 as i32));
+        if wx0 >= wx1 || wy0 >= wy1 {
+            return;
+        }
+        for i in 0..3 {
+            row[i] += eb[i] * step * i64::from(wy0 - y0) + ea[i] * step * i64::from(wx0 - x0);
+        }
+        for y in wy0..wy1 {
             let mut e = row;
             let ky_row = (key_s + dkdy * (i64::from(y - y0) * step) as f64) as f32;
-            let mut x = x0;
-            while x < x1 {
+            let mut x = wx0;
+            while x < wx1 {
                 if (e[0] | e[1] | e[2]) >= 0 {
                     let key = ky_row + kx * (x - x0) as f32;
                     frag(x as u32, y as u32, s, key);
@@ -509,5 +564,41 @@ mod tests {
             n += 1;
         });
         assert!(n > 100);
+    }
+
+    #[test]
+    fn fast_rounding_equals_f32_round() {
+        let mut x = -5_000_000.0f32;
+        let special = [
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.5,
+            0.499_999_97,
+            -0.499_999_97,
+            4_194_303.5,
+            -4_194_303.5,
+            4_194_304.0,
+            8_388_607.5,
+            1e10,
+            -1e10,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+        ];
+        for &v in &special {
+            assert_eq!(round_to_i32(v), v.round() as i32, "{v}");
+        }
+        while x < 5_000_000.0 {
+            for d in [0.0, 0.25, 0.5, 0.75] {
+                let v = x + d;
+                assert_eq!(round_to_i32(v), v.round() as i32, "{v}");
+            }
+            x += 977.312_5;
+        }
     }
 }

@@ -47,7 +47,8 @@
 //! itself stays per polygon or per vertex (like OpenGL's separate specular
 //! colour).
 
-use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize, sample_offsets};
+use crate::clip::outcode;
+use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize_window, sample_offsets};
 use crate::shadow::{ShadowVolumes, Shadows, VolumeCounting};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
@@ -410,12 +411,91 @@ impl Ctx<'_, '_> {
     }
 }
 
+/// What shading needs of a visible triangle, fetched once for a run of
+/// samples on it.
+#[derive(Clone, Copy)]
+struct TriData<'a> {
+    t: u32,
+    idx: [usize; 3],
+    p: [Vec3; 3],
+    /// `PreparedScene::face_normal(t)`.
+    ng: Vec3,
+    mode: ShadeMode,
+    material: &'a Material,
+}
+
+impl<'a> Ctx<'a, '_> {
+    /// The data of triangle `t`, from `cache` when it holds `t` (the
+    /// cache then holds `t`).
+    #[inline]
+    fn tri_data(&self, t: u32, cache: &mut Option<TriData<'a>>) -> TriData<'a> {
+        if let Some(c) = cache
+            && c.t == t
+        {
+            return *c;
+        }
+        let idx = self.ps.triangles[t as usize].map(|i| i as usize);
+        let d = TriData {
+            t,
+            idx,
+            p: idx.map(|i| self.ps.positions[i]),
+            ng: self.ps.face_normal(t),
+            mode: self.mode(t),
+            material: self.ps.material(self.ps.tri_material[t as usize]),
+        };
+        *cache = Some(d);
+        d
+    }
+
+    /// [`PreparedScene::triangle_surface`] at barycentrics `(u, v)`, the
+    /// same expressions on the cached triangle; the uv, object-space point
+    /// and tangent (which only textures, bump and normal maps read) are
+    /// computed only when `textured`, zero otherwise.
+    #[inline]
+    fn surface(&self, td: &TriData<'_>, u: f32, v: f32, textured: bool) -> SurfaceHit {
+        let ps = self.ps;
+        let [i0, i1, i2] = td.idx;
+        let w = 1.0 - u - v;
+        let lerp3 = |a: &[Vec3]| a[i0] * w + a[i1] * u + a[i2] * v;
+        let ng = td.ng;
+        let mut ns = lerp3(&ps.normals).try_normalize().unwrap_or(ng);
+        if ns.dot(ng) < 0.0 {
+            // Interpolated normals may point away from a thin face; keep the front side.
+            ns = ng;
+        }
+        let (uv, p_object, tangent) = if textured {
+            let tan = ps.tangents[i0] * w + ps.tangents[i1] * u + ps.tangents[i2] * v;
+            (
+                ps.uvs[i0] * w + ps.uvs[i1] * u + ps.uvs[i2] * v,
+                lerp3(&ps.object_positions),
+                tan.truncate()
+                    .normalize_or_zero()
+                    .extend(if tan.w < 0.0 { -1.0 } else { 1.0 }),
+            )
+        } else {
+            (Vec2::ZERO, Vec3::ZERO, Vec4::ZERO)
+        };
+        SurfaceHit {
+            p: td.p[0] * w + td.p[1] * u + td.p[2] * v,
+            ng,
+            ns,
+            uv,
+            p_object,
+            tangent,
+            color: lerp3(&ps.colors),
+            material: ps.tri_material[td.t as usize],
+            object: ps.tri_object[td.t as usize],
+        }
+    }
+}
+
 /// Per-triangle results of the visibility pass that flat and Gouraud
 /// shading need.
 #[derive(Default)]
 struct PolyShading {
-    /// Flat: one split per triangle (only visible ones are computed).
-    flat: HashMap<u32, Split>,
+    /// Flat: one split per triangle (only visible ones are computed;
+    /// empty when no triangle is flat-shaded).
+    flat: Vec<Split>,
     /// Gouraud: per vertex, front side.
     vertex_front: Vec<Split>,
     /// Gouraud: per vertex, back side (two-sided surfaces seen from behind).
@@ -429,6 +509,8 @@ struct PolyShading {
 /// transparent fragments in front of it, and the shadow-volume counts.
 struct TileVis {
     rect: TileRect,
+    /// The part of the tile inside the crop window: the only pixels drawn.
+    window: Rect,
     /// Nearest opaque (or screen-door) triangle per sample.
     ids: Vec<u32>,
     /// Its closeness key (`1 / w`), `NEG_INFINITY` on the background.
@@ -499,14 +581,9 @@ pub fn render_prepared_with(
     let cam = &scene.camera;
     let clip_from_world = cam.projection_matrix(w as f32 / h as f32) * cam.view_matrix();
 
-    // 1. Vertices to clip space.
-    let clip: Vec<Vec4> = ps
-        .positions
-        .par_iter()
-        .map(|p| clip_from_world * p.extend(1.0))
-        .collect();
-
-    // 2. Setup and binning over fixed chunks (deterministic order).
+    // 1. Vertices to clip space; those inside the clip volume are also
+    // snapped and keyed here, once, instead of once per triangle.
+    progress.begin("vertex", 1);
     let rects = tiles(w, h, TILE_SIZE);
     let tiles_x = w.div_ceil(TILE_SIZE);
     let vp_cull = Viewport {
@@ -519,6 +596,38 @@ pub fn render_prepared_with(
         cull_back: false,
         ..vp_cull
     };
+    let verts: Vec<ScreenVertex> = ps
+        .positions
+        .par_iter()
+        .map(|p| {
+            let clip = clip_from_world * p.extend(1.0);
+            let inside = outcode(clip) == 0;
+            ScreenVertex {
+                clip,
+                inside,
+                xy: if inside { vp_all.snap(clip) } else { [0; 2] },
+                // The key `Viewport::setup` gives an unclipped vertex:
+                // its barycentric (a unit vector) dotted with (1, 1, 1),
+                // exactly 1, over w.
+                key: 1.0 / clip.w,
+            }
+        })
+        .collect();
+
+    // 2. Setup and binning over fixed chunks (deterministic order), into
+    // the tiles that meet the crop window.
+    let [cx0, cy0, cx1, cy1] = settings.crop_rect();
+    let crop = Rect {
+        x0: cx0,
+        y0: cy0,
+        x1: cx1,
+        y1: cy1,
+    };
+    let binner = Binner {
+        crop,
+        tiles_x,
+        ntiles: rects.len(),
+    };
     let cull_material: Vec<bool> = scene
         .materials
         .iter()
@@ -527,44 +636,44 @@ pub fn render_prepared_with(
     let nt = ps.triangles.len();
     let chunk = nt.div_ceil(256).max(4096);
     progress.begin("setup", 1);
-    let chunks: Vec<Bins> = ps
-        .triangles
-        .par_chunks(chunk)
-        .enumerate()
-        .map(|(ci, tris)| {
-            let mut out = Vec::with_capacity(tris.len());
-            let mut scratch = Vec::new();
-            let mut bins: Vec<Vec<u32>> = vec![Vec::new(); rects.len()];
-            for (k, tri) in tris.iter().enumerate() {
-                let t = (ci * chunk + k) as u32;
-                let cull = cull_material
-                    .get(ps.tri_material[t as usize].index())
-                    .copied()
-                    .unwrap_or(settings.cull_backfaces);
-                let vp = if cull { &vp_cull } else { &vp_all };
-                let c = tri.map(|i| clip[i as usize]);
-                let first = out.len();
-                vp.setup(c, t, &mut scratch, &mut out);
-                for (j, rt) in out.iter().enumerate().skip(first) {
-                    let b = rt.pixel_bounds();
-                    if b[2] < 0 || b[3] < 0 || b[0] >= w as i32 || b[1] >= h as i32 {
-                        continue;
+    let chunks: Vec<Bins> = if crop.x0 >= crop.x1 || crop.y0 >= crop.y1 {
+        Vec::new()
+    } else {
+        ps.triangles
+            .par_chunks(chunk)
+            .enumerate()
+            .map(|(ci, tris)| {
+                let mut out = Vec::with_capacity(tris.len());
+                let mut scratch = Vec::new();
+                let mut bins = binner.empty();
+                for (k, tri) in tris.iter().enumerate() {
+                    let t = (ci * chunk + k) as u32;
+                    let cull = cull_material
+                        .get(ps.tri_material[t as usize].index())
+                        .copied()
+                        .unwrap_or(settings.cull_backfaces);
+                    let vp = if cull { &vp_cull } else { &vp_all };
+                    let v = tri.map(|i| &verts[i as usize]);
+                    let first = out.len();
+                    if v[0].inside && v[1].inside && v[2].inside {
+                        vp.emit(
+                            [v[0].xy, v[1].xy, v[2].xy],
+                            [v[0].key, v[1].key, v[2].key],
+                            t,
+                            &mut out,
+                        );
+                    } else {
+                        vp.setup(v.map(|v| v.clip), t, &mut scratch, &mut out);
                     }
-                    let tx0 = (b[0].max(0) as u32) / TILE_SIZE;
-                    let ty0 = (b[1].max(0) as u32) / TILE_SIZE;
-                    let tx1 = (b[2].min(w as i32 - 1) as u32) / TILE_SIZE;
-                    let ty1 = (b[3].min(h as i32 - 1) as u32) / TILE_SIZE;
-                    for ty in ty0..=ty1 {
-                        for tx in tx0..=tx1 {
-                            bins[(ty * tiles_x + tx) as usize].push(j as u32);
-                        }
+                    for (j, rt) in out.iter().enumerate().skip(first) {
+                        binner.bin(rt, j as u32, &mut bins);
                     }
                 }
-            }
-            Bins { tris: out, bins }
-        })
-        .collect();
-    drop(clip);
+                Bins { tris: out, bins }
+            })
+            .collect()
+    };
+    drop(verts);
     let class: Vec<Class> = scene
         .materials
         .iter()
@@ -583,26 +692,14 @@ pub fn render_prepared_with(
         let vols = ShadowVolumes::new(ps);
         let mut out = Vec::new();
         let mut scratch = Vec::new();
-        let mut bins: Vec<Vec<u32>> = vec![Vec::new(); rects.len()];
+        let mut bins = binner.empty();
         for (li, tris) in vols.per_light.iter().enumerate() {
             for tri in tris {
                 let c = tri.map(|p| clip_from_world * p);
                 let first = out.len();
                 vp_all.setup_homogeneous(c, tri.map(|p| p.w), li as u32, &mut scratch, &mut out);
                 for (j, rt) in out.iter().enumerate().skip(first) {
-                    let b = rt.pixel_bounds();
-                    if b[2] < 0 || b[3] < 0 || b[0] >= w as i32 || b[1] >= h as i32 {
-                        continue;
-                    }
-                    let tx0 = (b[0].max(0) as u32) / TILE_SIZE;
-                    let ty0 = (b[1].max(0) as u32) / TILE_SIZE;
-                    let tx1 = (b[2].min(w as i32 - 1) as u32) / TILE_SIZE;
-                    let ty1 = (b[3].min(h as i32 - 1) as u32) / TILE_SIZE;
-                    for ty in ty0..=ty1 {
-                        for tx in tx0..=tx1 {
-                            bins[(ty * tiles_x + tx) as usize].push(j as u32);
-                        }
-                    }
+                    binner.bin(rt, j as u32, &mut bins);
                 }
             }
         }
@@ -612,24 +709,38 @@ pub fn render_prepared_with(
     progress.advance(1);
 
     // 3. Visibility per tile.
-    progress.begin("raster", rects.len() as u64);
-    let spp_us = spp as usize;
-    let vis: Vec<Option<TileVis>> = rects
-        .par_iter()
+    // Only the tiles that meet the crop window, and only their part of it.
+    let active: Vec<(usize, TileRect, Rect)> = rects
+        .iter()
         .enumerate()
-        .map(|(ti, &rect)| {
+        .filter_map(|(ti, &rect)| {
+            let win = Rect {
+                x0: rect.x.max(crop.x0),
+                y0: rect.y.max(crop.y0),
+                x1: (rect.x + rect.width).min(crop.x1),
+                y1: (rect.y + rect.height).min(crop.y1),
+            };
+            (win.x0 < win.x1 && win.y0 < win.y1).then_some((ti, rect, win))
+        })
+        .collect();
+    progress.begin("raster", active.len() as u64);
+    let spp_us = spp as usize;
+    let vis: Vec<Option<TileVis>> = active
+        .par_iter()
+        .map(|&(ti, rect, win)| {
             if progress.cancelled() {
                 return None;
             }
-            let n = (rect.width * rect.height) as usize * spp_us;
-            let mut key = vec![f32::NEG_INFINITY; n];
-            let mut ids = vec![NONE; n];
+            // Keys are interpolated from the tile's origin whatever the window.
             let r = Rect {
                 x0: rect.x,
                 y0: rect.y,
                 x1: rect.x + rect.width,
                 y1: rect.y + rect.height,
             };
+            let n = (rect.width * rect.height) as usize * spp_us;
+            let mut key = vec![f32::NEG_INFINITY; n];
+            let mut ids = vec![NONE; n];
             let tw = rect.width as usize;
             let index = |x: u32, y: u32, s: usize| {
                 (((y - rect.y) as usize) * tw + (x - rect.x) as usize) * spp_us + s
@@ -640,20 +751,22 @@ pub fn render_prepared_with(
                 for &j in &c.bins[ti] {
                     let rt = &c.tris[j as usize];
                     match class_of(rt.id) {
-                        Class::Opaque => rasterize(rt, r, &offsets, |x, y, s, k| {
+                        Class::Opaque => rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
                             let i = index(x, y, s);
                             if k > key[i] {
                                 key[i] = k;
                                 ids[i] = rt.id;
                             }
                         }),
-                        Class::ScreenDoor(kt) => rasterize(rt, r, &offsets, |x, y, s, k| {
-                            let i = index(x, y, s);
-                            if k > key[i] && dither_threshold(x, y, s as u32) >= kt {
-                                key[i] = k;
-                                ids[i] = rt.id;
-                            }
-                        }),
+                        Class::ScreenDoor(kt) => {
+                            rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
+                                let i = index(x, y, s);
+                                if k > key[i] && dither_threshold(x, y, s as u32) >= kt {
+                                    key[i] = k;
+                                    ids[i] = rt.id;
+                                }
+                            })
+                        }
                         Class::Blend(_) => blend.push(rt),
                     }
                 }
@@ -665,7 +778,7 @@ pub fn render_prepared_with(
             } else {
                 let mut list: Vec<(u32, f32, u32)> = Vec::new();
                 for rt in blend {
-                    rasterize(rt, r, &offsets, |x, y, s, k| {
+                    rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
                         let i = index(x, y, s);
                         if k > key[i] {
                             list.push((i as u32, k, rt.id));
@@ -684,6 +797,7 @@ pub fn render_prepared_with(
             };
             let mut tv = TileVis {
                 rect,
+                window: win,
                 ids,
                 keys: key,
                 start,
@@ -722,7 +836,9 @@ pub fn render_prepared_with(
     };
 
     // 4. Per-polygon and per-vertex illumination of visible flat/Gouraud triangles.
+    progress.begin("poly", 1);
     let poly = poly_shading(&ctx, &vis);
+    progress.advance(1);
 
     // 5. Shading.
     progress.begin("shade", vis.len() as u64);
@@ -738,10 +854,57 @@ pub fn render_prepared_with(
         })
         .collect();
     let mut film = Film::new(w, h);
+    // Tiles outside the crop window stay black with infinite depth.
     for t in shaded {
         film.write_tile(&t.ok_or(CoreError::Cancelled)?);
     }
     Ok(film)
+}
+
+/// A vertex of the scene in clip space and, when it is inside the clip
+/// volume, on the screen.
+struct ScreenVertex {
+    clip: Vec4,
+    /// Inside the near plane and the guard band: `xy` and `key` are valid.
+    inside: bool,
+    /// Snapped screen position (see [`Viewport::snap`]).
+    xy: [i32; 2],
+    /// Closeness key `1 / w`.
+    key: f32,
+}
+
+/// Bins screen triangles into the tiles that meet the crop window.
+#[derive(Clone, Copy)]
+struct Binner {
+    crop: Rect,
+    tiles_x: u32,
+    ntiles: usize,
+}
+
+impl Binner {
+    fn empty(&self) -> Vec<Vec<u32>> {
+        vec![Vec::new(); self.ntiles]
+    }
+
+    /// Appends `j` to the bin of every tile whose part of the crop window
+    /// the bounding box of `rt` meets.
+    #[inline]
+    fn bin(&self, rt: &RasterTri, j: u32, bins: &mut [Vec<u32>]) {
+        let b = rt.pixel_bounds();
+        let c = self.crop;
+        if b[2] < c.x0 as i32 || b[3] < c.y0 as i32 || b[0] >= c.x1 as i32 || b[1] >= c.y1 as i32 {
+            return;
+        }
+        let tx0 = (b[0].max(c.x0 as i32) as u32) / TILE_SIZE;
+        let ty0 = (b[1].max(c.y0 as i32) as u32) / TILE_SIZE;
+        let tx1 = (b[2].min(c.x1 as i32 - 1) as u32) / TILE_SIZE;
+        let ty1 = (b[3].min(c.y1 as i32 - 1) as u32) / TILE_SIZE;
+        for ty in ty0..=ty1 {
+            for tx in tx0..=tx1 {
+                bins[(ty * self.tiles_x + tx) as usize].push(j);
+            }
+        }
+    }
 }
 
 /// Triangles binned to tiles: `bins[tile]` indexes `tris`.
@@ -776,7 +939,7 @@ fn count_volumes(
     for &j in &vb.bins[ti] {
         let rt = &vb.tris[j as usize];
         let li = rt.id as usize;
-        rasterize(rt, r, offsets, |x, y, s, k| {
+        rasterize_window(rt, r, tv.window, offsets, |x, y, s, k| {
             let i = (((y - r.y0) as usize) * tw + (x - r.x0) as usize) * spp + s;
             let mut bump = |p: usize, key: f32| {
                 if key == f32::NEG_INFINITY {
@@ -818,48 +981,64 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
                 seen[id as usize] = true;
             }
         }
+        for &(id, _) in &tv.frags {
+            seen[id as usize] = true;
+        }
     }
     let visible: Vec<u32> = (0..ps.triangles.len() as u32)
         .filter(|&t| seen[t as usize])
         .collect();
     drop(seen);
     // Flat: one illumination per polygon.
-    out.flat = visible
+    let flat: Vec<(u32, Split)> = visible
         .par_iter()
         .filter(|&&t| ctx.mode(t) == ShadeMode::Flat)
         .map(|&t| (t, ctx.flat_split(t)))
         .collect();
-    // Gouraud: which vertex sides are needed, and vertices shared across materials.
+    if !flat.is_empty() {
+        out.flat = vec![Split::default(); ps.triangles.len()];
+        for (t, split) in flat {
+            out.flat[t as usize] = split;
+        }
+    }
+    // Gouraud: which vertex sides are needed (by the visible triangles).
     let nv = ps.positions.len();
-    let mut need = vec![0u8; nv];
-    let mut vmat = vec![u32::MAX; nv];
-    let mut conflict = vec![false; nv];
     let gouraud: Vec<(u32, bool)> = visible
         .iter()
         .filter(|&&t| ctx.mode(t) == ShadeMode::Gouraud)
         .map(|&t| (t, ctx.flipped(t)))
         .collect();
+    if gouraud.is_empty() {
+        return out;
+    }
+    let mut need = vec![0u8; nv];
     for &(t, back) in &gouraud {
-        let m = ps.tri_material[t as usize].0;
         for &v in &ps.triangles[t as usize] {
+            need[v as usize] |= if back { 2 } else { 1 };
+        }
+    }
+    // A representative (triangle, corner) for each vertex: the first
+    // Gouraud triangle using it, visible or not (so that a vertex's colour
+    // does not depend on what else is on screen, e.g. on the crop window);
+    // vertices shared by Gouraud faces of different materials are shaded
+    // per corner instead.
+    let mut rep = vec![(u32::MAX, 0u8); nv];
+    let mut vmat = vec![u32::MAX; nv];
+    let mut conflict = vec![false; nv];
+    for t in 0..ps.triangles.len() as u32 {
+        if ctx.mode(t) != ShadeMode::Gouraud {
+            continue;
+        }
+        let m = ps.tri_material[t as usize].0;
+        for (k, &v) in ps.triangles[t as usize].iter().enumerate() {
             let v = v as usize;
-            need[v] |= if back { 2 } else { 1 };
+            if rep[v].0 == u32::MAX {
+                rep[v] = (t, k as u8);
+            }
             if vmat[v] == u32::MAX {
                 vmat[v] = m;
             } else if vmat[v] != m {
                 conflict[v] = true;
-            }
-        }
-    }
-    if gouraud.is_empty() {
-        return out;
-    }
-    // A representative (triangle, corner) for each vertex, for its material.
-    let mut rep = vec![(u32::MAX, 0u8); nv];
-    for &(t, _) in &gouraud {
-        for (k, &v) in ps.triangles[t as usize].iter().enumerate() {
-            if rep[v as usize].0 == u32::MAX {
-                rep[v as usize] = (t, k as u8);
             }
         }
     }
@@ -917,8 +1096,19 @@ fn shade_tile(
     let spp = offsets.len();
     let inv_spp = 1.0 / spp as f32;
     let sub = crate::raster::SUBPIXEL as f32;
-    for py in 0..rect.height {
-        for px in 0..rect.width {
+    let nl = ctx.ps.lights.len();
+    let counts_of = |p: usize| tv.counts.get(p * nl..(p + 1) * nl);
+    let env_background = ctx
+        .ps
+        .scene
+        .environment
+        .as_ref()
+        .is_some_and(|e| e.as_background);
+    // The triangle of the previous sample: neighbours mostly share one.
+    let mut cache: Option<TriData> = None;
+    let win = tv.window;
+    for py in (win.y0 - rect.y)..(win.y1 - rect.y) {
+        for px in (win.x0 - rect.x)..(win.x1 - rect.x) {
             let pi = (py * rect.width + px) as usize;
             let mut sum = Vec3::ZERO;
             let mut best_depth = f32::INFINITY;
@@ -928,18 +1118,21 @@ fn shade_tile(
                 let sy = (rect.y + py) as f32 + o[1] as f32 / sub;
                 let i = pi * spp + s;
                 let id = tv.ids[i];
-                let dir = ctx.rays.dir(sx, sy);
-                let nl = ctx.ps.lights.len();
-                let counts_of = |p: usize| tv.counts.get(p * nl..(p + 1) * nl);
                 let mut r = if id == NONE {
                     SampleResult {
-                        color: background_radiance(ctx.ps.scene, dir),
+                        color: if env_background {
+                            background_radiance(ctx.ps.scene, ctx.rays.dir(sx, sy))
+                        } else {
+                            ctx.ps.scene.background
+                        },
                         depth: f32::INFINITY,
                         normal: Vec3::ZERO,
                         specular: Vec3::ZERO,
                     }
                 } else {
-                    shade_sample(ctx, poly, id, sx, sy, dir, counts_of(i), false)
+                    let td = ctx.tri_data(id, &mut cache);
+                    let dir = ctx.rays.dir(sx, sy);
+                    shade_sample(ctx, poly, &td, sx, sy, dir, counts_of(i), false)
                 };
                 // Transparent fragments, composited back to front.
                 let n = tv.ids.len();
@@ -949,8 +1142,10 @@ fn shade_tile(
                     let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
                     let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
                         == Some(&Class::Blend(TransparencyMode::Interpolated));
+                    let td = ctx.tri_data(t, &mut cache);
+                    let dir = ctx.rays.dir(sx, sy);
                     let front =
-                        shade_sample(ctx, poly, t, sx, sy, dir, counts_of(n + f), interpolated);
+                        shade_sample(ctx, poly, &td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);
                     r.color = if interpolated {
                         // Foley et al. 16.5.1: I = (1 - kt) I_front + kt I_behind,
@@ -987,7 +1182,7 @@ fn shade_tile(
 fn shade_sample(
     ctx: &Ctx<'_, '_>,
     poly: &PolyShading,
-    t: u32,
+    td: &TriData,
     sx: f32,
     sy: f32,
     dir: Vec3,
@@ -996,17 +1191,18 @@ fn shade_sample(
 ) -> SampleResult {
     let ps = ctx.ps;
     let eye = ctx.rays.eye;
-    let [i0, i1, i2] = ps.triangles[t as usize].map(|i| i as usize);
-    let (p0, p1, p2) = (ps.positions[i0], ps.positions[i1], ps.positions[i2]);
+    let t = td.t;
+    let [i0, i1, i2] = td.idx;
+    let [p0, p1, p2] = td.p;
     // Perspective-correct barycentrics of the sample and of its neighbours.
     let third = Vec2::splat(1.0 / 3.0);
     let b = ray_plane_bary(eye, dir, p0, p1, p2).unwrap_or(third);
-    let hit = ps.triangle_surface(t, b.x, b.y);
-    let material = ps.material(hit.material);
+    let material = td.material;
     let needs_footprint = material.texture.is_some()
         || material.bump.is_some()
         || material.normal_map.is_some()
         || material.emission_texture.is_some();
+    let hit = ctx.surface(td, b.x, b.y, needs_footprint);
     let (duv_dx, duv_dy) = if needs_footprint {
         let uv_at = |x: f32, y: f32| {
             let bb = ray_plane_bary(eye, ctx.rays.dir(x, y), p0, p1, p2).unwrap_or(b);
@@ -1026,7 +1222,7 @@ fn shade_sample(
     let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
     let sign = if flip { -1.0 } else { 1.0 };
     let mut specular = Vec3::ZERO;
-    let (color, n, kr) = match ctx.mode(t) {
+    let (color, n, kr) = match td.mode {
         ShadeMode::Phong => {
             let sm = ps.surface_material_lod(&hit, duv_dx, duv_dy);
             let mut n = hit.ns;
@@ -1076,7 +1272,7 @@ fn shade_sample(
             )
         }
         ShadeMode::Flat => {
-            let split = poly.flat.get(&t).copied().unwrap_or_default();
+            let split = poly.flat.get(t as usize).copied().unwrap_or_default();
             let tex = if material.texture.is_some() {
                 let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
                 ps.diffuse_texture_factor(hit.material, &tc)

@@ -558,3 +558,61 @@ fn depth_cue_blends_with_distance() {
         }
     }
 }
+
+#[test]
+fn crop_window_matches_the_full_render_and_leaves_the_rest_black() {
+    let mut s = test_scene();
+    s.background = Vec3::new(0.2, 0.3, 0.4);
+    // One transparent material, so that A-buffer fragments are cropped too.
+    s.materials[0].transmit = Vec3::splat(0.5);
+    let (w, h) = (48u32, 40u32);
+    let window = [7u32, 5, 37, 29];
+    for (technique, shadows, samples) in [
+        (Technique::Phong, ShadowMethod::None, 1),
+        (Technique::Phong, ShadowMethod::Volume, 2),
+        (Technique::Gouraud, ShadowMethod::Ray, 1),
+        (Technique::Flat, ShadowMethod::Map, 3),
+    ] {
+        let full_settings = RenderSettings {
+            shadows,
+            samples,
+            ..settings(technique, w, h)
+        };
+        let full = render(&s, &full_settings, &NoProgress).expect("full");
+        let cropped = render(
+            &s,
+            &RenderSettings {
+                crop: Some(window),
+                ..full_settings.clone()
+            },
+            &NoProgress,
+        )
+        .expect("cropped");
+        let mut inside_lit = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                let inside = x >= window[0] && x < window[2] && y >= window[1] && y < window[3];
+                if inside {
+                    assert_eq!(cropped.color[i], full.color[i], "{technique:?} ({x}, {y})");
+                    assert_eq!(cropped.depth[i].to_bits(), full.depth[i].to_bits());
+                    assert_eq!(cropped.normal[i], full.normal[i]);
+                    inside_lit += usize::from(full.color[i] != Vec3::ZERO);
+                } else {
+                    assert_eq!(cropped.color[i], Vec3::ZERO, "{technique:?} ({x}, {y})");
+                    assert_eq!(cropped.depth[i], f32::INFINITY);
+                    assert_eq!(cropped.normal[i], Vec3::ZERO);
+                }
+            }
+        }
+        assert!(inside_lit > 600, "{technique:?}: {inside_lit}");
+    }
+    // A window outside the image draws nothing.
+    let st = RenderSettings {
+        crop: Some([60, 0, 80, 10]),
+        ..settings(Technique::Phong, w, h)
+    };
+    let empty = render(&s, &st, &NoProgress).expect("empty crop");
+    assert!(empty.color.iter().all(|&c| c == Vec3::ZERO));
+    assert!(empty.depth.iter().all(|d| d.is_infinite()));
+}
