@@ -312,6 +312,12 @@ pub fn supports_crop(technique: Technique) -> bool {
     matches!(technique, Technique::Preview | Technique::Path)
 }
 
+/// Scenes with more triangles than this are rendered whole, not in bands:
+/// every band is a separate render that prepares the scene (and builds its
+/// BVH) again, which for a ~1M-triangle scene costs about a second a band
+/// (BENCHMARKS.md, "Web viewer").
+pub const BAND_TRIANGLE_LIMIT: usize = 100_000;
+
 /// Rows per band when rendering progressively: about 8 bands, at least 8
 /// rows each.
 pub fn band_height(height: u32) -> u32 {
@@ -322,7 +328,8 @@ pub fn band_height(height: u32) -> u32 {
 /// [`RenderSettings::crop`], where the technique supports it), calling
 /// `on_band(film, y0, y1)` after each band with the film so far; returns the
 /// whole film (identical to a plain render) and the summed statistics.
-/// A technique without crop support is rendered whole and reported as one
+/// A technique without crop support, or a scene of more than
+/// [`BAND_TRIANGLE_LIMIT`] triangles, is rendered whole and reported as one
 /// band.
 ///
 /// # Errors
@@ -333,7 +340,10 @@ pub fn render_in_bands<E: From<chiaro::Error>>(
     progress: &dyn Progress,
     mut on_band: impl FnMut(&Film, u32, u32) -> Result<(), E>,
 ) -> Result<(Film, chiaro::RenderStats), E> {
-    if !supports_crop(settings.technique) || settings.crop.is_some() {
+    if !supports_crop(settings.technique)
+        || settings.crop.is_some()
+        || scene.triangle_count() > BAND_TRIANGLE_LIMIT
+    {
         let (film, stats) = chiaro::render_with_stats(scene, settings, progress)?;
         on_band(&film, 0, film.height)?;
         return Ok((film, stats));

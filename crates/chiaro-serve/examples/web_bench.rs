@@ -1,0 +1,147 @@
+//! Web viewer benchmark: time to first picture and frames per second of the
+//! interactive low-resolution preview, measured end to end over the
+//! WebSocket (render + PNG encoding + transfer), for the Cornell box and a
+//! ~1M-triangle scene (the raster benchmark's 14x14 grid of spheres, here
+//! UV spheres of ~5000 triangles).
+//!
+//! `cargo run --release -p chiaro-serve --example web_bench -- [frames]`
+
+use chiaro::Vec3;
+use chiaro::scene::{Attenuation, Camera, Geometry, Light, Material, Object, Scene, Transform};
+use chiaro_core::geometry::primitives::uv_sphere;
+use chiaro_serve::{ServeOptions, Server};
+use serde_json::{Value, json};
+use std::path::Path;
+use std::time::Instant;
+use tungstenite::Message;
+
+fn grid_scene() -> Scene {
+    let mut s = Scene::default();
+    let m = s.add_material(Material {
+        diffuse: Vec3::new(0.7, 0.3, 0.2),
+        specular: Vec3::ONE,
+        shininess: 32.0,
+        ..Material::default()
+    });
+    let mesh = s.add_mesh(uv_sphere(0.45, 72, 36));
+    for i in 0..14 {
+        for j in 0..14 {
+            s.objects.push(Object {
+                geometry: Geometry::Mesh(mesh),
+                material: m,
+                transform: Transform {
+                    translate: Vec3::new(i as f32 - 6.5, j as f32 - 6.5, 0.0),
+                    ..Transform::default()
+                },
+                ..Object::default()
+            });
+        }
+    }
+    s.lights = vec![
+        Light::Ambient {
+            color: Vec3::ONE,
+            intensity: 0.2,
+        },
+        Light::Point {
+            position: Vec3::new(5.0, -5.0, 10.0),
+            color: Vec3::ONE,
+            intensity: 60.0,
+            attenuation: Attenuation::default(),
+        },
+    ];
+    s.camera = Camera {
+        eye: Vec3::new(0.0, -4.5, 8.0),
+        look_at: Vec3::ZERO,
+        up: Vec3::Z,
+        fov_y_degrees: 60.0,
+        near: 0.1,
+        far: 100.0,
+    };
+    s.render.width = 640;
+    s.render.height = 480;
+    s
+}
+
+type Ws = tungstenite::WebSocket<tungstenite::stream::MaybeTlsStream<std::net::TcpStream>>;
+
+/// Sends `req` and waits for its `done`; returns (ms to first frame, ms to done).
+fn round_trip(ws: &mut Ws, req: &Value) -> (f64, f64) {
+    let t = Instant::now();
+    ws.send(Message::text(req.to_string())).expect("send");
+    let mut first = None;
+    loop {
+        match ws.read().expect("read") {
+            Message::Binary(_) => {
+                first.get_or_insert(t.elapsed().as_secs_f64() * 1e3);
+            }
+            Message::Text(txt) => {
+                let v: Value = serde_json::from_str(txt.as_str()).expect("json");
+                match v["type"].as_str() {
+                    Some("done") => {
+                        let all = t.elapsed().as_secs_f64() * 1e3;
+                        return (first.unwrap_or(all), all);
+                    }
+                    Some("error") => panic!("{v}"),
+                    _ => {}
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+fn bench(name: &str, scene: Scene, frames: usize) {
+    let (w, h) = (scene.render.width, scene.render.height);
+    let tris = scene.triangle_count();
+    let opts = ServeOptions {
+        port: 0,
+        ..ServeOptions::default()
+    };
+    let server = Server::bind_scene(scene, name, &opts).expect("bind");
+    let addr = server.local_addr().expect("addr");
+    std::thread::spawn(move || server.run());
+    let (mut ws, _) = tungstenite::connect(format!("ws://{addr}/ws")).expect("connect");
+    for technique in ["phong", "preview"] {
+        let view = json!([{"technique": technique, "samples": 1}]);
+        // Time to first picture: the page's first request (low resolution),
+        // then the full-resolution progressive one.
+        let low =
+            json!({"type": "render", "id": 1, "width": w / 4, "height": h / 4, "views": view});
+        let (first_low, _) = round_trip(&mut ws, &low);
+        let full = json!({"type": "render", "id": 2, "width": w, "height": h, "progressive": true, "views": view});
+        let (first_band, full_ms) = round_trip(&mut ws, &full);
+        // Interactive preview: successive low-resolution frames while orbiting.
+        let t = Instant::now();
+        for i in 0..frames {
+            let req = json!({"type": "render", "id": 10 + i, "width": w / 4, "height": h / 4,
+                "orbit": {"yaw": i as f32 * 0.05, "pitch": 0.0, "zoom": 1.0}, "views": view});
+            round_trip(&mut ws, &req);
+        }
+        let fps = frames as f64 / t.elapsed().as_secs_f64();
+        println!(
+            "| {name} ({tris} triangles) | {technique} | {:.0} ms ({}x{}) | {:.0} ms / {:.0} ms ({w}x{h}) | {fps:.1} fps ({}x{}) |",
+            first_low,
+            w / 4,
+            h / 4,
+            first_band,
+            full_ms,
+            w / 4,
+            h / 4
+        );
+    }
+}
+
+fn main() {
+    let frames = std::env::args()
+        .nth(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(20);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.toml");
+    let cornell = chiaro::io::load_scene(&root).expect("cornell box").scene;
+    println!(
+        "| scene | technique | first picture (low res) | first band / whole (full res) | interactive preview |"
+    );
+    println!("| --- | --- | --- | --- | --- |");
+    bench("cornell-box", cornell, frames);
+    bench("sphere-grid", grid_scene(), frames);
+}
