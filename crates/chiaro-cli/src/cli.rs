@@ -24,6 +24,18 @@ const EXAMPLES: &str = "Examples:
 pub enum Command {
     /// Render a scene (.toml, .obj, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
     Render(RenderArgs),
+    /// Serve a web viewer for SCENE: techniques side by side, orbit camera,
+    /// difference images (loopback only unless --host is given).
+    Serve {
+        /// The scene file.
+        scene: PathBuf,
+        /// TCP port (0 picks a free one).
+        #[arg(long, default_value_t = 8080)]
+        port: u16,
+        /// IP address to listen on; 0.0.0.0 exposes the viewer to the network.
+        #[arg(long, default_value = "127.0.0.1")]
+        host: String,
+    },
     /// Describe a scene: objects, triangles, lights, materials, textures, bounds, warnings.
     Info {
         /// The scene file.
@@ -104,6 +116,9 @@ pub struct RenderArgs {
     /// Write 16-bit PNG.
     #[arg(long)]
     pub png16: bool,
+    /// Stream the image to a running tev viewer as it renders (HOST:PORT, tev's default port is 14158).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub display_server: Option<String>,
     /// Radiosity/hybrid: save the view-independent solution to this file.
     #[arg(long, value_name = "FILE")]
     pub save_solution: Option<PathBuf>,

@@ -74,7 +74,24 @@ pub fn render(args: RenderArgs) -> Result<()> {
         load: args.solution.as_deref(),
         save: args.save_solution.as_deref(),
     };
-    let result = chiaro::render_with_solution_files(&scene, &settings, &bar, files);
+    let result = match &args.display_server {
+        Some(addr) => {
+            if files.load.is_some() || files.save.is_some() {
+                bar.finish();
+                anyhow::bail!(
+                    "--display-server cannot be combined with --solution or --save-solution"
+                );
+            }
+            let name = args.output.file_name().map_or_else(
+                || "chiaro".to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            chiaro_serve::tev::render_to_tev(&scene, &settings, &bar, addr, &name)
+                .map_err(anyhow::Error::from)
+        }
+        None => chiaro::render_with_solution_files(&scene, &settings, &bar, files)
+            .map_err(anyhow::Error::from),
+    };
     bar.finish();
     let (film, stats) = result?;
     let palette = args.palette.map(|p| match p {
