@@ -1,6 +1,7 @@
-//! The bounding volume hierarchy: a binary BVH built with the binned
-//! surface-area heuristic, and [`SceneBvh`], the scene-level
-//! [`Accelerator`] over a [`PreparedScene`]'s triangles and analytic spheres.
+//! The bounding volume hierarchy: a 4-wide BVH (BVH4) collapsed from a
+//! binary tree built with the binned surface-area heuristic, and
+//! [`SceneBvh`], the scene-level [`Accelerator`] over a [`PreparedScene`]'s
+//! triangles and analytic spheres.
 //!
 //! Build (after Wald 2007, "On fast Construction of SAH-based Bounding Volume
 //! Hierarchies", and pbrt-v4 `BVHAggregate::buildRecursive`): primitive
@@ -13,16 +14,25 @@
 //! Large nodes bin in parallel and build their two halves with
 //! `rayon::join`; the result does not depend on the number of threads.
 //!
-//! Layout: 32-byte [`BvhNode`]s in depth-first order; the two children of
-//! an interior node are adjacent (`offset`, `offset + 1`), so one cache line
-//! holds both boxes that traversal tests together.
+//! Collapse (Wald, Benthin and Boulos 2008, "Getting Rid of Packets",
+//! section 3; Embree's BVH4): each 4-wide node takes a binary node's two
+//! children and keeps opening the interior child with the largest surface
+//! area until it has four children or only leaves. That halves the depth, so
+//! a ray waits on half as many dependent node loads.
 //!
-//! Traversal keeps an explicit stack, tests boxes with the slab method and
-//! the precomputed inverse direction (Kay and Kajiya 1986; Williams et al.
-//! 2005), visits the nearer child first for closest hits (pbrt-v4 section
-//! 7.3.5), and stops at the first hit for occlusion queries. Box exits are
-//! widened by `1 + 2 gamma(3)` (pbrt-v4 section 6.8.2) so that rounding
-//! never culls a primitive the exact test would hit.
+//! Layout: 128-byte [`BvhNode`]s (two cache lines) holding the four child
+//! boxes in structure-of-arrays form, `bounds[row][lane]`, so one node test
+//! is a few 4-lane operations that the compiler vectorises from plain array
+//! code (no intrinsics: the workspace forbids `unsafe`).
+//!
+//! Traversal keeps an explicit stack, tests boxes with the slab method
+//! (Kay and Kajiya 1986) using the precomputed inverse direction and the
+//! per-ray choice of near and far planes by direction sign (Williams et al.
+//! 2005), visits hit children nearest first for closest hits and skips
+//! popped ones that lie beyond the current hit, and stops at the first hit
+//! for occlusion queries. Box exits are widened by `1 + 2 gamma(3)`
+//! (pbrt-v4 section 6.8.2) so that rounding never culls a primitive the
+//! exact test would hit.
 
 use super::{Accelerator, Hit, WatertightRay, intersect_sphere};
 use crate::geometry::{Aabb, Ray};
@@ -32,59 +42,196 @@ use rayon::prelude::*;
 
 /// Most bins a build may use.
 pub const MAX_BINS: usize = 64;
-/// Traversal stack size; the build keeps the tree shallower than this.
-const STACK: usize = 128;
+/// Children per node.
+pub const WIDTH: usize = 4;
 /// Depth from which the build splits at the object median (bounding the
 /// depth however the primitives are distributed).
 const MEDIAN_DEPTH: u32 = 64;
 /// `1 + 2 gamma(3)`, gamma(n) = n eps / (1 - n eps) with eps = 2^-24
 /// (pbrt-v4 eq. 6.24 and section 6.8.2).
 const EXIT_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+/// [`BvhNode::count`] of an unused lane.
+pub const EMPTY_LANE: u32 = u32::MAX;
 
-/// One node: its box, and either two children or a run of primitives.
-/// 32 bytes, 32-byte aligned.
+/// One 4-wide node: up to four children, each an inner node or a leaf (a
+/// run of primitive slots). 128 bytes, 64-byte aligned.
 #[derive(Debug, Clone, Copy, PartialEq)]
-#[repr(C, align(32))]
+#[repr(C, align(64))]
 pub struct BvhNode {
-    /// Lower corner of the box.
-    pub min: [f32; 3],
-    /// Interior node: index of the left child (the right one follows it).
-    /// Leaf: first slot of its primitives in [`Bvh::prim_order`].
-    pub offset: u32,
-    /// Upper corner of the box.
-    pub max: [f32; 3],
-    /// Number of primitives of a leaf; 0 for an interior node.
-    pub count: u32,
+    /// Child boxes, structure of arrays: rows 0-2 hold the lower corners'
+    /// x, y, z, rows 3-5 the upper corners', one lane per child. Unused
+    /// lanes hold an inverted (empty) box.
+    pub bounds: [[f32; WIDTH]; 6],
+    /// Per lane: the child node's index for an inner child, the first slot
+    /// in [`Bvh::prim_order`] for a leaf.
+    pub child: [u32; WIDTH],
+    /// Per lane: 0 for an inner child, the primitive count (>= 1) for a
+    /// leaf, [`EMPTY_LANE`] for an unused lane.
+    pub count: [u32; WIDTH],
+}
+
+/// One child of a [`BvhNode`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Child {
+    /// An inner node, by index.
+    Node(u32),
+    /// A leaf: `count` primitives from slot `first` on.
+    Leaf {
+        /// First slot.
+        first: u32,
+        /// Number of slots (>= 1).
+        count: u32,
+    },
 }
 
 impl BvhNode {
     const EMPTY: BvhNode = BvhNode {
-        min: [0.0; 3],
-        offset: 0,
-        max: [0.0; 3],
-        count: 0,
+        bounds: [
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+        ],
+        child: [0; WIDTH],
+        count: [EMPTY_LANE; WIDTH],
     };
 
-    fn new(b: &Aabb, offset: u32, count: u32) -> Self {
+    fn set_lane(&mut self, lane: usize, b: &Aabb, child: u32, count: u32) {
+        for a in 0..3 {
+            self.bounds[a][lane] = b.min[a];
+            self.bounds[a + 3][lane] = b.max[a];
+        }
+        self.child[lane] = child;
+        self.count[lane] = count;
+    }
+
+    /// The used lanes: each child's box and what it is.
+    pub fn children(&self) -> impl Iterator<Item = (Aabb, Child)> + '_ {
+        (0..WIDTH)
+            .filter(|&i| self.count[i] != EMPTY_LANE)
+            .map(|i| {
+                let b = Aabb {
+                    min: Vec3::new(self.bounds[0][i], self.bounds[1][i], self.bounds[2][i]),
+                    max: Vec3::new(self.bounds[3][i], self.bounds[4][i], self.bounds[5][i]),
+                };
+                let c = if self.count[i] == 0 {
+                    Child::Node(self.child[i])
+                } else {
+                    Child::Leaf {
+                        first: self.child[i],
+                        count: self.count[i],
+                    }
+                };
+                (b, c)
+            })
+    }
+
+    /// Slab test of all four lanes: per lane the entry distance, and the
+    /// bit mask of the lanes whose box the ray meets inside
+    /// `(t_min, t_max)`. Written as plain loops over lanes so LLVM turns
+    /// each into 4-wide SIMD; a NaN product (a zero direction component
+    /// with the origin on a slab plane) never narrows the interval.
+    #[inline(always)]
+    fn intersect(&self, r: &RayPre, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
+        let mut near = [t_min; WIDTH];
+        let mut far = [f32::INFINITY; WIDTH];
+        for a in 0..3 {
+            let lo = &self.bounds[r.near_row[a]];
+            let hi = &self.bounds[r.far_row[a]];
+            let (o, inv) = (r.org[a], r.inv[a]);
+            for i in 0..WIDTH {
+                let tn = (lo[i] - o) * inv;
+                let tf = (hi[i] - o) * inv;
+                near[i] = if tn > near[i] { tn } else { near[i] };
+                far[i] = if tf < far[i] { tf } else { far[i] };
+            }
+        }
+        let mut mask = 0u32;
+        for i in 0..WIDTH {
+            let f = far[i] * EXIT_SLACK;
+            let f = if f < t_max { f } else { t_max };
+            let valid = self.count[i] != EMPTY_LANE;
+            mask |= ((near[i] <= f && valid) as u32) << i;
+        }
+        (near, mask)
+    }
+}
+
+/// Per-ray constants of the slab test.
+struct RayPre {
+    org: [f32; 3],
+    inv: [f32; 3],
+    /// Row of [`BvhNode::bounds`] holding the entry plane on each axis (the
+    /// lower corner for a positive direction component).
+    near_row: [usize; 3],
+    far_row: [usize; 3],
+}
+
+impl RayPre {
+    #[inline(always)]
+    fn new(ray: &Ray) -> Self {
+        let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
+        let neg = inv.map(|v| v.is_sign_negative() as usize);
         Self {
-            min: b.min.to_array(),
-            offset,
-            max: b.max.to_array(),
-            count,
+            org: ray.origin.to_array(),
+            inv,
+            near_row: [3 * neg[0], 1 + 3 * neg[1], 2 + 3 * neg[2]],
+            far_row: [3 - 3 * neg[0], 4 - 3 * neg[1], 5 - 3 * neg[2]],
+        }
+    }
+}
+
+/// A deferred child on the traversal stack.
+#[derive(Debug, Clone, Copy, Default)]
+struct Entry {
+    child: u32,
+    count: u32,
+    near: f32,
+}
+
+/// Entries kept in the fixed part of the stack (a 4-wide tree over a few
+/// million primitives needs ~40); deeper trees spill into a `Vec`.
+const STACK: usize = 48;
+
+/// The traversal stack: a fixed array that spills into a `Vec` (never
+/// allocated for ordinary trees) so that no tree is too deep.
+struct Stack {
+    fixed: [Entry; STACK],
+    len: usize,
+    spill: Vec<Entry>,
+}
+
+impl Stack {
+    #[inline(always)]
+    fn new() -> Self {
+        Self {
+            fixed: [Entry::default(); STACK],
+            len: 0,
+            spill: Vec::new(),
         }
     }
 
-    /// True for a leaf.
-    #[inline]
-    pub fn is_leaf(&self) -> bool {
-        self.count > 0
+    #[inline(always)]
+    fn push(&mut self, e: Entry) {
+        if self.len < STACK {
+            self.fixed[self.len] = e;
+            self.len += 1;
+        } else {
+            self.spill.push(e);
+        }
     }
 
-    /// The node's box.
-    pub fn bounds(&self) -> Aabb {
-        Aabb {
-            min: Vec3::from(self.min),
-            max: Vec3::from(self.max),
+    #[inline(always)]
+    fn pop(&mut self) -> Option<Entry> {
+        if let Some(e) = self.spill.pop() {
+            Some(e)
+        } else if self.len > 0 {
+            self.len -= 1;
+            Some(self.fixed[self.len])
+        } else {
+            None
         }
     }
 }
@@ -130,21 +277,48 @@ impl PrimRef {
     }
 }
 
-/// Two sibling nodes in one 64-byte cache line.
+/// A node of the intermediate binary tree: its box, and either two
+/// children (`offset`, `offset + 1`) or a run of primitives.
 #[derive(Debug, Clone, Copy, PartialEq)]
-#[repr(C, align(64))]
-struct NodePair([BvhNode; 2]);
+struct BinNode {
+    bounds: Aabb,
+    /// Inner node: index of the left child. Leaf: first slot.
+    offset: u32,
+    /// Primitives of a leaf; 0 for an inner node.
+    count: u32,
+}
 
-/// A binary BVH over primitive boxes. It knows nothing about the
+impl BinNode {
+    const EMPTY: BinNode = BinNode {
+        bounds: Aabb::EMPTY,
+        offset: 0,
+        count: 0,
+    };
+
+    fn new(b: &Aabb, offset: u32, count: u32) -> Self {
+        Self {
+            bounds: *b,
+            offset,
+            count,
+        }
+    }
+
+    #[inline]
+    fn is_leaf(&self) -> bool {
+        self.count > 0
+    }
+}
+
+/// A 4-wide BVH over primitive boxes. It knows nothing about the
 /// primitives themselves: queries call back with *slots*, positions in
 /// [`Bvh::prim_order`], which maps each slot to the index of the box given
 /// to [`Bvh::build`].
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
-    /// Node `i` is `pairs[i / 2].0[i % 2]`; the root is node 0 (node 1 is
-    /// unused padding), so every pair of siblings shares a cache line.
-    pairs: Vec<NodePair>,
+    /// The root is node 0.
+    nodes: Vec<BvhNode>,
     prim_order: Vec<u32>,
+    bounds: Aabb,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -208,36 +382,33 @@ impl Bvh {
         if refs.is_empty() {
             return Self::default();
         }
-        let nodes = build_subtree(&mut refs, 0, 0, &opts);
-        let pairs = nodes
-            .chunks(2)
-            .map(|c| NodePair([c[0], c.get(1).copied().unwrap_or(BvhNode::EMPTY)]))
-            .collect();
+        let binary = build_subtree(&mut refs, 0, 0, &opts);
+        let nodes = collapse(&binary);
         let prim_order = refs.iter().map(|r| r.index).collect();
-        Self { pairs, prim_order }
+        Self {
+            nodes,
+            prim_order,
+            bounds: binary[0].bounds,
+        }
     }
 
-    /// Number of node slots (node 1 is padding; 0 for an empty BVH).
+    /// Number of nodes (0 for an empty BVH).
     pub fn node_count(&self) -> usize {
-        self.pairs.len() * 2
+        self.nodes.len()
     }
 
-    /// Node `i` (the root is node 0; the children of an interior node `n`
-    /// are `n.offset` and `n.offset + 1`).
+    /// Node `i` (the root is node 0).
     ///
     /// # Panics
     /// If `i >= self.node_count()`.
     #[inline(always)]
     pub fn node(&self, i: usize) -> &BvhNode {
-        &self.pairs[i >> 1].0[i & 1]
+        &self.nodes[i]
     }
 
-    /// Every node reachable from the root, in storage order.
+    /// Every node, in storage order (the root first).
     pub fn nodes(&self) -> impl Iterator<Item = &BvhNode> + '_ {
-        self.pairs
-            .iter()
-            .enumerate()
-            .flat_map(|(k, p)| p.0.iter().take(if k == 0 { 1 } else { 2 }))
+        self.nodes.iter()
     }
 
     /// For each slot, the index of its primitive in the `bounds` given to
@@ -248,20 +419,27 @@ impl Bvh {
 
     /// Bounds of everything (empty for an empty BVH).
     pub fn bounds(&self) -> Aabb {
-        self.pairs.first().map_or(Aabb::EMPTY, |p| p.0[0].bounds())
+        if self.nodes.is_empty() {
+            Aabb::EMPTY
+        } else {
+            self.bounds
+        }
     }
 
-    /// Depth of the tree (a single leaf has depth 1; 0 when empty).
+    /// Depth of the tree in 4-wide nodes, leaves counted as a level (a
+    /// single leaf under the root has depth 2; 0 when empty).
     pub fn depth(&self) -> usize {
         fn rec(b: &Bvh, i: usize) -> usize {
-            let n = b.node(i);
-            if n.is_leaf() {
-                1
-            } else {
-                1 + rec(b, n.offset as usize).max(rec(b, n.offset as usize + 1))
-            }
+            1 + b.nodes[i]
+                .children()
+                .map(|(_, c)| match c {
+                    Child::Node(k) => rec(b, k as usize),
+                    Child::Leaf { .. } => 1,
+                })
+                .max()
+                .unwrap_or(0)
         }
-        if self.pairs.is_empty() {
+        if self.nodes.is_empty() {
             0
         } else {
             rec(self, 0)
@@ -280,61 +458,67 @@ impl Bvh {
         mut test: impl FnMut(usize, f32) -> Option<f32>,
     ) -> f32 {
         let mut t_max = ray.t_max;
-        if self.pairs.is_empty() {
+        if self.nodes.is_empty() {
             return t_max;
         }
-        let org = Vec3A::from(ray.origin);
-        let inv = Vec3A::ONE / Vec3A::from(ray.dir);
+        let pre = RayPre::new(ray);
         let t_min = ray.t_min;
-        let mut stack = [0u32; STACK];
-        let mut sp = 0usize;
-        if slab(self.node(0), org, inv, t_min, t_max).is_none() {
-            return t_max;
-        }
-        let mut node = 0usize;
+        let mut stack = Stack::new();
+        let (mut child, mut count) = (0u32, 0u32);
         loop {
-            let n = self.node(node);
-            if n.count > 0 {
-                let first = n.offset as usize;
-                for slot in first..first + n.count as usize {
+            if count == 0 {
+                let n = &self.nodes[child as usize];
+                let (near, mask) = n.intersect(&pre, t_min, t_max);
+                if mask != 0 {
+                    let first = mask.trailing_zeros() as usize;
+                    let rest = mask & (mask - 1);
+                    if rest == 0 {
+                        // One child: descend.
+                        (child, count) = (n.child[first], n.count[first]);
+                        continue;
+                    }
+                    // Several: push all but the nearest, farthest deepest
+                    // (insertion sort of at most four).
+                    let mut hits = [Entry::default(); WIDTH];
+                    let mut k = 0usize;
+                    let mut m = mask;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let e = Entry {
+                            child: n.child[i],
+                            count: n.count[i],
+                            near: near[i],
+                        };
+                        let mut j = k;
+                        while j > 0 && hits[j - 1].near < e.near {
+                            hits[j] = hits[j - 1];
+                            j -= 1;
+                        }
+                        hits[j] = e;
+                        k += 1;
+                    }
+                    for e in &hits[..k - 1] {
+                        stack.push(*e);
+                    }
+                    (child, count) = (hits[k - 1].child, hits[k - 1].count);
+                    continue;
+                }
+            } else {
+                let first = child as usize;
+                for slot in first..first + count as usize {
                     if let Some(t) = test(slot, t_max) {
                         t_max = t;
                     }
                 }
-            } else {
-                let l = n.offset as usize;
-                let hl = slab(self.node(l), org, inv, t_min, t_max);
-                let hr = slab(self.node(l + 1), org, inv, t_min, t_max);
-                match (hl, hr) {
-                    (Some(a), Some(b)) => {
-                        let (near, far) = if a <= b { (l, l + 1) } else { (l + 1, l) };
-                        if sp < STACK {
-                            stack[sp] = far as u32;
-                            sp += 1;
-                        }
-                        node = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        node = l;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        node = l + 1;
-                        continue;
-                    }
-                    (None, None) => {}
-                }
             }
-            // Pop the next node whose box still lies in front of the hit.
+            // Pop the next child whose box still starts before the hit.
             loop {
-                if sp == 0 {
+                let Some(e) = stack.pop() else {
                     return t_max;
-                }
-                sp -= 1;
-                let i = stack[sp] as usize;
-                if slab(self.node(i), org, inv, t_min, t_max).is_some() {
-                    node = i;
+                };
+                if e.near <= t_max {
+                    (child, count) = (e.child, e.count);
                     break;
                 }
             }
@@ -346,64 +530,109 @@ impl Bvh {
     /// particular order, until it returns true. Returns true if it did.
     #[inline]
     pub fn traverse_any(&self, ray: &Ray, mut test: impl FnMut(usize) -> bool) -> bool {
-        if self.pairs.is_empty() {
+        if self.nodes.is_empty() {
             return false;
         }
-        let org = Vec3A::from(ray.origin);
-        let inv = Vec3A::ONE / Vec3A::from(ray.dir);
+        let pre = RayPre::new(ray);
         let (t_min, t_max) = (ray.t_min, ray.t_max);
-        let mut stack = [0u32; STACK];
-        let mut sp = 0usize;
-        if slab(self.node(0), org, inv, t_min, t_max).is_none() {
-            return false;
-        }
-        let mut node = 0usize;
+        let mut stack = Stack::new();
+        let (mut child, mut count) = (0u32, 0u32);
         loop {
-            let n = self.node(node);
-            if n.count > 0 {
-                let first = n.offset as usize;
-                for slot in first..first + n.count as usize {
+            if count == 0 {
+                let n = &self.nodes[child as usize];
+                let (_, mut mask) = n.intersect(&pre, t_min, t_max);
+                if mask != 0 {
+                    let first = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        stack.push(Entry {
+                            child: n.child[i],
+                            count: n.count[i],
+                            near: 0.0,
+                        });
+                    }
+                    (child, count) = (n.child[first], n.count[first]);
+                    continue;
+                }
+            } else {
+                let first = child as usize;
+                for slot in first..first + count as usize {
                     if test(slot) {
                         return true;
                     }
                 }
-            } else {
-                let l = n.offset as usize;
-                let hl = slab(self.node(l), org, inv, t_min, t_max).is_some();
-                let hr = slab(self.node(l + 1), org, inv, t_min, t_max).is_some();
-                if hl && hr {
-                    if sp < STACK {
-                        stack[sp] = (l + 1) as u32;
-                        sp += 1;
-                    }
-                    node = l;
-                    continue;
-                } else if hl {
-                    node = l;
-                    continue;
-                } else if hr {
-                    node = l + 1;
-                    continue;
-                }
             }
-            if sp == 0 {
+            let Some(e) = stack.pop() else {
                 return false;
-            }
-            sp -= 1;
-            node = stack[sp] as usize;
+            };
+            (child, count) = (e.child, e.count);
         }
     }
 }
 
-/// Slab test: the entry distance when the ray meets the node's box within
-/// `(t_min, t_max)`.
-#[inline(always)]
-fn slab(n: &BvhNode, org: Vec3A, inv: Vec3A, t_min: f32, t_max: f32) -> Option<f32> {
-    let t0 = (Vec3A::from(n.min) - org) * inv;
-    let t1 = (Vec3A::from(n.max) - org) * inv;
-    let near = t0.min(t1).max_element().max(t_min);
-    let far = (t0.max(t1).min_element() * EXIT_SLACK).min(t_max);
-    (near <= far).then_some(near)
+/// Collapses the binary tree (root at 0, children of `n` at `n.offset`
+/// and `n.offset + 1`) into 4-wide nodes, depth first, each node's inner
+/// children directly after it in order.
+fn collapse(binary: &[BinNode]) -> Vec<BvhNode> {
+    fn fill(binary: &[BinNode], b: usize, slot: usize, out: &mut Vec<BvhNode>) {
+        // Gather up to four children, opening the largest inner one first.
+        let mut kids = [0usize; WIDTH];
+        let mut k;
+        let root = &binary[b];
+        if root.is_leaf() {
+            kids[0] = b;
+            k = 1;
+        } else {
+            kids[0] = root.offset as usize;
+            kids[1] = root.offset as usize + 1;
+            k = 2;
+        }
+        while k < WIDTH {
+            let mut best: Option<(usize, f32)> = None;
+            for (j, &c) in kids[..k].iter().enumerate() {
+                let n = &binary[c];
+                let area = n.bounds.surface_area();
+                if !n.is_leaf() && best.is_none_or(|(_, a)| area > a) {
+                    best = Some((j, area));
+                }
+            }
+            let Some((j, _)) = best else { break };
+            let l = binary[kids[j]].offset as usize;
+            // Keep the order: the left child replaces the parent, the right
+            // one follows it.
+            for m in (j + 1..k).rev() {
+                kids[m + 1] = kids[m];
+            }
+            kids[j] = l;
+            kids[j + 1] = l + 1;
+            k += 1;
+        }
+        let mut node = BvhNode::EMPTY;
+        let mut inner = [(0usize, 0usize); WIDTH];
+        let mut ni = 0;
+        for (lane, &c) in kids[..k].iter().enumerate() {
+            let n = &binary[c];
+            if n.is_leaf() {
+                node.set_lane(lane, &n.bounds, n.offset, n.count);
+            } else {
+                let idx = out.len();
+                out.push(BvhNode::EMPTY);
+                node.set_lane(lane, &n.bounds, idx as u32, 0);
+                inner[ni] = (c, idx);
+                ni += 1;
+            }
+        }
+        out[slot] = node;
+        for &(c, idx) in &inner[..ni] {
+            fill(binary, c, idx, out);
+        }
+    }
+    let mut out = Vec::with_capacity(binary.len() / 3 + 1);
+    out.push(BvhNode::EMPTY);
+    fill(binary, 0, 0, &mut out);
+    out
 }
 
 /// Bounds of the references and of their centroids.
@@ -625,20 +854,20 @@ fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb) -> usize {
 /// its nodes laid out as `[root, padding, sibling pairs...]` (an even
 /// number of nodes, every pair at an even index), child indices relative to
 /// the returned vector.
-fn build_subtree(refs: &mut [PrimRef], base: u32, depth: u32, opts: &BvhOptions) -> Vec<BvhNode> {
+fn build_subtree(refs: &mut [PrimRef], base: u32, depth: u32, opts: &BvhOptions) -> Vec<BinNode> {
     let n = refs.len();
     let mut scratch = Vec::new();
     if n < opts.parallel_threshold {
         let mut out = Vec::with_capacity(2 * n + 2);
-        out.push(BvhNode::EMPTY);
-        out.push(BvhNode::EMPTY);
+        out.push(BinNode::EMPTY);
+        out.push(BinNode::EMPTY);
         build_serial(refs, base, 0, depth, &mut out, opts, &mut scratch);
         return out;
     }
     let (bounds, cb) = ref_bounds(refs, true);
     let split = choose_split(refs, &bounds, &cb, depth, opts, true, &mut scratch);
     if let Split::Leaf = split {
-        return vec![BvhNode::new(&bounds, base, n as u32), BvhNode::EMPTY];
+        return vec![BinNode::new(&bounds, base, n as u32), BinNode::EMPTY];
     }
     let mid = partition(refs, &split, &cb);
     let (left, right) = refs.split_at_mut(mid);
@@ -651,9 +880,9 @@ fn build_subtree(refs: &mut [PrimRef], base: u32, depth: u32, opts: &BvhOptions)
     // even indices.
     let nl = ln.len();
     let mut out = Vec::with_capacity(nl + rn.len());
-    out.push(BvhNode::new(&bounds, 2, 0));
-    out.push(BvhNode::EMPTY);
-    let remap = |mut node: BvhNode, shift: usize| {
+    out.push(BinNode::new(&bounds, 2, 0));
+    out.push(BinNode::EMPTY);
+    let remap = |mut node: BinNode, shift: usize| {
         if !node.is_leaf() {
             node.offset += shift as u32;
         }
@@ -671,7 +900,7 @@ fn build_serial(
     base: u32,
     index: usize,
     depth: u32,
-    out: &mut Vec<BvhNode>,
+    out: &mut Vec<BinNode>,
     opts: &BvhOptions,
     scratch: &mut Vec<Bin>,
 ) {
@@ -679,14 +908,14 @@ fn build_serial(
     let (bounds, cb) = ref_bounds(refs, false);
     let split = choose_split(refs, &bounds, &cb, depth, opts, false, scratch);
     if let Split::Leaf = split {
-        out[index] = BvhNode::new(&bounds, base, n as u32);
+        out[index] = BinNode::new(&bounds, base, n as u32);
         return;
     }
     let mid = partition(refs, &split, &cb);
     let left = out.len();
-    out.push(BvhNode::EMPTY);
-    out.push(BvhNode::EMPTY);
-    out[index] = BvhNode::new(&bounds, left as u32, 0);
+    out.push(BinNode::EMPTY);
+    out.push(BinNode::EMPTY);
+    out[index] = BinNode::new(&bounds, left as u32, 0);
     let (l, r) = refs.split_at_mut(mid);
     build_serial(l, base, left, depth + 1, out, opts, scratch);
     build_serial(
@@ -1067,23 +1296,36 @@ mod tests {
             seen[p as usize] = true;
         }
         assert!(seen.iter().all(|&s| s));
+        // Every node but the root is referenced once; child boxes contain
+        // their children's boxes and their leaves' prims; leaves cover every
+        // slot once.
+        let mut referenced = vec![0u32; a.node_count()];
+        let mut covered = vec![0u32; a.prim_order().len()];
         for n in a.nodes() {
-            let nb = n.bounds();
-            if n.is_leaf() {
-                assert!(n.count <= opts.max_leaf);
-                for s in n.offset..n.offset + n.count {
-                    let pb = boxes[a.prim_order()[s as usize] as usize];
-                    assert_eq!(nb.union(pb), nb);
-                }
-            } else {
-                for c in [n.offset, n.offset + 1] {
-                    let cb = a.node(c as usize).bounds();
-                    assert_eq!(nb.union(cb), nb);
+            for (cb, c) in n.children() {
+                match c {
+                    Child::Leaf { first, count } => {
+                        assert!(count <= opts.max_leaf);
+                        for s in first..first + count {
+                            covered[s as usize] += 1;
+                            let pb = boxes[a.prim_order()[s as usize] as usize];
+                            assert_eq!(cb.union(pb), cb);
+                        }
+                    }
+                    Child::Node(k) => {
+                        referenced[k as usize] += 1;
+                        for (gb, _) in a.node(k as usize).children() {
+                            assert_eq!(cb.union(gb), cb);
+                        }
+                    }
                 }
             }
         }
-        assert!(a.depth() < 40, "depth {}", a.depth());
-        assert_eq!(std::mem::size_of::<BvhNode>(), 32);
+        assert_eq!(referenced[0], 0);
+        assert!(referenced[1..].iter().all(|&r| r == 1));
+        assert!(covered.iter().all(|&c| c == 1));
+        assert!(a.depth() < 25, "depth {}", a.depth());
+        assert_eq!(std::mem::size_of::<BvhNode>(), 128);
     }
 
     #[test]
