@@ -16,8 +16,10 @@
 //!   list of triangles overlapping it.
 
 pub mod clip;
+pub mod object_shadows;
 pub mod raster;
 pub mod render;
+pub mod scanline_shadows;
 pub mod shadow;
 pub mod zbuffer;
 

@@ -1,0 +1,686 @@
+//! Two-pass object-precision shadows (Atherton, Weiler and Greenberg 1978,
+//! "Polygon shadow generation", SIGGRAPH '78).
+//!
+//! The first pass works from the light: for every triangle (the
+//! *receiver*) it finds the parts that the light sees, by subtracting from
+//! the receiver the shadows of every triangle nearer to the light. The lit
+//! parts are kept as *lit fragments*: convex polygons in the receiver's
+//! plane, tagged with the light ([`ObjectShadows`] is built per light). The
+//! second pass, the camera render, adds a light's direct term only where the
+//! shaded point lies in one of that light's fragments
+//! ([`ObjectShadows::lit_fraction`]); the ambient term is everywhere and
+//! several lights simply add.
+//!
+//! # How the clipping is done
+//! Atherton, Weiler and Greenberg transform the scene into the light's view
+//! and clip polygons there. Here each receiver is clipped in its own plane
+//! instead: the shadow of an occluder `Q` on the receiver's plane is the
+//! central projection from the light (parallel projection for a directional
+//! light) of the part of `Q` between the light and that plane. The light's
+//! view and the receiver's plane are related by a projective map that is
+//! defined on all of that part, so the clipped result is the same polygon
+//! the light-view clipping gives, and no cube of light views (with polygons
+//! split across faces) is needed.
+//!
+//! The polygon difference `fragment minus shadow` (both convex) is computed
+//! by splitting the fragment successively along each edge of the shadow
+//! (Sutherland and Hodgman 1974 half-plane clipping): the part outside edge
+//! `i` but inside edges `0..i` is a convex piece. This gives at most `k`
+//! convex pieces for a `k`-gon shadow, which tile `fragment \ shadow`
+//! exactly (the two sides of every split share the same computed
+//! intersection points). It replaces the Weiler-Atherton clipper, which
+//! returns concave polygons with holes; every fragment here stays convex so
+//! the per-sample test is a point-in-convex-polygon test.
+//!
+//! # Tolerances
+//! Geometry is processed in `f64`. Occluder parts closer than
+//! `1e-5 * scale` to the receiver's plane (the same offset the shadow rays of
+//! [`chiaro_core::geometry::offset_ray_origin`] use, `scale` the largest
+//! coordinate magnitude) are taken as lying in it, so touching and coplanar
+//! polygons do not shadow each other. Fragments thinner than `1e-12` of the
+//! receiver's area are dropped.
+//!
+//! # Limits
+//! Point, spot (treated as a point: the cone is the shading's job) and
+//! directional lights. Area lights are approximated by their centre (hard
+//! shadows, documented); ambient lights cast nothing and are refused.
+//! Analytic spheres are refused (prepare with tessellated spheres).
+//! Every occluder is opaque: filtering materials are not tinted. Objects
+//! with `casts_shadows = false` cast nothing.
+
+use chiaro_core::accel::bvh::{Bvh, Child};
+use chiaro_core::error::CoreError;
+use chiaro_core::geometry::Aabb;
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::scene::Light;
+pub(crate) use dvec::{DVec2, DVec3};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// A convex polygon in world space (counter-clockwise seen from the side
+/// of the receiver that faces the light).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Polygon {
+    /// Vertices, world space.
+    pub points: Vec<Vec3>,
+}
+
+impl Polygon {
+    /// Area in square world units (Newell's vector area).
+    pub fn area(&self) -> f32 {
+        let n = self.points.len();
+        let mut s = DVec3::ZERO;
+        for i in 0..n {
+            let a = DVec3::from(self.points[i]);
+            let b = DVec3::from(self.points[(i + 1) % n]);
+            s = s + a.cross(b);
+        }
+        (0.5 * s.length()) as f32
+    }
+}
+
+/// The light as the shadow geometry sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum LightGeom {
+    /// A point at this position.
+    Point(DVec3),
+    /// At infinity, in this unit direction (pointing towards the light).
+    Directional(DVec3),
+}
+
+impl LightGeom {
+    /// The light's shadow-casting geometry, or why there is none.
+    pub(crate) fn of(ps: &PreparedScene<'_>, light_index: usize) -> Result<Self, CoreError> {
+        if !ps.spheres.is_empty() {
+            return Err(CoreError::Unsupported(
+                "object-precision and scan-line shadows need tessellated spheres".into(),
+            ));
+        }
+        match ps.lights.get(light_index) {
+            Some(Light::Point { position, .. }) => Ok(LightGeom::Point(position.into())),
+            Some(Light::Spot(s)) => Ok(LightGeom::Point(s.position.into())),
+            Some(Light::Area { shape, .. }) => Ok(LightGeom::Point(shape.center().into())),
+            Some(Light::Directional { direction, .. }) => {
+                match (-DVec3::from(direction)).try_normalize() {
+                    Some(d) => Ok(LightGeom::Directional(d)),
+                    None => Err(CoreError::Unsupported(
+                        "directional light with a zero direction".into(),
+                    )),
+                }
+            }
+            Some(Light::Ambient { .. }) => Err(CoreError::Unsupported(
+                "an ambient light casts no shadow".into(),
+            )),
+            None => Err(CoreError::Unsupported(format!(
+                "light index {light_index} out of range ({} lights)",
+                ps.lights.len()
+            ))),
+        }
+    }
+}
+
+/// A receiver triangle's plane and 2D frame, oriented so the light is on
+/// the positive side of the plane.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ReceiverFrame {
+    /// Origin (the first vertex).
+    pub o: DVec3,
+    /// In-plane unit axes.
+    pub u: DVec3,
+    pub v: DVec3,
+    /// Unit normal towards the light side.
+    pub n: DVec3,
+    /// Height of a point light above the plane, or `n . to_light` for a
+    /// directional light; `<= 0` when the light is in the plane.
+    pub h: f64,
+    /// The receiver in 2D, counter-clockwise.
+    pub tri: [DVec2; 3],
+    /// Distance under which a point counts as lying in the plane.
+    pub eps: f64,
+}
+
+impl ReceiverFrame {
+    /// The frame of triangle `[a, b, c]`, `None` when degenerate.
+    pub fn new(p: [DVec3; 3], light: LightGeom, eps: f64) -> Option<Self> {
+        let o = p[0];
+        let mut n = (p[1] - p[0]).cross(p[2] - p[0]).try_normalize()?;
+        let side = match light {
+            LightGeom::Point(l) => n.dot(l - o),
+            LightGeom::Directional(d) => n.dot(d),
+        };
+        if side < 0.0 {
+            n = -n;
+        }
+        let u = (p[1] - p[0]).try_normalize()?;
+        let v = n.cross(u);
+        let h = side.abs();
+        let to2 = |q: DVec3| DVec2::new((q - o).dot(u), (q - o).dot(v));
+        let mut tri = p.map(to2);
+        if cross2(tri[1] - tri[0], tri[2] - tri[0]) < 0.0 {
+            tri.swap(1, 2);
+        }
+        Some(Self {
+            o,
+            u,
+            v,
+            n,
+            h,
+            tri,
+            eps,
+        })
+    }
+
+    /// 2D coordinates of world point `q` (projected onto the plane).
+    pub fn plane_2d(&self, q: DVec3) -> DVec2 {
+        DVec2::new((q - self.o).dot(self.u), (q - self.o).dot(self.v))
+    }
+
+    /// World point of 2D coordinates `q`.
+    pub fn world_of(&self, q: DVec2) -> DVec3 {
+        self.o + self.u * q.x + self.v * q.y
+    }
+
+    /// The shadow that occluder triangle `q` casts on this plane, as a
+    /// counter-clockwise convex polygon in 2D; `None` when it casts none
+    /// (entirely behind the plane, beyond a point light, or degenerate).
+    pub fn shadow_of(&self, q: [DVec3; 3], light: LightGeom) -> Option<Vec<DVec2>> {
+        if self.h <= self.eps {
+            return None; // light (nearly) in the plane: nothing to shadow
+        }
+        let dist = |x: DVec3| self.n.dot(x - self.o);
+        // Keep the part strictly between the plane and the light.
+        let mut poly: Vec<DVec3> = q.to_vec();
+        poly = clip3(&poly, |x| dist(x) - self.eps);
+        if poly.len() < 3 {
+            return None;
+        }
+        if let LightGeom::Point(_) = light {
+            poly = clip3(&poly, |x| self.h - self.eps - dist(x));
+            if poly.len() < 3 {
+                return None;
+            }
+        }
+        // Central (or parallel) projection onto the plane.
+        let mut s: Vec<DVec2> = poly
+            .iter()
+            .map(|&x| {
+                let d = dist(x);
+                let p = match light {
+                    LightGeom::Point(l) => l + (x - l) * (self.h / (self.h - d)),
+                    LightGeom::Directional(t) => x - t * (d / self.h),
+                };
+                self.plane_2d(p)
+            })
+            .collect();
+        let a = area2(&s);
+        if a.abs() <= 1e-14 * area2(&self.tri).abs() {
+            return None;
+        }
+        if a < 0.0 {
+            s.reverse();
+        }
+        Some(s)
+    }
+}
+
+/// 2D cross product.
+#[inline]
+pub(crate) fn cross2(a: DVec2, b: DVec2) -> f64 {
+    a.x * b.y - a.y * b.x
+}
+
+/// Twice the signed area of a 2D polygon (positive counter-clockwise).
+pub(crate) fn area2(p: &[DVec2]) -> f64 {
+    let n = p.len();
+    (0..n).map(|i| cross2(p[i], p[(i + 1) % n])).sum()
+}
+
+/// Sutherland-Hodgman: the part of convex polygon `p` where `f >= 0`
+/// (`f` affine).
+fn clip3(p: &[DVec3], f: impl Fn(DVec3) -> f64) -> Vec<DVec3> {
+    let mut out = Vec::with_capacity(p.len() + 1);
+    let n = p.len();
+    for i in 0..n {
+        let (a, b) = (p[i], p[(i + 1) % n]);
+        let (fa, fb) = (f(a), f(b));
+        if fa >= 0.0 {
+            out.push(a);
+        }
+        if (fa >= 0.0) != (fb >= 0.0) {
+            out.push(a + (b - a) * (fa / (fa - fb)));
+        }
+    }
+    out
+}
+
+/// Splits convex polygon `p` by the line through `a`, `b`: returns the part
+/// on the left (`cross >= 0`) and the part on the right. Both parts use the
+/// same intersection points, so together they tile `p` exactly.
+pub(crate) fn split2(p: &[DVec2], a: DVec2, b: DVec2) -> (Vec<DVec2>, Vec<DVec2>) {
+    let e = b - a;
+    let s: Vec<f64> = p.iter().map(|&q| cross2(e, q - a)).collect();
+    let (mut left, mut right) = (Vec::new(), Vec::new());
+    let n = p.len();
+    for i in 0..n {
+        let j = (i + 1) % n;
+        if s[i] >= 0.0 {
+            left.push(p[i]);
+        }
+        if s[i] <= 0.0 {
+            right.push(p[i]);
+        }
+        if (s[i] > 0.0 && s[j] < 0.0) || (s[i] < 0.0 && s[j] > 0.0) {
+            let x = p[i] + (p[j] - p[i]) * (s[i] / (s[i] - s[j]));
+            left.push(x);
+            right.push(x);
+        }
+    }
+    (left, right)
+}
+
+/// The intersection of convex polygon `p` with counter-clockwise convex
+/// polygon `clip`.
+pub(crate) fn intersect2(p: &[DVec2], clip: &[DVec2]) -> Vec<DVec2> {
+    let mut cur = p.to_vec();
+    let n = clip.len();
+    for i in 0..n {
+        if cur.len() < 3 {
+            return Vec::new();
+        }
+        cur = split2(&cur, clip[i], clip[(i + 1) % n]).0;
+    }
+    if cur.len() < 3 { Vec::new() } else { cur }
+}
+
+/// Appends to `out` the convex pieces of `frag \ clip` (both convex, `clip`
+/// counter-clockwise) with area above `min_area2` (twice the area).
+fn subtract(frag: &[DVec2], clip: &[DVec2], min_area2: f64, out: &mut Vec<Vec<DVec2>>) {
+    let n = clip.len();
+    // Entirely outside one edge: untouched.
+    for i in 0..n {
+        let (a, b) = (clip[i], clip[(i + 1) % n]);
+        if frag.iter().all(|&q| cross2(b - a, q - a) <= 0.0) {
+            out.push(frag.to_vec());
+            return;
+        }
+    }
+    let mut rest = frag.to_vec();
+    for i in 0..n {
+        let (inside, outside) = split2(&rest, clip[i], clip[(i + 1) % n]);
+        if outside.len() >= 3 && area2(&outside) > min_area2 {
+            out.push(outside);
+        }
+        rest = inside;
+        if rest.len() < 3 {
+            return;
+        }
+    }
+}
+
+/// Bounding box of a 2D polygon as `[min, max]`.
+fn bbox2(p: &[DVec2]) -> [DVec2; 2] {
+    let mut lo = DVec2::splat(f64::INFINITY);
+    let mut hi = DVec2::splat(f64::NEG_INFINITY);
+    for &q in p {
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    [lo, hi]
+}
+
+/// Strict point-in-convex-polygon test with tolerance `tol` (distance).
+fn inside_convex(p: &[DVec2], q: DVec2, tol: f64) -> bool {
+    let n = p.len();
+    (0..n).all(|i| {
+        let (a, b) = (p[i], p[(i + 1) % n]);
+        let e = b - a;
+        cross2(e, q - a) >= -tol * e.length()
+    })
+}
+
+/// Lit fragments of one triangle.
+#[derive(Debug, Clone)]
+struct TriFragments {
+    frame: Option<ReceiverFrame>,
+    /// Convex fragments in the frame's 2D coordinates, with their boxes.
+    polys: Vec<(Vec<DVec2>, [DVec2; 2])>,
+    /// The same fragments in world space.
+    world: Vec<Polygon>,
+}
+
+/// The lit fragments of every triangle of a [`PreparedScene`] for one light:
+/// the first pass of Atherton-Weiler-Greenberg shadows.
+#[derive(Debug, Clone)]
+pub struct ObjectShadows {
+    tris: Vec<TriFragments>,
+    tol: f64,
+    light_index: usize,
+}
+
+/// Scale of the scene's coordinates (at least 1), for tolerances.
+pub(crate) fn scene_scale(ps: &PreparedScene<'_>) -> f64 {
+    if ps.bounds.is_empty() {
+        1.0
+    } else {
+        f64::from(ps.bounds.min.abs().max(ps.bounds.max.abs()).max_element()).max(1.0)
+    }
+}
+
+/// World-space corners of triangle `t` in `f64`, `None` for bad indices.
+pub(crate) fn tri_points(ps: &PreparedScene<'_>, t: usize) -> Option<[DVec3; 3]> {
+    let tri = ps.triangles.get(t)?;
+    let mut out = [DVec3::ZERO; 3];
+    for k in 0..3 {
+        out[k] = ps.positions.get(tri[k] as usize)?.into();
+    }
+    Some(out)
+}
+
+/// Whether triangle `t`'s object casts shadows.
+pub(crate) fn casts(ps: &PreparedScene<'_>, t: usize) -> bool {
+    ps.tri_object
+        .get(t)
+        .and_then(|&o| ps.scene.objects.get(o as usize))
+        .is_none_or(|o| o.casts_shadows)
+}
+
+/// Calls `visit(prim)` for every primitive whose box overlaps `q`.
+fn query_box(bvh: &Bvh, q: &Aabb, mut visit: impl FnMut(u32)) {
+    if bvh.node_count() == 0 {
+        return;
+    }
+    let overlaps = |b: &Aabb| {
+        b.min.x <= q.max.x
+            && b.max.x >= q.min.x
+            && b.min.y <= q.max.y
+            && b.max.y >= q.min.y
+            && b.min.z <= q.max.z
+            && b.max.z >= q.min.z
+    };
+    let mut stack = vec![0u32];
+    while let Some(i) = stack.pop() {
+        for (b, c) in bvh.node(i as usize).children() {
+            if !overlaps(&b) {
+                continue;
+            }
+            match c {
+                Child::Node(k) => stack.push(k),
+                Child::Leaf { first, count } => {
+                    for s in first..first + count {
+                        visit(bvh.prim_order()[s as usize]);
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl ObjectShadows {
+    /// Runs the light pass for light `light_index` of `ps.lights`: the lit
+    /// fragments of every triangle. Candidate occluders of a receiver are
+    /// the triangles whose boxes overlap the box of the receiver's shadow
+    /// frustum (the receiver and the light; for a directional light the
+    /// receiver swept towards the light across the scene), found with a BVH.
+    ///
+    /// # Errors
+    /// [`CoreError::Unsupported`] for an ambient light, an out-of-range
+    /// index or a scene with analytic spheres.
+    pub fn build(ps: &PreparedScene<'_>, light_index: usize) -> Result<Self, CoreError> {
+        let light = LightGeom::of(ps, light_index)?;
+        let scale = scene_scale(ps);
+        let eps = 1e-5 * scale;
+        let boxes: Vec<Aabb> = (0..ps.triangles.len())
+            .map(|t| match tri_points(ps, t) {
+                Some(p) if casts(ps, t) => Aabb::from_points(p.map(Vec3::from)),
+                _ => Aabb::EMPTY,
+            })
+            .collect();
+        let bvh = Bvh::build(&boxes);
+        let reach = f64::from(ps.bounds.diagonal()) * 2.0 + 1.0;
+        let tris = (0..ps.triangles.len())
+            .into_par_iter()
+            .map(|t| {
+                let Some(p) = tri_points(ps, t) else {
+                    return TriFragments {
+                        frame: None,
+                        polys: Vec::new(),
+                        world: Vec::new(),
+                    };
+                };
+                let frame = ReceiverFrame::new(p, light, eps);
+                let mut polys = frame.map(|f| vec![f.tri.to_vec()]).unwrap_or_default();
+                if let Some(f) = frame {
+                    let qbox = match light {
+                        LightGeom::Point(l) => {
+                            Aabb::from_points([p[0], p[1], p[2], l].map(Vec3::from))
+                        }
+                        LightGeom::Directional(d) => Aabb::from_points(
+                            [
+                                p[0],
+                                p[1],
+                                p[2],
+                                p[0] + d * reach,
+                                p[1] + d * reach,
+                                p[2] + d * reach,
+                            ]
+                            .map(Vec3::from),
+                        ),
+                    };
+                    let min_area2 = 1e-12 * area2(&f.tri);
+                    let mut shadows = Vec::new();
+                    query_box(&bvh, &qbox, |o| {
+                        let o = o as usize;
+                        if o == t || boxes[o].is_empty() {
+                            return;
+                        }
+                        if let Some(q) = tri_points(ps, o)
+                            && let Some(s) = f.shadow_of(q, light)
+                        {
+                            shadows.push(s);
+                        }
+                    });
+                    for s in &shadows {
+                        let sb = bbox2(s);
+                        let mut next = Vec::with_capacity(polys.len());
+                        for frag in polys {
+                            let fb = bbox2(&frag);
+                            if fb[1].x <= sb[0].x
+                                || fb[0].x >= sb[1].x
+                                || fb[1].y <= sb[0].y
+                                || fb[0].y >= sb[1].y
+                            {
+                                next.push(frag);
+                            } else {
+                                subtract(&frag, s, min_area2, &mut next);
+                            }
+                        }
+                        polys = next;
+                        if polys.is_empty() {
+                            break;
+                        }
+                    }
+                }
+                let world = match frame {
+                    Some(f) => polys
+                        .iter()
+                        .map(|q| Polygon {
+                            points: q.iter().map(|&x| Vec3::from(f.world_of(x))).collect(),
+                        })
+                        .collect(),
+                    None => Vec::new(),
+                };
+                TriFragments {
+                    frame,
+                    polys: polys
+                        .into_iter()
+                        .map(|q| {
+                            let b = bbox2(&q);
+                            (q, b)
+                        })
+                        .collect(),
+                    world,
+                }
+            })
+            .collect();
+        Ok(Self {
+            tris,
+            tol: 1e-6 * scale,
+            light_index,
+        })
+    }
+
+    /// The light these fragments belong to (index into `ps.lights`).
+    pub fn light_index(&self) -> usize {
+        self.light_index
+    }
+
+    /// 1 if world point `p` (on triangle `tri`) lies in a lit fragment of
+    /// `tri`, else 0. `p` is projected onto the triangle's plane; points
+    /// within `1e-6 * scale` of a fragment's boundary count as inside.
+    /// Returns 1 for an out-of-range or degenerate triangle (no shadow
+    /// information: it was never clipped).
+    pub fn lit_fraction(&self, tri: u32, p: Vec3) -> f32 {
+        let Some(t) = self.tris.get(tri as usize) else {
+            return 1.0;
+        };
+        let Some(f) = &t.frame else {
+            return 1.0;
+        };
+        let q = f.plane_2d(p.into());
+        let tol = self.tol;
+        let hit = t.polys.iter().any(|(poly, b)| {
+            q.x >= b[0].x - tol
+                && q.x <= b[1].x + tol
+                && q.y >= b[0].y - tol
+                && q.y <= b[1].y + tol
+                && inside_convex(poly, q, tol)
+        });
+        if hit { 1.0 } else { 0.0 }
+    }
+
+    /// The lit fragments of triangle `tri` (convex, world space); empty when
+    /// it is entirely in shadow or out of range.
+    pub fn fragments(&self, tri: u32) -> &[Polygon] {
+        self.tris
+            .get(tri as usize)
+            .map(|t| t.world.as_slice())
+            .unwrap_or(&[])
+    }
+
+    /// Total number of lit fragments (a measure of the light pass's work).
+    pub fn fragment_count(&self) -> usize {
+        self.tris.iter().map(|t| t.polys.len()).sum()
+    }
+}
+
+/// Minimal `f64` vectors (the workspace builds glam without `f64`).
+mod dvec {
+    use glam::Vec3;
+    use std::ops::{Add, Mul, Neg, Sub};
+
+    /// A 3D `f64` vector.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct DVec3 {
+        pub x: f64,
+        pub y: f64,
+        pub z: f64,
+    }
+
+    /// A 2D `f64` vector.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct DVec2 {
+        pub x: f64,
+        pub y: f64,
+    }
+
+    impl DVec3 {
+        pub const ZERO: Self = Self::new(0.0, 0.0, 0.0);
+        pub const fn new(x: f64, y: f64, z: f64) -> Self {
+            Self { x, y, z }
+        }
+        pub fn dot(self, o: Self) -> f64 {
+            self.x * o.x + self.y * o.y + self.z * o.z
+        }
+        pub fn cross(self, o: Self) -> Self {
+            Self::new(
+                self.y * o.z - self.z * o.y,
+                self.z * o.x - self.x * o.z,
+                self.x * o.y - self.y * o.x,
+            )
+        }
+        pub fn length(self) -> f64 {
+            self.dot(self).sqrt()
+        }
+        pub fn try_normalize(self) -> Option<Self> {
+            let l = self.length();
+            (l.is_finite() && l > 0.0).then(|| self * (1.0 / l))
+        }
+    }
+
+    impl DVec2 {
+        pub const fn new(x: f64, y: f64) -> Self {
+            Self { x, y }
+        }
+        pub const fn splat(v: f64) -> Self {
+            Self { x: v, y: v }
+        }
+        pub fn min(self, o: Self) -> Self {
+            Self::new(self.x.min(o.x), self.y.min(o.y))
+        }
+        pub fn max(self, o: Self) -> Self {
+            Self::new(self.x.max(o.x), self.y.max(o.y))
+        }
+        pub fn length(self) -> f64 {
+            (self.x * self.x + self.y * self.y).sqrt()
+        }
+    }
+
+    impl From<Vec3> for DVec3 {
+        fn from(v: Vec3) -> Self {
+            Self::new(v.x.into(), v.y.into(), v.z.into())
+        }
+    }
+
+    impl From<&Vec3> for DVec3 {
+        fn from(v: &Vec3) -> Self {
+            (*v).into()
+        }
+    }
+
+    impl From<DVec3> for Vec3 {
+        fn from(v: DVec3) -> Self {
+            Vec3::new(v.x as f32, v.y as f32, v.z as f32)
+        }
+    }
+
+    macro_rules! ops {
+        ($t:ident, $($f:ident),+) => {
+            impl Add for $t {
+                type Output = Self;
+                fn add(self, o: Self) -> Self {
+                    Self { $($f: self.$f + o.$f),+ }
+                }
+            }
+            impl Sub for $t {
+                type Output = Self;
+                fn sub(self, o: Self) -> Self {
+                    Self { $($f: self.$f - o.$f),+ }
+                }
+            }
+            impl Mul<f64> for $t {
+                type Output = Self;
+                fn mul(self, k: f64) -> Self {
+                    Self { $($f: self.$f * k),+ }
+                }
+            }
+            impl Neg for $t {
+                type Output = Self;
+                fn neg(self) -> Self {
+                    Self { $($f: -self.$f),+ }
+                }
+            }
+        };
+    }
+    ops!(DVec3, x, y, z);
+    ops!(DVec2, x, y);
+}
