@@ -6,6 +6,7 @@
 
 pub mod metrics;
 pub mod palette;
+pub mod postfilter;
 pub mod tonemap;
 
 use crate::progress::Progress;
