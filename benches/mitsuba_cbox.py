@@ -1,0 +1,81 @@
+#!/usr/bin/env python3
+"""Mitsuba 3 vs chiaro's path tracer on Mitsuba's own Cornell box.
+
+usage: mitsuba_cbox.py render VARIANT SPP FILTER SEED OUT.npy [REPEATS]
+       mitsuba_cbox.py compare REF.npy IMG.npy [IMG.npy ...]
+       mitsuba_cbox.py regions IMG.npy [IMG.npy ...]
+
+`render` renders mi.cornell_box() (256x256, path, max_depth 8) with VARIANT
+(scalar_rgb | llvm_ad_rgb) and pixel FILTER (box | gaussian, Mitsuba's
+default), prints `render[i]=SECONDS s  M Msamples/s` per repeat (the render
+call only, as mi.render + dr.eval + sync) and writes the last image as .npy
+(float32, H x W x 3, linear RGB).
+`compare` prints the RMSE (over all pixels and channels) of each image
+against REF, and its mean. `regions` prints the mean colour of a few
+regions (walls, floor, boxes, light) for checking that two scenes match.
+"""
+import sys
+import time
+import numpy as np
+
+
+def render(variant, spp, filt, seed, out, repeats):
+    import mitsuba as mi
+    import drjit as dr
+
+    mi.set_variant(variant)
+    d = mi.cornell_box()
+    d["integrator"] = {"type": "path", "max_depth": 8}
+    d["sensor"]["sampler"]["sample_count"] = spp
+    if filt != "gaussian":
+        d["sensor"]["film"]["rfilter"] = {"type": filt}
+    w, h = d["sensor"]["film"]["width"], d["sensor"]["film"]["height"]
+    scene = mi.load_dict(d)
+    img = None
+    for i in range(repeats):
+        t0 = time.perf_counter()
+        img = mi.render(scene, spp=spp, seed=seed + i)
+        dr.eval(img)
+        dr.sync_thread()
+        t = time.perf_counter() - t0
+        print(f"render[{i}]={t:.3f}s  {w * h * spp / t / 1e6:.3f} Msamples/s", flush=True)
+    np.save(out, np.array(img, dtype=np.float32))
+
+
+REGIONS = {  # (y0, y1, x0, x1) in the 256x256 image
+    "light": (32, 38, 112, 144),
+    "ceiling": (12, 24, 60, 100),
+    "red wall": (80, 160, 14, 30),
+    "green wall": (80, 160, 226, 242),
+    "back wall": (60, 100, 110, 150),
+    "floor": (232, 250, 100, 160),
+    "tall box front": (100, 160, 60, 90),
+    "short box top": (170, 180, 160, 190),
+}
+
+
+def main():
+    cmd = sys.argv[1]
+    if cmd == "render":
+        variant, spp, filt, seed, out = sys.argv[2], int(sys.argv[3]), sys.argv[4], int(sys.argv[5]), sys.argv[6]
+        repeats = int(sys.argv[7]) if len(sys.argv) > 7 else 1
+        render(variant, spp, filt, seed, out, repeats)
+    elif cmd == "compare":
+        ref = np.load(sys.argv[2]).astype(np.float64)
+        for p in sys.argv[3:]:
+            img = np.load(p).astype(np.float64)
+            rmse = np.sqrt(np.mean((img - ref) ** 2))
+            print(f"{p}: rmse={rmse:.5f} mean={img.mean():.5f} ref_mean={ref.mean():.5f}")
+    elif cmd == "regions":
+        imgs = [np.load(p).astype(np.float64) for p in sys.argv[2:]]
+        for name, (y0, y1, x0, x1) in REGIONS.items():
+            row = "  ".join(
+                "[" + " ".join(f"{v:.4f}" for v in im[y0:y1, x0:x1].reshape(-1, 3).mean(0)) + "]" for im in imgs
+            )
+            print(f"{name:15s} {row}")
+    else:
+        raise SystemExit(__doc__)
+
+
+if __name__ == "__main__":
+    main()

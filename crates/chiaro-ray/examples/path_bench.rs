@@ -1,0 +1,137 @@
+//! Times the path tracer on a scene file and writes the image as `.npy`
+//! (float32, height x width x 3, linear RGB) and `.png` (clamped sRGB), for
+//! the Mitsuba 3 comparison in `benches/mitsuba_cbox.sh`.
+//!
+//! ```text
+//! cargo run --release -p chiaro-ray --example path_bench -- SCENE.toml OUT_PREFIX \
+//!     [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]
+//! ```
+//!
+//! Prints one line per repeat (`render[i]=SECONDS s  M Msamples/s`, timed
+//! from the loaded scene: BVH build included, file loading and image writing
+//! excluded) and the median; the image written is the last repeat's.
+
+use chiaro_core::accel::Accelerator;
+use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::progress::NoProgress;
+use chiaro_core::scene::Technique;
+use chiaro_ray::path;
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+fn accel(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+    Box::new(SceneBvh::new(p))
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let (Some(scene_path), Some(prefix)) = (args.get(1), args.get(2)) else {
+        return Err("usage: path_bench SCENE OUT_PREFIX [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]".into());
+    };
+    let arg = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    let loaded = chiaro_io::load_scene(Path::new(scene_path))?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
+    let scene = loaded.scene;
+    let mut settings = scene.render.clone();
+    settings.technique = Technique::Path;
+    if let Some(n) = arg("--spp") {
+        settings.samples = n.parse()?;
+    }
+    if let Some(d) = arg("--max-depth") {
+        settings.path.max_depth = d.parse()?;
+    }
+    if let Some(s) = arg("--seed") {
+        settings.seed = s.parse()?;
+    }
+    let repeats: usize = arg("--repeats").map_or(Ok(1), |s| s.parse())?;
+    let threads: usize = arg("--threads").map_or(Ok(0), |s| s.parse())?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
+    let samples =
+        u64::from(settings.width) * u64::from(settings.height) * u64::from(settings.samples);
+    println!(
+        "chiaro path {}x{} spp={} max_depth={} rr_depth={} threads={}",
+        settings.width,
+        settings.height,
+        settings.samples,
+        settings.path.max_depth,
+        settings.path.rr_depth,
+        pool.current_num_threads()
+    );
+    let mut times = Vec::new();
+    let mut last = None;
+    for i in 0..repeats.max(1) {
+        let t0 = Instant::now();
+        let (film, stats) =
+            pool.install(|| path::render_with(&scene, &settings, &NoProgress, &accel))?;
+        let secs = t0.elapsed().as_secs_f64();
+        println!(
+            "render[{i}]={secs:.3}s  {:.3} Msamples/s  {:.2} Mrays/s",
+            samples as f64 / secs / 1e6,
+            stats.rays as f64 / secs / 1e6
+        );
+        times.push(secs);
+        last = Some(film);
+    }
+    times.sort_by(f64::total_cmp);
+    let median = times[times.len() / 2];
+    println!(
+        "median={median:.3}s  {:.3} Msamples/s",
+        samples as f64 / median / 1e6
+    );
+    let Some(film) = last else {
+        return Err("no render".into());
+    };
+    // .npy version 1.0: magic, header length, a Python dict literal padded to 64 bytes.
+    let mut header = format!(
+        "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, 3), }}",
+        film.height, film.width
+    );
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut npy = Vec::with_capacity(10 + header.len() + film.color.len() * 12);
+    npy.extend_from_slice(b"\x93NUMPY\x01\x00");
+    npy.extend_from_slice(&u16::try_from(header.len())?.to_le_bytes());
+    npy.extend_from_slice(header.as_bytes());
+    for c in &film.color {
+        for v in [c.x, c.y, c.z] {
+            npy.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    std::fs::File::create(format!("{prefix}.npy"))?.write_all(&npy)?;
+    // Clamp and encode sRGB (IEC 61966-2-1).
+    let srgb = |x: f32| {
+        let x = x.clamp(0.0, 1.0);
+        let y = if x <= 0.003_130_8 {
+            12.92 * x
+        } else {
+            1.055 * x.powf(1.0 / 2.4) - 0.055
+        };
+        (y * 255.0 + 0.5) as u8
+    };
+    let bytes: Vec<u8> = film
+        .color
+        .iter()
+        .flat_map(|c| [srgb(c.x), srgb(c.y), srgb(c.z)])
+        .collect();
+    image::save_buffer(
+        format!("{prefix}.png"),
+        &bytes,
+        film.width,
+        film.height,
+        image::ExtendedColorType::Rgb8,
+    )?;
+    Ok(())
+}
