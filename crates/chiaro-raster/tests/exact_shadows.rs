@@ -3,12 +3,12 @@
 //! and shadow rays classify the same pixel centres; lit fragments tile the
 //! lit part of each polygon.
 
+use chiaro_core::Vec3;
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::geometry::{Ray, face_normal, offset_ray_origin};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::scene::{Attenuation, Geometry, Light, Material, Mesh, Object, Scene};
-use chiaro_core::Vec3;
 use chiaro_raster::object_shadows::ObjectShadows;
 use chiaro_raster::scanline_shadows::scanline_visibility;
 use chiaro_raster::zbuffer::NO_ITEM;
@@ -37,6 +37,7 @@ fn object_scanline_and_ray_shadows_classify_every_pixel_alike() {
     let scan = scanline_visibility(&ps, &scene.camera, w, h, li).expect("scanline");
     let bvh = SceneBvh::new(&ps);
     let (mut n, mut shadowed, mut obj_bad, mut scan_bad) = (0, 0, 0, 0);
+    let mut img = vec![[0u8; 3]; (w * h) as usize];
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
@@ -58,8 +59,17 @@ fn object_scanline_and_ray_shadows_classify_every_pixel_alike() {
             n += 1;
             shadowed += usize::from(!ray);
             obj_bad += usize::from(o != ray);
+            img[i] = match (o, sc == o && o == ray) {
+                (_, false) => [255, 0, 0],
+                (true, _) => [230, 230, 230],
+                (false, _) => [40, 40, 120],
+            };
             scan_bad += usize::from(sc != ray);
         }
+    }
+    if let Ok(dir) = std::env::var("CHIARO_DUMP") {
+        let im = image::RgbImage::from_fn(w, h, |x, y| image::Rgb(img[(y * w + x) as usize]));
+        let _ = im.save(format!("{dir}/exact_shadows_{w}.png"));
     }
     assert!(n > 2500, "only {n} covered pixels");
     assert!(shadowed > 100, "only {shadowed} shadowed pixels");
