@@ -457,6 +457,27 @@ impl Bvh {
         ray: &Ray,
         mut test: impl FnMut(usize, f32) -> Option<f32>,
     ) -> f32 {
+        self.traverse_closest_leaves(ray, |first, count, mut t_max| {
+            let mut hit = None;
+            for slot in first..first + count {
+                if let Some(t) = test(slot, t_max) {
+                    t_max = t;
+                    hit = Some(t);
+                }
+            }
+            hit
+        })
+    }
+
+    /// [`Bvh::traverse_closest`] a leaf at a time: `test(first, count,
+    /// t_max)` intersects the primitives in slots `first..first + count`
+    /// and returns the nearest hit distance inside `(ray.t_min, t_max)`.
+    #[inline]
+    pub fn traverse_closest_leaves(
+        &self,
+        ray: &Ray,
+        mut test: impl FnMut(usize, usize, f32) -> Option<f32>,
+    ) -> f32 {
         let mut t_max = ray.t_max;
         if self.nodes.is_empty() {
             return t_max;
@@ -504,13 +525,8 @@ impl Bvh {
                     (child, count) = (hits[k - 1].child, hits[k - 1].count);
                     continue;
                 }
-            } else {
-                let first = child as usize;
-                for slot in first..first + count as usize {
-                    if let Some(t) = test(slot, t_max) {
-                        t_max = t;
-                    }
-                }
+            } else if let Some(t) = test(child as usize, count as usize, t_max) {
+                t_max = t;
             }
             // Pop the next child whose box still starts before the hit.
             loop {
@@ -530,6 +546,17 @@ impl Bvh {
     /// particular order, until it returns true. Returns true if it did.
     #[inline]
     pub fn traverse_any(&self, ray: &Ray, mut test: impl FnMut(usize) -> bool) -> bool {
+        self.traverse_any_leaves(ray, |first, count| (first..first + count).any(&mut test))
+    }
+
+    /// [`Bvh::traverse_any`] a leaf at a time: `test(first, count)` gets
+    /// the slots `first..first + count` of a leaf the ray crosses.
+    #[inline]
+    pub fn traverse_any_leaves(
+        &self,
+        ray: &Ray,
+        mut test: impl FnMut(usize, usize) -> bool,
+    ) -> bool {
         if self.nodes.is_empty() {
             return false;
         }
@@ -556,13 +583,8 @@ impl Bvh {
                     (child, count) = (n.child[first], n.count[first]);
                     continue;
                 }
-            } else {
-                let first = child as usize;
-                for slot in first..first + count as usize {
-                    if test(slot) {
-                        return true;
-                    }
-                }
+            } else if test(child as usize, count as usize) {
+                return true;
             }
             let Some(e) = stack.pop() else {
                 return false;
@@ -929,11 +951,108 @@ fn build_serial(
     );
 }
 
-/// A primitive stored in BVH slot order.
+/// Four primitives in consecutive BVH slots (`4 k .. 4 k + 4`), triangles
+/// in structure-of-arrays form so that [`TriBlock::intersect`] tests all
+/// four at once. 160 bytes.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Shape {
-    Triangle([Vec3; 3]),
-    Sphere(Vec3, f32),
+#[repr(C, align(32))]
+struct TriBlock {
+    /// `v[3 * vertex + axis][lane]`; NaN for a sphere or unused lane.
+    v: [[f32; WIDTH]; 9],
+    /// Per lane the [`Hit::prim`] (a sphere when `>= triangle_count`).
+    prim: [u32; WIDTH],
+}
+
+/// Per-lane results of [`TriBlock::intersect`].
+struct Lanes {
+    t: [f32; WIDTH],
+    u: [f32; WIDTH],
+    v: [f32; WIDTH],
+    /// Lanes hit.
+    mask: u32,
+}
+
+impl TriBlock {
+    const EMPTY: TriBlock = TriBlock {
+        v: [[f32::NAN; WIDTH]; 9],
+        prim: [u32::MAX; WIDTH],
+    };
+
+    /// The watertight test of [`WatertightRay::intersect`] on the lanes in
+    /// `lanes`, four at a time: the same operations in the same order per
+    /// lane, so `t`, `u`, `v` are bit-identical to the scalar test (the
+    /// double-precision edge fallback runs per lane, scalar).
+    #[inline(always)]
+    fn intersect(&self, wr: &WatertightRay, lanes: u32) -> Lanes {
+        let (kx, ky, kz) = (wr.kx, wr.ky, wr.kz);
+        let (sx, sy, sz) = (wr.sx, wr.sy, wr.sz);
+        let o = wr.origin.to_array();
+        let (ox, oy, oz) = (o[kx], o[ky], o[kz]);
+        let v = &self.v;
+        let mut e = [[0.0f32; WIDTH]; 6]; // ax ay bx by cx cy
+        let mut z = [[0.0f32; WIDTH]; 3]; // a[kz] b[kz] c[kz]
+        for (p, (xy, zz)) in e.chunks_exact_mut(2).zip(z.iter_mut()).enumerate() {
+            let (px, py, pz) = (&v[3 * p + kx], &v[3 * p + ky], &v[3 * p + kz]);
+            for i in 0..WIDTH {
+                let (dx, dy, dz) = (px[i] - ox, py[i] - oy, pz[i] - oz);
+                xy[0][i] = dx - sx * dz;
+                xy[1][i] = dy - sy * dz;
+                zz[i] = dz;
+            }
+        }
+        let [ax, ay, bx, by, cx, cy] = e;
+        let mut uu = [0.0f32; WIDTH];
+        let mut vv = [0.0f32; WIDTH];
+        let mut ww = [0.0f32; WIDTH];
+        let mut zero = 0u32;
+        for i in 0..WIDTH {
+            uu[i] = cx[i] * by[i] - cy[i] * bx[i];
+            vv[i] = ax[i] * cy[i] - ay[i] * cx[i];
+            ww[i] = bx[i] * ay[i] - by[i] * ax[i];
+            zero |= ((uu[i] == 0.0 || vv[i] == 0.0 || ww[i] == 0.0) as u32) << i;
+        }
+        let mut fix = zero & lanes;
+        while fix != 0 {
+            // Recompute in double precision on edges (the paper's fallback).
+            let i = fix.trailing_zeros() as usize;
+            fix &= fix - 1;
+            let (cxd, cyd, bxd, byd, axd, ayd) = (
+                cx[i] as f64,
+                cy[i] as f64,
+                bx[i] as f64,
+                by[i] as f64,
+                ax[i] as f64,
+                ay[i] as f64,
+            );
+            uu[i] = (cxd * byd - cyd * bxd) as f32;
+            vv[i] = (axd * cyd - ayd * cxd) as f32;
+            ww[i] = (bxd * ayd - byd * axd) as f32;
+        }
+        let mut out = Lanes {
+            t: [0.0; WIDTH],
+            u: [0.0; WIDTH],
+            v: [0.0; WIDTH],
+            mask: 0,
+        };
+        for i in 0..WIDTH {
+            let (u, v, w) = (uu[i], vv[i], ww[i]);
+            let mixed = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
+            let det = u + v + w;
+            let az = sz * z[0][i];
+            let bz = sz * z[1][i];
+            let cz = sz * z[2][i];
+            let t_scaled = u * az + v * bz + w * cz;
+            let inv = 1.0 / det;
+            let t = t_scaled * inv;
+            let ok = !mixed && det != 0.0 && t > wr.t_min && t < wr.t_max;
+            out.t[i] = t;
+            out.u[i] = v * inv;
+            out.v[i] = w * inv;
+            out.mask |= (ok as u32) << i;
+        }
+        out.mask &= lanes;
+        out
+    }
 }
 
 /// Both roots of a ray-sphere intersection inside `(t_min, t_max)`, with
@@ -946,13 +1065,26 @@ fn sphere_roots(ray: &Ray, center: Vec3, radius: f32) -> [Option<f32>; 2] {
     [Some(t0), intersect_sphere(&rest, center, radius)]
 }
 
+/// The lane mask of slots `first..end` inside block `b`.
+#[inline(always)]
+fn block_lanes(b: usize, first: usize, end: usize) -> u32 {
+    let lo = first.saturating_sub(4 * b).min(WIDTH);
+    let hi = (end - 4 * b).min(WIDTH);
+    ((1u32 << hi) - 1) & !((1u32 << lo) - 1)
+}
+
 /// The BVH over a [`PreparedScene`]'s triangles and analytic spheres, with
-/// the primitives copied into leaf order. [`Hit::prim`] numbers triangles
-/// first, then spheres, as [`PreparedScene::surface`] expects.
+/// the triangles copied into leaf order in 4-wide blocks. [`Hit::prim`]
+/// numbers triangles first, then spheres, as [`PreparedScene::surface`]
+/// expects.
 #[derive(Debug, Clone)]
 pub struct SceneBvh {
     bvh: Bvh,
-    shapes: Vec<Shape>,
+    /// Slot `s` is lane `s % 4` of block `s / 4`.
+    blocks: Vec<TriBlock>,
+    /// Mask per block of the lanes holding spheres.
+    sphere_lanes: Vec<u8>,
+    spheres: Vec<(Vec3, f32)>,
     triangle_count: u32,
 }
 
@@ -993,23 +1125,33 @@ impl SceneBvh {
             max: s.center + Vec3::splat(s.radius.abs()),
         }));
         let bvh = Bvh::build_with(&bounds, opts);
-        let shape = |&p: &u32| {
-            let p = p as usize;
-            if p < n {
-                Shape::Triangle(tri(&scene.triangles[p]))
-            } else {
-                let s = &scene.spheres[p - n];
-                Shape::Sphere(s.center, s.radius)
+        let block = |slots: &[u32]| {
+            let mut b = TriBlock::EMPTY;
+            let mut spheres = 0u8;
+            for (lane, &p) in slots.iter().enumerate() {
+                b.prim[lane] = p;
+                if (p as usize) < n {
+                    for (k, v) in tri(&scene.triangles[p as usize]).iter().enumerate() {
+                        for a in 0..3 {
+                            b.v[3 * k + a][lane] = v[a];
+                        }
+                    }
+                } else {
+                    spheres |= 1 << lane;
+                }
             }
+            (b, spheres)
         };
-        let shapes = if bvh.prim_order.len() >= opts.parallel_threshold {
-            bvh.prim_order.par_iter().map(shape).collect()
+        let (blocks, sphere_lanes) = if bvh.prim_order.len() >= opts.parallel_threshold {
+            bvh.prim_order.par_chunks(WIDTH).map(block).unzip()
         } else {
-            bvh.prim_order.iter().map(shape).collect()
+            bvh.prim_order.chunks(WIDTH).map(block).unzip()
         };
         Self {
             bvh,
-            shapes,
+            blocks,
+            sphere_lanes,
+            spheres: scene.spheres.iter().map(|s| (s.center, s.radius)).collect(),
             triangle_count: n as u32,
         }
     }
@@ -1024,6 +1166,11 @@ impl SceneBvh {
         self.triangle_count
     }
 
+    #[inline(always)]
+    fn sphere(&self, prim: u32) -> (Vec3, f32) {
+        self.spheres[(prim - self.triangle_count) as usize]
+    }
+
     /// Calls `visit(hit)` for every intersection with `t` in
     /// `(ray.t_min, ray.t_max)`, in no particular order (a sphere crossed
     /// twice reports both roots), until `visit` returns true. Returns true
@@ -1031,22 +1178,42 @@ impl SceneBvh {
     /// attenuate light through transparent surfaces.
     pub fn visit_hits(&self, ray: &Ray, mut visit: impl FnMut(&Hit) -> bool) -> bool {
         let wr = WatertightRay::new(ray);
-        let order = &self.bvh.prim_order;
-        self.bvh.traverse_any(ray, |slot| {
-            let prim = order[slot];
-            match self.shapes[slot] {
-                Shape::Triangle([a, b, c]) => wr
-                    .intersect(a, b, c)
-                    .is_some_and(|(t, u, v)| visit(&Hit { t, prim, u, v })),
-                Shape::Sphere(c, r) => sphere_roots(ray, c, r).into_iter().flatten().any(|t| {
-                    visit(&Hit {
-                        t,
-                        prim,
-                        u: 0.0,
-                        v: 0.0,
-                    })
-                }),
+        self.bvh.traverse_any_leaves(ray, |first, count| {
+            let end = first + count;
+            for b in first / WIDTH..=(end - 1) / WIDTH {
+                let lanes = block_lanes(b, first, end);
+                let blk = &self.blocks[b];
+                let spheres = self.sphere_lanes[b] as u32 & lanes;
+                let r = blk.intersect(&wr, lanes & !spheres);
+                for i in 0..WIDTH {
+                    let prim = blk.prim[i];
+                    if r.mask >> i & 1 == 1 {
+                        let h = Hit {
+                            t: r.t[i],
+                            prim,
+                            u: r.u[i],
+                            v: r.v[i],
+                        };
+                        if visit(&h) {
+                            return true;
+                        }
+                    } else if spheres >> i & 1 == 1 {
+                        let (c, rad) = self.sphere(prim);
+                        let hit = sphere_roots(ray, c, rad).into_iter().flatten().any(|t| {
+                            visit(&Hit {
+                                t,
+                                prim,
+                                u: 0.0,
+                                v: 0.0,
+                            })
+                        });
+                        if hit {
+                            return true;
+                        }
+                    }
+                }
             }
+            false
         })
     }
 }
@@ -1055,40 +1222,67 @@ impl Accelerator for SceneBvh {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
         let mut wr = WatertightRay::new(ray);
         let mut best = None;
-        let order = &self.bvh.prim_order;
-        self.bvh.traverse_closest(ray, |slot, t_max| {
-            wr.t_max = t_max;
-            match self.shapes[slot] {
-                Shape::Triangle([a, b, c]) => {
-                    let (t, u, v) = wr.intersect(a, b, c)?;
-                    best = Some(Hit {
-                        t,
-                        prim: order[slot],
-                        u,
-                        v,
-                    });
-                    Some(t)
+        self.bvh
+            .traverse_closest_leaves(ray, |first, count, t_max| {
+                let end = first + count;
+                wr.t_max = t_max;
+                let mut found = None;
+                for b in first / WIDTH..=(end - 1) / WIDTH {
+                    let lanes = block_lanes(b, first, end);
+                    let blk = &self.blocks[b];
+                    let spheres = self.sphere_lanes[b] as u32 & lanes;
+                    let r = blk.intersect(&wr, lanes & !spheres);
+                    // In slot order, keep a hit only if strictly nearer (as a
+                    // one-at-a-time scan shrinking t_max would).
+                    for i in 0..WIDTH {
+                        let hit = if r.mask >> i & 1 == 1 {
+                            (r.t[i] < wr.t_max).then_some((r.t[i], r.u[i], r.v[i]))
+                        } else if spheres >> i & 1 == 1 {
+                            let (c, rad) = self.sphere(blk.prim[i]);
+                            intersect_sphere(
+                                &Ray {
+                                    t_max: wr.t_max,
+                                    ..*ray
+                                },
+                                c,
+                                rad,
+                            )
+                            .map(|t| (t, 0.0, 0.0))
+                        } else {
+                            None
+                        };
+                        if let Some((t, u, v)) = hit {
+                            wr.t_max = t;
+                            found = Some(t);
+                            best = Some(Hit {
+                                t,
+                                prim: blk.prim[i],
+                                u,
+                                v,
+                            });
+                        }
+                    }
                 }
-                Shape::Sphere(c, r) => {
-                    let t = intersect_sphere(&Ray { t_max, ..*ray }, c, r)?;
-                    best = Some(Hit {
-                        t,
-                        prim: order[slot],
-                        u: 0.0,
-                        v: 0.0,
-                    });
-                    Some(t)
-                }
-            }
-        });
+                found
+            });
         best
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
         let wr = WatertightRay::new(ray);
-        self.bvh.traverse_any(ray, |slot| match self.shapes[slot] {
-            Shape::Triangle([a, b, c]) => wr.intersect(a, b, c).is_some(),
-            Shape::Sphere(c, r) => intersect_sphere(ray, c, r).is_some(),
+        self.bvh.traverse_any_leaves(ray, |first, count| {
+            let end = first + count;
+            (first / WIDTH..=(end - 1) / WIDTH).any(|b| {
+                let lanes = block_lanes(b, first, end);
+                let spheres = self.sphere_lanes[b] as u32 & lanes;
+                self.blocks[b].intersect(&wr, lanes & !spheres).mask != 0
+                    || (0..WIDTH).any(|i| {
+                        spheres >> i & 1 == 1 && {
+                            let (c, rad) = self.sphere(self.blocks[b].prim[i]);
+                            intersect_sphere(ray, c, rad).is_some()
+                        }
+                    })
+            })
         })
     }
 }
@@ -1196,7 +1390,15 @@ mod tests {
                     _ => false,
                 };
                 let occ_same = bvh.occluded(r) == b.is_some();
-                (!same || !occ_same).then(|| format!("{r:?}: bvh {a:?} list {b:?}"))
+                // The nearest of all the hits visit_hits reports is the
+                // closest hit.
+                let mut visit_t: Option<f32> = None;
+                bvh.visit_hits(r, |h| {
+                    visit_t = Some(visit_t.map_or(h.t, |t| t.min(h.t)));
+                    false
+                });
+                let visit_same = visit_t == b.map(|h| h.t);
+                (!same || !occ_same || !visit_same).then(|| format!("{r:?}: bvh {a:?} list {b:?}"))
             })
             .collect();
         assert!(
@@ -1405,6 +1607,56 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn four_wide_triangle_test_is_bit_identical_to_scalar() {
+        let mut rng = pixel_rng(7, 0, 0, 0);
+        let mut edge_cases = 0;
+        for k in 0..4000 {
+            let mut blk = TriBlock::EMPTY;
+            let mut tris = [[Vec3::ZERO; 3]; WIDTH];
+            for (lane, t) in tris.iter_mut().enumerate() {
+                for p in t.iter_mut() {
+                    *p = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+                }
+                if k % 2 == 0 {
+                    // Axis-aligned grid triangles: rays through vertices and
+                    // edges take the double-precision fallback.
+                    *t = [Vec3::ZERO, Vec3::X, Vec3::Y].map(|p| p + Vec3::Z * lane as f32 * 0.1);
+                }
+                for (v, p) in t.iter().enumerate() {
+                    for a in 0..3 {
+                        blk.v[3 * v + a][lane] = p[a];
+                    }
+                }
+            }
+            let o = if k % 2 == 0 {
+                let g = |x: f32| (x * 4.0).round() / 4.0;
+                Vec3::new(g(uniform(&mut rng)), g(uniform(&mut rng)), 3.0)
+            } else {
+                Vec3::new(0.5, 0.5, 3.0)
+            };
+            let dir = if k % 2 == 0 {
+                -Vec3::Z
+            } else {
+                sample_uniform_sphere(uniform2(&mut rng)) - Vec3::Z * 2.0
+            };
+            let wr = WatertightRay::new(&Ray::new(o, dir));
+            let lanes = (k % 15 + 1) as u32;
+            let r = blk.intersect(&wr, lanes);
+            for (i, t) in tris.iter().enumerate() {
+                let want = if lanes >> i & 1 == 1 {
+                    wr.intersect(t[0], t[1], t[2])
+                } else {
+                    None
+                };
+                let got = (r.mask >> i & 1 == 1).then_some((r.t[i], r.u[i], r.v[i]));
+                assert_eq!(got, want, "case {k} lane {i}");
+                edge_cases += want.is_some_and(|(_, u, v)| u == 0.0 || v == 0.0) as u32;
+            }
+        }
+        assert!(edge_cases > 10, "only {edge_cases} edge hits");
     }
 
     #[test]
