@@ -298,7 +298,13 @@ impl Ctx<'_, '_> {
     /// visibility of the shadow method; `counts` are the shadow-volume
     /// counts of this sample, one per light (absent: no volume shadows).
     #[inline]
-    fn illuminate(&self, m: &SurfaceMaterial, sp: &ShadingPoint, counts: Option<&[i32]>) -> Vec3 {
+    fn illuminate(
+        &self,
+        tri: u32,
+        m: &SurfaceMaterial,
+        sp: &ShadingPoint,
+        counts: Option<&[i32]>,
+    ) -> Vec3 {
         let current = Cell::new(0u32);
         shade_local(
             m,
@@ -308,7 +314,7 @@ impl Ctx<'_, '_> {
                 current.set(i);
                 Vec2::splat(0.5)
             },
-            |li, s| self.visibility(li, current.get(), sp, s, counts),
+            |li, s| self.visibility(li, current.get(), tri, sp, s, counts),
         )
     }
 
@@ -317,6 +323,7 @@ impl Ctx<'_, '_> {
         &self,
         li: usize,
         i: u32,
+        tri: u32,
         sp: &ShadingPoint,
         s: &LightSample,
         counts: Option<&[i32]>,
@@ -336,17 +343,21 @@ impl Ctx<'_, '_> {
                 Some(&c) if c != 0 => Vec3::ZERO,
                 _ => Vec3::ONE,
             },
+            Shadows::Object(lights) => match lights.get(li) {
+                Some(Some(o)) => Vec3::splat(o.lit_fraction(tri, sp.p)),
+                _ => Vec3::ONE,
+            },
         }
     }
 
     /// The illumination split for flat and Gouraud shading.
-    fn illuminate_split(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> Split {
-        let total = self.illuminate(m, sp, None);
+    fn illuminate_split(&self, tri: u32, m: &SurfaceMaterial, sp: &ShadingPoint) -> Split {
+        let total = self.illuminate(tri, m, sp, None);
         let no_diffuse = SurfaceMaterial {
             kd: Vec3::ZERO,
             ..*m
         };
-        let rest = self.illuminate(&no_diffuse, sp, None);
+        let rest = self.illuminate(tri, &no_diffuse, sp, None);
         Split {
             diffuse: total - rest,
             rest,
@@ -381,7 +392,7 @@ impl Ctx<'_, '_> {
             ng: n,
             wo,
         };
-        self.illuminate_split(&self.untextured_material(&hit), &sp)
+        self.illuminate_split(t, &self.untextured_material(&hit), &sp)
     }
 
     /// Gouraud illumination at corner `k` of triangle `t`, on the front side
@@ -407,7 +418,7 @@ impl Ctx<'_, '_> {
             ng,
             wo,
         };
-        self.illuminate_split(&self.untextured_material(&hit), &sp)
+        self.illuminate_split(t, &self.untextured_material(&hit), &sp)
     }
 }
 
@@ -1237,14 +1248,14 @@ fn shade_sample(
                 ng: hit.ng * sign,
                 wo,
             };
-            let c = ctx.illuminate(&sm, &sp, counts);
+            let c = ctx.illuminate(t, &sm, &sp, counts);
             if want_specular {
                 let diffuse_only = SurfaceMaterial {
                     ks: Vec3::ZERO,
                     emission: Vec3::ZERO,
                     ..sm
                 };
-                specular = c - ctx.illuminate(&diffuse_only, &sp, counts);
+                specular = c - ctx.illuminate(t, &diffuse_only, &sp, counts);
             }
             (c, n, sm.kr)
         }

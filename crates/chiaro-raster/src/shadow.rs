@@ -69,14 +69,19 @@ pub(crate) enum Shadows {
     Map(ShadowMaps),
     /// Shadow volumes: the per-sample counts live in the renderer's tiles.
     Volume,
+    /// Atherton-Weiler-Greenberg object-precision shadows: the lit fragments
+    /// of every triangle, one set per light (`None` for ambient lights).
+    Object(Vec<Option<crate::object_shadows::ObjectShadows>>),
 }
 
 impl Shadows {
     /// Builds the structures of `settings.shadows` for `ps`.
     ///
     /// # Errors
-    /// [`chiaro_core::error::CoreError::Unsupported`] for the object-precision and
-    /// scan-line methods, which the scan converter does not implement yet.
+    /// [`chiaro_core::error::CoreError::Unsupported`] for the scan-line
+    /// method, which the scan converter does not draw yet (its classification
+    /// exists in [`crate::scanline_shadows`]), and for object-precision
+    /// shadows of lights it cannot handle.
     pub(crate) fn new(
         ps: &PreparedScene<'_>,
         settings: &RenderSettings,
@@ -90,11 +95,16 @@ impl Shadows {
                 settings.light_samples.max(1),
             )),
             ShadowMethod::Volume => Shadows::Volume,
-            ShadowMethod::Object => {
-                return Err(chiaro_core::error::CoreError::Unsupported(
-                    "shadows=object is not implemented yet".into(),
-                ));
-            }
+            ShadowMethod::Object => Shadows::Object(
+                ps.lights
+                    .iter()
+                    .enumerate()
+                    .map(|(li, l)| match l {
+                        chiaro_core::scene::Light::Ambient { .. } => Ok(None),
+                        _ => crate::object_shadows::ObjectShadows::build(ps, li).map(Some),
+                    })
+                    .collect::<Result<Vec<_>, _>>()?,
+            ),
             ShadowMethod::Scanline => {
                 return Err(chiaro_core::error::CoreError::Unsupported(
                     "shadows=scanline is not implemented yet".into(),

@@ -143,6 +143,17 @@ pub fn render_with_stats(
     if !errors.is_empty() {
         return Err(CoreError::InvalidScene { issues: errors }.into());
     }
+    if settings.aa == chiaro_core::scene::AaMode::Post {
+        // The seeds' "render, then remove the aliasing": one sample per
+        // pixel, then an edge-aware post filter (FXAA).
+        let one = RenderSettings {
+            aa: chiaro_core::scene::AaMode::Supersample,
+            samples: 1,
+            ..settings.clone()
+        };
+        let (film, stats) = render_with_stats(scene, &one, progress)?;
+        return Ok((chiaro_core::film::postfilter::fxaa(&film), stats));
+    }
     let start = Instant::now();
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let (film, rays) = match settings.technique {

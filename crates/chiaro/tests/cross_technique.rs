@@ -253,3 +253,23 @@ fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     // Colour bleeding: the ceiling is lit by red and green walls' light.
     assert!(a[1].x > a[1].z && b[1].x > b[1].z);
 }
+
+#[test]
+fn post_filter_antialiasing_changes_only_edges() {
+    // aa=post renders one sample per pixel and filters it (FXAA): inside
+    // smooth regions the picture is the one-sample picture.
+    let scene = scenes::shadow_test(48);
+    let mut s = scene.render.clone();
+    s.technique = Technique::Phong;
+    s.samples = 1;
+    let plain = render(&scene, &s);
+    s.aa = chiaro::scene::AaMode::Post;
+    s.samples = 16; // ignored by the post filter
+    let post = render(&scene, &s);
+    assert!(post.is_clean());
+    let mask = smooth_region(&plain);
+    let inside = diff_films(&plain, &post, 0.02, &mask);
+    let all = diff_films(&plain, &post, 1e-4, |_| true);
+    assert!(all.over > 0, "the filter changed nothing: {all:?}");
+    assert!(inside.over * 20 <= inside.compared, "{inside:?}");
+}
