@@ -301,6 +301,7 @@ impl Ctx<'_, '_> {
     fn illuminate(
         &self,
         tri: u32,
+        pixel: Option<(u32, u32)>,
         m: &SurfaceMaterial,
         sp: &ShadingPoint,
         counts: Option<&[i32]>,
@@ -314,7 +315,7 @@ impl Ctx<'_, '_> {
                 current.set(i);
                 Vec2::splat(0.5)
             },
-            |li, s| self.visibility(li, current.get(), tri, sp, s, counts),
+            |li, s| self.visibility(li, current.get(), tri, pixel, sp, s, counts),
         )
     }
 
@@ -324,6 +325,7 @@ impl Ctx<'_, '_> {
         li: usize,
         i: u32,
         tri: u32,
+        pixel: Option<(u32, u32)>,
         sp: &ShadingPoint,
         s: &LightSample,
         counts: Option<&[i32]>,
@@ -347,17 +349,31 @@ impl Ctx<'_, '_> {
                 Some(Some(o)) => Vec3::splat(o.lit_fraction(tri, sp.p)),
                 _ => Vec3::ONE,
             },
+            Shadows::Scanline { lines, fallback } => {
+                // The scan-line pass classified pixel centres; other points
+                // (sub-samples, vertices) use the exact lit fragments.
+                if let (Some((x, y)), Some(Some(l))) = (pixel, lines.get(li)) {
+                    let k = (y * l.width + x) as usize;
+                    if l.visible.get(k) == Some(&tri) {
+                        return Vec3::splat(l.lit[k]);
+                    }
+                }
+                match fallback.get(li) {
+                    Some(Some(o)) => Vec3::splat(o.lit_fraction(tri, sp.p)),
+                    _ => Vec3::ONE,
+                }
+            }
         }
     }
 
     /// The illumination split for flat and Gouraud shading.
     fn illuminate_split(&self, tri: u32, m: &SurfaceMaterial, sp: &ShadingPoint) -> Split {
-        let total = self.illuminate(tri, m, sp, None);
+        let total = self.illuminate(tri, None, m, sp, None);
         let no_diffuse = SurfaceMaterial {
             kd: Vec3::ZERO,
             ..*m
         };
-        let rest = self.illuminate(tri, &no_diffuse, sp, None);
+        let rest = self.illuminate(tri, None, &no_diffuse, sp, None);
         Split {
             diffuse: total - rest,
             rest,
@@ -1248,14 +1264,17 @@ fn shade_sample(
                 ng: hit.ng * sign,
                 wo,
             };
-            let c = ctx.illuminate(t, &sm, &sp, counts);
+            // A sample at a pixel centre (one sample per pixel) names its pixel.
+            let pixel = (sx.fract() == 0.5 && sy.fract() == 0.5 && sx >= 0.0 && sy >= 0.0)
+                .then_some((sx as u32, sy as u32));
+            let c = ctx.illuminate(t, pixel, &sm, &sp, counts);
             if want_specular {
                 let diffuse_only = SurfaceMaterial {
                     ks: Vec3::ZERO,
                     emission: Vec3::ZERO,
                     ..sm
                 };
-                specular = c - ctx.illuminate(t, &diffuse_only, &sp, counts);
+                specular = c - ctx.illuminate(t, pixel, &diffuse_only, &sp, counts);
             }
             (c, n, sm.kr)
         }

@@ -72,16 +72,38 @@ pub(crate) enum Shadows {
     /// Atherton-Weiler-Greenberg object-precision shadows: the lit fragments
     /// of every triangle, one set per light (`None` for ambient lights).
     Object(Vec<Option<crate::object_shadows::ObjectShadows>>),
+    /// Bouknight-Kelley scan-line shadows: per light, the lit/shadowed
+    /// classification of every pixel centre from the scan-line pass, with
+    /// object-precision fragments for samples that are not pixel centres
+    /// (supersampling, vertices) — both exact, so they agree.
+    Scanline {
+        /// Per light (`None` for ambient lights).
+        lines: Vec<Option<crate::scanline_shadows::ScanlineShadows>>,
+        /// Per light (`None` for ambient lights).
+        fallback: Vec<Option<crate::object_shadows::ObjectShadows>>,
+    },
+}
+
+fn object_shadows_per_light(
+    ps: &PreparedScene<'_>,
+) -> Result<Vec<Option<crate::object_shadows::ObjectShadows>>, chiaro_core::error::CoreError> {
+    ps.lights
+        .iter()
+        .enumerate()
+        .map(|(li, l)| match l {
+            chiaro_core::scene::Light::Ambient { .. } => Ok(None),
+            _ => crate::object_shadows::ObjectShadows::build(ps, li).map(Some),
+        })
+        .collect()
 }
 
 impl Shadows {
     /// Builds the structures of `settings.shadows` for `ps`.
     ///
     /// # Errors
-    /// [`chiaro_core::error::CoreError::Unsupported`] for the scan-line
-    /// method, which the scan converter does not draw yet (its classification
-    /// exists in [`crate::scanline_shadows`]), and for object-precision
-    /// shadows of lights it cannot handle.
+    /// [`chiaro_core::error::CoreError::Unsupported`] for object-precision
+    /// and scan-line shadows of lights they cannot handle (see
+    /// [`crate::object_shadows`]).
     pub(crate) fn new(
         ps: &PreparedScene<'_>,
         settings: &RenderSettings,
@@ -95,21 +117,26 @@ impl Shadows {
                 settings.light_samples.max(1),
             )),
             ShadowMethod::Volume => Shadows::Volume,
-            ShadowMethod::Object => Shadows::Object(
-                ps.lights
+            ShadowMethod::Object => Shadows::Object(object_shadows_per_light(ps)?),
+            ShadowMethod::Scanline => Shadows::Scanline {
+                lines: ps
+                    .lights
                     .iter()
                     .enumerate()
                     .map(|(li, l)| match l {
                         chiaro_core::scene::Light::Ambient { .. } => Ok(None),
-                        _ => crate::object_shadows::ObjectShadows::build(ps, li).map(Some),
+                        _ => crate::scanline_shadows::scanline_visibility(
+                            ps,
+                            &ps.scene.camera,
+                            settings.width,
+                            settings.height,
+                            li,
+                        )
+                        .map(Some),
                     })
                     .collect::<Result<Vec<_>, _>>()?,
-            ),
-            ShadowMethod::Scanline => {
-                return Err(chiaro_core::error::CoreError::Unsupported(
-                    "shadows=scanline is not implemented yet".into(),
-                ));
-            }
+                fallback: object_shadows_per_light(ps)?,
+            },
         })
     }
 }
