@@ -20,6 +20,7 @@ pub mod convert;
 pub mod errors;
 pub mod render;
 pub mod scene;
+pub mod solution;
 
 use crate::errors::io_err;
 use crate::scene::PyScene;
@@ -93,6 +94,7 @@ fn has_crop() -> bool {
 fn _chiaro(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<PyScene>()?;
+    m.add_class::<solution::PySolution>()?;
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(loads, m)?)?;
     m.add_function(wrap_pyfunction!(techniques, m)?)?;
@@ -100,6 +102,7 @@ fn _chiaro(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(has_crop, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
     m.add_function(wrap_pyfunction!(render::compare, m)?)?;
+    m.add_function(wrap_pyfunction!(solution::solve_radiosity, m)?)?;
     m.add_function(wrap_pyfunction!(render::write, m)?)?;
     m.add_function(wrap_pyfunction!(render::resolve, m)?)?;
     m.add_function(wrap_pyfunction!(render::encode_png, m)?)?;

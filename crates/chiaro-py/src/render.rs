@@ -6,6 +6,7 @@
 use crate::convert::{json_to_py, merge_props, py_to_json, toml_literal};
 use crate::errors::{RenderError, SettingsError, core_err, io_err, to_pyerr};
 use crate::scene::PyScene;
+use crate::solution::{PySolution, check_solution_technique, render_from_solution};
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film, write_film};
 use chiaro::scene::{Scene, ToneMap};
 use chiaro::{Film, Progress, RenderSettings, Technique, Vec3};
@@ -314,7 +315,7 @@ pub fn resolve<'py>(
 }
 
 /// Python `(key, value)` overrides as JSON.
-fn overrides_json(
+pub fn overrides_json(
     overrides: Option<Vec<(String, Bound<'_, PyAny>)>>,
 ) -> PyResult<Vec<(String, Value)>> {
     overrides
@@ -376,11 +377,13 @@ fn film_arrays<'py>(
 /// `(H, W, 3)` linear RGB, or the region's `(y1-y0, x1-x0, 3)`), `depth` and
 /// `normal` when `aovs`, `seconds`, `rays`, `triangles`, `settings` (the
 /// resolved settings as a dict) and `cropped` (whether the region was
-/// rendered alone rather than cut out of a whole film).
+/// rendered alone rather than cut out of a whole film). With `solution`
+/// (techniques `radiosity` and `hybrid` only), renders from that radiosity
+/// solution instead of solving.
 #[pyfunction]
 #[pyo3(signature = (scene, technique = None, width = None, height = None, samples = None,
                     seed = None, overrides = None, camera = None, region = None,
-                    progress = None, threads = None, aovs = false))]
+                    progress = None, threads = None, aovs = false, solution = None))]
 pub fn render<'py>(
     py: Python<'py>,
     scene: &PyScene,
@@ -395,6 +398,7 @@ pub fn render<'py>(
     progress: Option<Bound<'py, PyAny>>,
     threads: Option<usize>,
     aovs: bool,
+    solution: Option<&PySolution>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let overrides = overrides_json(overrides)?;
     let mut settings = resolve_settings(
@@ -406,6 +410,9 @@ pub fn render<'py>(
         seed,
         &overrides,
     )?;
+    if solution.is_some() {
+        check_solution_technique(settings.technique)?;
+    }
     let resolved = serde_json::to_value(&settings).unwrap_or(Value::Null);
     let full = (0, 0, settings.width, settings.height);
     let r = region.unwrap_or(full);
@@ -430,13 +437,14 @@ pub fn render<'py>(
         }
         None => &scene.inner,
     };
-    let (film, stats) = render_polling(
-        py,
-        scene_ref,
-        &settings,
-        progress.map(Bound::unbind),
-        threads,
-    )?;
+    let callback = progress.map(Bound::unbind);
+    let (film, stats) = match &solution {
+        Some(sol) => run_polling(py, callback, threads, |p| {
+            render_from_solution(scene_ref, &settings, &sol.inner, p)
+        })?
+        .map_err(to_pyerr)?,
+        None => render_polling(py, scene_ref, &settings, callback, threads)?,
+    };
     let out = PyDict::new(py);
     film_arrays(py, &film, r, aovs, &out)?;
     out.set_item("seconds", stats.elapsed.as_secs_f64())?;

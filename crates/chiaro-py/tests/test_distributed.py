@@ -91,3 +91,58 @@ def test_module_cli_renders_on_the_cluster(ray_cluster, root, tmp_path):
         capture_output=True, text=True, timeout=120,
     )
     assert bad.returncode == 1 and "none.toml" in bad.stderr
+
+
+@pytest.mark.parametrize("technique", ["radiosity", "hybrid"])
+def test_tiled_radiosity_is_solved_once_and_equals_local_render(
+    ray_cluster, root, tmp_path, monkeypatch, technique
+):
+    scene = chiaro.load(root / BOX)
+    fast = {"radiosity.solver": "hierarchical"}
+    solves = []
+    real_solve = chiaro.solve_radiosity
+
+    def counting_solve(*a, **kw):
+        solves.append(1)
+        return real_solve(*a, **kw)
+
+    monkeypatch.setattr(chiaro, "solve_radiosity", counting_solve)
+    directory = str(tmp_path)
+
+    def record_solution(job):
+        # Runs in the worker (pickled by value): records the object-store id
+        # of the solution this task was given.
+        holder = job.get("solution")
+        ref = "none" if holder is None else holder[0].hex()
+        name = f"{job['frame']}-{'-'.join(map(str, job['region']))}"
+        with open(os.path.join(directory, name), "w") as f:
+            f.write(ref)
+
+    eye = scene.camera["eye"]
+    cams = [None, {"eye": [eye[0] + 60.0, eye[1], eye[2]]}]
+    frames = dist.render(scene, technique, width=48, height=48, settings=fast, tiles=6,
+                         cameras=[c or {} for c in cams],
+                         on_task_start=record_solution)
+    assert len(solves) == 1, "one solve on the driver for every tile and frame"
+    refs = {p.read_text() for p in tmp_path.iterdir()}
+    assert len(list(tmp_path.iterdir())) == 2 * frames[0].stats["tiles"]
+    assert len(refs) == 1 and "none" not in refs, refs
+    assert frames[0].stats["solution"]["solver"] == "hierarchical"
+    monkeypatch.undo()
+    for cam, frame in zip(cams, frames):
+        local = chiaro.render(scene, technique, width=48, height=48, settings=fast, camera=cam)
+        np.testing.assert_array_equal(np.asarray(frame), np.asarray(local))
+    assert not np.array_equal(frames[0], frames[1])
+
+
+def test_a_given_solution_is_shared_and_another_scenes_is_refused(ray_cluster, root):
+    scene = chiaro.load(root / BOX)
+    sol = chiaro.solve_radiosity(scene, radiosity__solver="hierarchical")
+    img = dist.render(scene, "radiosity", width=32, height=32, tiles=4, solution=sol)
+    np.testing.assert_array_equal(img, chiaro.render(scene, "radiosity", width=32, height=32, solution=sol))
+    other = scene.copy()
+    other.add_light("point", position=(278, 500, 278), intensity=1000)
+    with pytest.raises(chiaro.RenderError, match="does not match this scene"):
+        dist.render(other, "radiosity", width=16, height=16, tiles=2, solution=sol)
+    with pytest.raises(chiaro.SettingsError, match="radiosity or hybrid"):
+        dist.render(scene, "phong", width=16, height=16, solution=sol)

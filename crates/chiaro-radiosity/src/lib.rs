@@ -529,7 +529,9 @@ fn build_solution(
 /// `round(sqrt(samples))^2` samples per pixel, and each visible sample gets
 /// the Gouraud interpolation of its element's vertex radiance (exact
 /// barycentrics on the element's plane along the pixel ray). Background:
-/// `scene.background`. Fills the film's depth and normal buffers.
+/// `scene.background`. Fills the film's depth and normal buffers. Only the
+/// pixels of `settings.crop_rect()` are shaded (the rest stay black with
+/// infinite depth), each equal to the full render's.
 ///
 /// # Errors
 /// [`CoreError::Unsupported`] if the solution belongs to another scene;
@@ -570,10 +572,14 @@ pub fn render_solution(
         })
         .collect();
     let mut film = Film::new(w, h);
-    let rows: Vec<Vec<(Vec3, f32, Vec3)>> = (0..h)
+    // Only the crop window's pixels are shaded (the others stay black with
+    // infinite depth); each pixel depends only on its own samples, so the
+    // window equals the same pixels of a full render.
+    let [cx0, cy0, cx1, cy1] = settings.crop_rect();
+    let rows: Vec<Vec<(Vec3, f32, Vec3)>> = (cy0..cy1.min(h))
         .into_par_iter()
         .map(|y| {
-            (0..w)
+            (cx0..cx1.min(w))
                 .map(|x| {
                     let (mut col, mut depth, mut normal) = (Vec3::ZERO, f32::INFINITY, Vec3::ZERO);
                     for sy in 0..ss {
@@ -614,10 +620,10 @@ pub fn render_solution(
                 .collect()
         })
         .collect();
-    for (y, row) in rows.into_iter().enumerate() {
-        for (x, (c, d, n)) in row.into_iter().enumerate() {
-            film.set(x as u32, y as u32, c);
-            let i = film.index(x as u32, y as u32);
+    for (y, row) in (cy0..).zip(rows) {
+        for (x, (c, d, n)) in (cx0..).zip(row) {
+            film.set(x, y, c);
+            let i = film.index(x, y);
             film.depth[i] = d;
             film.normal[i] = n;
         }

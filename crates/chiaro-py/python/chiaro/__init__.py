@@ -14,6 +14,10 @@ Render settings are the CLI's ``--set`` keys: pass them as keyword
 arguments with ``.`` written as ``__`` (``whitted__max_depth=3``) or as a
 dict (``settings={"whitted.max_depth": 3}``).
 
+Radiosity is view independent: :func:`solve_radiosity` solves it once and
+``render(..., solution=sol)`` renders any camera or region from it
+(techniques ``radiosity`` and ``hybrid``) without solving again.
+
 Distributed rendering on a Ray cluster lives in :mod:`chiaro.distributed`.
 """
 
@@ -27,6 +31,7 @@ import numpy as np
 from . import _chiaro
 from ._chiaro import (
     ChiaroError,
+    RadiositySolution,
     RenderError,
     Scene,
     SceneError,
@@ -41,6 +46,7 @@ __version__ = _chiaro.__version__
 __all__ = [
     "ChiaroError",
     "Image",
+    "RadiositySolution",
     "RenderError",
     "Scene",
     "SceneError",
@@ -53,6 +59,7 @@ __all__ = [
     "render",
     "render_region",
     "settings_keys",
+    "solve_radiosity",
     "techniques",
     "write",
 ]
@@ -187,6 +194,7 @@ def _render_native(
     progress: ProgressArg = None,
     threads: Optional[int] = None,
     aovs: bool = False,
+    solution: Optional[RadiositySolution] = None,
 ) -> Image:
     if not isinstance(scene, Scene):
         raise TypeError(f"expected a chiaro.Scene, got {type(scene).__name__}")
@@ -205,6 +213,7 @@ def _render_native(
             progress=callback,
             threads=threads,
             aovs=aovs,
+            solution=solution,
         )
     finally:
         if close is not None:
@@ -226,6 +235,7 @@ def render(
     aovs: bool = False,
     progress: ProgressArg = None,
     threads: Optional[int] = None,
+    solution: Optional[RadiositySolution] = None,
     **kwargs: Any,
 ) -> Image:
     """Renders ``scene`` and returns an :class:`Image` (a float32 numpy array
@@ -246,6 +256,13 @@ def render(
     installed) or a callable ``f(stage, done, total)`` called about every
     50 ms from the calling thread; an exception it raises cancels the
     render. ``threads``: worker threads (default: all cores).
+    ``solution``: a :class:`RadiositySolution` of this scene (from
+    :func:`solve_radiosity`) to render from instead of solving, with
+    technique ``radiosity`` (the solution displayed) or ``hybrid`` (ray
+    tracing plus the solution's indirect light); the ``radiosity.*``
+    settings are then those it was solved with. Raises
+    :class:`SettingsError` for another technique and :class:`RenderError`
+    for a solution of another scene.
 
     The GIL is released while rendering; Ctrl-C cancels the render and
     raises ``KeyboardInterrupt``. Raises :class:`SettingsError` for an
@@ -254,7 +271,7 @@ def render(
     """
     return _render_native(
         scene, technique, width, height, samples, seed, settings, kwargs,
-        camera=camera, progress=progress, threads=threads, aovs=aovs,
+        camera=camera, progress=progress, threads=threads, aovs=aovs, solution=solution,
     )
 
 
@@ -275,6 +292,7 @@ def render_region(
     aovs: bool = False,
     progress: ProgressArg = None,
     threads: Optional[int] = None,
+    solution: Optional[RadiositySolution] = None,
     **kwargs: Any,
 ) -> Image:
     """Renders the pixels ``x0 <= x < x1``, ``y0 <= y < y1`` of the image
@@ -284,12 +302,51 @@ def render_region(
 
     When the renderer has a crop window (:func:`has_crop`), only the region
     is rendered; otherwise the whole image is rendered and the region cut
-    out (``image.stats["cropped"]`` says which).
+    out (``image.stats["cropped"]`` says which). ``solution``: as in
+    :func:`render`; radiosity and hybrid renders from a solution shade only
+    the region.
     """
     return _render_native(
         scene, technique, width, height, samples, seed, settings, kwargs,
         camera=camera, region=(x0, y0, x1, y1), progress=progress, threads=threads, aovs=aovs,
+        solution=solution,
     )
+
+
+def solve_radiosity(
+    scene: Scene,
+    *,
+    settings: Optional[Mapping[str, Any]] = None,
+    progress: ProgressArg = None,
+    threads: Optional[int] = None,
+    **kwargs: Any,
+) -> RadiositySolution:
+    """Solves the radiosity of ``scene`` once and returns the
+    view-independent :class:`RadiositySolution`, for
+    ``render(scene, "radiosity" or "hybrid", solution=sol)`` from any camera
+    or region without solving again.
+
+    Settings are given as for :func:`render` (only the ``radiosity.*`` keys
+    matter: ``radiosity__solver="hierarchical"``, ``radiosity__patch_size``,
+    ...). The GIL is released while solving; ``progress`` and Ctrl-C behave
+    as in :func:`render`.
+
+    The solution pickles, and ``sol.to_bytes()`` /
+    ``RadiositySolution.from_bytes(scene, data)`` round-trip it (the JSON of
+    ``chiaro render --save-solution``); ``from_bytes`` and rendering raise
+    :class:`RenderError` for a solution of another scene (different
+    geometry, materials, lights or patch size).
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"expected a chiaro.Scene, got {type(scene).__name__}")
+    callback, close = _progress_callback(progress)
+    try:
+        return _chiaro.solve_radiosity(
+            scene, overrides=_overrides(settings, kwargs), progress=callback, threads=threads
+        )
+    finally:
+        if close is not None:
+            close()
 
 
 def write(

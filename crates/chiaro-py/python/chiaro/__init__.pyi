@@ -86,6 +86,17 @@ class Scene:
     @staticmethod
     def from_json(text: str) -> Scene: ...
 
+class RadiositySolution:
+    @property
+    def stats(self) -> dict[str, Any]: ...
+    @property
+    def element_count(self) -> int: ...
+    def to_bytes(self) -> bytes: ...
+    def check_scene(self, scene: Scene) -> None: ...
+    @staticmethod
+    def from_bytes(scene: Scene, data: bytes) -> RadiositySolution: ...
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]: ...
+
 class Image(np.ndarray):
     depth: Optional[np.ndarray]
     normal: Optional[np.ndarray]
@@ -112,6 +123,7 @@ def render(
     aovs: bool = False,
     progress: ProgressArg = None,
     threads: Optional[int] = None,
+    solution: Optional[RadiositySolution] = None,
     **kwargs: Any,
 ) -> Image: ...
 def render_region(
@@ -131,8 +143,17 @@ def render_region(
     aovs: bool = False,
     progress: ProgressArg = None,
     threads: Optional[int] = None,
+    solution: Optional[RadiositySolution] = None,
     **kwargs: Any,
 ) -> Image: ...
+def solve_radiosity(
+    scene: Scene,
+    *,
+    settings: Optional[Mapping[str, Any]] = None,
+    progress: ProgressArg = None,
+    threads: Optional[int] = None,
+    **kwargs: Any,
+) -> RadiositySolution: ...
 def write(
     path: PathLike,
     image: ArrayLike,

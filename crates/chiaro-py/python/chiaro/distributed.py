@@ -23,9 +23,12 @@ or without writing Python::
 
     python -m chiaro.distributed scene.toml -o out.exr --address auto --tiles 64
 
-Future work: a radiosity solution (techniques ``radiosity``/``hybrid``,
-not yet in the facade) should be solved once on the driver and shipped to
-every tile through the object store, instead of being re-solved per tile.
+Radiosity and hybrid: the radiosity solution is view independent, so it is
+solved once, on the driver (:func:`chiaro.solve_radiosity`, or pass your own
+``solution=``), put into the object store once as bytes, and every tile
+task renders its window from it (each worker process decodes it once and
+keeps it for its later tiles); no task solves. Both the radiosity display
+and the hybrid ray tracer shade only the tile's pixels.
 """
 
 from __future__ import annotations
@@ -36,12 +39,13 @@ import math
 import os
 import sys
 import time
+from collections import OrderedDict
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 import chiaro
-from chiaro import Image, Scene, _chiaro
+from chiaro import Image, RadiositySolution, Scene, _chiaro
 
 Region = Tuple[int, int, int, int]
 
@@ -69,6 +73,36 @@ def tile_grid(width: int, height: int, tiles: int) -> List[Region]:
     ]
 
 
+#: Techniques that render from a radiosity solution.
+SOLUTION_TECHNIQUES = ("radiosity", "hybrid")
+
+# Per worker process: decoded solutions by object-store id, newest last,
+# so a worker decodes a shared solution once rather than once per tile.
+_SOLUTIONS: "OrderedDict[str, RadiositySolution]" = OrderedDict()
+_SOLUTIONS_KEPT = 2
+
+
+def _shared_solution(scene: Scene, holder: Optional[List[Any]]) -> Optional[RadiositySolution]:
+    """The solution whose bytes the driver put in the object store;
+    ``holder`` is ``[ObjectRef]`` (wrapped so that Ray passes the reference,
+    not the value, and this process can cache by its id), or ``None``."""
+    if holder is None:
+        return None
+    import ray
+
+    ref = holder[0]
+    key = ref.hex()
+    sol = _SOLUTIONS.get(key)
+    if sol is None:
+        sol = RadiositySolution.from_bytes(scene, ray.get(ref))
+        _SOLUTIONS[key] = sol
+        while len(_SOLUTIONS) > _SOLUTIONS_KEPT:
+            _SOLUTIONS.popitem(last=False)
+    else:
+        _SOLUTIONS.move_to_end(key)
+    return sol
+
+
 def _tile_task(
     scene: Scene,
     job: Dict[str, Any],
@@ -80,7 +114,8 @@ def _tile_task(
     x0, y0, x1, y1 = job["region"]
     img = chiaro.render_region(
         scene, x0, y0, x1, y1,
-        camera=job["camera"], threads=job["threads"], **job["args"],
+        camera=job["camera"], threads=job["threads"],
+        solution=_shared_solution(scene, job.get("solution")), **job["args"],
     )
     return job["frame"], job["region"], np.asarray(img, dtype=np.float32)
 
@@ -102,6 +137,7 @@ def render(
     progress: Any = None,
     on_task_start: Optional[Callable[[Dict[str, Any]], None]] = None,
     ray_init: Optional[Mapping[str, Any]] = None,
+    solution: Optional[RadiositySolution] = None,
     **kwargs: Any,
 ) -> Union[Image, List[Image]]:
     """Renders ``scene`` on a Ray cluster and returns the same
@@ -122,13 +158,22 @@ def render(
     - ``cpus_per_task``: CPUs Ray reserves for each task, and the render
       threads the task uses.
     - ``progress``: ``True`` for a tqdm bar over tiles (when tqdm is
-      installed) or a callable ``f("tiles", done, total)``.
+      installed) or a callable ``f("tiles", done, total)`` (preceded, for
+      radiosity and hybrid, by the driver's ``f("radiosity ...", done,
+      total)`` solve stages).
+    - ``solution``: techniques ``radiosity`` and ``hybrid`` only: a
+      :class:`chiaro.RadiositySolution` of ``scene`` to render from. Without
+      it, the solution is solved once on the driver with these settings.
+      Either way it goes into the object store once and is shared by every
+      tile and frame (it is view independent); ``stats["solution"]`` has
+      its stats.
     - ``on_task_start``: called inside the worker with the task's job dict
       (``frame``, ``region``, ...) before it renders: for logging,
       instrumentation, or fault-injection tests. It must be picklable.
 
     Settings are checked on the driver first, so a bad key raises
-    :class:`chiaro.SettingsError` before any task is sent.
+    :class:`chiaro.SettingsError` before any task is sent (as does
+    ``solution`` with another technique).
     """
     import ray  # imported here so `import chiaro` works without Ray
 
@@ -141,6 +186,50 @@ def render(
         technique=technique, width=width, height=height, samples=samples, seed=seed,
         settings=dict(overrides),
     )
+    uses_solution = str(resolved["technique"]) in SOLUTION_TECHNIQUES
+    if solution is not None and not uses_solution:
+        raise chiaro.SettingsError(
+            f"solution= needs technique radiosity or hybrid, not {resolved['technique']}"
+        )
+    callback, close = chiaro._progress_callback(progress)
+    start = time.perf_counter()
+    try:
+        if uses_solution and solution is None:
+            # Solved once, here; the tiles only display it.
+            solution = chiaro.solve_radiosity(scene, settings=dict(overrides), progress=callback)
+        elif solution is not None:
+            solution.check_scene(scene)  # refuse another scene's before any task
+        return _run(
+            ray, scene, solution, resolved, args, w, h, tiles, cameras, address,
+            max_retries, cpus_per_task, callback, on_task_start, ray_init, start,
+        )
+    finally:
+        if close is not None:
+            close()
+
+
+def _run(
+    ray: Any,
+    scene: Scene,
+    solution: Optional[RadiositySolution],
+    resolved: Dict[str, Any],
+    args: Dict[str, Any],
+    w: int,
+    h: int,
+    tiles: int,
+    cameras: Optional[Sequence[Mapping[str, Any]]],
+    address: Optional[str],
+    max_retries: int,
+    cpus_per_task: int,
+    callback: Optional[Callable[[str, int, int], Any]],
+    on_task_start: Optional[Callable[[Dict[str, Any]], None]],
+    ray_init: Optional[Mapping[str, Any]],
+    start: float,
+) -> Union[Image, List[Image]]:
+    """The body of :func:`render` once settings are checked and the
+    solution (if any) is solved: joins or starts Ray, submits one task per
+    tile and frame, and reassembles the images (``stats["seconds"]`` counts
+    from ``start``, a ``time.perf_counter()``)."""
     if not ray.is_initialized():
         init = dict(ray_init or {})
         init.setdefault("include_dashboard", False)
@@ -150,6 +239,7 @@ def render(
     frames: List[Optional[Mapping[str, Any]]] = list(cameras) if cameras is not None else [None]
     regions = tile_grid(w, h, tiles)
     scene_ref = ray.put(scene)
+    solution_holder = None if solution is None else [ray.put(solution.to_bytes())]
     task = ray.remote(num_cpus=cpus_per_task, max_retries=max_retries)(_tile_task)
     pending = [
         task.remote(
@@ -160,6 +250,7 @@ def render(
                 "camera": None if cam is None else dict(cam),
                 "threads": cpus_per_task,
                 "args": args,
+                "solution": solution_holder,
             },
             on_task_start,
         )
@@ -167,25 +258,20 @@ def render(
         for r in regions
     ]
     images = [np.zeros((h, w, 3), dtype=np.float32) for _ in frames]
-    callback, close = chiaro._progress_callback(progress)
     total, done = len(pending), 0
-    start = time.perf_counter()
-    try:
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            for frame, (x0, y0, x1, y1), tile in ray.get(ready):
-                images[frame][y0:y1, x0:x1] = tile
-                done += 1
-            if callback is not None:
-                callback("tiles", done, total)
-    finally:
-        if close is not None:
-            close()
+    while pending:
+        ready, pending = ray.wait(pending, num_returns=1)
+        for frame, (x0, y0, x1, y1), tile in ray.get(ready):
+            images[frame][y0:y1, x0:x1] = tile
+            done += 1
+        if callback is not None:
+            callback("tiles", done, total)
     stats = {
         "seconds": time.perf_counter() - start,
         "tiles": len(regions),
         "frames": len(frames),
         "settings": resolved,
+        "solution": None if solution is None else solution.stats,
     }
     out = [Image(img, stats=stats) for img in images]
     return out if cameras is not None else out[0]
