@@ -50,6 +50,8 @@ const MEDIAN_DEPTH: u32 = 64;
 /// `1 + 2 gamma(3)`, gamma(n) = n eps / (1 - n eps) with eps = 2^-24
 /// (pbrt-v4 eq. 6.24 and section 6.8.2).
 const EXIT_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+/// [`Bvh::prim_order`] entry of a padding slot (no leaf refers to it).
+pub const PAD_SLOT: u32 = u32::MAX;
 /// [`BvhNode::count`] of an unused lane.
 pub const EMPTY_LANE: u32 = u32::MAX;
 
@@ -383,8 +385,8 @@ impl Bvh {
             return Self::default();
         }
         let binary = build_subtree(&mut refs, 0, 0, &opts);
-        let nodes = collapse(&binary);
-        let prim_order = refs.iter().map(|r| r.index).collect();
+        let mut nodes = collapse(&binary);
+        let prim_order = align_leaves(&mut nodes, &refs);
         Self {
             nodes,
             prim_order,
@@ -412,7 +414,8 @@ impl Bvh {
     }
 
     /// For each slot, the index of its primitive in the `bounds` given to
-    /// the build. Leaves refer to contiguous runs of slots.
+    /// the build, or [`PAD_SLOT`] for the padding that starts every leaf at
+    /// a multiple of [`WIDTH`]. Leaves refer to contiguous runs of slots.
     pub fn prim_order(&self) -> &[u32] {
         &self.prim_order
     }
@@ -592,6 +595,32 @@ impl Bvh {
             (child, count) = (e.child, e.count);
         }
     }
+}
+
+/// Slot order with every leaf starting at a multiple of [`WIDTH`], so that
+/// a leaf of up to four primitives is one block of a [`SceneBvh`]; the gaps
+/// hold [`PAD_SLOT`]. Rewrites the leaves' first slots to match.
+fn align_leaves(nodes: &mut [BvhNode], refs: &[PrimRef]) -> Vec<u32> {
+    // Leaves are disjoint runs covering every slot; visit them in slot order.
+    let mut leaves: Vec<(u32, usize, usize)> = Vec::new();
+    for (k, n) in nodes.iter().enumerate() {
+        for lane in 0..WIDTH {
+            let c = n.count[lane];
+            if c != 0 && c != EMPTY_LANE {
+                leaves.push((n.child[lane], k, lane));
+            }
+        }
+    }
+    leaves.sort_unstable();
+    let mut order = Vec::with_capacity(refs.len() + refs.len() / 2);
+    for &(first, k, lane) in &leaves {
+        order.resize(order.len().next_multiple_of(WIDTH), PAD_SLOT);
+        let count = nodes[k].count[lane] as usize;
+        nodes[k].child[lane] = order.len() as u32;
+        let first = first as usize;
+        order.extend(refs[first..first + count].iter().map(|r| r.index));
+    }
+    order
 }
 
 /// Collapses the binary tree (root at 0, children of `n` at `n.offset`
@@ -806,14 +835,14 @@ fn choose_split(
             if c == 0 || rc == 0 {
                 continue;
             }
-            let cost = b.surface_area() * c as f32 + right_area[i + 1] * rc as f32;
+            let cost = b.surface_area() * blocks(c) + right_area[i + 1] * blocks(rc);
             if cost < best.0 {
                 best = (cost, axis, i);
             }
         }
     }
     let area = bounds.surface_area();
-    if n as u32 <= opts.max_leaf && n as f32 * area <= opts.traversal_cost * area + best.0 {
+    if n as u32 <= opts.max_leaf && blocks(n as u32) * area <= opts.traversal_cost * area + best.0 {
         return Split::Leaf;
     }
     if !best.0.is_finite() {
@@ -826,6 +855,14 @@ fn choose_split(
         bin: best.2,
         bins,
     }
+}
+
+/// Intersection cost of `n` primitives tested [`WIDTH`] at a time, in
+/// block tests (the SAH leaf cost of Embree's `BVHBuilderBinnedSAH`, whose
+/// `logBlockSize` rounds counts up to whole blocks).
+#[inline(always)]
+fn blocks(n: u32) -> f32 {
+    n.div_ceil(WIDTH as u32) as f32
 }
 
 /// Applies a split; returns the size of the left part (always in `1..n`).
@@ -1130,7 +1167,9 @@ impl SceneBvh {
             let mut spheres = 0u8;
             for (lane, &p) in slots.iter().enumerate() {
                 b.prim[lane] = p;
-                if (p as usize) < n {
+                if p == PAD_SLOT {
+                    continue;
+                } else if (p as usize) < n {
                     for (k, v) in tri(&scene.triangles[p as usize]).iter().enumerate() {
                         for a in 0..3 {
                             b.v[3 * k + a][lane] = v[a];
@@ -1493,7 +1532,7 @@ mod tests {
         // Every prim appears once; every leaf box contains its prims; every
         // parent box contains its children; leaves are small.
         let mut seen = vec![false; boxes.len()];
-        for &p in a.prim_order() {
+        for &p in a.prim_order().iter().filter(|&&p| p != PAD_SLOT) {
             assert!(!seen[p as usize]);
             seen[p as usize] = true;
         }
@@ -1508,6 +1547,7 @@ mod tests {
                 match c {
                     Child::Leaf { first, count } => {
                         assert!(count <= opts.max_leaf);
+                        assert_eq!(first as usize % WIDTH, 0);
                         for s in first..first + count {
                             covered[s as usize] += 1;
                             let pb = boxes[a.prim_order()[s as usize] as usize];
@@ -1525,7 +1565,9 @@ mod tests {
         }
         assert_eq!(referenced[0], 0);
         assert!(referenced[1..].iter().all(|&r| r == 1));
-        assert!(covered.iter().all(|&c| c == 1));
+        for (&c, &p) in covered.iter().zip(a.prim_order()) {
+            assert_eq!(c, (p != PAD_SLOT) as u32);
+        }
         assert!(a.depth() < 25, "depth {}", a.depth());
         assert_eq!(std::mem::size_of::<BvhNode>(), 128);
     }
