@@ -1,4 +1,4 @@
-//! BVH benchmark on the workload of `shared/peers/embree_rays.py`: a 14 x 14
+//! BVH benchmark (chiaro's 4-wide BVH, [`SceneBvh`]) on the workload of `shared/peers/embree_rays.py`: a 14 x 14
 //! grid of 5120-triangle icospheres (1,003,520 triangles), 1000 x 1000
 //! coherent pinhole camera rays and 1M incoherent random rays, closest hit,
 //! one ray at a time, on a rayon pool of `--threads` threads.
@@ -9,7 +9,10 @@
 //! ```
 //! `--dump DIR` writes the mesh and both ray sets as `DIR/wl_{V,F,O,D,Or,Dr}.bin`
 //! (raw little-endian f32 / u32 triples), the files `embree3_native` reads,
-//! so that Embree traces exactly the same rays.
+//! so that Embree traces exactly the same rays. Times are wall clock; the
+//! `cpu` figures are the process's CPU time over the same interval (from
+//! `/proc/self/task/*/schedstat`), steadier when other work shares the
+//! machine.
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
@@ -87,6 +90,25 @@ fn icosphere(levels: u32, radius: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
         f = next;
     }
     (v.into_iter().map(|p| p * radius).collect(), f)
+}
+
+/// CPU time of this process so far, seconds: the sum of the run times in
+/// `/proc/self/task/*/schedstat` (Linux). Unlike wall-clock time it does not
+/// count time spent descheduled by other processes, so it is the steadier
+/// figure on a shared machine. `None` where the files are unavailable.
+fn cpu_seconds() -> Option<f64> {
+    let mut total = 0u64;
+    for e in std::fs::read_dir("/proc/self/task").ok()? {
+        let s = std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok()?;
+        total += s.split_whitespace().next()?.parse::<u64>().ok()?;
+    }
+    Some(total as f64 * 1e-9)
+}
+
+/// Median of `v` (sorted in place).
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 fn write_f32(dir: &str, name: &str, data: impl Iterator<Item = f32>) -> std::io::Result<()> {
@@ -200,18 +222,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // Build, median of `reps`.
     let mut builds = Vec::new();
+    let mut build_cpu = Vec::new();
     let mut bvh = None;
     for _ in 0..reps.max(1) {
-        let t0 = Instant::now();
+        let (t0, c0) = (Instant::now(), cpu_seconds());
         let b = pool.install(|| SceneBvh::with_options(&ps, &opts));
         builds.push(t0.elapsed().as_secs_f64());
+        if let (Some(c0), Some(c1)) = (c0, cpu_seconds()) {
+            build_cpu.push(c1 - c0);
+        }
         bvh = Some(b);
     }
     let bvh = bvh.ok_or("no build")?;
-    builds.sort_by(f64::total_cmp);
+    let cpu_note = if build_cpu.is_empty() {
+        String::new()
+    } else {
+        format!(", cpu {:.3}s", median(&mut build_cpu))
+    };
     println!(
-        "chiaro BVH build: median {:.3}s (min {:.3}s), {} nodes, depth {}",
-        builds[builds.len() / 2],
+        "chiaro BVH build: median {:.3}s (min {:.3}s{cpu_note}), {} nodes, depth {}",
+        median(&mut builds),
         builds[0],
         bvh.bvh().node_count(),
         bvh.bvh().depth()
@@ -238,20 +268,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("incoherent(random)", &incoherent),
     ] {
         let mut times = Vec::new();
+        let mut cpu = Vec::new();
         let mut hits = 0usize;
         for _ in 0..reps.max(1) {
-            let t0 = Instant::now();
+            let (t0, c0) = (Instant::now(), cpu_seconds());
             hits = pool.install(|| {
                 rays.par_chunks(4096)
                     .map(|c| c.iter().filter(|r| bvh.intersect(r).is_some()).count())
                     .sum()
             });
             times.push(t0.elapsed().as_secs_f64());
+            if let (Some(c0), Some(c1)) = (c0, cpu_seconds()) {
+                cpu.push(c1 - c0);
+            }
         }
-        times.sort_by(f64::total_cmp);
-        let med = times[times.len() / 2];
+        let med = median(&mut times);
+        // CPU-normalised: rays per second if every thread had had a core.
+        let cpu_note = if cpu.is_empty() {
+            String::new()
+        } else {
+            let c = median(&mut cpu);
+            format!(
+                ", cpu {c:.4}s -> {:.2} Mrays/s cpu-normalised",
+                rays.len() as f64 / (c / threads as f64) / 1e6
+            )
+        };
         println!(
-            "{name:<20} intersect  threads={threads}: median {med:.4}s -> {:.2} Mrays/s (min {:.4} max {:.4}, hit rate {:.3})",
+            "{name:<20} intersect  threads={threads}: median {med:.4}s -> {:.2} Mrays/s (min {:.4} max {:.4}, hit rate {:.3}{cpu_note})",
             rays.len() as f64 / med / 1e6,
             times[0],
             times[times.len() - 1],
