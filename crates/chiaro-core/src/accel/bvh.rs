@@ -1026,18 +1026,28 @@ impl TriBlock {
         let o = wr.origin.to_array();
         let (ox, oy, oz) = (o[kx], o[ky], o[kz]);
         let v = &self.v;
-        let mut e = [[0.0f32; WIDTH]; 6]; // ax ay bx by cx cy
-        let mut z = [[0.0f32; WIDTH]; 3]; // a[kz] b[kz] c[kz]
-        for (p, (xy, zz)) in e.chunks_exact_mut(2).zip(z.iter_mut()).enumerate() {
-            let (px, py, pz) = (&v[3 * p + kx], &v[3 * p + ky], &v[3 * p + kz]);
+        // Translate to the ray origin and shear (per vertex, four lanes).
+        #[inline(always)]
+        fn shear(
+            p: [&[f32; WIDTH]; 3],
+            o: [f32; 3],
+            sx: f32,
+            sy: f32,
+        ) -> ([f32; WIDTH], [f32; WIDTH], [f32; WIDTH]) {
+            let (mut x, mut y, mut z) = ([0.0f32; WIDTH], [0.0f32; WIDTH], [0.0f32; WIDTH]);
             for i in 0..WIDTH {
-                let (dx, dy, dz) = (px[i] - ox, py[i] - oy, pz[i] - oz);
-                xy[0][i] = dx - sx * dz;
-                xy[1][i] = dy - sy * dz;
-                zz[i] = dz;
+                let dz = p[2][i] - o[2];
+                x[i] = (p[0][i] - o[0]) - sx * dz;
+                y[i] = (p[1][i] - o[1]) - sy * dz;
+                z[i] = dz;
             }
+            (x, y, z)
         }
-        let [ax, ay, bx, by, cx, cy] = e;
+        let ok = [ox, oy, oz];
+        let (ax, ay, az0) = shear([&v[kx], &v[ky], &v[kz]], ok, sx, sy);
+        let (bx, by, bz0) = shear([&v[3 + kx], &v[3 + ky], &v[3 + kz]], ok, sx, sy);
+        let (cx, cy, cz0) = shear([&v[6 + kx], &v[6 + ky], &v[6 + kz]], ok, sx, sy);
+        let z = [az0, bz0, cz0];
         let mut uu = [0.0f32; WIDTH];
         let mut vv = [0.0f32; WIDTH];
         let mut ww = [0.0f32; WIDTH];
