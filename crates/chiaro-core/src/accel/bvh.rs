@@ -323,16 +323,59 @@ pub struct Bvh {
     bounds: Aabb,
 }
 
+/// One SAH bin: the box of its references (SIMD corners) and their count.
 #[derive(Debug, Clone, Copy)]
 struct Bin {
-    bounds: Aabb,
+    min: Vec3A,
+    max: Vec3A,
+    /// Bounds of the references' centroids, so that a split knows its
+    /// children's centroid bounds without another pass.
+    cmin: Vec3A,
+    cmax: Vec3A,
     count: u32,
 }
 
+impl Bin {
+    #[inline(always)]
+    fn bounds(&self) -> Aabb {
+        Aabb {
+            min: self.min.into(),
+            max: self.max.into(),
+        }
+    }
+}
+
 const EMPTY_BIN: Bin = Bin {
-    bounds: Aabb::EMPTY,
+    min: Vec3A::INFINITY,
+    max: Vec3A::NEG_INFINITY,
+    cmin: Vec3A::INFINITY,
+    cmax: Vec3A::NEG_INFINITY,
     count: 0,
 };
+
+/// Bounds and centroid bounds of the two sides of a binned split: bins
+/// `0..=bin` of `axis` and the rest. Exact unions, so they equal what
+/// [`ref_bounds`] would compute over each side's references.
+fn split_bounds(binned: &[Bin], axis: usize, bin: usize, bins: usize) -> [(Aabb, Aabb); 2] {
+    let row = &binned[axis * bins..(axis + 1) * bins];
+    let side = |r: &[Bin]| {
+        let b = r.iter().fold(EMPTY_BIN, |a, b| Bin {
+            min: a.min.min(b.min),
+            max: a.max.max(b.max),
+            cmin: a.cmin.min(b.cmin),
+            cmax: a.cmax.max(b.cmax),
+            count: 0,
+        });
+        (
+            b.bounds(),
+            Aabb {
+                min: b.cmin.into(),
+                max: b.cmax.into(),
+            },
+        )
+    };
+    [side(&row[..=bin]), side(&row[bin + 1..])]
+}
 
 /// How to cut a node's references.
 enum Split {
@@ -384,7 +427,7 @@ impl Bvh {
         if refs.is_empty() {
             return Self::default();
         }
-        let binary = build_subtree(&mut refs, 0, 0, &opts);
+        let binary = build_subtree(&mut refs, None, 0, 0, &opts);
         let mut nodes = collapse(&binary);
         let prim_order = align_leaves(&mut nodes, &refs);
         Self {
@@ -737,16 +780,21 @@ fn bin_refs(
     parallel: bool,
     out: &mut [Bin],
 ) {
+    let (lo, scale) = (Vec3A::from(cb.min), Vec3A::from(scale));
+    let last = bins as i64 - 1;
     let one = |refs: &[PrimRef], out: &mut [Bin]| {
         for r in refs {
-            let c = r.centroid();
-            let rb = Aabb {
-                min: r.min,
-                max: r.max,
-            };
+            let (mn, mx) = (Vec3A::from(r.min), Vec3A::from(r.max));
+            // The arithmetic of `bin_of`, three axes at once.
+            let c = (mn + mx) * 0.5;
+            let f = (c - lo) * scale;
             for axis in 0..3 {
-                let b = &mut out[axis * bins + bin_of(c[axis], cb.min[axis], scale[axis], bins)];
-                b.bounds = b.bounds.union(rb);
+                let k = (f[axis] as i64).clamp(0, last) as usize;
+                let b = &mut out[axis * bins + k];
+                b.min = b.min.min(mn);
+                b.max = b.max.max(mx);
+                b.cmin = b.cmin.min(c);
+                b.cmax = b.cmax.max(c);
                 b.count += 1;
             }
         }
@@ -763,7 +811,10 @@ fn bin_refs(
             .collect();
         for part in parts {
             for (o, b) in out.iter_mut().zip(part) {
-                o.bounds = o.bounds.union(b.bounds);
+                o.min = o.min.min(b.min);
+                o.max = o.max.max(b.max);
+                o.cmin = o.cmin.min(b.cmin);
+                o.cmax = o.cmax.max(b.cmax);
                 o.count += b.count;
             }
         }
@@ -822,14 +873,14 @@ fn choose_split(
         }
         let (mut b, mut c) = (Aabb::EMPTY, 0u32);
         for i in (1..bins).rev() {
-            b = b.union(row[i].bounds);
+            b = b.union(row[i].bounds());
             c += row[i].count;
             right_area[i] = b.surface_area();
             right_count[i] = c;
         }
         let (mut b, mut c) = (Aabb::EMPTY, 0u32);
         for i in 0..bins - 1 {
-            b = b.union(row[i].bounds);
+            b = b.union(row[i].bounds());
             c += row[i].count;
             let rc = right_count[i + 1];
             if c == 0 || rc == 0 {
@@ -913,26 +964,33 @@ fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb) -> usize {
 /// its nodes laid out as `[root, padding, sibling pairs...]` (an even
 /// number of nodes, every pair at an even index), child indices relative to
 /// the returned vector.
-fn build_subtree(refs: &mut [PrimRef], base: u32, depth: u32, opts: &BvhOptions) -> Vec<BinNode> {
+fn build_subtree(
+    refs: &mut [PrimRef],
+    known: Option<(Aabb, Aabb)>,
+    base: u32,
+    depth: u32,
+    opts: &BvhOptions,
+) -> Vec<BinNode> {
     let n = refs.len();
     let mut scratch = Vec::new();
     if n < opts.parallel_threshold {
         let mut out = Vec::with_capacity(2 * n + 2);
         out.push(BinNode::EMPTY);
         out.push(BinNode::EMPTY);
-        build_serial(refs, base, 0, depth, &mut out, opts, &mut scratch);
+        build_serial(refs, known, base, 0, depth, &mut out, opts, &mut scratch);
         return out;
     }
-    let (bounds, cb) = ref_bounds(refs, true);
+    let (bounds, cb) = known.unwrap_or_else(|| ref_bounds(refs, true));
     let split = choose_split(refs, &bounds, &cb, depth, opts, true, &mut scratch);
     if let Split::Leaf = split {
         return vec![BinNode::new(&bounds, base, n as u32), BinNode::EMPTY];
     }
     let mid = partition(refs, &split, &cb);
+    let [lk, rk] = child_bounds(&split, &scratch, mid);
     let (left, right) = refs.split_at_mut(mid);
     let (ln, rn) = rayon::join(
-        || build_subtree(left, base, depth + 1, opts),
-        || build_subtree(right, base + mid as u32, depth + 1, opts),
+        || build_subtree(left, lk, base, depth + 1, opts),
+        || build_subtree(right, rk, base + mid as u32, depth + 1, opts),
     );
     // Lay out [root, pad, L0, R0, L2.., R2..] and renumber the children:
     // left nodes move by 2, right ones by |L|, both even, so pairs stay at
@@ -954,8 +1012,29 @@ fn build_subtree(refs: &mut [PrimRef], base: u32, depth: u32, opts: &BvhOptions)
     out
 }
 
+/// The children's (bounds, centroid bounds) when the split's bins (still
+/// in `scratch`) give them.
+/// `mid` is the size of the left part the partition made; the bins are
+/// only trusted when it matches theirs.
+fn child_bounds(split: &Split, scratch: &[Bin], mid: usize) -> [Option<(Aabb, Aabb)>; 2] {
+    match *split {
+        Split::Binned { axis, bin, bins }
+            if scratch[axis * bins..=axis * bins + bin]
+                .iter()
+                .map(|b| b.count as usize)
+                .sum::<usize>()
+                == mid =>
+        {
+            split_bounds(scratch, axis, bin, bins).map(Some)
+        }
+        _ => [None, None],
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
 fn build_serial(
     refs: &mut [PrimRef],
+    known: Option<(Aabb, Aabb)>,
     base: u32,
     index: usize,
     depth: u32,
@@ -964,21 +1043,23 @@ fn build_serial(
     scratch: &mut Vec<Bin>,
 ) {
     let n = refs.len();
-    let (bounds, cb) = ref_bounds(refs, false);
+    let (bounds, cb) = known.unwrap_or_else(|| ref_bounds(refs, false));
     let split = choose_split(refs, &bounds, &cb, depth, opts, false, scratch);
     if let Split::Leaf = split {
         out[index] = BinNode::new(&bounds, base, n as u32);
         return;
     }
     let mid = partition(refs, &split, &cb);
+    let [lk, rk] = child_bounds(&split, scratch, mid);
     let left = out.len();
     out.push(BinNode::EMPTY);
     out.push(BinNode::EMPTY);
     out[index] = BinNode::new(&bounds, left as u32, 0);
     let (l, r) = refs.split_at_mut(mid);
-    build_serial(l, base, left, depth + 1, out, opts, scratch);
+    build_serial(l, lk, base, left, depth + 1, out, opts, scratch);
     build_serial(
         r,
+        rk,
         base + mid as u32,
         left + 1,
         depth + 1,
