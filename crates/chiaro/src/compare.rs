@@ -546,7 +546,7 @@ mod tests {
                 samples: DEFAULT_REFERENCE_SPP
             }
         );
-        for bad in ["path:0", "path:-3", "path:x", "pth:4", "", "radiosity:4"] {
+        for bad in ["path:0", "path:-3", "path:x", "pth:4", "", "raytrace:4"] {
             let e = ReferenceSpec::parse(bad);
             assert!(
                 matches!(e, Err(CoreError::BadSetting { .. })),
