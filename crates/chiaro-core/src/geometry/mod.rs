@@ -5,8 +5,8 @@ mod bounds;
 mod frame;
 pub mod normals;
 pub mod primitives;
-pub mod teapot;
 mod ray;
+pub mod teapot;
 
 pub use bounds::Aabb;
 pub use frame::Frame;

@@ -160,7 +160,11 @@ fn sample_area(
             if area2 <= 0.0 {
                 return None;
             }
-            (a * bary.x + b * bary.y + c * (1.0 - bary.x - bary.y), cr / area2, 0.5 * area2)
+            (
+                a * bary.x + b * bary.y + c * (1.0 - bary.x - bary.y),
+                cr / area2,
+                0.5 * area2,
+            )
         }
     };
     let d = q - p;
