@@ -11,14 +11,13 @@
 //!
 //! `cargo run --release -p chiaro-raster --example raster_bench -- [frames] [--png] [--no-cull] [--issue4] [--crop] [--only NAME]`
 
+use chiaro_core::Vec3;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::scene::{
-    Attenuation, Camera, Geometry, Light, Material, Mesh, Object, RenderSettings, Scene, ShadeMode,
+    Attenuation, Camera, Geometry, Light, Material, Object, RenderSettings, Scene, ShadeMode,
     ShadowMethod, Technique, Transform, TransparencyMode,
 };
-use chiaro_core::{Vec2, Vec3};
-use std::collections::HashMap;
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -75,75 +74,6 @@ fn median(v: &mut [f64]) -> f64 {
     v[v.len() / 2]
 }
 
-/// An icosphere: the icosahedron subdivided `levels` times, projected to the
-/// sphere (20 * 4^levels triangles), with exact sphere normals.
-fn icosphere(radius: f32, levels: u32) -> Mesh {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut p: Vec<Vec3> = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
-    .collect();
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut m = |a: u32, b: u32, p: &mut Vec<Vec3>| {
-            let k = (a.min(b), a.max(b));
-            *mid.entry(k).or_insert_with(|| {
-                p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
-                p.len() as u32 - 1
-            })
-        };
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        for [a, b, c] in f {
-            let (ab, bc, ca) = (m(a, b, &mut p), m(b, c, &mut p), m(c, a, &mut p));
-            nf.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        f = nf;
-    }
-    Mesh {
-        name: "icosphere".into(),
-        normals: p.clone(),
-        uvs: vec![Vec2::ZERO; p.len()],
-        positions: p.iter().map(|&v| v * radius).collect(),
-        indices: f,
-        ..Mesh::default()
-    }
-}
-
 fn scene() -> Scene {
     let mut s = Scene::default();
     // The peer's model: 0.1 ambient + per light c (kd N.L + (R.V)^32), no attenuation.
@@ -154,7 +84,7 @@ fn scene() -> Scene {
         shininess: 32.0,
         ..Material::default()
     });
-    let mesh = s.add_mesh(icosphere(0.45, 4));
+    let mesh = s.add_mesh(chiaro_core::geometry::primitives::icosphere(0.45, 4));
     let n = 14;
     for i in 0..n {
         for j in 0..n {

@@ -22,75 +22,8 @@ use chiaro_core::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2}
 use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
 use glam::Vec3;
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::io::Write;
 use std::time::Instant;
-
-/// Icosphere: an icosahedron subdivided `levels` times (each triangle into
-/// four, new vertices pushed onto the sphere), as trimesh builds it.
-fn icosphere(levels: u32, radius: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut v: Vec<Vec3> = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
-    .collect();
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut next = Vec::with_capacity(f.len() * 4);
-        for tri in &f {
-            let mut m = [0u32; 3];
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let key = (a.min(b), a.max(b));
-                m[k] = *mid.entry(key).or_insert_with(|| {
-                    v.push(((v[a as usize] + v[b as usize]) * 0.5).normalize());
-                    v.len() as u32 - 1
-                });
-            }
-            next.push([tri[0], m[0], m[2]]);
-            next.push([tri[1], m[1], m[0]]);
-            next.push([tri[2], m[2], m[1]]);
-            next.push([m[0], m[1], m[2]]);
-        }
-        f = next;
-    }
-    (v.into_iter().map(|p| p * radius).collect(), f)
-}
 
 /// CPU time of this process so far, seconds: the sum of the run times in
 /// `/proc/self/task/*/schedstat` (Linux). Unlike wall-clock time it does not
@@ -144,7 +77,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // The mesh: 14 x 14 icospheres of radius 0.45 on a unit grid.
     const N: i32 = 14;
-    let (v0, f0) = icosphere(4, 0.45);
+    let sphere = chiaro_core::geometry::primitives::icosphere(0.45, 4);
+    let (v0, f0) = (sphere.positions, sphere.indices);
     let mut mesh = Mesh::default();
     for i in 0..N {
         for j in 0..N {

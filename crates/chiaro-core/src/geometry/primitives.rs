@@ -206,6 +206,77 @@ pub fn cylinder(radius: f32, height: f32, segments: u32) -> Mesh {
     m
 }
 
+/// An icosphere: the icosahedron subdivided `levels` times, projected to the
+/// sphere (20 * 4^levels triangles), with exact sphere normals and zero
+/// uvs. The mesh of the benchmark scenes (a 14x14 grid of level-4
+/// icospheres, 5120 triangles each, as the peers build it).
+pub fn icosphere(radius: f32, levels: u32) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut p: Vec<Vec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut f: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut mid: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();
+        let mut m = |a: u32, b: u32, p: &mut Vec<Vec3>| {
+            let k = (a.min(b), a.max(b));
+            *mid.entry(k).or_insert_with(|| {
+                p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
+                p.len() as u32 - 1
+            })
+        };
+        let mut nf = Vec::with_capacity(f.len() * 4);
+        for [a, b, c] in f {
+            let (ab, bc, ca) = (m(a, b, &mut p), m(b, c, &mut p), m(c, a, &mut p));
+            nf.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        f = nf;
+    }
+    Mesh {
+        name: "icosphere".into(),
+        normals: p.clone(),
+        uvs: vec![Vec2::ZERO; p.len()],
+        positions: p.iter().map(|&v| v * radius).collect(),
+        indices: f,
+        ..Mesh::default()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -235,5 +306,7 @@ mod tests {
         outward(&cube());
         outward(&cylinder(1.0, 2.0, 10));
         outward(&quad(Vec3::ZERO, Vec3::X, Vec3::Y));
+        outward(&icosphere(1.0, 2));
+        assert_eq!(icosphere(1.0, 4).indices.len(), 5120);
     }
 }
