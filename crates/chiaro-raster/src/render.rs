@@ -60,7 +60,7 @@ use chiaro_core::scene::{
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
     LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
-    samples_for_light, sanitize, shade_local,
+    samples_for_light, sanitize, shade_local, shade_local_split,
 };
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -181,8 +181,9 @@ impl Rays {
 /// Barycentrics `(u, v)` of vertices 1 and 2 where the ray `o + t d` meets the
 /// plane of the triangle (Moller and Trumbore 1997, without the inside test):
 /// the perspective-correct barycentrics of the sample. `None` when the ray
-/// is parallel to the plane.
-#[inline]
+/// is parallel to the plane. The reference for [`TriData::bary`], which
+/// shading uses.
+#[cfg(test)]
 fn ray_plane_bary(o: Vec3, d: Vec3, p0: Vec3, p1: Vec3, p2: Vec3) -> Option<Vec2> {
     let e1 = p1 - p0;
     let e2 = p2 - p0;
@@ -306,6 +307,16 @@ impl Ctx<'_, '_> {
         sp: &ShadingPoint,
         counts: Option<&[i32]>,
     ) -> Vec3 {
+        if matches!(self.shadows, Shadows::None) {
+            // Every light sample is visible: closures the compiler inlines.
+            return shade_local(
+                m,
+                sp,
+                &self.lighting,
+                |_, _| Vec2::splat(0.5),
+                |_, _| Vec3::ONE,
+            );
+        }
         let current = Cell::new(0u32);
         shade_local(
             m,
@@ -366,14 +377,21 @@ impl Ctx<'_, '_> {
         }
     }
 
-    /// The illumination split for flat and Gouraud shading.
+    /// The illumination split for flat and Gouraud shading: one evaluation
+    /// of [`shade_local_split`], whose `rest` is exactly the illumination
+    /// with `kd = 0`.
     fn illuminate_split(&self, tri: u32, m: &SurfaceMaterial, sp: &ShadingPoint) -> Split {
-        let total = self.illuminate(tri, None, m, sp, None);
-        let no_diffuse = SurfaceMaterial {
-            kd: Vec3::ZERO,
-            ..*m
-        };
-        let rest = self.illuminate(tri, None, &no_diffuse, sp, None);
+        let current = Cell::new(0u32);
+        let [total, rest] = shade_local_split(
+            m,
+            sp,
+            &self.lighting,
+            |_, i| {
+                current.set(i);
+                Vec2::splat(0.5)
+            },
+            |li, s| self.visibility(li, current.get(), tri, None, sp, s, None),
+        );
         Split {
             diffuse: total - rest,
             rest,
@@ -438,8 +456,8 @@ impl Ctx<'_, '_> {
     }
 }
 
-/// What shading needs of a visible triangle, fetched once for a run of
-/// samples on it.
+/// What shading needs of a visible triangle, fetched once per tile (see
+/// [`TriCache`]).
 #[derive(Clone, Copy)]
 struct TriData<'a> {
     t: u32,
@@ -449,28 +467,81 @@ struct TriData<'a> {
     ng: Vec3,
     mode: ShadeMode,
     material: &'a Material,
+    /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
+    /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
+    e1: Vec3,
+    e2: Vec3,
+    s: Vec3,
+    q: Vec3,
+}
+
+impl TriData<'_> {
+    /// `ray_plane_bary` for the eye ray with direction `d`: the same
+    /// operations in the same order, with the terms that do not depend on
+    /// `d` precomputed.
+    #[inline]
+    fn bary(&self, d: Vec3) -> Option<Vec2> {
+        let pv = d.cross(self.e2);
+        let det = self.e1.dot(pv);
+        if det.abs() < 1e-30 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let u = self.s.dot(pv) * inv;
+        let v = d.dot(self.q) * inv;
+        let r = Vec2::new(u, v);
+        r.is_finite().then_some(r)
+    }
+}
+
+/// Number of entries of [`TriCache`] (a power of two).
+const TRI_CACHE_SIZE: usize = 256;
+
+/// A direct-mapped cache of [`TriData`] keyed by triangle id, for one tile:
+/// a triangle covers a few pixels on a few rows, and neighbouring triangles
+/// have neighbouring ids, so most lookups hit.
+struct TriCache<'a> {
+    entries: Vec<Option<TriData<'a>>>,
+}
+
+impl TriCache<'_> {
+    fn new() -> Self {
+        Self {
+            entries: vec![None; TRI_CACHE_SIZE],
+        }
+    }
 }
 
 impl<'a> Ctx<'a, '_> {
     /// The data of triangle `t`, from `cache` when it holds `t` (the
     /// cache then holds `t`).
     #[inline]
-    fn tri_data(&self, t: u32, cache: &mut Option<TriData<'a>>) -> TriData<'a> {
-        if let Some(c) = cache
+    fn tri_data(&self, t: u32, cache: &mut TriCache<'a>) -> TriData<'a> {
+        let slot = t as usize & (TRI_CACHE_SIZE - 1);
+        if let Some(Some(c)) = cache.entries.get(slot)
             && c.t == t
         {
             return *c;
         }
         let idx = self.ps.triangles[t as usize].map(|i| i as usize);
+        let p = idx.map(|i| self.ps.positions[i]);
+        let e1 = p[1] - p[0];
+        let s = self.rays.eye - p[0];
         let d = TriData {
             t,
             idx,
-            p: idx.map(|i| self.ps.positions[i]),
+            p,
             ng: self.ps.face_normal(t),
             mode: self.mode(t),
             material: self.ps.material(self.ps.tri_material[t as usize]),
+            e1,
+            e2: p[2] - p[0],
+            s,
+            q: s.cross(e1),
         };
-        *cache = Some(d);
+        if let Some(e) = cache.entries.get_mut(slot) {
+            *e = Some(d);
+        }
         d
     }
 
@@ -1132,7 +1203,7 @@ fn shade_tile(
         .as_ref()
         .is_some_and(|e| e.as_background);
     // The triangle of the previous sample: neighbours mostly share one.
-    let mut cache: Option<TriData> = None;
+    let mut cache = TriCache::new();
     let win = tv.window;
     for py in (win.y0 - rect.y)..(win.y1 - rect.y) {
         for px in (win.x0 - rect.x)..(win.x1 - rect.x) {
@@ -1220,10 +1291,9 @@ fn shade_sample(
     let eye = ctx.rays.eye;
     let t = td.t;
     let [i0, i1, i2] = td.idx;
-    let [p0, p1, p2] = td.p;
     // Perspective-correct barycentrics of the sample and of its neighbours.
     let third = Vec2::splat(1.0 / 3.0);
-    let b = ray_plane_bary(eye, dir, p0, p1, p2).unwrap_or(third);
+    let b = td.bary(dir).unwrap_or(third);
     let material = td.material;
     let needs_footprint = material.texture.is_some()
         || material.bump.is_some()
@@ -1232,7 +1302,7 @@ fn shade_sample(
     let hit = ctx.surface(td, b.x, b.y, needs_footprint);
     let (duv_dx, duv_dy) = if needs_footprint {
         let uv_at = |x: f32, y: f32| {
-            let bb = ray_plane_bary(eye, ctx.rays.dir(x, y), p0, p1, p2).unwrap_or(b);
+            let bb = td.bary(ctx.rays.dir(x, y)).unwrap_or(b);
             ps.uvs[i0] * (1.0 - bb.x - bb.y) + ps.uvs[i1] * bb.x + ps.uvs[i2] * bb.y
         };
         let dx = uv_at(sx + 1.0, sy) - hit.uv;

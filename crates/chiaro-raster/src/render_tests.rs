@@ -616,3 +616,48 @@ fn crop_window_matches_the_full_render_and_leaves_the_rest_black() {
     assert!(empty.color.iter().all(|&c| c == Vec3::ZERO));
     assert!(empty.depth.iter().all(|d| d.is_infinite()));
 }
+
+#[test]
+fn cached_bary_equals_ray_plane_bary_exactly() {
+    let s = test_scene();
+    let ps = PreparedScene::new(
+        &s,
+        PrepareOptions {
+            analytic_spheres: false,
+            ..PrepareOptions::default()
+        },
+    );
+    let st = settings(Technique::Phong, 32, 24);
+    let ctx = Ctx {
+        ps: &ps,
+        settings: &st,
+        rays: Rays::new(&s, 32, 24),
+        lighting: LocalLighting {
+            lights: &ps.lights,
+            area_samples: 1,
+            ambient: true,
+        },
+        object_mode: vec![ShadeMode::Phong; s.objects.len()],
+        shadows: Shadows::None,
+        class: Vec::new(),
+    };
+    let mut cache = TriCache::new();
+    let nt = ps.triangles.len() as u32;
+    assert!(nt > 10);
+    let mut checked = 0;
+    for k in 0..200u32 {
+        let t = (k * 7919) % nt;
+        // Twice: a miss, then a hit of the same entry.
+        for _ in 0..2 {
+            let td = ctx.tri_data(t, &mut cache);
+            assert_eq!(td.t, t);
+            let [p0, p1, p2] = td.p;
+            let d = ctx.rays.dir(k as f32 * 0.37 % 32.0, k as f32 * 0.11 % 24.0);
+            let a = td.bary(d);
+            let b = ray_plane_bary(ctx.rays.eye, d, p0, p1, p2);
+            assert_eq!(a.map(|v| v.to_array()), b.map(|v| v.to_array()));
+            checked += usize::from(a.is_some());
+        }
+    }
+    assert!(checked > 300);
+}

@@ -64,6 +64,7 @@ pub fn spot_factor(s: &SpotLight, p: Vec3) -> f32 {
 /// (ignored by delta lights). `None` for ambient lights, for points where the
 /// light contributes nothing (outside a spot cone, behind a one-sided area
 /// light), and at the light's own position.
+#[inline]
 pub fn sample_light(light: &Light, p: Vec3, u: Vec2) -> Option<LightSample> {
     match light {
         Light::Ambient { .. } => None,

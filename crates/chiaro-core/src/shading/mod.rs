@@ -130,14 +130,51 @@ pub struct LocalLighting<'a> {
 /// area-light sample `sample_index` (return `(0.5, 0.5)` for strata centres).
 ///
 /// Returns linear RGB radiance towards `wo`; never NaN for finite input.
+#[inline]
 pub fn shade_local(
+    m: &SurfaceMaterial,
+    sp: &ShadingPoint,
+    env: &LocalLighting<'_>,
+    jitter: impl FnMut(usize, u32) -> Vec2,
+    visibility: impl FnMut(usize, &LightSample) -> Vec3,
+) -> Vec3 {
+    local_model::<false>(m, sp, env, jitter, visibility)[0]
+}
+
+/// [`shade_local`] split into two parts in one evaluation: returns
+/// `[total, rest]`, where `total` is exactly what [`shade_local`] returns and
+/// `rest` is exactly what it returns for the same material with `kd = 0`
+/// (emission and specular reflection: the part that does not scale with the
+/// diffuse colour). `visibility` is called once per light sample, as in
+/// [`shade_local`]. Flat and Gouraud shading use `total - rest` as the
+/// illumination a diffuse texture modulates.
+#[inline]
+pub fn shade_local_split(
+    m: &SurfaceMaterial,
+    sp: &ShadingPoint,
+    env: &LocalLighting<'_>,
+    jitter: impl FnMut(usize, u32) -> Vec2,
+    visibility: impl FnMut(usize, &LightSample) -> Vec3,
+) -> [Vec3; 2] {
+    local_model::<true>(m, sp, env, jitter, visibility)
+}
+
+/// The body of [`shade_local`] and [`shade_local_split`]: `[total, rest]`
+/// (`rest` only computed when `SPLIT`, zero otherwise). Every operation on
+/// `total` is the same whether or not `SPLIT`, and the operations on `rest`
+/// are those `total` performs with `kd = 0` (the diffuse terms then add
+/// exact zeros), so the split is exact.
+#[inline(always)]
+fn local_model<const SPLIT: bool>(
     m: &SurfaceMaterial,
     sp: &ShadingPoint,
     env: &LocalLighting<'_>,
     mut jitter: impl FnMut(usize, u32) -> Vec2,
     mut visibility: impl FnMut(usize, &LightSample) -> Vec3,
-) -> Vec3 {
+) -> [Vec3; 2] {
     let mut out = m.emission;
+    let mut rest = m.emission;
+    let has_specular = m.has_specular();
     for (li, light) in env.lights.iter().enumerate() {
         if let Light::Ambient { .. } = light {
             if env.ambient {
@@ -147,19 +184,52 @@ pub fn shade_local(
         }
         let count = samples_for_light(light, env.area_samples);
         let mut sum = Vec3::ZERO;
+        let mut sum_rest = Vec3::ZERO;
         for i in 0..count {
-            let u = stratum(i, count, jitter(li, i));
+            let j = jitter(li, i);
+            // A single sample is its stratum's jitter itself (stratum(0, 1, j) == j).
+            let u = if count == 1 { j } else { stratum(i, count, j) };
             if let Some(s) = sample_light(light, sp.p, u) {
-                if s.wi.dot(sp.n) <= 0.0 {
+                let cos_i = s.wi.dot(sp.n);
+                if cos_i <= 0.0 {
                     continue;
                 }
                 let v = visibility(li, &s);
-                sum += direct_from_sample(m, sp, &s, v);
+                if v == Vec3::ZERO {
+                    continue;
+                }
+                // direct_from_sample / eval_brdf_cos, inlined with the
+                // specular lobe evaluated once for both parts.
+                let spec = if has_specular {
+                    brdf::specular_cos(m, sp.n, sp.wo, s.wi, cos_i)
+                } else {
+                    Vec3::ZERO
+                };
+                let mut f = m.kd * (std::f32::consts::FRAC_1_PI * cos_i);
+                if has_specular {
+                    f += spec;
+                }
+                sum += PI * f * s.intensity * v;
+                if SPLIT {
+                    // eval_brdf_cos with kd = 0 is `spec` (zero without specular).
+                    sum_rest += PI * spec * s.intensity * v;
+                }
             }
         }
-        out += sum / count as f32;
+        if count == 1 {
+            // `x / 1.0 == x` exactly: skip the divisions.
+            out += sum;
+            if SPLIT {
+                rest += sum_rest;
+            }
+        } else {
+            out += sum / count as f32;
+            if SPLIT {
+                rest += sum_rest / count as f32;
+            }
+        }
     }
-    out
+    [out, if SPLIT { rest } else { Vec3::ZERO }]
 }
 
 /// Depth cueing (Foley et al. 16.1.3): blend the shaded colour `c` towards
@@ -258,6 +328,86 @@ mod tests {
             shade_local(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE),
             Vec3::ZERO
         );
+    }
+
+    #[test]
+    fn split_is_total_and_kd_zero_evaluation_exactly() {
+        use crate::scene::{AreaShape, ReflectanceModel};
+        let lights = [
+            Light::Ambient {
+                color: Vec3::ONE,
+                intensity: 0.3,
+            },
+            Light::Point {
+                position: Vec3::new(1.0, 3.0, 0.5),
+                color: Vec3::new(1.0, 0.8, 0.6),
+                intensity: 5.0,
+                attenuation: Attenuation::InverseSquare,
+            },
+            Light::Directional {
+                direction: Vec3::new(-0.3, -1.0, 0.2),
+                color: Vec3::ONE,
+                intensity: 0.7,
+            },
+            Light::Area {
+                shape: AreaShape::Quad {
+                    corner: Vec3::new(-1.0, 4.0, -1.0),
+                    edge_u: Vec3::new(2.0, 0.0, 0.0),
+                    edge_v: Vec3::new(0.0, 0.0, 2.0),
+                },
+                color: Vec3::ONE,
+                intensity: 3.0,
+                two_sided: true,
+            },
+        ];
+        let env = LocalLighting {
+            lights: &lights,
+            area_samples: 4,
+            ambient: true,
+        };
+        let models = [
+            ReflectanceModel::Phong,
+            ReflectanceModel::Blinn,
+            ReflectanceModel::TorranceSparrow,
+        ];
+        for (k, model) in models.into_iter().enumerate() {
+            for ks in [0.0f32, 0.6] {
+                let m = SurfaceMaterial {
+                    ka: Vec3::splat(0.2),
+                    kd: Vec3::new(0.7, 0.3, 0.2),
+                    ks: Vec3::splat(ks),
+                    shininess: 20.0 + k as f32,
+                    model,
+                    roughness: 0.3,
+                    emission: Vec3::new(0.01, 0.0, 0.02),
+                    ..SurfaceMaterial::default()
+                };
+                let n = Vec3::new(0.1 * k as f32, 1.0, 0.2).normalize();
+                let sp = ShadingPoint {
+                    p: Vec3::new(0.2, 0.0, -0.1),
+                    n,
+                    ng: n,
+                    wo: Vec3::new(0.3, 1.0, 0.4).normalize(),
+                };
+                // A partly shadowed light sample, to exercise visibility.
+                let vis = |li: usize, s: &LightSample| {
+                    if li == 3 && s.point.x < 0.0 {
+                        Vec3::new(0.5, 0.25, 0.0)
+                    } else {
+                        Vec3::ONE
+                    }
+                };
+                let jitter = |_: usize, _: u32| Vec2::splat(0.5);
+                let [total, rest] = shade_local_split(&m, &sp, &env, jitter, vis);
+                let no_kd = SurfaceMaterial {
+                    kd: Vec3::ZERO,
+                    ..m
+                };
+                assert_eq!(total, shade_local(&m, &sp, &env, jitter, vis));
+                assert_eq!(rest, shade_local(&no_kd, &sp, &env, jitter, vis));
+                assert!(total.x > rest.x && rest.cmpge(m.emission).all());
+            }
+        }
     }
 
     #[test]
