@@ -41,7 +41,7 @@
 use super::{Accelerator, Hit, WatertightRay, intersect_sphere};
 use crate::geometry::{Aabb, Ray};
 use crate::prepared::PreparedScene;
-use glam::{Vec3, Vec3A};
+use glam::{Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
 /// Most bins a build may use.
@@ -136,39 +136,29 @@ impl BvhNode {
 
     /// Slab test of all four lanes: per lane the entry distance, and the
     /// bit mask of the lanes whose box the ray meets inside
-    /// `(t_min, t_max)`. Written as plain loops over lanes so LLVM turns
-    /// each into 4-wide SIMD; a NaN product (a zero direction component
-    /// with the origin on a slab plane) never narrows the interval.
+    /// `(t_min, t_max)`. Four-lane `glam::Vec4` arithmetic (SSE on x86):
+    /// `max`/`min` take their second operand when either is NaN, so a NaN
+    /// product (a zero direction component with the origin on a slab plane)
+    /// never narrows the interval. Unused lanes hold inverted boxes, whose
+    /// entry always lies beyond their exit, so they never hit.
     #[inline(always)]
-    fn intersect(&self, r: &RayPre, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
-        let mut near = [t_min; WIDTH];
-        let mut far = [f32::INFINITY; WIDTH];
-        for a in 0..3 {
-            let lo = &self.bounds[r.near_row[a]];
-            let hi = &self.bounds[r.far_row[a]];
-            let (o, inv) = (r.org[a], r.inv[a]);
-            for i in 0..WIDTH {
-                let tn = (lo[i] - o) * inv;
-                let tf = (hi[i] - o) * inv;
-                near[i] = if tn > near[i] { tn } else { near[i] };
-                far[i] = if tf < far[i] { tf } else { far[i] };
-            }
-        }
-        let mut mask = 0u32;
-        for i in 0..WIDTH {
-            let f = far[i] * EXIT_SLACK;
-            let f = if f < t_max { f } else { t_max };
-            let valid = self.count[i] != EMPTY_LANE;
-            mask |= ((near[i] <= f && valid) as u32) << i;
-        }
-        (near, mask)
+    fn intersect(&self, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, u32) {
+        let b = &self.bounds;
+        let slab = |row: usize, a: usize| (Vec4::from_array(b[row]) - r.org[a]) * r.inv[a];
+        let near = slab(r.near_row[2], 2)
+            .max(slab(r.near_row[1], 1).max(slab(r.near_row[0], 0).max(Vec4::splat(t_min))));
+        let far = slab(r.far_row[2], 2)
+            .min(slab(r.far_row[1], 1).min(slab(r.far_row[0], 0).min(Vec4::INFINITY)));
+        let far = (far * EXIT_SLACK).min(Vec4::splat(t_max));
+        (near, near.cmple(far).bitmask())
     }
 }
 
 /// Per-ray constants of the slab test.
 struct RayPre {
-    org: [f32; 3],
-    inv: [f32; 3],
+    /// Origin and inverse direction, each component splat over four lanes.
+    org: [Vec4; 3],
+    inv: [Vec4; 3],
     /// Row of [`BvhNode::bounds`] holding the entry plane on each axis (the
     /// lower corner for a positive direction component).
     near_row: [usize; 3],
@@ -180,9 +170,10 @@ impl RayPre {
     fn new(ray: &Ray) -> Self {
         let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
         let neg = inv.map(|v| v.is_sign_negative() as usize);
+        let o = ray.origin.to_array();
         Self {
-            org: ray.origin.to_array(),
-            inv,
+            org: o.map(Vec4::splat),
+            inv: inv.map(Vec4::splat),
             near_row: [3 * neg[0], 1 + 3 * neg[1], 2 + 3 * neg[2]],
             far_row: [3 - 3 * neg[0], 4 - 3 * neg[1], 5 - 3 * neg[2]],
         }
@@ -540,6 +531,7 @@ impl Bvh {
             if count == 0 {
                 let n = &self.nodes[child as usize];
                 let (near, mask) = n.intersect(&pre, t_min, t_max);
+                let near = near.to_array();
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
                     let rest = mask & (mask - 1);
@@ -1101,89 +1093,70 @@ impl TriBlock {
     };
 
     /// The watertight test of [`WatertightRay::intersect`] on the lanes in
-    /// `lanes`, four at a time: the same operations in the same order per
-    /// lane, so `t`, `u`, `v` are bit-identical to the scalar test (the
+    /// `lanes`, four at a time (`glam::Vec4`, SSE on x86): the same
+    /// operations in the same order per lane and no fused multiply-adds, so
+    /// `t`, `u`, `v` are bit-identical to the scalar test (the
     /// double-precision edge fallback runs per lane, scalar).
     #[inline(always)]
     fn intersect(&self, wr: &WatertightRay, lanes: u32) -> Lanes {
         let (kx, ky, kz) = (wr.kx, wr.ky, wr.kz);
-        let (sx, sy, sz) = (wr.sx, wr.sy, wr.sz);
         let o = wr.origin.to_array();
-        let (ox, oy, oz) = (o[kx], o[ky], o[kz]);
+        let (ox, oy, oz) = (Vec4::splat(o[kx]), Vec4::splat(o[ky]), Vec4::splat(o[kz]));
+        let (sx, sy, sz) = (Vec4::splat(wr.sx), Vec4::splat(wr.sy), Vec4::splat(wr.sz));
         let v = &self.v;
-        // Translate to the ray origin and shear (per vertex, four lanes).
-        #[inline(always)]
-        fn shear(
-            p: [&[f32; WIDTH]; 3],
-            o: [f32; 3],
-            sx: f32,
-            sy: f32,
-        ) -> ([f32; WIDTH], [f32; WIDTH], [f32; WIDTH]) {
-            let (mut x, mut y, mut z) = ([0.0f32; WIDTH], [0.0f32; WIDTH], [0.0f32; WIDTH]);
-            for i in 0..WIDTH {
-                let dz = p[2][i] - o[2];
-                x[i] = (p[0][i] - o[0]) - sx * dz;
-                y[i] = (p[1][i] - o[1]) - sy * dz;
-                z[i] = dz;
-            }
-            (x, y, z)
-        }
-        let ok = [ox, oy, oz];
-        let (ax, ay, az0) = shear([&v[kx], &v[ky], &v[kz]], ok, sx, sy);
-        let (bx, by, bz0) = shear([&v[3 + kx], &v[3 + ky], &v[3 + kz]], ok, sx, sy);
-        let (cx, cy, cz0) = shear([&v[6 + kx], &v[6 + ky], &v[6 + kz]], ok, sx, sy);
-        let z = [az0, bz0, cz0];
-        let mut uu = [0.0f32; WIDTH];
-        let mut vv = [0.0f32; WIDTH];
-        let mut ww = [0.0f32; WIDTH];
-        let mut zero = 0u32;
-        for i in 0..WIDTH {
-            uu[i] = cx[i] * by[i] - cy[i] * bx[i];
-            vv[i] = ax[i] * cy[i] - ay[i] * cx[i];
-            ww[i] = bx[i] * ay[i] - by[i] * ax[i];
-            zero |= ((uu[i] == 0.0 || vv[i] == 0.0 || ww[i] == 0.0) as u32) << i;
-        }
-        let mut fix = zero & lanes;
-        while fix != 0 {
-            // Recompute in double precision on edges (the paper's fallback).
-            let i = fix.trailing_zeros() as usize;
-            fix &= fix - 1;
-            let (cxd, cyd, bxd, byd, axd, ayd) = (
-                cx[i] as f64,
-                cy[i] as f64,
-                bx[i] as f64,
-                by[i] as f64,
-                ax[i] as f64,
-                ay[i] as f64,
-            );
-            uu[i] = (cxd * byd - cyd * bxd) as f32;
-            vv[i] = (axd * cyd - ayd * cxd) as f32;
-            ww[i] = (bxd * ayd - byd * axd) as f32;
-        }
-        let mut out = Lanes {
-            t: [0.0; WIDTH],
-            u: [0.0; WIDTH],
-            v: [0.0; WIDTH],
-            mask: 0,
+        // Translate vertex k to the ray origin and shear: (x, y, z - oz).
+        let shear = |k: usize| {
+            let dz = Vec4::from_array(v[3 * k + kz]) - oz;
+            let x = (Vec4::from_array(v[3 * k + kx]) - ox) - sx * dz;
+            let y = (Vec4::from_array(v[3 * k + ky]) - oy) - sy * dz;
+            (x, y, dz)
         };
-        for i in 0..WIDTH {
-            let (u, v, w) = (uu[i], vv[i], ww[i]);
-            let mixed = (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0);
-            let det = u + v + w;
-            let az = sz * z[0][i];
-            let bz = sz * z[1][i];
-            let cz = sz * z[2][i];
-            let t_scaled = u * az + v * bz + w * cz;
-            let inv = 1.0 / det;
-            let t = t_scaled * inv;
-            let ok = !mixed && det != 0.0 && t > wr.t_min && t < wr.t_max;
-            out.t[i] = t;
-            out.u[i] = v * inv;
-            out.v[i] = w * inv;
-            out.mask |= (ok as u32) << i;
+        let (ax, ay, az) = shear(0);
+        let (bx, by, bz) = shear(1);
+        let (cx, cy, cz) = shear(2);
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        let zero = Vec4::ZERO;
+        let mut fix = (u.cmpeq(zero) | v.cmpeq(zero) | w.cmpeq(zero)).bitmask() & lanes;
+        if fix != 0 {
+            // Recompute in double precision on edges (the paper's fallback).
+            let (mut ua, mut va, mut wa) = (u.to_array(), v.to_array(), w.to_array());
+            let [axa, aya, bxa, bya, cxa, cya] = [ax, ay, bx, by, cx, cy].map(|x| x.to_array());
+            while fix != 0 {
+                let i = fix.trailing_zeros() as usize;
+                fix &= fix - 1;
+                let (cxd, cyd, bxd, byd, axd, ayd) = (
+                    cxa[i] as f64,
+                    cya[i] as f64,
+                    bxa[i] as f64,
+                    bya[i] as f64,
+                    axa[i] as f64,
+                    aya[i] as f64,
+                );
+                ua[i] = (cxd * byd - cyd * bxd) as f32;
+                va[i] = (axd * cyd - ayd * cxd) as f32;
+                wa[i] = (bxd * ayd - byd * axd) as f32;
+            }
+            (u, v, w) = (
+                Vec4::from_array(ua),
+                Vec4::from_array(va),
+                Vec4::from_array(wa),
+            );
         }
-        out.mask &= lanes;
-        out
+        let neg = u.cmplt(zero) | v.cmplt(zero) | w.cmplt(zero);
+        let pos = u.cmpgt(zero) | v.cmpgt(zero) | w.cmpgt(zero);
+        let det = u + v + w;
+        let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+        let inv = Vec4::ONE / det;
+        let t = t_scaled * inv;
+        let ok = det.cmpne(zero) & t.cmpgt(Vec4::splat(wr.t_min)) & t.cmplt(Vec4::splat(wr.t_max));
+        Lanes {
+            t: t.to_array(),
+            u: (v * inv).to_array(),
+            v: (w * inv).to_array(),
+            mask: ok.bitmask() & !(neg & pos).bitmask() & lanes,
+        }
     }
 }
 
