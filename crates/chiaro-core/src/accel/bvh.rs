@@ -188,9 +188,11 @@ struct Entry {
     near: f32,
 }
 
-/// Entries kept in the fixed part of the stack (a 4-wide tree over a few
-/// million primitives needs ~40); deeper trees spill into a `Vec`.
-const STACK: usize = 48;
+/// Entries kept in the fixed part of the stack. Ordered traversal with
+/// pop-culling rarely holds more than a dozen; deeper trees spill into a
+/// `Vec`. Kept under 256 bytes so that clearing it per ray is a few vector
+/// stores rather than a call to `memset`.
+const STACK: usize = 20;
 
 /// The traversal stack: a fixed array that spills into a `Vec` (never
 /// allocated for ordinary trees) so that no tree is too deep.
@@ -538,6 +540,24 @@ impl Bvh {
                     if rest == 0 {
                         // One child: descend.
                         (child, count) = (n.child[first], n.count[first]);
+                        continue;
+                    }
+                    let second = rest.trailing_zeros() as usize;
+                    if rest & (rest - 1) == 0 {
+                        // Two (the common case): push the farther, descend
+                        // into the nearer (the later lane on a tie, as the
+                        // sort below orders them).
+                        let (far, near_lane) = if near[first] < near[second] {
+                            (second, first)
+                        } else {
+                            (first, second)
+                        };
+                        stack.push(Entry {
+                            child: n.child[far],
+                            count: n.count[far],
+                            near: near[far],
+                        });
+                        (child, count) = (n.child[near_lane], n.count[near_lane]);
                         continue;
                     }
                     // Several: push all but the nearest, farthest deepest
@@ -1341,7 +1361,10 @@ impl Accelerator for SceneBvh {
                     let r = blk.intersect(&wr, lanes & !spheres);
                     // In slot order, keep a hit only if strictly nearer (as a
                     // one-at-a-time scan shrinking t_max would).
-                    for i in 0..WIDTH {
+                    let mut todo = r.mask | spheres;
+                    while todo != 0 {
+                        let i = todo.trailing_zeros() as usize;
+                        todo &= todo - 1;
                         let hit = if r.mask >> i & 1 == 1 {
                             (r.t[i] < wr.t_max).then_some((r.t[i], r.u[i], r.v[i]))
                         } else if spheres >> i & 1 == 1 {
