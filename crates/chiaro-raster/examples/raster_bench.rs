@@ -9,14 +9,21 @@
 //! shadow method and transparency mode (issue 4). Each line also splits the
 //! median frame into the renderer's passes (the `Progress` stages).
 //!
-//! `cargo run --release -p chiaro-raster --example raster_bench -- [frames] [--png] [--no-cull] [--issue4] [--crop] [--only NAME]`
+//! `--issue8` times the six shadow methods (none, rays, maps, volumes,
+//! object-precision, scan-line; Phong, one sample, 640x480) on the shadow
+//! test scene and on a 103,682-triangle scene (81 level-3 icospheres over a
+//! ground plane, one point light), then one sample + FXAA (`aa = post`)
+//! against 4-sample supersampling, and prints a Markdown table with each
+//! method's cost relative to shadow maps.
+//!
+//! `cargo run --release -p chiaro-raster --example raster_bench -- [frames] [--png] [--no-cull] [--issue4 | --issue8] [--crop] [--only NAME]`
 
 use chiaro_core::Vec3;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::scene::{
-    Attenuation, Camera, Geometry, Light, Material, Object, RenderSettings, Scene, ShadeMode,
-    ShadowMethod, Technique, Transform, TransparencyMode,
+    AaMode, Attenuation, Camera, Geometry, Light, Material, Object, RenderSettings, Scene,
+    ShadeMode, ShadowMethod, Technique, Transform, TransparencyMode,
 };
 use std::sync::Mutex;
 use std::time::Instant;
@@ -145,6 +152,131 @@ struct Case {
     scene: usize,
     mode: ShadeMode,
     settings: RenderSettings,
+    /// Apply the FXAA post filter to the frame (what the facade does for
+    /// `aa = post`), inside the timed region.
+    post: bool,
+}
+
+/// The issue-8 large scene: a 9x9 grid of level-3 icospheres (1280
+/// triangles each) floating over a 16x16-cell ground plane, lit by one
+/// point light above and to the side so every sphere casts a shadow on the
+/// plane and on its neighbours: 81 * 1280 + 2 * 16 * 16 = 104,192
+/// triangles.
+fn hundred_k_scene() -> Scene {
+    let mut s = Scene::default();
+    let m = s.add_material(Material {
+        specular: Vec3::splat(0.4),
+        shininess: 40.0,
+        ..Material::diffuse("sphere", Vec3::new(0.7, 0.3, 0.2))
+    });
+    let floor = s.add_material(Material::diffuse("floor", Vec3::splat(0.7)));
+    let ball = s.add_mesh(chiaro_core::geometry::primitives::icosphere(0.4, 3));
+    let plane = s.add_mesh(chiaro_core::geometry::primitives::plane(6.0, 16));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(plane),
+        material: floor,
+        smooth: false,
+        ..Object::default()
+    });
+    let n = 9;
+    for i in 0..n {
+        for j in 0..n {
+            s.objects.push(Object {
+                geometry: Geometry::Mesh(ball),
+                material: m,
+                transform: Transform {
+                    translate: Vec3::new(
+                        i as f32 * 1.2 - 4.8,
+                        0.6 + 0.25 * ((i + j) % 3) as f32,
+                        j as f32 * 1.2 - 4.8,
+                    ),
+                    ..Transform::default()
+                },
+                ..Object::default()
+            });
+        }
+    }
+    s.lights = vec![
+        Light::Ambient {
+            color: Vec3::ONE,
+            intensity: 0.1,
+        },
+        Light::Point {
+            position: Vec3::new(-4.0, 9.0, -3.0),
+            color: Vec3::ONE,
+            intensity: 60.0,
+            attenuation: Attenuation::InverseSquare,
+        },
+    ];
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 9.0, -11.0),
+        look_at: Vec3::new(0.0, 0.0, 0.0),
+        up: Vec3::Y,
+        fov_y_degrees: 50.0,
+        near: 0.1,
+        far: 100.0,
+    };
+    s
+}
+
+/// The issue-8 cases: every shadow method on scenes 0 (the shadow test
+/// scene) and 1 (the 100k-triangle scene), then `aa = post` against
+/// 4-sample supersampling on scene 0 with shadow maps.
+fn issue8_cases(cull: bool) -> Vec<Case> {
+    let base = RenderSettings {
+        width: 640,
+        height: 480,
+        samples: 1,
+        ..settings(Technique::Phong, cull)
+    };
+    let mut cases = Vec::new();
+    for (scene, tag) in [(0, "shadow test"), (1, "100k")] {
+        for (name, sh) in [
+            ("none", ShadowMethod::None),
+            ("rays", ShadowMethod::Ray),
+            ("maps", ShadowMethod::Map),
+            ("volumes", ShadowMethod::Volume),
+            ("object", ShadowMethod::Object),
+            ("scanline", ShadowMethod::Scanline),
+        ] {
+            cases.push(Case {
+                name: format!("{tag}, shadows {name}"),
+                scene,
+                mode: ShadeMode::Phong,
+                settings: RenderSettings {
+                    shadows: sh,
+                    ..base.clone()
+                },
+                post: false,
+            });
+        }
+    }
+    for (name, samples, post) in [("aa post (1 + FXAA)", 1, true), ("aa 4 samples", 4, false)] {
+        cases.push(Case {
+            name: format!("shadow test, shadows maps, {name}"),
+            scene: 0,
+            mode: ShadeMode::Phong,
+            settings: RenderSettings {
+                shadows: ShadowMethod::Map,
+                samples,
+                aa: if post {
+                    AaMode::Post
+                } else {
+                    AaMode::Supersample
+                },
+                ..base.clone()
+            },
+            post,
+        });
+    }
+    cases
+}
+
+/// The 1-, 5- and 15-minute load averages from /proc/loadavg.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "unknown".into())
 }
 
 fn settings(technique: Technique, cull: bool) -> RenderSettings {
@@ -184,22 +316,32 @@ fn main() {
     let png = args.iter().any(|a| a == "--png");
     let cull = !args.iter().any(|a| a == "--no-cull");
     let issue4 = args.iter().any(|a| a == "--issue4");
+    let issue8 = args.iter().any(|a| a == "--issue8");
     let crop = args.iter().any(|a| a == "--crop");
-    let scenes = [scene(), transparent_scene()];
+    let scenes = if issue8 {
+        vec![chiaro_testkit::scenes::shadow_test(640), hundred_k_scene()]
+    } else {
+        vec![scene(), transparent_scene()]
+    };
     let t0 = Instant::now();
     let prepared: Vec<PreparedScene<'_>> = scenes
         .iter()
         .map(|s| PreparedScene::new(s, PrepareOptions::default()))
         .collect();
     let prep = t0.elapsed().as_secs_f64() * 1e3 / 2.0;
-    println!(
-        "scene: {} triangles, {} vertices; prepare {prep:.1} ms; threads {}; cull {cull}",
-        prepared[0].triangle_count(),
-        prepared[0].positions.len(),
-        rayon::current_num_threads()
-    );
+    for (k, ps) in prepared.iter().enumerate() {
+        println!(
+            "scene {k}: {} triangles, {} vertices; prepare {prep:.1} ms; threads {}; cull {cull}",
+            ps.triangle_count(),
+            ps.positions.len(),
+            rayon::current_num_threads()
+        );
+    }
+    println!("load average before: {}", load_average());
     let mut cases = Vec::new();
-    if issue4 {
+    if issue8 {
+        cases = issue8_cases(cull);
+    } else if issue4 {
         for (name, sh) in [
             ("phong, shadows none", ShadowMethod::None),
             ("phong, shadow rays", ShadowMethod::Ray),
@@ -214,6 +356,7 @@ fn main() {
                     shadows: sh,
                     ..settings(Technique::Phong, cull)
                 },
+                post: false,
             });
         }
         cases.push(Case {
@@ -221,6 +364,7 @@ fn main() {
             scene: 0,
             mode: ShadeMode::Phong,
             settings: settings(Technique::Phong, cull),
+            post: false,
         });
         for (name, t) in [
             ("screen-door", TransparencyMode::ScreenDoor),
@@ -235,6 +379,7 @@ fn main() {
                     transparency: Some(t),
                     ..settings(Technique::Phong, cull)
                 },
+                post: false,
             });
         }
     } else {
@@ -251,6 +396,7 @@ fn main() {
                     crop: crop.then_some([640, 270, 1280, 810]),
                     ..settings(technique, cull)
                 },
+                post: false,
             });
         }
     }
@@ -258,6 +404,8 @@ fn main() {
         .iter()
         .position(|a| a == "--only")
         .and_then(|i| args.get(i + 1));
+    // (case, median wall ms, median CPU ms, passes) for the Markdown table.
+    let mut results: Vec<(&Case, f64, f64, String)> = Vec::new();
     for case in cases
         .iter()
         .filter(|c| only.is_none_or(|o| c.name.starts_with(o.as_str())))
@@ -271,10 +419,24 @@ fn main() {
             let timer = PhaseTimer::default();
             let c0 = cpu_ms();
             let t = Instant::now();
-            let f = chiaro_raster::render_prepared(ps, &case.settings, case.mode, &timer);
+            let f =
+                chiaro_raster::render_prepared(ps, &case.settings, case.mode, &timer).map(|f| {
+                    if case.post {
+                        timer.begin("fxaa", 0);
+                        chiaro_core::film::postfilter::fxaa(&f)
+                    } else {
+                        f
+                    }
+                });
             let end = Instant::now();
             let c1 = cpu_ms();
-            film = f.ok();
+            film = match f {
+                Ok(f) => Some(f),
+                Err(e) => {
+                    eprintln!("{}: {e}", case.name);
+                    None
+                }
+            };
             if frame == 0 {
                 continue; // warm-up
             }
@@ -310,15 +472,15 @@ fn main() {
             .iter_mut()
             .map(|(stage, v)| format!("{stage} {:.1}", median(v)))
             .collect();
+        let (wall, cpu) = (median(&mut times), median(&mut cpu));
         println!(
-            "{}: median {:.1} ms/frame (min {min:.1}, max {max:.1}, n={frames}) [{}]; cpu {:.0} ms/frame; covered {:.1}%; film {hash:016x}; peak RSS {:.0} MiB",
+            "{}: median {wall:.1} ms/frame (min {min:.1}, max {max:.1}, n={frames}) [{}]; cpu {cpu:.0} ms/frame; covered {:.1}%; film {hash:016x}; peak RSS {:.0} MiB",
             case.name,
-            median(&mut times),
             split.join(", "),
-            median(&mut cpu),
             covered * 100.0,
             peak_rss_mib()
         );
+        results.push((case, wall, cpu, split.join(", ")));
         if png {
             let dir = std::env::var("OUT_DIR").unwrap_or_else(|_| "/tmp".into());
             let img = image::RgbImage::from_fn(film.width, film.height, |x, y| {
@@ -336,5 +498,30 @@ fn main() {
                 eprintln!("{path}: {e}");
             }
         }
+    }
+    println!("load average after: {}", load_average());
+    if issue8 {
+        print_issue8_table(&results);
+    }
+}
+
+/// Prints the issue-8 results as a Markdown table, each case's median wall
+/// and CPU time also as a multiple of shadow maps' on the same scene.
+fn print_issue8_table(results: &[(&Case, f64, f64, String)]) {
+    println!();
+    println!("| case | wall ms/frame | CPU ms/frame | wall / maps | CPU / maps | passes (ms) |");
+    println!("| --- | ---: | ---: | ---: | ---: | --- |");
+    for (case, wall, cpu, split) in results {
+        let maps = results.iter().find(|(c, ..)| {
+            c.scene == case.scene
+                && c.settings.shadows == ShadowMethod::Map
+                && c.settings.samples == 1
+                && !c.post
+        });
+        let (rw, rc) = maps.map_or((f64::NAN, f64::NAN), |(_, w, c, _)| (wall / w, cpu / c));
+        println!(
+            "| {} | {wall:.1} | {cpu:.0} | {rw:.2} | {rc:.2} | {split} |",
+            case.name
+        );
     }
 }

@@ -183,43 +183,230 @@ impl ReceiverFrame {
     /// The shadow that occluder triangle `q` casts on this plane, as a
     /// counter-clockwise convex polygon in 2D; `None` when it casts none
     /// (entirely behind the plane, beyond a point light, or degenerate).
+    /// Allocates only for a shadow that exists.
     pub fn shadow_of(&self, q: [DVec3; 3], light: LightGeom) -> Option<Vec<DVec2>> {
         if self.h <= self.eps {
             return None; // light (nearly) in the plane: nothing to shadow
         }
         let dist = |x: DVec3| self.n.dot(x - self.o);
-        // Keep the part strictly between the plane and the light.
-        let mut poly: Vec<DVec3> = q.to_vec();
-        poly = clip3(&poly, |x| dist(x) - self.eps);
-        if poly.len() < 3 {
+        // Keep the part strictly between the plane and the light (at most
+        // five corners: a triangle cut by two planes).
+        let mut a = [DVec3::ZERO; MAX_CLIP];
+        let mut n = clip3_into(&q, |x| dist(x) - self.eps, &mut a);
+        if n < 3 {
             return None;
         }
-        if let LightGeom::Point(_) = light {
-            poly = clip3(&poly, |x| self.h - self.eps - dist(x));
-            if poly.len() < 3 {
+        let mut b = [DVec3::ZERO; MAX_CLIP];
+        let poly: &[DVec3] = if let LightGeom::Point(_) = light {
+            n = clip3_into(&a[..n], |x| self.h - self.eps - dist(x), &mut b);
+            if n < 3 {
                 return None;
             }
-        }
+            &b[..n]
+        } else {
+            &a[..n]
+        };
         // Central (or parallel) projection onto the plane.
-        let mut s: Vec<DVec2> = poly
-            .iter()
-            .map(|&x| {
-                let d = dist(x);
-                let p = match light {
-                    LightGeom::Point(l) => l + (x - l) * (self.h / (self.h - d)),
-                    LightGeom::Directional(t) => x - t * (d / self.h),
-                };
-                self.plane_2d(p)
-            })
-            .collect();
-        let a = area2(&s);
+        let mut s = [DVec2::default(); MAX_CLIP];
+        for (o, &x) in s.iter_mut().zip(poly) {
+            let d = dist(x);
+            let p = match light {
+                LightGeom::Point(l) => l + (x - l) * (self.h / (self.h - d)),
+                LightGeom::Directional(t) => x - t * (d / self.h),
+            };
+            *o = self.plane_2d(p);
+        }
+        let s = &mut s[..poly.len()];
+        let a = area2(s);
         if a.abs() <= 1e-14 * area2(&self.tri).abs() {
             return None;
         }
         if a < 0.0 {
             s.reverse();
         }
-        Some(s)
+        Some(s.to_vec())
+    }
+
+    /// The shadow frustum of this receiver (corners `p`, those given to
+    /// [`ReceiverFrame::new`]): half-spaces outside which an occluder
+    /// cannot shadow any point of the receiver. For a point light they are
+    /// the receiver's plane, the plane through the light parallel to it and
+    /// the three planes through the light and each edge; for a directional
+    /// light the receiver's plane and the three planes through each edge
+    /// along the light direction. Each is loosened by `eps`, so the test
+    /// only discards pairs that [`ReceiverFrame::shadow_of`] and the clip
+    /// to the receiver would reduce to nothing. `None` when the light is in
+    /// the plane (no shadow at all).
+    pub fn frustum(&self, p: [DVec3; 3], light: LightGeom) -> Option<ShadowFrustum> {
+        if self.h <= self.eps {
+            return None;
+        }
+        let mut f = ShadowFrustum {
+            planes: [HalfSpace {
+                n: DVec3::ZERO,
+                c: 0.0,
+            }; 5],
+            count: 0,
+        };
+        let mut push = |n: DVec3, c: f64| {
+            f.planes[f.count] = HalfSpace { n, c };
+            f.count += 1;
+        };
+        // In front of the receiver: dist(x) >= eps, loosened to >= eps / 2
+        // (far more than the rounding of `dist`), so that neighbours
+        // sharing a vertex with the receiver and bending away from the
+        // light are discarded here.
+        push(self.n, -self.n.dot(self.o) - 0.5 * self.eps);
+        if let LightGeom::Point(_) = light {
+            // Below the light: dist(x) <= h - eps, loosened to <= h - eps / 2.
+            push(-self.n, self.n.dot(self.o) + self.h - 0.5 * self.eps);
+        }
+        for i in 0..3 {
+            let (a, b, c) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
+            // The plane through the edge containing the light (or the light
+            // direction), its normal turned towards the opposite corner.
+            let (m, at) = match light {
+                LightGeom::Point(l) => ((a - l).cross(b - l), l),
+                LightGeom::Directional(d) => ((b - a).cross(d), a),
+            };
+            let Some(mut m) = m.try_normalize() else {
+                continue; // degenerate: skip (the test stays conservative)
+            };
+            if m.dot(c - at) < 0.0 {
+                m = -m;
+            }
+            push(m, -m.dot(at) + self.eps);
+        }
+        Some(f)
+    }
+}
+
+/// Most corners of a triangle clipped by two planes, with room to spare.
+const MAX_CLIP: usize = 8;
+
+/// The half-space `n . x + c >= 0`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HalfSpace {
+    n: DVec3,
+    c: f64,
+}
+
+/// A receiver's shadow frustum: the intersection of up to five
+/// half-spaces (see [`ReceiverFrame::frustum`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ShadowFrustum {
+    planes: [HalfSpace; 5],
+    count: usize,
+}
+
+impl ShadowFrustum {
+    /// Whether box `b` lies entirely outside one of the half-spaces (the
+    /// corner furthest along each plane's normal is outside).
+    fn excludes_box(&self, b: &Aabb) -> bool {
+        let (lo, hi) = (DVec3::from(b.min), DVec3::from(b.max));
+        self.planes[..self.count].iter().any(|h| {
+            let x = if h.n.x >= 0.0 { hi.x } else { lo.x };
+            let y = if h.n.y >= 0.0 { hi.y } else { lo.y };
+            let z = if h.n.z >= 0.0 { hi.z } else { lo.z };
+            h.n.dot(DVec3::new(x, y, z)) + h.c < 0.0
+        })
+    }
+
+    /// Whether every corner of triangle `q` lies outside one of the
+    /// half-spaces.
+    pub(crate) fn excludes_tri(&self, q: &[DVec3; 3]) -> bool {
+        self.planes[..self.count]
+            .iter()
+            .any(|h| q.iter().all(|&x| h.n.dot(x) + h.c < 0.0))
+    }
+}
+
+/// The shadow casters of a scene for the exact shadow methods: a BVH over
+/// the boxes of the triangles whose objects cast shadows (the seed's
+/// light-cube projection, which pairs polygons whose projections from the
+/// light overlap, done instead as a frustum query against the BVH).
+#[derive(Debug, Clone)]
+pub(crate) struct Casters {
+    bvh: Bvh,
+    /// Per triangle, its corners in `f64`; `None` for triangles that cast
+    /// nothing (their boxes in the BVH are empty).
+    points: Vec<Option<[DVec3; 3]>>,
+}
+
+impl Casters {
+    /// The casters of `ps`.
+    pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
+        let points: Vec<Option<[DVec3; 3]>> = (0..ps.triangles.len())
+            .map(|t| tri_points(ps, t).filter(|_| casts(ps, t)))
+            .collect();
+        let boxes: Vec<Aabb> = points
+            .iter()
+            .map(|p| p.map_or(Aabb::EMPTY, |p| Aabb::from_points(p.map(Vec3::from))))
+            .collect();
+        let bvh = Bvh::build(&boxes);
+        Self { bvh, points }
+    }
+
+    /// Appends to `out` the shadows (2D, in `frame`) that the casters other
+    /// than triangle `r` throw on receiver `r` with corners `p`, in BVH
+    /// order. Returns the number of candidate occluders whose boxes met the
+    /// receiver's shadow frustum. `stack` is scratch space.
+    pub(crate) fn shadows_on(
+        &self,
+        r: usize,
+        p: [DVec3; 3],
+        frame: &ReceiverFrame,
+        light: LightGeom,
+        stack: &mut Vec<u32>,
+        out: &mut Vec<Vec<DVec2>>,
+    ) -> usize {
+        let Some(fr) = frame.frustum(p, light) else {
+            return 0;
+        };
+        let mut candidates = 0;
+        self.query(&fr, stack, |o| {
+            let o = o as usize;
+            if o == r {
+                return;
+            }
+            let Some(&Some(q)) = self.points.get(o) else {
+                return;
+            };
+            candidates += 1;
+            if !fr.excludes_tri(&q)
+                && let Some(s) = frame.shadow_of(q, light)
+            {
+                out.push(s);
+            }
+        });
+        candidates
+    }
+
+    /// Calls `visit(prim)` for every primitive whose leaf box the frustum
+    /// does not exclude.
+    fn query(&self, fr: &ShadowFrustum, stack: &mut Vec<u32>, mut visit: impl FnMut(u32)) {
+        if self.bvh.node_count() == 0 {
+            return;
+        }
+        stack.clear();
+        stack.push(0);
+        while let Some(i) = stack.pop() {
+            for (b, c) in self.bvh.node(i as usize).children() {
+                if fr.excludes_box(&b) {
+                    continue;
+                }
+                match c {
+                    Child::Node(k) => stack.push(k),
+                    Child::Leaf { first, count } => {
+                        for s in first..first + count {
+                            if let Some(&prim) = self.bvh.prim_order().get(s as usize) {
+                                visit(prim);
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -235,22 +422,29 @@ pub(crate) fn area2(p: &[DVec2]) -> f64 {
     (0..n).map(|i| cross2(p[i], p[(i + 1) % n])).sum()
 }
 
-/// Sutherland-Hodgman: the part of convex polygon `p` where `f >= 0`
-/// (`f` affine).
-fn clip3(p: &[DVec3], f: impl Fn(DVec3) -> f64) -> Vec<DVec3> {
-    let mut out = Vec::with_capacity(p.len() + 1);
+/// Sutherland-Hodgman: writes to `out` the part of convex polygon `p`
+/// where `f >= 0` (`f` affine) and returns its corner count (at most
+/// `p.len() + 1`, capped at [`MAX_CLIP`]).
+fn clip3_into(p: &[DVec3], f: impl Fn(DVec3) -> f64, out: &mut [DVec3; MAX_CLIP]) -> usize {
+    let mut k = 0;
+    let mut put = |x: DVec3| {
+        if k < MAX_CLIP {
+            out[k] = x;
+            k += 1;
+        }
+    };
     let n = p.len();
     for i in 0..n {
         let (a, b) = (p[i], p[(i + 1) % n]);
         let (fa, fb) = (f(a), f(b));
         if fa >= 0.0 {
-            out.push(a);
+            put(a);
         }
         if (fa >= 0.0) != (fb >= 0.0) {
-            out.push(a + (b - a) * (fa / (fa - fb)));
+            put(a + (b - a) * (fa / (fa - fb)));
         }
     }
-    out
+    k
 }
 
 /// Splits convex polygon `p` by the line through `a`, `b`: returns the part
@@ -384,43 +578,13 @@ pub(crate) fn casts(ps: &PreparedScene<'_>, t: usize) -> bool {
         .is_none_or(|o| o.casts_shadows)
 }
 
-/// Calls `visit(prim)` for every primitive whose box overlaps `q`.
-fn query_box(bvh: &Bvh, q: &Aabb, mut visit: impl FnMut(u32)) {
-    if bvh.node_count() == 0 {
-        return;
-    }
-    let overlaps = |b: &Aabb| {
-        b.min.x <= q.max.x
-            && b.max.x >= q.min.x
-            && b.min.y <= q.max.y
-            && b.max.y >= q.min.y
-            && b.min.z <= q.max.z
-            && b.max.z >= q.min.z
-    };
-    let mut stack = vec![0u32];
-    while let Some(i) = stack.pop() {
-        for (b, c) in bvh.node(i as usize).children() {
-            if !overlaps(&b) {
-                continue;
-            }
-            match c {
-                Child::Node(k) => stack.push(k),
-                Child::Leaf { first, count } => {
-                    for s in first..first + count {
-                        visit(bvh.prim_order()[s as usize]);
-                    }
-                }
-            }
-        }
-    }
-}
-
 impl ObjectShadows {
     /// Runs the light pass for light `light_index` of `ps.lights`: the lit
     /// fragments of every triangle. Candidate occluders of a receiver are
-    /// the triangles whose boxes overlap the box of the receiver's shadow
-    /// frustum (the receiver and the light; for a directional light the
-    /// receiver swept towards the light across the scene), found with a BVH.
+    /// the triangles whose boxes meet the receiver's shadow frustum (the
+    /// pyramid from the light through the receiver, cut by the receiver's
+    /// plane; for a directional light the prism swept towards the light),
+    /// found with a BVH over the casters' boxes.
     ///
     /// # Errors
     /// [`CoreError::Unsupported`] for an ambient light, an out-of-range
@@ -429,17 +593,10 @@ impl ObjectShadows {
         let light = LightGeom::of(ps, light_index)?;
         let scale = scene_scale(ps);
         let eps = 1e-5 * scale;
-        let boxes: Vec<Aabb> = (0..ps.triangles.len())
-            .map(|t| match tri_points(ps, t) {
-                Some(p) if casts(ps, t) => Aabb::from_points(p.map(Vec3::from)),
-                _ => Aabb::EMPTY,
-            })
-            .collect();
-        let bvh = Bvh::build(&boxes);
-        let reach = f64::from(ps.bounds.diagonal()) * 2.0 + 1.0;
+        let casters = Casters::new(ps);
         let tris = (0..ps.triangles.len())
             .into_par_iter()
-            .map(|t| {
+            .map_init(Vec::new, |stack, t| {
                 let Some(p) = tri_points(ps, t) else {
                     return TriFragments {
                         frame: None,
@@ -450,35 +607,9 @@ impl ObjectShadows {
                 let frame = ReceiverFrame::new(p, light, eps);
                 let mut polys = frame.map(|f| vec![f.tri.to_vec()]).unwrap_or_default();
                 if let Some(f) = frame {
-                    let qbox = match light {
-                        LightGeom::Point(l) => {
-                            Aabb::from_points([p[0], p[1], p[2], l].map(Vec3::from))
-                        }
-                        LightGeom::Directional(d) => Aabb::from_points(
-                            [
-                                p[0],
-                                p[1],
-                                p[2],
-                                p[0] + d * reach,
-                                p[1] + d * reach,
-                                p[2] + d * reach,
-                            ]
-                            .map(Vec3::from),
-                        ),
-                    };
                     let min_area2 = 1e-12 * area2(&f.tri);
                     let mut shadows = Vec::new();
-                    query_box(&bvh, &qbox, |o| {
-                        let o = o as usize;
-                        if o == t || boxes[o].is_empty() {
-                            return;
-                        }
-                        if let Some(q) = tri_points(ps, o)
-                            && let Some(s) = f.shadow_of(q, light)
-                        {
-                            shadows.push(s);
-                        }
-                    });
+                    casters.shadows_on(t, p, &f, light, stack, &mut shadows);
                     for s in &shadows {
                         let sb = bbox2(s);
                         let mut next = Vec::with_capacity(polys.len());
