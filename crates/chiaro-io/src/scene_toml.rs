@@ -12,7 +12,7 @@
 //!
 //! | table | keys |
 //! | --- | --- |
-//! | `[render]` | `technique` (`preview`, `flat`, `gouraud`, `phong`, `whitted`, `radiosity`, `hybrid`, `path`), `width`, `height` (1..=16384, at most 64 Mpixel), `samples`, `seed`, `shadows` (`none`, `map`, `volume`, `ray`, `object`, `scanline`), `transparency`, `aa` (`supersample`, `adaptive`, `post`), `light_samples`, `tonemap` (`clamp`, `reinhard`, `filmic`), `exposure`, `cull_backfaces`; sub-tables `shadow_map` {`resolution`, `bias`, `slope_bias`, `pcf_radius`}, `whitted` {`max_depth`, `min_weight`, `adaptive_threshold`, `adaptive_max_depth`}, `path` {`max_depth`, `rr_depth`}, `radiosity` {`solver` (`jacobi`, `gauss-seidel`, `progressive`, `hierarchical`), `formfactor` (`hemicube`, `raycast`, `analytic`), `patch_size`, `hemicube_resolution`, `tolerance`, `max_iterations`}, `depth_cue` {`color`, `near`, `far`, `max_scale`, `min_scale`} |
+//! | `[render]` | `technique` (`preview`, `flat`, `gouraud`, `phong`, `whitted`, `radiosity`, `hybrid`, `path`), `width`, `height` (1..=16384, at most 64 Mpixel), `samples`, `seed`, `shadows` (`none`, `map`, `volume`, `ray`, `object`, `scanline`), `transparency`, `aa` (`supersample`, `adaptive`, `post`), `filter` (`box`, `tent`: the reconstruction of the scan converter's supersamples), `light_samples`, `tonemap` (`clamp`, `reinhard`, `filmic`), `exposure`, `cull_backfaces`; sub-tables `shadow_map` {`resolution`, `bias`, `slope_bias`, `pcf_radius`}, `whitted` {`max_depth`, `min_weight`, `adaptive_threshold`, `adaptive_max_depth`}, `path` {`max_depth`, `rr_depth`}, `radiosity` {`solver` (`jacobi`, `gauss-seidel`, `progressive`, `hierarchical`), `formfactor` (`hemicube`, `raycast`, `analytic`), `patch_size`, `hemicube_resolution`, `tolerance`, `max_iterations`}, `depth_cue` {`color`, `near`, `far`, `max_scale`, `min_scale`} |
 //! | `[camera]` | `eye`, `look_at`, `up`, `fov` (vertical, 0..180), `near`, `far` |
 //! | `[[light]]` | `type` = `ambient` {`color`, `intensity`}; `point` {+ `position`, `attenuation`}; `directional` {`direction`, the way the light travels}; `spot` {`position`, `direction` or `look_at`, `attenuation`, `exponent` (Warn's n, default 1), `cone` (half-angle, default 90), `cone_softness`, `flaps` = [{`axis`, `min`, `max`}]}; `area` {`shape` = `quad` {`corner`, `edge_u`, `edge_v`} / `disk` {`center`, `normal`, `radius`} / `sphere` {`center`, `radius`}, `two_sided`} |
 //! | `[material.NAME]` | `ambient` (ka, relative to kd), `diffuse`, `specular`, `shininess`, `model` (`phong`, `blinn`, `torrance-sparrow`), `roughness`, `distribution` (`ggx`, `beckmann`), `reflect`, `transmit`, `ior`, `absorption`, `fresnel`, `transparency` (`interpolated`, `screen-door`, `filtered`), `texture`, `bump`, `normal_map`, `emission`, `emission_texture`, `two_sided` |
@@ -400,6 +400,9 @@ impl Ctx<'_> {
         r.transparency = raw.transparency;
         if let Some(a) = raw.aa {
             r.aa = a;
+        }
+        if let Some(f) = raw.filter {
+            r.filter = f;
         }
         if let Some(t) = raw.tonemap {
             r.tonemap = t;
@@ -1385,5 +1388,33 @@ fn default_colors(kind: ProceduralKind) -> (Vec3, Vec3) {
         ProceduralKind::Wood => (Vec3::new(0.55, 0.33, 0.15), Vec3::new(0.3, 0.16, 0.06)),
         ProceduralKind::Marble => (Vec3::new(0.9, 0.9, 0.88), Vec3::new(0.25, 0.25, 0.3)),
         _ => (Vec3::splat(0.1), Vec3::splat(0.9)),
+    }
+}
+
+#[cfg(test)]
+mod filter_tests {
+    use super::parse_scene;
+    use chiaro_core::scene::PixelFilter;
+    use std::path::Path;
+
+    fn filter_of(text: &str) -> Result<PixelFilter, String> {
+        parse_scene(text, Path::new("."), Path::new("t.toml"))
+            .map(|l| l.scene.render.filter)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn render_filter_parses_box_and_tent_and_defaults_to_box() {
+        assert_eq!(filter_of("[render]\nwidth = 8\n"), Ok(PixelFilter::Box));
+        assert_eq!(
+            filter_of("[render]\nfilter = \"box\"\n"),
+            Ok(PixelFilter::Box)
+        );
+        assert_eq!(
+            filter_of("[render]\nfilter = \"tent\"\n"),
+            Ok(PixelFilter::Tent)
+        );
+        let e = filter_of("[render]\nfilter = \"gauss\"\n").expect_err("unknown filter");
+        assert!(e.contains("tent"), "{e}");
     }
 }

@@ -16,6 +16,7 @@
 //!   list of triangles overlapping it.
 
 pub mod clip;
+pub mod filter;
 pub mod object_shadows;
 pub mod raster;
 pub mod render;

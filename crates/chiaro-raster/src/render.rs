@@ -57,6 +57,7 @@ use chiaro_core::progress::Progress;
 use chiaro_core::scene::{
     Material, RenderSettings, Scene, Severity, ShadeMode, ShadowMethod, Technique, TransparencyMode,
 };
+use chiaro_core::scene::{MaterialId, PixelFilter};
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
     LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
@@ -467,6 +468,13 @@ struct TriData<'a> {
     ng: Vec3,
     mode: ShadeMode,
     material: &'a Material,
+    material_id: MaterialId,
+    object: u32,
+    /// True when the material has a texture, bump, normal or emission map
+    /// (which need the uv footprint).
+    textured: bool,
+    /// `SurfaceMaterial::from_material(material)`.
+    base: SurfaceMaterial,
     /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
     /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
     e1: Vec3,
@@ -501,13 +509,16 @@ const TRI_CACHE_SIZE: usize = 256;
 /// a triangle covers a few pixels on a few rows, and neighbouring triangles
 /// have neighbouring ids, so most lookups hit.
 struct TriCache<'a> {
-    entries: Vec<Option<TriData<'a>>>,
+    /// Index into `data` of each slot's entry (`u32::MAX`: empty).
+    slots: Vec<u32>,
+    data: Vec<TriData<'a>>,
 }
 
 impl TriCache<'_> {
     fn new() -> Self {
         Self {
-            entries: vec![None; TRI_CACHE_SIZE],
+            slots: vec![u32::MAX; TRI_CACHE_SIZE],
+            data: Vec::new(),
         }
     }
 }
@@ -516,33 +527,48 @@ impl<'a> Ctx<'a, '_> {
     /// The data of triangle `t`, from `cache` when it holds `t` (the
     /// cache then holds `t`).
     #[inline]
-    fn tri_data(&self, t: u32, cache: &mut TriCache<'a>) -> TriData<'a> {
-        let slot = t as usize & (TRI_CACHE_SIZE - 1);
-        if let Some(Some(c)) = cache.entries.get(slot)
-            && c.t == t
-        {
-            return *c;
+    fn tri_data<'c>(&self, t: u32, cache: &'c mut TriCache<'a>) -> &'c TriData<'a> {
+        let slot = t as usize % cache.slots.len();
+        let k = cache.slots[slot] as usize;
+        if k < cache.data.len() {
+            if cache.data[k].t != t {
+                cache.data[k] = self.make_tri_data(t);
+            }
+            &cache.data[k]
+        } else {
+            cache.slots[slot] = cache.data.len() as u32;
+            cache.data.push(self.make_tri_data(t));
+            &cache.data[cache.data.len() - 1]
         }
+    }
+
+    /// The [`TriData`] of triangle `t`, computed.
+    fn make_tri_data(&self, t: u32) -> TriData<'a> {
         let idx = self.ps.triangles[t as usize].map(|i| i as usize);
         let p = idx.map(|i| self.ps.positions[i]);
         let e1 = p[1] - p[0];
         let s = self.rays.eye - p[0];
-        let d = TriData {
+        let material_id = self.ps.tri_material[t as usize];
+        let material = self.ps.material(material_id);
+        TriData {
             t,
             idx,
             p,
             ng: self.ps.face_normal(t),
             mode: self.mode(t),
-            material: self.ps.material(self.ps.tri_material[t as usize]),
+            material,
+            material_id,
+            object: self.ps.tri_object[t as usize],
+            textured: material.texture.is_some()
+                || material.bump.is_some()
+                || material.normal_map.is_some()
+                || material.emission_texture.is_some(),
+            base: SurfaceMaterial::from_material(material),
             e1,
             e2: p[2] - p[0],
             s,
             q: s.cross(e1),
-        };
-        if let Some(e) = cache.entries.get_mut(slot) {
-            *e = Some(d);
         }
-        d
     }
 
     /// [`PreparedScene::triangle_surface`] at barycentrics `(u, v)`, the
@@ -581,8 +607,8 @@ impl<'a> Ctx<'a, '_> {
             p_object,
             tangent,
             color: lerp3(&ps.colors),
-            material: ps.tri_material[td.t as usize],
-            object: ps.tri_object[td.t as usize],
+            material: td.material_id,
+            object: td.object,
         }
     }
 }
@@ -715,11 +741,25 @@ pub fn render_prepared_with(
     // 2. Setup and binning over fixed chunks (deterministic order), into
     // the tiles that meet the crop window.
     let [cx0, cy0, cx1, cy1] = settings.crop_rect();
-    let crop = Rect {
+    let out_crop = Rect {
         x0: cx0,
         y0: cy0,
         x1: cx1,
         y1: cy1,
+    };
+    // The tent filter reads the samples of the pixels around each pixel:
+    // shade a one-pixel border around the crop window too, so that a pixel
+    // of a crop window has its value in the full image.
+    let tent = settings.filter == PixelFilter::Tent && spp > 1;
+    let crop = if tent && out_crop.x0 < out_crop.x1 && out_crop.y0 < out_crop.y1 {
+        Rect {
+            x0: out_crop.x0.saturating_sub(1),
+            y0: out_crop.y0.saturating_sub(1),
+            x1: (out_crop.x1 + 1).min(w),
+            y1: (out_crop.y1 + 1).min(h),
+        }
+    } else {
+        out_crop
     };
     let binner = Binner {
         crop,
@@ -940,23 +980,86 @@ pub fn render_prepared_with(
 
     // 5. Shading.
     progress.begin("shade", vis.len() as u64);
-    let shaded: Vec<Option<TilePixels>> = vis
+    let shaded: Vec<Option<(TilePixels, Vec<Vec3>)>> = vis
         .par_iter()
         .map(|tv| {
             if progress.cancelled() {
                 return None;
             }
-            let t = shade_tile(&ctx, &poly, tv, &offsets);
+            let t = shade_tile(&ctx, &poly, tv, &offsets, tent);
             progress.advance(1);
             Some(t)
         })
         .collect();
     let mut film = Film::new(w, h);
     // Tiles outside the crop window stay black with infinite depth.
+    let mut kept = Vec::with_capacity(if tent { shaded.len() } else { 0 });
     for t in shaded {
-        film.write_tile(&t.ok_or(CoreError::Cancelled)?);
+        let (pixels, samples) = t.ok_or(CoreError::Cancelled)?;
+        film.write_tile(&pixels);
+        if tent {
+            kept.push((pixels.rect, samples));
+        }
+    }
+    if tent {
+        tent_filter(&mut film, &kept, crop, out_crop, &offsets);
     }
     Ok(film)
+}
+
+/// Replaces the box-filtered colours of the pixels of `out` (the crop
+/// window) by the tent filter of the samples of `region` (the crop window
+/// and a one-pixel border, see [`crate::filter::tent_resolve`]); the pixels
+/// of the border outside `out` are reset to black with infinite depth.
+/// `tiles` are the shaded tiles with their sample colours (indexed like
+/// [`TileVis::ids`]).
+fn tent_filter(
+    film: &mut Film,
+    tiles: &[(TileRect, Vec<Vec3>)],
+    region: Rect,
+    out: Rect,
+    offsets: &[[i32; 2]],
+) {
+    let spp = offsets.len();
+    let rw = (region.x1 - region.x0) as usize;
+    let rh = (region.y1 - region.y0) as usize;
+    let mut samples = vec![Vec3::ZERO; rw * rh * spp];
+    for (rect, colors) in tiles {
+        let x0 = rect.x.max(region.x0);
+        let x1 = (rect.x + rect.width).min(region.x1);
+        let y0 = rect.y.max(region.y0);
+        let y1 = (rect.y + rect.height).min(region.y1);
+        if x0 >= x1 {
+            continue;
+        }
+        let n = (x1 - x0) as usize * spp;
+        for y in y0..y1 {
+            let src = (((y - rect.y) * rect.width + (x0 - rect.x)) as usize) * spp;
+            let dst = (((y - region.y0) as usize) * rw + (x0 - region.x0) as usize) * spp;
+            if let (Some(d), Some(s)) = (samples.get_mut(dst..dst + n), colors.get(src..src + n)) {
+                d.copy_from_slice(s);
+            }
+        }
+    }
+    let sub = crate::raster::SUBPIXEL as f32;
+    let pos: Vec<[f32; 2]> = offsets
+        .iter()
+        .map(|o| [o[0] as f32 / sub, o[1] as f32 / sub])
+        .collect();
+    let colors = crate::filter::tent_resolve(&samples, region, &pos, out);
+    let ow = (out.x1 - out.x0) as usize;
+    for y in region.y0..region.y1 {
+        for x in region.x0..region.x1 {
+            let k = film.index(x, y);
+            if (out.x0..out.x1).contains(&x) && (out.y0..out.y1).contains(&y) {
+                film.color[k] = colors[((y - out.y0) as usize) * ow + (x - out.x0) as usize];
+            } else {
+                film.color[k] = Vec3::ZERO;
+                film.depth[k] = f32::INFINITY;
+                film.normal[k] = Vec3::ZERO;
+            }
+        }
+    }
 }
 
 /// A vertex of the scene in clip space and, when it is inside the clip
@@ -1182,16 +1285,24 @@ struct SampleResult {
     specular: Vec3,
 }
 
-/// Step 5 for one tile.
+/// Step 5 for one tile: the box-filtered pixels and, with `keep_samples`,
+/// the colour of every sample of the window (indexed like `tv.ids`; empty
+/// otherwise) for the tent filter.
 fn shade_tile(
     ctx: &Ctx<'_, '_>,
     poly: &PolyShading,
     tv: &TileVis,
     offsets: &[[i32; 2]],
-) -> TilePixels {
+    keep_samples: bool,
+) -> (TilePixels, Vec<Vec3>) {
     let rect = tv.rect;
     let mut out = TilePixels::new(rect);
     let spp = offsets.len();
+    let mut kept = if keep_samples {
+        vec![Vec3::ZERO; tv.ids.len()]
+    } else {
+        Vec::new()
+    };
     let inv_spp = 1.0 / spp as f32;
     let sub = crate::raster::SUBPIXEL as f32;
     let nl = ctx.ps.lights.len();
@@ -1230,7 +1341,7 @@ fn shade_tile(
                 } else {
                     let td = ctx.tri_data(id, &mut cache);
                     let dir = ctx.rays.dir(sx, sy);
-                    shade_sample(ctx, poly, &td, sx, sy, dir, counts_of(i), false)
+                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
                 };
                 // Transparent fragments, composited back to front.
                 let n = tv.ids.len();
@@ -1243,7 +1354,7 @@ fn shade_tile(
                     let td = ctx.tri_data(t, &mut cache);
                     let dir = ctx.rays.dir(sx, sy);
                     let front =
-                        shade_sample(ctx, poly, &td, sx, sy, dir, counts_of(n + f), interpolated);
+                        shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);
                     r.color = if interpolated {
                         // Foley et al. 16.5.1: I = (1 - kt) I_front + kt I_behind,
@@ -1258,7 +1369,11 @@ fn shade_tile(
                     r.depth = front.depth;
                     r.normal = front.normal;
                 }
-                sum += sanitize(r.color);
+                let c = sanitize(r.color);
+                if keep_samples {
+                    kept[i] = c;
+                }
+                sum += c;
                 if r.depth < best_depth {
                     best_depth = r.depth;
                     best_normal = r.normal;
@@ -1269,7 +1384,7 @@ fn shade_tile(
             out.normal[pi] = best_normal;
         }
     }
-    out
+    (out, kept)
 }
 
 /// Shades the sample at film position `(sx, sy)` (direction `dir`) where
@@ -1295,10 +1410,7 @@ fn shade_sample(
     let third = Vec2::splat(1.0 / 3.0);
     let b = td.bary(dir).unwrap_or(third);
     let material = td.material;
-    let needs_footprint = material.texture.is_some()
-        || material.bump.is_some()
-        || material.normal_map.is_some()
-        || material.emission_texture.is_some();
+    let needs_footprint = td.textured;
     let hit = ctx.surface(td, b.x, b.y, needs_footprint);
     let (duv_dx, duv_dy) = if needs_footprint {
         let uv_at = |x: f32, y: f32| {
@@ -1321,7 +1433,14 @@ fn shade_sample(
     let mut specular = Vec3::ZERO;
     let (color, n, kr) = match td.mode {
         ShadeMode::Phong => {
-            let sm = ps.surface_material_lod(&hit, duv_dx, duv_dy);
+            let sm = if needs_footprint {
+                ps.surface_material_lod(&hit, duv_dx, duv_dy)
+            } else {
+                // surface_material_lod without textures: the vertex colour only.
+                let mut sm = td.base;
+                sm.kd *= hit.color;
+                sm
+            };
             let mut n = hit.ns;
             if material.bump.is_some() || material.normal_map.is_some() {
                 let (dpdu, dpdv) = ps.triangle_dpduv(t);

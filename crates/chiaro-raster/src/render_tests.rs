@@ -661,3 +661,71 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
     }
     assert!(checked > 300);
 }
+
+#[test]
+fn tent_filter_widens_edges_keeps_interiors_and_crops_exactly() {
+    let mut s = test_scene();
+    s.background = Vec3::new(0.2, 0.3, 0.4);
+    let (w, h) = (48u32, 40u32);
+    let base = RenderSettings {
+        samples: 4,
+        ..settings(Technique::Flat, w, h)
+    };
+    let boxed = render(&s, &base, &NoProgress).expect("box");
+    let tent_settings = RenderSettings {
+        filter: PixelFilter::Tent,
+        ..base.clone()
+    };
+    let tent = render(&s, &tent_settings, &NoProgress).expect("tent");
+    assert!(tent.is_clean());
+    // Depth and normals are not filtered.
+    assert_eq!(tent.depth, boxed.depth);
+    assert_eq!(tent.normal, boxed.normal);
+    // Pixels whose 3x3 neighbourhood is one constant colour in the box
+    // image (inside a flat polygon or on the background) keep it; edges
+    // differ.
+    let (mut same, mut differ) = (0, 0);
+    for y in 1..h - 1 {
+        for x in 1..w - 1 {
+            let c = boxed.get(x, y);
+            let flat = (0..3).all(|dy| {
+                (0..3).all(|dx| (boxed.get(x + dx - 1, y + dy - 1) - c).abs().max_element() < 1e-6)
+            });
+            let d = (tent.get(x, y) - c).abs().max_element();
+            if flat {
+                assert!(d < 1e-5, "({x}, {y}): {d}");
+                same += 1;
+            } else if d > 1e-4 {
+                differ += 1;
+            }
+        }
+    }
+    assert!(same > 100 && differ > 20, "{same} {differ}");
+    let mean_diff = (tent.mean() - boxed.mean()).abs().max_element();
+    assert!(mean_diff < 0.01, "{mean_diff}");
+    // A crop window has the values of the full image inside (its border
+    // pixels read samples outside it) and is black outside.
+    let window = [7u32, 5, 37, 29];
+    let cropped = render(
+        &s,
+        &RenderSettings {
+            crop: Some(window),
+            ..tent_settings
+        },
+        &NoProgress,
+    )
+    .expect("cropped");
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            if x >= window[0] && x < window[2] && y >= window[1] && y < window[3] {
+                assert_eq!(cropped.color[i], tent.color[i], "({x}, {y})");
+                assert_eq!(cropped.depth[i].to_bits(), tent.depth[i].to_bits());
+            } else {
+                assert_eq!(cropped.color[i], Vec3::ZERO, "({x}, {y})");
+                assert_eq!(cropped.depth[i], f32::INFINITY);
+                assert_eq!(cropped.normal[i], Vec3::ZERO);
+            }
+        }
+    }
+}

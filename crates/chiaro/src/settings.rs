@@ -111,6 +111,9 @@ mod tests {
         apply_override(&mut s, "whitted.max_depth", "3").expect("known");
         apply_override(&mut s, "transparency", "screen-door").expect("known");
         apply_override(&mut s, "depth_cue.far", "12.5").expect("known");
+        assert_eq!(s.filter, chiaro_core::scene::PixelFilter::Box);
+        apply_override(&mut s, "filter", "tent").expect("known");
+        assert_eq!(s.filter, chiaro_core::scene::PixelFilter::Tent);
         assert_eq!(s.technique, Technique::Whitted);
         assert_eq!(s.shadows, ShadowMethod::Volume);
         assert_eq!(s.whitted.max_depth, 3);

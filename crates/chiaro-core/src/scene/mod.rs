@@ -18,7 +18,7 @@ pub use light::{AreaShape, Attenuation, Flap, Light, SpotLight};
 pub use material::{Bump, Distribution, Material, ReflectanceModel, TransparencyMode};
 pub use mesh::{Geometry, Mesh, Object, Transform};
 pub use settings::{
-    AaMode, DepthCue, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, PathSettings,
+    AaMode, DepthCue, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, PathSettings, PixelFilter,
     RadiositySettings, RenderSettings, ShadeMode, ShadowMapSettings, ShadowMethod, Technique,
     ToneMap, WhittedSettings,
 };

@@ -114,6 +114,20 @@ pub enum AaMode {
     Post,
 }
 
+/// Reconstruction filter that resolves the supersamples of a pixel
+/// (scan conversion; the other techniques box-filter).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum PixelFilter {
+    /// The mean of the pixel's own samples.
+    #[default]
+    Box,
+    /// A tent (triangle) of radius one pixel: every sample within one pixel
+    /// of the pixel centre, in this pixel or a neighbour, weighted by
+    /// `max(0, 1 - |dx|) * max(0, 1 - |dy|)` and normalised by the weight sum.
+    Tent,
+}
+
 /// Tone mapping applied when writing low-dynamic-range images.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -275,6 +289,8 @@ pub struct RenderSettings {
     pub transparency: Option<TransparencyMode>,
     /// Anti-aliasing strategy.
     pub aa: AaMode,
+    /// Reconstruction filter of the supersamples (box by default).
+    pub filter: PixelFilter,
     /// Samples per area light per shading point.
     pub light_samples: u32,
     /// Depth cueing, off when absent.
@@ -311,6 +327,7 @@ impl Default for RenderSettings {
             shadows: ShadowMethod::Ray,
             transparency: None,
             aa: AaMode::Supersample,
+            filter: PixelFilter::Box,
             light_samples: 16,
             depth_cue: None,
             tonemap: ToneMap::Clamp,

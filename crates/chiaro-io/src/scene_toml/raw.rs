@@ -5,8 +5,8 @@
 
 use chiaro_core::glam::Vec3;
 use chiaro_core::scene::{
-    AaMode, Distribution, PathSettings, ProceduralKind, ReflectanceModel, ShadeMode, ShadowMethod,
-    Technique, ToneMap, TransparencyMode, WhittedSettings, WrapMode,
+    AaMode, Distribution, PathSettings, PixelFilter, ProceduralKind, ReflectanceModel, ShadeMode,
+    ShadowMethod, Technique, ToneMap, TransparencyMode, WhittedSettings, WrapMode,
 };
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
@@ -206,6 +206,7 @@ pub(crate) struct RawRender {
     pub shadows: Option<ShadowMethod>,
     pub transparency: Option<TransparencyMode>,
     pub aa: Option<AaMode>,
+    pub filter: Option<PixelFilter>,
     pub light_samples: Opt<u32>,
     pub depth_cue: Option<RawDepthCue>,
     pub tonemap: Option<ToneMap>,
