@@ -1402,17 +1402,23 @@ impl Accelerator for SceneBvh {
         let wr = WatertightRay::new(ray);
         self.bvh.traverse_any_leaves(ray, |first, count| {
             let end = first + count;
-            (first / WIDTH..=(end - 1) / WIDTH).any(|b| {
+            for b in first / WIDTH..=(end - 1) / WIDTH {
                 let lanes = block_lanes(b, first, end);
-                let spheres = self.sphere_lanes[b] as u32 & lanes;
-                self.blocks[b].intersect(&wr, lanes & !spheres).mask != 0
-                    || (0..WIDTH).any(|i| {
-                        spheres >> i & 1 == 1 && {
-                            let (c, rad) = self.sphere(self.blocks[b].prim[i]);
-                            intersect_sphere(ray, c, rad).is_some()
-                        }
-                    })
-            })
+                let blk = &self.blocks[b];
+                let mut spheres = self.sphere_lanes[b] as u32 & lanes;
+                if blk.intersect(&wr, lanes & !spheres).mask != 0 {
+                    return true;
+                }
+                while spheres != 0 {
+                    let i = spheres.trailing_zeros() as usize;
+                    spheres &= spheres - 1;
+                    let (c, rad) = self.sphere(blk.prim[i]);
+                    if intersect_sphere(ray, c, rad).is_some() {
+                        return true;
+                    }
+                }
+            }
+            false
         })
     }
 }
