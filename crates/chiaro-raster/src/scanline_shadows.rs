@@ -25,7 +25,14 @@
 //! The visible polygon of each pixel comes from the z-buffer's item buffer
 //! ([`crate::zbuffer::item_buffer`]), i.e. the same sampling as the
 //! renderer. Lights, occluders and tolerances are as in
-//! [`crate::object_shadows`].
+//! [`crate::object_shadows`]: shadows are hard, and an area light casts the
+//! shadow of a point light at its centre (no penumbra; use shadow rays or
+//! shadow maps for soft shadows).
+//!
+//! # Cost
+//! The pairs found by the frustum test dominate: on a 104k-triangle scene
+//! of spheres over a plane, about 9 million candidate pairs give 414,000
+//! shadow polygons; the sweep itself is `O(rows * active polygons)`.
 
 use crate::object_shadows::{
     Casters, DVec2, DVec3, LightGeom, ReceiverFrame, intersect2, scene_scale, tri_points,
