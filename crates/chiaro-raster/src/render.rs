@@ -415,7 +415,8 @@ impl Ctx<'_, '_> {
     /// Flat shading of triangle `t`: once, at the centroid, with the face normal.
     fn flat_split(&self, t: u32) -> Split {
         let third = 1.0 / 3.0;
-        let hit = self.ps.triangle_surface(t, third, third);
+        let td = self.make_tri_data(t);
+        let hit = self.surface(&td, third, third, td.textured);
         let mut n = hit.ng;
         if self.flipped(t) {
             n = -n;
@@ -438,7 +439,8 @@ impl Ctx<'_, '_> {
             1 => (1.0, 0.0),
             _ => (0.0, 1.0),
         };
-        let hit = self.ps.triangle_surface(t, u, v);
+        let td = self.make_tri_data(t);
+        let hit = self.surface(&td, u, v, td.textured);
         let vi = self.ps.triangles[t as usize][k] as usize;
         let mut n = self.ps.normals[vi];
         let mut ng = hit.ng;
@@ -554,7 +556,8 @@ impl<'a> Ctx<'a, '_> {
             t,
             idx,
             p,
-            ng: self.ps.face_normal(t),
+            // PreparedScene::face_normal(t), from the positions at hand.
+            ng: chiaro_core::geometry::normals::face_normal(p[0], p[1], p[2]).unwrap_or(Vec3::Z),
             mode: self.mode(t),
             material,
             material_id,
