@@ -8,8 +8,9 @@
 //! 3. *Visibility* (parallel over tiles): every binned triangle is
 //!    rasterized into a per-tile depth and item buffer, `samples` per pixel
 //!    (early z: nothing is shaded here).
-//! 4. *Vertex and polygon illumination* for flat and Gouraud triangles that
-//!    are visible somewhere, once per vertex (Gouraud) or per polygon (flat).
+//! 4. *Vertex illumination* for Gouraud triangles that are visible
+//!    somewhere, once per vertex. (Flat polygons are illuminated once per
+//!    tile that shows them, when shading first meets them.)
 //! 5. *Shading* (parallel over tiles): each visible sample is shaded once
 //!    (deferred shading), the samples of a pixel are averaged (box filter).
 //!
@@ -413,10 +414,10 @@ impl Ctx<'_, '_> {
     }
 
     /// Flat shading of triangle `t`: once, at the centroid, with the face normal.
-    fn flat_split(&self, t: u32) -> Split {
+    fn flat_split(&self, td: &TriData<'_>) -> Split {
+        let t = td.t;
         let third = 1.0 / 3.0;
-        let td = self.make_tri_data(t);
-        let hit = self.surface(&td, third, third, td.textured);
+        let hit = self.surface(td, third, third, td.textured);
         let mut n = hit.ng;
         if self.flipped(t) {
             n = -n;
@@ -477,6 +478,9 @@ struct TriData<'a> {
     textured: bool,
     /// `SurfaceMaterial::from_material(material)`.
     base: SurfaceMaterial,
+    /// The flat-shading illumination of the polygon (zero unless `mode` is
+    /// flat): computed with the triangle's data, once per tile that shows it.
+    flat: Split,
     /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
     /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
     e1: Vec3,
@@ -552,7 +556,7 @@ impl<'a> Ctx<'a, '_> {
         let s = self.rays.eye - p[0];
         let material_id = self.ps.tri_material[t as usize];
         let material = self.ps.material(material_id);
-        TriData {
+        let mut d = TriData {
             t,
             idx,
             p,
@@ -571,7 +575,12 @@ impl<'a> Ctx<'a, '_> {
             e2: p[2] - p[0],
             s,
             q: s.cross(e1),
+            flat: Split::default(),
+        };
+        if d.mode == ShadeMode::Flat {
+            d.flat = self.flat_split(&d);
         }
+        d
     }
 
     /// [`PreparedScene::triangle_surface`] at barycentrics `(u, v)`, the
@@ -620,9 +629,6 @@ impl<'a> Ctx<'a, '_> {
 /// shading need.
 #[derive(Default)]
 struct PolyShading {
-    /// Flat: one split per triangle (only visible ones are computed;
-    /// empty when no triangle is flat-shaded).
-    flat: Vec<Split>,
     /// Gouraud: per vertex, front side.
     vertex_front: Vec<Split>,
     /// Gouraud: per vertex, back side (two-sided surfaces seen from behind).
@@ -1169,12 +1175,12 @@ fn count_volumes(
     tv.counts = counts;
 }
 
-/// Step 4: finds the visible flat and Gouraud triangles and illuminates their
-/// polygons or vertices.
+/// Step 4: finds the visible Gouraud triangles and illuminates their
+/// vertices (flat polygons are illuminated with their [`TriData`]).
 fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
     let ps = ctx.ps;
     let mut out = PolyShading::default();
-    if ctx.object_mode.iter().all(|&m| m == ShadeMode::Phong) {
+    if ctx.object_mode.iter().all(|&m| m != ShadeMode::Gouraud) {
         return out;
     }
     // Visible triangles (deduplicated, sorted: deterministic).
@@ -1193,18 +1199,6 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         .filter(|&t| seen[t as usize])
         .collect();
     drop(seen);
-    // Flat: one illumination per polygon.
-    let flat: Vec<(u32, Split)> = visible
-        .par_iter()
-        .filter(|&&t| ctx.mode(t) == ShadeMode::Flat)
-        .map(|&t| (t, ctx.flat_split(t)))
-        .collect();
-    if !flat.is_empty() {
-        out.flat = vec![Split::default(); ps.triangles.len()];
-        for (t, split) in flat {
-            out.flat[t as usize] = split;
-        }
-    }
     // Gouraud: which vertex sides are needed (by the visible triangles).
     let nv = ps.positions.len();
     let gouraud: Vec<(u32, bool)> = visible
@@ -1494,7 +1488,7 @@ fn shade_sample(
             )
         }
         ShadeMode::Flat => {
-            let split = poly.flat.get(t as usize).copied().unwrap_or_default();
+            let split = td.flat;
             let tex = if material.texture.is_some() {
                 let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
                 ps.diffuse_texture_factor(hit.material, &tc)
