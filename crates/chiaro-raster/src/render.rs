@@ -417,7 +417,7 @@ impl Ctx<'_, '_> {
     fn flat_split(&self, td: &TriData<'_>) -> Split {
         let t = td.t;
         let third = 1.0 / 3.0;
-        let hit = self.surface(td, third, third, td.textured);
+        let hit = self.surface(td, third, third, td.textured, true);
         let mut n = hit.ng;
         if self.flipped(t) {
             n = -n;
@@ -441,7 +441,7 @@ impl Ctx<'_, '_> {
             _ => (0.0, 1.0),
         };
         let td = self.make_tri_data(t);
-        let hit = self.surface(&td, u, v, td.textured);
+        let hit = self.surface(&td, u, v, td.textured, true);
         let vi = self.ps.triangles[t as usize][k] as usize;
         let mut n = self.ps.normals[vi];
         let mut ng = hit.ng;
@@ -469,6 +469,9 @@ struct TriData<'a> {
     p: [Vec3; 3],
     /// `PreparedScene::face_normal(t)`.
     ng: Vec3,
+    /// The vertex normals and colours.
+    n: [Vec3; 3],
+    c: [Vec3; 3],
     mode: ShadeMode,
     material: &'a Material,
     material_id: MaterialId,
@@ -562,6 +565,8 @@ impl<'a> Ctx<'a, '_> {
             p,
             // PreparedScene::face_normal(t), from the positions at hand.
             ng: chiaro_core::geometry::normals::face_normal(p[0], p[1], p[2]).unwrap_or(Vec3::Z),
+            n: idx.map(|i| self.ps.normals[i]),
+            c: idx.map(|i| self.ps.colors[i]),
             mode: self.mode(t),
             material,
             material_id,
@@ -587,18 +592,35 @@ impl<'a> Ctx<'a, '_> {
     /// same expressions on the cached triangle; the uv, object-space point
     /// and tangent (which only textures, bump and normal maps read) are
     /// computed only when `textured`, zero otherwise.
+    ///
+    /// With `shading` false (flat-shaded samples, which read neither) the
+    /// shading normal is the face normal and the vertex colour zero.
     #[inline]
-    fn surface(&self, td: &TriData<'_>, u: f32, v: f32, textured: bool) -> SurfaceHit {
+    fn surface(
+        &self,
+        td: &TriData<'_>,
+        u: f32,
+        v: f32,
+        textured: bool,
+        shading: bool,
+    ) -> SurfaceHit {
         let ps = self.ps;
         let [i0, i1, i2] = td.idx;
         let w = 1.0 - u - v;
         let lerp3 = |a: &[Vec3]| a[i0] * w + a[i1] * u + a[i2] * v;
         let ng = td.ng;
-        let mut ns = lerp3(&ps.normals).try_normalize().unwrap_or(ng);
-        if ns.dot(ng) < 0.0 {
-            // Interpolated normals may point away from a thin face; keep the front side.
-            ns = ng;
-        }
+        let (ns, color) = if shading {
+            let mut ns = (td.n[0] * w + td.n[1] * u + td.n[2] * v)
+                .try_normalize()
+                .unwrap_or(ng);
+            if ns.dot(ng) < 0.0 {
+                // Interpolated normals may point away from a thin face; keep the front side.
+                ns = ng;
+            }
+            (ns, td.c[0] * w + td.c[1] * u + td.c[2] * v)
+        } else {
+            (ng, Vec3::ZERO)
+        };
         let (uv, p_object, tangent) = if textured {
             let tan = ps.tangents[i0] * w + ps.tangents[i1] * u + ps.tangents[i2] * v;
             (
@@ -618,7 +640,7 @@ impl<'a> Ctx<'a, '_> {
             uv,
             p_object,
             tangent,
-            color: lerp3(&ps.colors),
+            color,
             material: td.material_id,
             object: td.object,
         }
@@ -1408,7 +1430,7 @@ fn shade_sample(
     let b = td.bary(dir).unwrap_or(third);
     let material = td.material;
     let needs_footprint = td.textured;
-    let hit = ctx.surface(td, b.x, b.y, needs_footprint);
+    let hit = ctx.surface(td, b.x, b.y, needs_footprint, td.mode != ShadeMode::Flat);
     let (duv_dx, duv_dy) = if needs_footprint {
         let uv_at = |x: f32, y: f32| {
             let bb = td.bary(ctx.rays.dir(x, y)).unwrap_or(b);
