@@ -95,6 +95,16 @@ pub(crate) fn build_matrix(
     Ok(m)
 }
 
+/// How one iteration of `L <- E + rho (F L)` updates `L`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Sweep {
+    /// Every row from the previous iterate (rows in parallel).
+    Jacobi,
+    /// Rows in order, in place, so later rows already use the new values
+    /// (about twice as fast to converge).
+    GaussSeidel,
+}
+
 /// Jacobi iteration `L <- E + rho (F L)` from `L = E`.
 pub(crate) fn jacobi(
     elements: &[Element],
@@ -104,46 +114,7 @@ pub(crate) fn jacobi(
     max_iter: u32,
     progress: &dyn Progress,
 ) -> Result<SolveOutput, CoreError> {
-    let n = elements.len();
-    let p0 = power(elements, e);
-    let mut l = e.to_vec();
-    let mut out = SolveOutput {
-        l: Vec::new(),
-        iterations: 0,
-        unshot: 0.0,
-    };
-    if p0 <= 0.0 {
-        out.l = l;
-        return Ok(out);
-    }
-    progress.begin("radiosity jacobi", max_iter as u64);
-    for it in 1..=max_iter {
-        if progress.cancelled() {
-            return Err(CoreError::Cancelled);
-        }
-        let next: Vec<Vec3> = (0..n)
-            .into_par_iter()
-            .map(|j| {
-                let row = &m[j * n..(j + 1) * n];
-                let g: Vec3 = row.iter().zip(&l).map(|(f, x)| *f * *x).sum();
-                e[j] + elements[j].rho * g
-            })
-            .collect();
-        let diff: Vec<Vec3> = next.iter().zip(&l).map(|(a, b)| *a - *b).collect();
-        out.unshot = power(elements, &diff) / p0;
-        l = next;
-        out.iterations = it;
-        progress.advance(1);
-        progress.message(&format!(
-            "jacobi: iteration {it}, residual {:.3e}",
-            out.unshot
-        ));
-        if out.unshot < tol {
-            break;
-        }
-    }
-    out.l = l;
-    Ok(out)
+    iterate(elements, e, m, tol, max_iter, progress, Sweep::Jacobi)
 }
 
 /// Gauss-Seidel iteration: like [`jacobi`] but each `L_j` is updated in
@@ -156,6 +127,21 @@ pub(crate) fn gauss_seidel(
     max_iter: u32,
     progress: &dyn Progress,
 ) -> Result<SolveOutput, CoreError> {
+    iterate(elements, e, m, tol, max_iter, progress, Sweep::GaussSeidel)
+}
+
+/// The full-matrix gathering solver behind [`jacobi`] and
+/// [`gauss_seidel`]: iterates from `L = E` until the power of an
+/// iteration's change falls below `tol` times the emitted power.
+fn iterate(
+    elements: &[Element],
+    e: &[Vec3],
+    m: &[f32],
+    tol: f32,
+    max_iter: u32,
+    progress: &dyn Progress,
+    sweep: Sweep,
+) -> Result<SolveOutput, CoreError> {
     let n = elements.len();
     let p0 = power(elements, e);
     let mut l = e.to_vec();
@@ -168,24 +154,43 @@ pub(crate) fn gauss_seidel(
         out.l = l;
         return Ok(out);
     }
-    progress.begin("radiosity gauss-seidel", max_iter as u64);
+    let name = match sweep {
+        Sweep::Jacobi => "jacobi",
+        Sweep::GaussSeidel => "gauss-seidel",
+    };
+    progress.begin(&format!("radiosity {name}"), max_iter as u64);
+    // Row j of the system: E_j + rho_j sum_i F_ji L_i.
+    let gather = |j: usize, l: &[Vec3]| {
+        let row = &m[j * n..(j + 1) * n];
+        let g: Vec3 = row.iter().zip(l).map(|(f, x)| *f * *x).sum();
+        e[j] + elements[j].rho * g
+    };
     for it in 1..=max_iter {
         if progress.cancelled() {
             return Err(CoreError::Cancelled);
         }
-        let mut change = 0.0f32;
-        for j in 0..n {
-            let row = &m[j * n..(j + 1) * n];
-            let g: Vec3 = row.iter().zip(&l).map(|(f, x)| *f * *x).sum();
-            let v = e[j] + elements[j].rho * g;
-            change += elements[j].area * (v - l[j]).abs().element_sum();
-            l[j] = v;
-        }
+        let change = match sweep {
+            Sweep::Jacobi => {
+                let next: Vec<Vec3> = (0..n).into_par_iter().map(|j| gather(j, &l)).collect();
+                let diff: Vec<Vec3> = next.iter().zip(&l).map(|(a, b)| *a - *b).collect();
+                l = next;
+                power(elements, &diff)
+            }
+            Sweep::GaussSeidel => {
+                let mut change = 0.0f32;
+                for j in 0..n {
+                    let v = gather(j, &l);
+                    change += elements[j].area * (v - l[j]).abs().element_sum();
+                    l[j] = v;
+                }
+                change
+            }
+        };
         out.unshot = change / p0;
         out.iterations = it;
         progress.advance(1);
         progress.message(&format!(
-            "gauss-seidel: iteration {it}, residual {:.3e}",
+            "{name}: iteration {it}, residual {:.3e}",
             out.unshot
         ));
         if out.unshot < tol {
