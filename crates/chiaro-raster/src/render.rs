@@ -12,7 +12,10 @@
 //!    somewhere, once per vertex. (Flat polygons are illuminated once per
 //!    tile that shows them, when shading first meets them.)
 //! 5. *Shading* (parallel over tiles): each visible sample is shaded once
-//!    (deferred shading), the samples of a pixel are averaged (box filter).
+//!    (deferred shading), the samples of a pixel are averaged (box filter)
+//!    or, with `RenderSettings::filter = Tent`, resolved afterwards by the
+//!    tent filter of [`crate::filter`] (the samples of a one-pixel border
+//!    around the crop window are shaded too, so that a crop stays exact).
 //!
 //! Attributes are interpolated with *perspective-correct* barycentrics,
 //! computed per sample by intersecting the sample's eye ray with the plane of
@@ -78,9 +81,9 @@ const NONE: u32 = u32::MAX;
 /// Gouraud or Phong; an object's `shade_mode` overrides it).
 ///
 /// Returns the film: linear RGB radiance (the `samples` of each pixel
-/// box-filtered), the distance from the eye to the nearest surface along the
-/// pixel's sample ray (`INFINITY` on the background) and the world-space
-/// shading normal (zero on the background).
+/// box- or tent-filtered, `settings.filter`), the distance from the eye to
+/// the nearest surface along the pixel's sample ray (`INFINITY` on the
+/// background) and the world-space shading normal (zero on the background).
 ///
 /// # Errors
 /// [`CoreError::Unsupported`] for a technique other than flat, Gouraud or
@@ -527,7 +530,7 @@ impl TriCache<'_> {
     fn new() -> Self {
         Self {
             slots: vec![u32::MAX; TRI_CACHE_SIZE],
-            data: Vec::new(),
+            data: Vec::with_capacity(TRI_CACHE_SIZE),
         }
     }
 }
