@@ -3,6 +3,7 @@
 //! scene-level [`bvh::SceneBvh`]).
 
 pub mod bvh;
+pub mod instanced;
 pub mod list;
 
 use crate::geometry::Ray;
