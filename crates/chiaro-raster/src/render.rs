@@ -71,6 +71,7 @@ use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::cell::Cell;
 use std::collections::HashMap;
+use std::sync::{Mutex, PoisonError};
 
 /// Side of the square screen tiles, in pixels.
 pub const TILE_SIZE: u32 = 64;
@@ -1012,29 +1013,34 @@ pub fn render_prepared_with(
     let poly = poly_shading(&ctx, &vis);
     progress.advance(1);
 
-    // 5. Shading.
+    // 5. Shading. Each tile is written into the film as soon as it is
+    // shaded, so that its buffers are freed and reused by the next tile
+    // instead of every tile's pixels being alive (and fresh pages) at once.
     progress.begin("shade", vis.len() as u64);
-    let shaded: Vec<Option<(TilePixels, Vec<Vec3>)>> = vis
-        .par_iter()
-        .map(|tv| {
-            if progress.cancelled() {
-                return None;
-            }
-            let t = shade_tile(&ctx, &poly, tv, &offsets, tent);
-            progress.advance(1);
-            Some(t)
-        })
-        .collect();
-    let mut film = Film::new(w, h);
     // Tiles outside the crop window stay black with infinite depth.
-    let mut kept = Vec::with_capacity(if tent { shaded.len() } else { 0 });
-    for t in shaded {
-        let (pixels, samples) = t.ok_or(CoreError::Cancelled)?;
-        film.write_tile(&pixels);
-        if tent {
-            kept.push((pixels.rect, samples));
+    let film = Mutex::new(Film::new(w, h));
+    let kept: Mutex<Vec<(TileRect, Vec<Vec3>)>> = Mutex::new(Vec::new());
+    let finished = vis.par_iter().all(|tv| {
+        if progress.cancelled() {
+            return false;
         }
+        let (pixels, samples) = shade_tile(&ctx, &poly, tv, &offsets, tent);
+        film.lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .write_tile(&pixels);
+        if tent {
+            kept.lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push((pixels.rect, samples));
+        }
+        progress.advance(1);
+        true
+    });
+    if !finished {
+        return Err(CoreError::Cancelled);
     }
+    let mut film = film.into_inner().unwrap_or_else(PoisonError::into_inner);
+    let kept = kept.into_inner().unwrap_or_else(PoisonError::into_inner);
     if tent {
         tent_filter(&mut film, &kept, crop, out_crop, &offsets);
     }
