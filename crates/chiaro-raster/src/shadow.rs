@@ -22,7 +22,9 @@ use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::prepared::PreparedScene;
-use chiaro_core::scene::{AreaShape, Light, RenderSettings, ShadowMapSettings, ShadowMethod};
+use chiaro_core::scene::{
+    AreaShape, Light, RenderSettings, ShadeMode, ShadowMapSettings, ShadowMethod,
+};
 use chiaro_core::shading::{LightSample, samples_for_light, stratum};
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -80,8 +82,110 @@ pub(crate) enum Shadows {
         /// Per light (`None` for ambient lights).
         lines: Vec<Option<crate::scanline_shadows::ScanlineShadows>>,
         /// Per light (`None` for ambient lights).
-        fallback: Vec<Option<crate::object_shadows::ObjectShadows>>,
+        fallback: Vec<Option<ExactFallback>>,
     },
+}
+
+/// Where scan-line shadows get the visibility of a point that is not the
+/// pixel centre the scan-line pass classified (sub-samples, flat and
+/// Gouraud illumination points, or a pixel whose centre the scan-line
+/// pass saw on another triangle than the rasterizer did, at a tie on a
+/// shared edge).
+pub(crate) enum ExactFallback {
+    /// The Atherton-Weiler-Greenberg lit fragments of every triangle: built
+    /// when a render shades points other than pixel centres.
+    Fragments(crate::object_shadows::ObjectShadows),
+    /// A shadow ray from the point to the light's shadow-casting point (or
+    /// along its direction), blocked by any shadow-casting triangle: the
+    /// same exact point classification as the fragments, for the few
+    /// tie pixels of a one-sample Phong render, without building
+    /// fragments for every triangle (the most expensive part of the
+    /// method on large scenes).
+    Ray {
+        /// The scene's BVH, shared by the lights.
+        bvh: std::sync::Arc<SceneBvh>,
+        /// Per triangle: whether it casts shadows, and its face normal.
+        tris: std::sync::Arc<Vec<(bool, Vec3)>>,
+        /// The light's shadow-casting point or direction.
+        light: crate::object_shadows::LightGeom,
+    },
+}
+
+impl ExactFallback {
+    /// 1 if world point `p` on triangle `tri` sees the light, else 0.
+    pub(crate) fn lit_fraction(&self, tri: u32, p: Vec3) -> f32 {
+        match self {
+            ExactFallback::Fragments(o) => o.lit_fraction(tri, p),
+            ExactFallback::Ray { bvh, tris, light } => {
+                let Some(&(_, ng)) = tris.get(tri as usize) else {
+                    return 1.0;
+                };
+                let ray = match *light {
+                    crate::object_shadows::LightGeom::Point(q) => {
+                        let q = Vec3::from(q);
+                        Ray::segment(offset_ray_origin(p, ng, q - p), q)
+                    }
+                    crate::object_shadows::LightGeom::Directional(d) => {
+                        let d = Vec3::from(d);
+                        Ray::new(offset_ray_origin(p, ng, d), d)
+                    }
+                };
+                let blocked = bvh.visit_hits(&ray, |h| {
+                    h.prim != tri && tris.get(h.prim as usize).is_none_or(|t| t.0)
+                });
+                if blocked { 0.0 } else { 1.0 }
+            }
+        }
+    }
+}
+
+/// True if a render of `settings` shades points other than pixel centres
+/// (several samples per pixel, or flat or Gouraud shading anywhere).
+fn shades_off_centre(ps: &PreparedScene<'_>, settings: &RenderSettings) -> bool {
+    let mode = crate::render::shade_mode_of(settings.technique).unwrap_or(ShadeMode::Flat);
+    settings.samples > 1
+        || mode != ShadeMode::Phong
+        || ps
+            .scene
+            .objects
+            .iter()
+            .any(|o| o.shade_mode.is_some_and(|m| m != ShadeMode::Phong))
+}
+
+/// The [`ExactFallback`] of every light of a scan-line render.
+fn scanline_fallbacks(
+    ps: &PreparedScene<'_>,
+    settings: &RenderSettings,
+) -> Result<Vec<Option<ExactFallback>>, chiaro_core::error::CoreError> {
+    if shades_off_centre(ps, settings) {
+        return Ok(object_shadows_per_light(ps)?
+            .into_iter()
+            .map(|o| o.map(ExactFallback::Fragments))
+            .collect());
+    }
+    let bvh = std::sync::Arc::new(SceneBvh::new(ps));
+    let tris = std::sync::Arc::new(
+        (0..ps.triangles.len())
+            .map(|t| {
+                (
+                    crate::object_shadows::casts(ps, t),
+                    ps.face_normal(t as u32),
+                )
+            })
+            .collect::<Vec<_>>(),
+    );
+    ps.lights
+        .iter()
+        .enumerate()
+        .map(|(li, l)| match l {
+            Light::Ambient { .. } => Ok(None),
+            _ => Ok(Some(ExactFallback::Ray {
+                bvh: bvh.clone(),
+                tris: tris.clone(),
+                light: crate::object_shadows::LightGeom::of(ps, li)?,
+            })),
+        })
+        .collect()
 }
 
 fn object_shadows_per_light(
@@ -135,7 +239,7 @@ impl Shadows {
                         .map(Some),
                     })
                     .collect::<Result<Vec<_>, _>>()?,
-                fallback: object_shadows_per_light(ps)?,
+                fallback: scanline_fallbacks(ps, settings)?,
             },
         })
     }
@@ -854,5 +958,62 @@ mod tests {
                 "{d} {c}"
             );
         }
+    }
+
+    /// The shadow-ray fallback of one-sample scan-line renders classifies
+    /// points exactly as the object-precision fragments it replaces: on
+    /// random points of every triangle of the shadow test scene they agree
+    /// except within a hair of a fragment boundary, and both lit and
+    /// shadowed points occur.
+    #[test]
+    fn ray_fallback_classifies_points_like_the_fragments() {
+        use chiaro_core::prepared::PrepareOptions;
+        use chiaro_core::sampling::{pixel_rng, uniform2};
+        let scene = chiaro_testkit::scenes::shadow_test(64);
+        let ps = PreparedScene::new(&scene, PrepareOptions::default());
+        let one = RenderSettings {
+            technique: chiaro_core::scene::Technique::Phong,
+            samples: 1,
+            ..RenderSettings::default()
+        };
+        let four = RenderSettings {
+            samples: 4,
+            ..one.clone()
+        };
+        let rays = scanline_fallbacks(&ps, &one).expect("ray fallback");
+        let frags = scanline_fallbacks(&ps, &four).expect("fragments");
+        let (mut agree, mut total, mut lit, mut dark) = (0u32, 0u32, 0u32, 0u32);
+        for (r, f) in rays.iter().zip(&frags) {
+            let (Some(r), Some(f)) = (r, f) else { continue };
+            assert!(matches!(r, ExactFallback::Ray { .. }));
+            assert!(matches!(f, ExactFallback::Fragments(_)));
+            for t in 0..ps.triangles.len() as u32 {
+                let [a, b, c] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+                for k in 0..32 {
+                    let mut rng = pixel_rng(7, t, k, 0);
+                    let u = uniform2(&mut rng);
+                    let (u, v) = if u.x + u.y > 1.0 {
+                        (1.0 - u.x, 1.0 - u.y)
+                    } else {
+                        (u.x, u.y)
+                    };
+                    let p = a + (b - a) * u + (c - a) * v;
+                    let (x, y) = (r.lit_fraction(t, p), f.lit_fraction(t, p));
+                    total += 1;
+                    agree += (x == y) as u32;
+                    lit += (y == 1.0) as u32;
+                    dark += (y == 0.0) as u32;
+                }
+            }
+        }
+        assert!(
+            lit > total / 10 && dark > total / 20,
+            "lit {lit} dark {dark} of {total}"
+        );
+        assert!(
+            total - agree <= total / 500,
+            "{} of {total} points classified differently",
+            total - agree
+        );
     }
 }
