@@ -32,7 +32,6 @@ pub use chiaro_core::{Vec2, Vec3};
 pub use chiaro_io as io;
 
 use chiaro_core::accel::Accelerator;
-use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::error::CoreError;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::Severity;
@@ -113,9 +112,13 @@ pub fn technique_list() -> String {
         .join(", ")
 }
 
-/// The accelerator used by the ray-based techniques.
+/// The accelerator used by the ray-based techniques (preview, path): the
+/// two-level `InstancedBvh` when meshes shared by several objects would
+/// otherwise be duplicated by at least
+/// `chiaro_core::accel::instanced::MIN_DUPLICATED_TRIANGLES` triangles, the
+/// flat `SceneBvh` otherwise (same hits up to rounding).
 fn accelerator(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
-    Box::new(SceneBvh::new(p))
+    chiaro_core::accel::instanced::build_accelerator(p)
 }
 
 /// Renders `scene` with `settings` (which override `scene.render`), reporting
