@@ -171,42 +171,53 @@ fn cornell() -> Scene {
 
 /// Mean colour per Cornell wall (floor, ceiling, back, left, right) over the
 /// pixels whose first hit lies on that wall's plane, outside the blocks' and
-/// the light's footprints.
+/// the light's footprints, and whose four neighbours see the same wall (so
+/// that no pixel straddling an edge, whose colour and depth depend on where
+/// its samples fell, enters a mean).
 fn wall_means(scene: &Scene, f: &Film) -> [Vec3; 5] {
+    let wall_of = |x: u32, y: u32| -> Option<usize> {
+        let i = f.index(x, y);
+        let d = f.depth[i];
+        if !d.is_finite() {
+            return None;
+        }
+        let dir = scene
+            .camera
+            .ray_direction(x as f32 + 0.5, y as f32 + 0.5, f.width, f.height);
+        let p = scene.camera.eye + dir * d;
+        // 10 mm tolerance: depths come from sub-pixel samples.
+        if p.y < 10.0 {
+            Some(0)
+        } else if p.y > 539.0 && !(200.0..356.0).contains(&p.x) {
+            Some(1)
+        } else if p.z > 549.0 {
+            Some(2)
+        } else if p.x > 540.0 {
+            Some(3)
+        } else if p.x < 10.0 {
+            Some(4)
+        } else {
+            None
+        }
+    };
     let mut sum = [Vec3::ZERO; 5];
     let mut n = [0u32; 5];
-    for y in 0..f.height {
-        for x in 0..f.width {
-            let i = f.index(x, y);
-            let d = f.depth[i];
-            if !d.is_finite() {
-                continue;
-            }
-            let dir = scene
-                .camera
-                .ray_direction(x as f32 + 0.5, y as f32 + 0.5, f.width, f.height);
-            let p = scene.camera.eye + dir * d;
-            // 10 mm tolerance: depths come from sub-pixel samples.
-            let wall = if p.y < 10.0 {
-                Some(0)
-            } else if p.y > 539.0 && !(200.0..356.0).contains(&p.x) {
-                Some(1)
-            } else if p.z > 549.0 {
-                Some(2)
-            } else if p.x > 540.0 {
-                Some(3)
-            } else if p.x < 10.0 {
-                Some(4)
-            } else {
-                None
-            };
-            if let Some(k) = wall {
-                sum[k] += f.color[i];
+    for y in 1..f.height.saturating_sub(1) {
+        for x in 1..f.width.saturating_sub(1) {
+            let Some(k) = wall_of(x, y) else { continue };
+            let inside = [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)]
+                .iter()
+                .all(|&(a, b)| wall_of(a, b) == Some(k));
+            if inside {
+                sum[k] += f.color[f.index(x, y)];
                 n[k] += 1;
             }
         }
     }
-    std::array::from_fn(|k| sum[k] / n[k].max(1) as f32)
+    for (k, &c) in n.iter().enumerate() {
+        assert!(c >= 20, "wall {k}: only {c} interior pixels");
+    }
+    std::array::from_fn(|k| sum[k] / n[k] as f32)
 }
 
 #[test]

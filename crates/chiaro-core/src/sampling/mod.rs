@@ -5,6 +5,10 @@
 //! Sources: pbrt-v4 `util/sampling.h`; Shirley and Chiu 1997 for the
 //! concentric disk map.
 
+pub mod sobol;
+
+pub use sobol::SobolSampler;
+
 use glam::{Vec2, Vec3};
 use rand::{RngExt, SeedableRng};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
