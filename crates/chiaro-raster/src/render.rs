@@ -73,6 +73,10 @@ use std::cell::Cell;
 use std::collections::HashMap;
 use std::sync::{Mutex, PoisonError};
 
+#[path = "lighting.rs"]
+mod lighting;
+use lighting::PointLighting;
+
 /// Side of the square screen tiles, in pixels.
 pub const TILE_SIZE: u32 = 64;
 /// Id of samples no triangle covers.
@@ -178,9 +182,29 @@ impl Rays {
     /// Unit direction through film position `(x, y)` (pixels, top-left origin).
     #[inline]
     fn dir(&self, x: f32, y: f32) -> Vec3 {
+        Self::dir_from(self.column(x), self.row(y))
+    }
+
+    /// The part of the unnormalised direction through column `x` that does
+    /// not depend on the row: `forward + ndc_x right`.
+    #[inline]
+    fn column(&self, x: f32) -> Vec3 {
         let ndc_x = (2.0 * x / self.width - 1.0) * self.tan_half * self.aspect;
+        self.forward + ndc_x * self.right
+    }
+
+    /// The part that depends on the row `y` only: `ndc_y up`.
+    #[inline]
+    fn row(&self, y: f32) -> Vec3 {
         let ndc_y = (1.0 - 2.0 * y / self.height) * self.tan_half;
-        (self.forward + ndc_x * self.right + ndc_y * self.up).normalize()
+        ndc_y * self.up
+    }
+
+    /// [`Rays::dir`] from its [`Rays::column`] and [`Rays::row`] parts
+    /// (computed once per tile column and row by the shading pass).
+    #[inline]
+    fn dir_from(column: Vec3, row: Vec3) -> Vec3 {
+        (column + row).normalize()
     }
 }
 
@@ -235,6 +259,9 @@ struct Ctx<'a, 's> {
     shadows: Shadows,
     /// Per material: how it is drawn ([`Class`]).
     class: Vec<Class>,
+    /// `lighting` specialised, when there are no shadows and only point
+    /// and ambient lights (bit-identical to `shade_local`).
+    point_lighting: Option<PointLighting>,
 }
 
 /// How the visibility pass treats a material.
@@ -313,6 +340,9 @@ impl Ctx<'_, '_> {
         sp: &ShadingPoint,
         counts: Option<&[i32]>,
     ) -> Vec3 {
+        if let Some(pl) = &self.point_lighting {
+            return pl.shade(m, sp);
+        }
         if matches!(self.shadows, Shadows::None) {
             // Every light sample is visible: closures the compiler inlines.
             return shade_local(
@@ -387,6 +417,13 @@ impl Ctx<'_, '_> {
     /// of [`shade_local_split`], whose `rest` is exactly the illumination
     /// with `kd = 0`.
     fn illuminate_split(&self, tri: u32, m: &SurfaceMaterial, sp: &ShadingPoint) -> Split {
+        if let Some(pl) = &self.point_lighting {
+            let [total, rest] = pl.shade_split(m, sp);
+            return Split {
+                diffuse: total - rest,
+                rest,
+            };
+        }
         let current = Cell::new(0u32);
         let [total, rest] = shade_local_split(
             m,
@@ -1004,6 +1041,11 @@ pub fn render_prepared_with(
             .iter()
             .map(|o| o.shade_mode.unwrap_or(mode))
             .collect(),
+        point_lighting: if matches!(shadows, Shadows::None) {
+            PointLighting::new(&ps.lights, true)
+        } else {
+            None
+        },
         shadows,
         class,
     };
@@ -1344,21 +1386,37 @@ fn shade_tile(
     // The triangle of the previous sample: neighbours mostly share one.
     let mut cache = TriCache::new();
     let win = tv.window;
-    for py in (win.y0 - rect.y)..(win.y1 - rect.y) {
-        for px in (win.x0 - rect.x)..(win.x1 - rect.x) {
+    // The row- and column-only parts of the sample directions (Rays::dir),
+    // per window column (or row) and sample.
+    let sample_x = |px: u32, o: &[i32; 2]| (rect.x + px) as f32 + o[0] as f32 / sub;
+    let sample_y = |py: u32, o: &[i32; 2]| (rect.y + py) as f32 + o[1] as f32 / sub;
+    let (wx0, wy0) = (win.x0 - rect.x, win.y0 - rect.y);
+    let columns: Vec<Vec3> = (wx0..win.x1 - rect.x)
+        .flat_map(|px| {
+            offsets
+                .iter()
+                .map(move |o| ctx.rays.column(sample_x(px, o)))
+        })
+        .collect();
+    let rows: Vec<Vec3> = (wy0..win.y1 - rect.y)
+        .flat_map(|py| offsets.iter().map(move |o| ctx.rays.row(sample_y(py, o))))
+        .collect();
+    for (py, rows) in (wy0..win.y1 - rect.y).zip(rows.chunks_exact(spp)) {
+        for (px, columns) in (wx0..win.x1 - rect.x).zip(columns.chunks_exact(spp)) {
             let pi = (py * rect.width + px) as usize;
             let mut sum = Vec3::ZERO;
             let mut best_depth = f32::INFINITY;
             let mut best_normal = Vec3::ZERO;
-            for (s, o) in offsets.iter().enumerate() {
-                let sx = (rect.x + px) as f32 + o[0] as f32 / sub;
-                let sy = (rect.y + py) as f32 + o[1] as f32 / sub;
+            for (s, ((o, &column), &row)) in offsets.iter().zip(columns).zip(rows).enumerate() {
+                let sx = sample_x(px, o);
+                let sy = sample_y(py, o);
+                let dir = Rays::dir_from(column, row);
                 let i = pi * spp + s;
                 let id = tv.ids[i];
                 let mut r = if id == NONE {
                     SampleResult {
                         color: if env_background {
-                            background_radiance(ctx.ps.scene, ctx.rays.dir(sx, sy))
+                            background_radiance(ctx.ps.scene, dir)
                         } else {
                             ctx.ps.scene.background
                         },
@@ -1368,7 +1426,6 @@ fn shade_tile(
                     }
                 } else {
                     let td = ctx.tri_data(id, &mut cache);
-                    let dir = ctx.rays.dir(sx, sy);
                     shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
                 };
                 // Transparent fragments, composited back to front.
@@ -1380,7 +1437,6 @@ fn shade_tile(
                     let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
                         == Some(&Class::Blend(TransparencyMode::Interpolated));
                     let td = ctx.tri_data(t, &mut cache);
-                    let dir = ctx.rays.dir(sx, sy);
                     let front =
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);

@@ -640,6 +640,7 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         object_mode: vec![ShadeMode::Phong; s.objects.len()],
         shadows: Shadows::None,
         class: Vec::new(),
+        point_lighting: None,
     };
     let mut cache = TriCache::new();
     let nt = ps.triangles.len() as u32;

@@ -1,0 +1,247 @@
+//! The local illumination model specialised for the rasterizer's common
+//! case: no shadows and only point and ambient lights.
+//!
+//! [`PointLighting::shade`] returns bit-for-bit what
+//! [`chiaro_core::shading::shade_local`] returns with every light sample
+//! visible: the same floating-point operations in the same order, with the
+//! per-light constants (`color * intensity`) computed once per frame instead
+//! of once per sample, the Phong mirror direction computed once per sample
+//! instead of once per light, and no closures or light-kind dispatch in the
+//! loop. Any other light kind (spot, directional, area) or a shadow method
+//! makes [`PointLighting::new`] return `None`, and the caller keeps using
+//! `shade_local`.
+
+use chiaro_core::scene::{Attenuation, Light, ReflectanceModel};
+use chiaro_core::shading::brdf::specular_cos;
+use chiaro_core::shading::{ShadingPoint, SurfaceMaterial, ambient_term, reflect};
+use glam::Vec3;
+use std::f32::consts::{FRAC_1_PI, PI};
+
+/// One light of [`PointLighting`], in scene order.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// An ambient light's `color * intensity`.
+    Ambient(Vec3),
+    /// A point light: position, `color * intensity`, fall-off.
+    Point {
+        position: Vec3,
+        power: Vec3,
+        attenuation: Attenuation,
+    },
+}
+
+/// The lights of a scene whose lights are all point or ambient lights, in
+/// scene order (the order `shade_local` sums them in).
+#[derive(Debug, Clone)]
+pub(crate) struct PointLighting {
+    sources: Vec<Source>,
+}
+
+impl PointLighting {
+    /// The lighting of `lights`, or `None` when one of them is neither a
+    /// point nor an ambient light. Ambient lights are dropped unless
+    /// `ambient` (as `LocalLighting::ambient` does).
+    pub(crate) fn new(lights: &[Light], ambient: bool) -> Option<Self> {
+        let mut sources = Vec::with_capacity(lights.len());
+        for light in lights {
+            match light {
+                Light::Ambient { .. } => {
+                    if ambient {
+                        sources.push(Source::Ambient(light.power_rgb()));
+                    }
+                }
+                Light::Point {
+                    position,
+                    attenuation,
+                    ..
+                } => sources.push(Source::Point {
+                    position: *position,
+                    power: light.power_rgb(),
+                    attenuation: *attenuation,
+                }),
+                _ => return None,
+            }
+        }
+        Some(Self { sources })
+    }
+
+    /// `shade_local(m, sp, lighting, |_, _| (0.5, 0.5), |_, _| 1)`: emission
+    /// plus ambient plus, per point light, `pi f(wo, wi) cos_i I / att(d)`
+    /// (see `chiaro_core::shading`), bit-identical to it. Linear RGB
+    /// radiance towards `sp.wo`.
+    #[inline]
+    pub(crate) fn shade(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> Vec3 {
+        self.model::<false>(m, sp)[0]
+    }
+
+    /// `shade_local_split` with every light sample visible, bit-identical
+    /// to it: `[total, rest]`, `rest` being the part that does not scale
+    /// with `kd` (emission and specular reflection).
+    #[inline]
+    pub(crate) fn shade_split(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> [Vec3; 2] {
+        self.model::<true>(m, sp)
+    }
+
+    /// The body of `chiaro_core::shading`'s `local_model` for these lights:
+    /// `[total, rest]`, `rest` zero unless `SPLIT`.
+    #[inline(always)]
+    fn model<const SPLIT: bool>(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> [Vec3; 2] {
+        let mut out = m.emission;
+        let mut rest = m.emission;
+        let has_specular = m.has_specular();
+        let phong = m.model == ReflectanceModel::Phong;
+        // phong_lobe's mirror direction, the same for every light.
+        let r = reflect(sp.wo, sp.n);
+        for src in &self.sources {
+            match *src {
+                Source::Ambient(power) => out += ambient_term(m, power),
+                Source::Point {
+                    position,
+                    power,
+                    attenuation,
+                } => {
+                    // sample_light for a point light.
+                    let d = position - sp.p;
+                    let dist = d.length();
+                    if dist <= 0.0 {
+                        continue;
+                    }
+                    let wi = d / dist;
+                    let intensity = power * attenuation.factor(dist);
+                    let cos_i = wi.dot(sp.n);
+                    if cos_i <= 0.0 {
+                        continue;
+                    }
+                    let spec = if !has_specular {
+                        Vec3::ZERO
+                    } else if phong {
+                        // brdf::specular_cos for the Phong lobe.
+                        let c = r.dot(wi);
+                        let lobe = if c <= 0.0 { 0.0 } else { c.powf(m.shininess) };
+                        m.ks * (lobe * FRAC_1_PI)
+                    } else {
+                        specular_cos(m, sp.n, sp.wo, wi, cos_i)
+                    };
+                    let mut f = m.kd * (FRAC_1_PI * cos_i);
+                    if has_specular {
+                        f += spec;
+                    }
+                    // The light's sums over its one sample start at zero.
+                    let mut sum = Vec3::ZERO;
+                    sum += PI * f * intensity;
+                    out += sum;
+                    if SPLIT {
+                        let mut sum_rest = Vec3::ZERO;
+                        sum_rest += PI * spec * intensity;
+                        rest += sum_rest;
+                    }
+                }
+            }
+        }
+        [out, if SPLIT { rest } else { Vec3::ZERO }]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chiaro_core::scene::Material;
+    use chiaro_core::shading::{LocalLighting, shade_local, shade_local_split};
+    use glam::Vec2;
+
+    /// A seeded xorshift generator of numbers in `[-1, 1)`.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+        }
+    }
+
+    fn unit(rng: &mut Rng) -> Vec3 {
+        loop {
+            let v = Vec3::new(rng.next(), rng.next(), rng.next());
+            if let Some(u) = v.try_normalize() {
+                return u;
+            }
+        }
+    }
+
+    #[test]
+    fn point_lighting_is_bit_identical_to_shade_local_and_split() {
+        let lights = vec![
+            Light::Ambient {
+                color: Vec3::new(0.2, 0.3, 0.4),
+                intensity: 0.5,
+            },
+            Light::Point {
+                position: Vec3::new(2.0, 3.0, 1.0),
+                color: Vec3::new(1.0, 0.9, 0.8),
+                intensity: 7.0,
+                attenuation: Attenuation::InverseSquare,
+            },
+            Light::Point {
+                position: Vec3::new(-3.0, 1.0, 2.0),
+                color: Vec3::ONE,
+                intensity: 2.0,
+                attenuation: Attenuation::None,
+            },
+        ];
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        for model in [
+            ReflectanceModel::Phong,
+            ReflectanceModel::Blinn,
+            ReflectanceModel::TorranceSparrow,
+        ] {
+            let mat = Material {
+                diffuse: Vec3::new(0.6, 0.5, 0.4),
+                specular: Vec3::splat(0.3),
+                ambient: Vec3::splat(0.7),
+                shininess: 24.0,
+                model,
+                ..Material::default()
+            };
+            let m = SurfaceMaterial::from_material(&mat);
+            for ambient in [false, true] {
+                let fast = PointLighting::new(&lights, ambient).expect("point lights only");
+                let env = LocalLighting {
+                    lights: &lights,
+                    area_samples: 4,
+                    ambient,
+                };
+                for _ in 0..500 {
+                    let n = unit(&mut rng);
+                    let sp = ShadingPoint {
+                        p: unit(&mut rng) * 0.8,
+                        n,
+                        ng: n,
+                        wo: unit(&mut rng),
+                    };
+                    let want =
+                        shade_local(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
+                    let got = fast.shade(&m, &sp);
+                    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                    assert_eq!(bits(got), bits(want));
+                    let want_split =
+                        shade_local_split(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
+                    let got_split = fast.shade_split(&m, &sp);
+                    assert_eq!(got_split.map(bits), want_split.map(bits));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn other_lights_are_refused() {
+        let lights = vec![Light::Directional {
+            direction: Vec3::NEG_Y,
+            color: Vec3::ONE,
+            intensity: 1.0,
+        }];
+        assert!(PointLighting::new(&lights, true).is_none());
+        assert!(PointLighting::new(&[], true).is_some());
+    }
+}
