@@ -65,14 +65,20 @@ impl Film {
     /// Copies a rendered tile into the film.
     pub fn write_tile(&mut self, tile: &TilePixels) {
         let r = tile.rect;
+        let w = r.width as usize;
+        // Row by row, as slices (no per-pixel index arithmetic or bounds checks).
         for y in 0..r.height {
-            for x in 0..r.width {
-                let src = (y * r.width + x) as usize;
-                let dst = self.index(r.x + x, r.y + y);
-                self.color[dst] = sanitize(tile.color[src]);
-                self.depth[dst] = tile.depth[src];
-                self.normal[dst] = tile.normal[src];
+            let src = y as usize * w..(y as usize + 1) * w;
+            let d0 = self.index(r.x, r.y + y);
+            let dst = d0..d0 + w;
+            for (d, &c) in self.color[dst.clone()]
+                .iter_mut()
+                .zip(&tile.color[src.clone()])
+            {
+                *d = sanitize(c);
             }
+            self.depth[dst.clone()].copy_from_slice(&tile.depth[src.clone()]);
+            self.normal[dst].copy_from_slice(&tile.normal[src]);
         }
     }
 
