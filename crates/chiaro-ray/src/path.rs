@@ -104,7 +104,7 @@ pub fn render_with(
                 let (px, py) = (rect.x + tx, rect.y + ty);
                 let mut sum = Vec3::ZERO;
                 for s in 0..spp {
-                    let mut rng = SobolSampler::new(settings.seed, px, py, s);
+                    let mut rng = SobolSampler::new(settings.seed, px, py, s, spp);
                     let j = rng.next_2d();
                     let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
                     let (l, first) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);

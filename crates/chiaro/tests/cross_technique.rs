@@ -223,7 +223,7 @@ fn wall_means(scene: &Scene, f: &Film) -> [Vec3; 5] {
 #[test]
 fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     // A converged radiosity solution and a converged path tracer must agree
-    // on a purely Lambertian scene: within 5% mean relative error per wall.
+    // on a purely Lambertian scene: within 4% relative error per wall.
     let scene = cornell();
     let mut s = scene.render.clone();
     s.width = 40;
@@ -233,6 +233,9 @@ fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     s.radiosity.solver = "hierarchical".into();
     s.radiosity.formfactor = "raycast".into();
     s.radiosity.patch_size = 40.0;
+    // Converged: the BF refinement threshold scales with the tolerance, and
+    // the default 0.01 leaves the back wall ~5% dark (0.001: within 1.5%).
+    s.radiosity.tolerance = 0.001;
     let rad = render(&scene, &s);
     s.technique = Technique::Path;
     s.samples = 256;
@@ -253,7 +256,7 @@ fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
             rel * 100.0
         );
         assert!(
-            rel < 0.05,
+            rel < 0.04,
             "{}: radiosity {} vs path {} ({:.1}%)",
             names[k],
             a[k],

@@ -19,36 +19,56 @@ use super::mix64;
 use glam::Vec2;
 
 /// Draws the numbers of one sample of one pixel (see the module doc).
-/// Results depend only on the seed, the pixel, the sample index and the
-/// order of the draws, never on threads or tiles.
+/// Results depend only on the seed, the pixel, the sample index, the
+/// number of samples and the order of the draws, never on threads or tiles.
 #[derive(Debug, Clone)]
 pub struct SobolSampler {
     /// Hash of the scene seed and the pixel (the same for all its samples).
     pixel: u64,
     /// The sample's index among the pixel's samples.
     index: u32,
+    /// `2^m - 1` for the smallest `2^m >= ` the pixel's sample count: the
+    /// shuffle permutes indices within `[0, 2^m)`.
+    mask: u32,
     /// Pairs drawn so far.
     dim: u32,
 }
 
 impl SobolSampler {
-    /// The sampler of sample `index` of pixel `(x, y)` under `seed`.
-    pub fn new(seed: u64, x: u32, y: u32, index: u32) -> Self {
+    /// The sampler of sample `index` of the `count` samples of pixel
+    /// `(x, y)` under `seed`.
+    pub fn new(seed: u64, x: u32, y: u32, index: u32, count: u32) -> Self {
         Self {
             pixel: mix64(seed ^ mix64((u64::from(x) << 32) | u64::from(y)) ^ 0x5EB0_1D00),
             index,
+            mask: count.max(1).next_power_of_two().wrapping_sub(1),
             dim: 0,
         }
+    }
+
+    /// The shuffled sample index of the next dimension pair, and the keys
+    /// that scramble its two coordinates. The shuffle is a nested uniform
+    /// scramble of the index: for indices below `2^m` its bits from `m` up
+    /// are one constant, so masking them leaves a permutation of `[0, 2^m)`
+    /// (and keeps the Sobol loop short).
+    #[inline]
+    fn next_pair(&mut self) -> (u32, u64) {
+        let key = mix64(self.pixel ^ u64::from(self.dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        self.dim += 1;
+        (
+            nested_uniform_scramble(self.index, key as u32) & self.mask,
+            key,
+        )
     }
 
     /// The next pair of numbers in `[0, 1)^2` (one fresh dimension pair).
     #[inline]
     pub fn next_2d(&mut self) -> Vec2 {
-        let key = mix64(self.pixel ^ u64::from(self.dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        self.dim += 1;
-        let i = nested_uniform_scramble(self.index, key as u32);
-        let x = nested_uniform_scramble(i.reverse_bits(), (key >> 32) as u32);
-        let y = nested_uniform_scramble(sobol_second(i), mix64(key) as u32);
+        let (i, key) = self.next_pair();
+        // Owen scrambling of Sobol's first dimension (the bit reversal of
+        // i): reverse(LK(reverse(reverse(i)))) = reverse(LK(i)).
+        let x = laine_karras(i, (key >> 32) as u32).reverse_bits();
+        let y = laine_karras(sobol_second_reversed(i), mix64(key) as u32).reverse_bits();
         Vec2::new(to_unit(x), to_unit(y))
     }
 
@@ -56,13 +76,8 @@ impl SobolSampler {
     /// a scrambled van der Corput sequence, stratified in one dimension).
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
-        let key = mix64(self.pixel ^ u64::from(self.dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        self.dim += 1;
-        let i = nested_uniform_scramble(self.index, key as u32);
-        to_unit(nested_uniform_scramble(
-            i.reverse_bits(),
-            (key >> 32) as u32,
-        ))
+        let (i, key) = self.next_pair();
+        to_unit(laine_karras(i, (key >> 32) as u32).reverse_bits())
     }
 }
 
@@ -72,19 +87,20 @@ fn to_unit(x: u32) -> f32 {
     (x >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
-/// The second dimension of the Sobol sequence, as a 32-bit fraction:
-/// direction numbers `v_1 = 2^31`, `v_{k+1} = v_k ^ (v_k >> 1)` (the
-/// primitive polynomial `x + 1`; the first dimension is the bit reversal).
+/// The second dimension of the Sobol sequence, bit-reversed (so bit `k` of
+/// the result is the coefficient of `2^-(k+1)`): direction numbers
+/// `v_1 = 1`, `v_{k+1} = v_k ^ (v_k << 1)` in reversed order (the primitive
+/// polynomial `x + 1`; the first dimension is the index itself reversed).
 #[inline]
-fn sobol_second(mut index: u32) -> u32 {
-    let mut v = 1u32 << 31;
+fn sobol_second_reversed(mut index: u32) -> u32 {
+    let mut v = 1u32;
     let mut r = 0u32;
     while index != 0 {
         if index & 1 == 1 {
             r ^= v;
         }
         index >>= 1;
-        v ^= v >> 1;
+        v ^= v << 1;
     }
     r
 }
@@ -101,8 +117,9 @@ fn laine_karras(mut x: u32, seed: u32) -> u32 {
     x
 }
 
-/// Nested uniform (Owen) scrambling of the 32-bit fraction `x`: each bit is
-/// flipped depending on the bits above it (Burley 2020, listing 3).
+/// Nested uniform (Owen) scrambling of the 32-bit fraction `x` (bit 31 is
+/// the coefficient of 1/2): each bit is flipped depending on the bits above
+/// it (Burley 2020, listing 3).
 #[inline]
 fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
     laine_karras(x.reverse_bits(), seed).reverse_bits()
@@ -122,7 +139,7 @@ mod tests {
             for pair in 0..5 {
                 let pts: Vec<Vec2> = (0..n)
                     .map(|i| {
-                        let mut s = SobolSampler::new(9, 3, 5, i);
+                        let mut s = SobolSampler::new(9, 3, 5, i, n);
                         for _ in 0..pair {
                             s.next_2d();
                         }
@@ -155,7 +172,7 @@ mod tests {
         let mut count = 0.0f64;
         for px in 0..64 {
             for i in 0..16 {
-                let mut s = SobolSampler::new(1, px, 7, i);
+                let mut s = SobolSampler::new(1, px, 7, i, 16);
                 let a = s.next_2d();
                 let b = s.next_2d();
                 let c = s.next_1d();
@@ -191,7 +208,7 @@ mod tests {
         for px in 0..pixels {
             let mean: f64 = (0..64)
                 .map(|i| {
-                    let p = SobolSampler::new(3, px, 0, i).next_2d();
+                    let p = SobolSampler::new(3, px, 0, i, 64).next_2d();
                     f64::from(p.x) * f64::from(p.y)
                 })
                 .sum::<f64>()
