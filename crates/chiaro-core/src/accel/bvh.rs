@@ -51,7 +51,10 @@ use rayon::prelude::*;
 pub const MAX_BINS: usize = 64;
 /// Children per node.
 pub const WIDTH: usize = 8;
-const _: () = assert!(WIDTH.is_multiple_of(4), "node tests run four lanes at a time");
+const _: () = assert!(
+    WIDTH.is_multiple_of(4),
+    "node tests run four lanes at a time"
+);
 /// Primitives per leaf block: leaves start at multiples of `BLOCK` slots
 /// and a [`SceneBvh`] tests a block's triangles together.
 pub const BLOCK: usize = 4;
