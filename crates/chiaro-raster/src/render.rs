@@ -262,6 +262,8 @@ struct Ctx<'a, 's> {
     /// `lighting` specialised, when there are no shadows and only point
     /// and ambient lights (bit-identical to `shade_local`).
     point_lighting: Option<PointLighting>,
+    /// `SurfaceMaterial::from_material` of each scene material, by index.
+    bases: Vec<SurfaceMaterial>,
 }
 
 /// How the visibility pass treats a material.
@@ -454,23 +456,39 @@ impl Ctx<'_, '_> {
         sm
     }
 
-    /// Flat shading of triangle `t`: once, at the centroid, with the face normal.
+    /// `SurfaceMaterial::from_material` of the triangle's material.
+    #[inline]
+    fn base(&self, td: &TriData<'_>) -> SurfaceMaterial {
+        match self.bases.get(td.material_id.index()) {
+            Some(b) => *b,
+            None => SurfaceMaterial::from_material(td.material),
+        }
+    }
+
+    /// Flat shading of triangle `td`: once, at the centroid, with the face
+    /// normal. The same values as `surface` at the centroid, `flipped` and
+    /// `untextured_material` give, from the cached triangle.
     fn flat_split(&self, td: &TriData<'_>) -> Split {
         let t = td.t;
         let third = 1.0 / 3.0;
-        let hit = self.surface(td, third, third, td.textured, true);
-        let mut n = hit.ng;
-        if self.flipped(t) {
+        let (p, sm) = if td.textured {
+            let hit = self.surface(td, third, third, true, true);
+            (hit.p, self.untextured_material(&hit))
+        } else {
+            // surface(): w = 1 - u - v, then the same interpolations.
+            let w = 1.0 - third - third;
+            let mut sm = self.base(td);
+            sm.kd *= td.c[0] * w + td.c[1] * third + td.c[2] * third;
+            (td.p[0] * w + td.p[1] * third + td.p[2] * third, sm)
+        };
+        let mut n = td.ng;
+        // flipped(t), with the cached face normal (PreparedScene::face_normal).
+        if td.material.two_sided && td.ng.dot(self.rays.eye - td.p[0]) < 0.0 {
             n = -n;
         }
-        let wo = (self.rays.eye - hit.p).normalize_or_zero();
-        let sp = ShadingPoint {
-            p: hit.p,
-            n,
-            ng: n,
-            wo,
-        };
-        self.illuminate_split(t, &self.untextured_material(&hit), &sp)
+        let wo = (self.rays.eye - p).normalize_or_zero();
+        let sp = ShadingPoint { p, n, ng: n, wo };
+        self.illuminate_split(t, &sm, &sp)
     }
 
     /// Gouraud illumination at corner `k` of triangle `t`, on the front side
@@ -520,8 +538,6 @@ struct TriData<'a> {
     /// True when the material has a texture, bump, normal or emission map
     /// (which need the uv footprint).
     textured: bool,
-    /// `SurfaceMaterial::from_material(material)`.
-    base: SurfaceMaterial,
     /// The flat-shading illumination of the polygon (zero unless `mode` is
     /// flat): computed with the triangle's data, once per tile that shows it.
     flat: Split,
@@ -616,7 +632,6 @@ impl<'a> Ctx<'a, '_> {
                 || material.bump.is_some()
                 || material.normal_map.is_some()
                 || material.emission_texture.is_some(),
-            base: SurfaceMaterial::from_material(material),
             e1,
             e2: p[2] - p[0],
             s,
@@ -1046,6 +1061,12 @@ pub fn render_prepared_with(
         } else {
             None
         },
+        bases: ps
+            .scene
+            .materials
+            .iter()
+            .map(SurfaceMaterial::from_material)
+            .collect(),
         shadows,
         class,
     };
@@ -1521,7 +1542,7 @@ fn shade_sample(
                 ps.surface_material_lod(&hit, duv_dx, duv_dy)
             } else {
                 // surface_material_lod without textures: the vertex colour only.
-                let mut sm = td.base;
+                let mut sm = ctx.base(td);
                 sm.kd *= hit.color;
                 sm
             };

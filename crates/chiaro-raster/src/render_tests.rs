@@ -641,6 +641,7 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         shadows: Shadows::None,
         class: Vec::new(),
         point_lighting: None,
+        bases: Vec::new(),
     };
     let mut cache = TriCache::new();
     let nt = ps.triangles.len() as u32;
