@@ -148,6 +148,7 @@ pub fn parse_scene(text: &str, base: &Path, path: &Path) -> Result<Loaded> {
         base,
         warnings: Vec::new(),
         images: HashMap::new(),
+        primitive_meshes: HashMap::new(),
         spans: SpanIndex::default(),
     };
     // Parse once with spans, refuse NaN/Inf anywhere, then deserialize.
@@ -221,6 +222,10 @@ struct Ctx<'a> {
     warnings: Vec<String>,
     /// Decoded image files: (resolved path, sRGB) -> texture.
     images: HashMap<(PathBuf, bool), TextureId>,
+    /// Tessellated primitives by their parameters: objects with the same
+    /// primitive share one object-space mesh (instances, which the
+    /// two-level BVH builds once).
+    primitive_meshes: HashMap<String, chiaro_core::scene::MeshId>,
     spans: SpanIndex,
 }
 
@@ -1120,10 +1125,31 @@ impl Ctx<'_> {
                         }
                     },
                 };
-                let geometry = self.primitive(scene, r, prim, &present)?;
-                if let Geometry::Mesh(_) = geometry {
-                    self.spans.meshes.push(span.clone());
-                }
+                // Same primitive, same parameters: the same mesh.
+                let key = format!(
+                    "{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
+                    prim.get_ref(),
+                    r.stacks.as_ref().map(|v| *v.get_ref()),
+                    r.radius.as_ref().map(|v| v.get_ref().to_bits()),
+                    r.size.as_ref().map(|v| *v.get_ref()),
+                    r.height.as_ref().map(|v| v.get_ref().to_bits()),
+                    r.segments.as_ref().map(|v| *v.get_ref()),
+                    r.subdivisions.as_ref().map(|v| *v.get_ref()),
+                    r.corner.as_ref().map(|v| v.get_ref().map(f32::to_bits)),
+                    r.edge_u.as_ref().map(|v| v.get_ref().map(f32::to_bits)),
+                    r.edge_v.as_ref().map(|v| v.get_ref().map(f32::to_bits)),
+                );
+                let geometry = match self.primitive_meshes.get(&key) {
+                    Some(&mesh) => Geometry::Mesh(mesh),
+                    None => {
+                        let geometry = self.primitive(scene, r, prim, &present)?;
+                        if let Geometry::Mesh(mesh) = geometry {
+                            self.spans.meshes.push(span.clone());
+                            self.primitive_meshes.insert(key, mesh);
+                        }
+                        geometry
+                    }
+                };
                 scene.objects.push(Object {
                     name: if template.name.is_empty() {
                         prim.get_ref().clone()
@@ -1416,5 +1442,57 @@ mod filter_tests {
         );
         let e = filter_of("[render]\nfilter = \"gauss\"\n").expect_err("unknown filter");
         assert!(e.contains("tent"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod instancing_tests {
+    use super::parse_scene;
+    use chiaro_core::scene::Geometry;
+    use std::path::Path;
+
+    /// Objects with the same tessellated primitive and parameters share one
+    /// mesh (instances); other parameters, or analytic spheres, do not.
+    #[test]
+    fn identical_primitives_share_one_mesh() {
+        let text = r#"
+[[object]]
+primitive = "box"
+size = [1, 2, 3]
+[[object]]
+primitive = "box"
+size = [1, 2, 3]
+transform = { translate = [4, 0, 0] }
+[[object]]
+primitive = "box"
+size = [1, 2, 4]
+[[object]]
+primitive = "cylinder"
+radius = 0.5
+[[object]]
+primitive = "cylinder"
+radius = 0.5
+transform = { rotate = [0, 90, 0] }
+[[object]]
+primitive = "sphere"
+radius = 1
+"#;
+        let scene = parse_scene(text, Path::new("."), Path::new("t.toml"))
+            .expect("parses")
+            .scene;
+        let meshes: Vec<Option<usize>> = scene
+            .objects
+            .iter()
+            .map(|o| match o.geometry {
+                Geometry::Mesh(m) => Some(m.index()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(meshes[0], meshes[1]);
+        assert_ne!(meshes[0], meshes[2]);
+        assert_eq!(meshes[3], meshes[4]);
+        assert_ne!(meshes[0], meshes[3]);
+        assert_eq!(meshes[5], None);
+        assert_eq!(scene.meshes.len(), 3);
     }
 }
