@@ -7,25 +7,29 @@
 //! per-light constants (`color * intensity`) computed once per frame instead
 //! of once per sample, the Phong mirror direction computed once per sample
 //! instead of once per light, and no closures or light-kind dispatch in the
-//! loop. Any other light kind (spot, directional, area) or a shadow method
+//! loop. The vector arithmetic is done on SSE `Vec3A`s, lane by lane the
+//! same IEEE operations as on `Vec3` (add, subtract, multiply, divide and
+//! `dot`, which sums `(x + y) + z` in both; glam's `Vec3A::cross` and
+//! `normalize` are not used: they fuse or divide differently).
+//! Any other light kind (spot, directional, area) or a shadow method
 //! makes [`PointLighting::new`] return `None`, and the caller keeps using
 //! `shade_local`.
 
 use chiaro_core::scene::{Attenuation, Light, ReflectanceModel};
 use chiaro_core::shading::brdf::specular_cos;
-use chiaro_core::shading::{ShadingPoint, SurfaceMaterial, ambient_term, reflect};
-use glam::Vec3;
+use chiaro_core::shading::{ShadingPoint, SurfaceMaterial};
+use glam::{Vec3, Vec3A};
 use std::f32::consts::{FRAC_1_PI, PI};
 
 /// One light of [`PointLighting`], in scene order.
 #[derive(Debug, Clone, Copy)]
 enum Source {
     /// An ambient light's `color * intensity`.
-    Ambient(Vec3),
+    Ambient(Vec3A),
     /// A point light: position, `color * intensity`, fall-off.
     Point {
-        position: Vec3,
-        power: Vec3,
+        position: Vec3A,
+        power: Vec3A,
         attenuation: Attenuation,
     },
 }
@@ -47,7 +51,7 @@ impl PointLighting {
             match light {
                 Light::Ambient { .. } => {
                     if ambient {
-                        sources.push(Source::Ambient(light.power_rgb()));
+                        sources.push(Source::Ambient(light.power_rgb().into()));
                     }
                 }
                 Light::Point {
@@ -55,8 +59,8 @@ impl PointLighting {
                     attenuation,
                     ..
                 } => sources.push(Source::Point {
-                    position: *position,
-                    power: light.power_rgb(),
+                    position: (*position).into(),
+                    power: light.power_rgb().into(),
                     attenuation: *attenuation,
                 }),
                 _ => return None,
@@ -86,59 +90,63 @@ impl PointLighting {
     /// `[total, rest]`, `rest` zero unless `SPLIT`.
     #[inline(always)]
     fn model<const SPLIT: bool>(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> [Vec3; 2] {
-        let mut out = m.emission;
-        let mut rest = m.emission;
+        let (ka, kd, ks) = (Vec3A::from(m.ka), Vec3A::from(m.kd), Vec3A::from(m.ks));
+        let (p, n, wo) = (Vec3A::from(sp.p), Vec3A::from(sp.n), Vec3A::from(sp.wo));
+        let mut out = Vec3A::from(m.emission);
+        let mut rest = out;
         let has_specular = m.has_specular();
         let phong = m.model == ReflectanceModel::Phong;
-        // phong_lobe's mirror direction, the same for every light.
-        let r = reflect(sp.wo, sp.n);
+        // phong_lobe's mirror direction (fresnel::reflect), the same for
+        // every light.
+        let r = 2.0 * n.dot(wo) * n - wo;
         for src in &self.sources {
             match *src {
-                Source::Ambient(power) => out += ambient_term(m, power),
+                // ambient_term: ia * ka * kd.
+                Source::Ambient(power) => out += power * ka * kd,
                 Source::Point {
                     position,
                     power,
                     attenuation,
                 } => {
                     // sample_light for a point light.
-                    let d = position - sp.p;
+                    let d = position - p;
                     let dist = d.length();
                     if dist <= 0.0 {
                         continue;
                     }
                     let wi = d / dist;
                     let intensity = power * attenuation.factor(dist);
-                    let cos_i = wi.dot(sp.n);
+                    let cos_i = wi.dot(n);
                     if cos_i <= 0.0 {
                         continue;
                     }
                     let spec = if !has_specular {
-                        Vec3::ZERO
+                        Vec3A::ZERO
                     } else if phong {
                         // brdf::specular_cos for the Phong lobe.
                         let c = r.dot(wi);
                         let lobe = if c <= 0.0 { 0.0 } else { c.powf(m.shininess) };
-                        m.ks * (lobe * FRAC_1_PI)
+                        ks * (lobe * FRAC_1_PI)
                     } else {
-                        specular_cos(m, sp.n, sp.wo, wi, cos_i)
+                        specular_cos(m, sp.n, sp.wo, wi.into(), cos_i).into()
                     };
-                    let mut f = m.kd * (FRAC_1_PI * cos_i);
+                    let mut f = kd * (FRAC_1_PI * cos_i);
                     if has_specular {
                         f += spec;
                     }
                     // The light's sums over its one sample start at zero.
-                    let mut sum = Vec3::ZERO;
+                    let mut sum = Vec3A::ZERO;
                     sum += PI * f * intensity;
                     out += sum;
                     if SPLIT {
-                        let mut sum_rest = Vec3::ZERO;
+                        let mut sum_rest = Vec3A::ZERO;
                         sum_rest += PI * spec * intensity;
                         rest += sum_rest;
                     }
                 }
             }
         }
-        [out, if SPLIT { rest } else { Vec3::ZERO }]
+        [out.into(), if SPLIT { rest.into() } else { Vec3::ZERO }]
     }
 }
 
