@@ -67,12 +67,14 @@ use chiaro_core::shading::{
     LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
     samples_for_light, sanitize, shade_local, shade_local_split,
 };
-use glam::{Vec2, Vec3, Vec4};
+use glam::{Vec2, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 use std::cell::Cell;
 use std::collections::HashMap;
 use std::sync::{Mutex, PoisonError};
 
+#[path = "exact.rs"]
+mod exact;
 #[path = "lighting.rs"]
 mod lighting;
 use lighting::PointLighting;
@@ -182,29 +184,29 @@ impl Rays {
     /// Unit direction through film position `(x, y)` (pixels, top-left origin).
     #[inline]
     fn dir(&self, x: f32, y: f32) -> Vec3 {
-        Self::dir_from(self.column(x), self.row(y))
+        Self::dir_from(self.column(x), self.row(y)).into()
     }
 
     /// The part of the unnormalised direction through column `x` that does
     /// not depend on the row: `forward + ndc_x right`.
     #[inline]
-    fn column(&self, x: f32) -> Vec3 {
+    fn column(&self, x: f32) -> Vec3A {
         let ndc_x = (2.0 * x / self.width - 1.0) * self.tan_half * self.aspect;
-        self.forward + ndc_x * self.right
+        (self.forward + ndc_x * self.right).into()
     }
 
     /// The part that depends on the row `y` only: `ndc_y up`.
     #[inline]
-    fn row(&self, y: f32) -> Vec3 {
+    fn row(&self, y: f32) -> Vec3A {
         let ndc_y = (1.0 - 2.0 * y / self.height) * self.tan_half;
-        ndc_y * self.up
+        (ndc_y * self.up).into()
     }
 
     /// [`Rays::dir`] from its [`Rays::column`] and [`Rays::row`] parts
     /// (computed once per tile column and row by the shading pass).
     #[inline]
-    fn dir_from(column: Vec3, row: Vec3) -> Vec3 {
-        (column + row).normalize()
+    fn dir_from(column: Vec3A, row: Vec3A) -> Vec3A {
+        exact::normalize(column + row)
     }
 }
 
@@ -478,12 +480,15 @@ impl Ctx<'_, '_> {
             // surface(): w = 1 - u - v, then the same interpolations.
             let w = 1.0 - third - third;
             let mut sm = self.base(td);
-            sm.kd *= td.c[0] * w + td.c[1] * third + td.c[2] * third;
-            (td.p[0] * w + td.p[1] * third + td.p[2] * third, sm)
+            sm.kd *= Vec3::from(td.c[0] * w + td.c[1] * third + td.c[2] * third);
+            (
+                Vec3::from(td.p[0] * w + td.p[1] * third + td.p[2] * third),
+                sm,
+            )
         };
-        let mut n = td.ng;
+        let mut n = Vec3::from(td.ng);
         // flipped(t), with the cached face normal (PreparedScene::face_normal).
-        if td.material.two_sided && td.ng.dot(self.rays.eye - td.p[0]) < 0.0 {
+        if td.material.two_sided && td.ng.dot(Vec3A::from(self.rays.eye) - td.p[0]) < 0.0 {
             n = -n;
         }
         let wo = (self.rays.eye - p).normalize_or_zero();
@@ -525,12 +530,13 @@ impl Ctx<'_, '_> {
 struct TriData<'a> {
     t: u32,
     idx: [usize; 3],
-    p: [Vec3; 3],
+    /// The vertex positions (as SSE vectors, see [`exact`]).
+    p: [Vec3A; 3],
     /// `PreparedScene::face_normal(t)`.
-    ng: Vec3,
+    ng: Vec3A,
     /// The vertex normals and colours.
-    n: [Vec3; 3],
-    c: [Vec3; 3],
+    n: [Vec3A; 3],
+    c: [Vec3A; 3],
     mode: ShadeMode,
     material: &'a Material,
     material_id: MaterialId,
@@ -543,10 +549,10 @@ struct TriData<'a> {
     flat: Split,
     /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
     /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
-    e1: Vec3,
-    e2: Vec3,
-    s: Vec3,
-    q: Vec3,
+    e1: Vec3A,
+    e2: Vec3A,
+    s: Vec3A,
+    q: Vec3A,
 }
 
 impl TriData<'_> {
@@ -554,8 +560,8 @@ impl TriData<'_> {
     /// operations in the same order, with the terms that do not depend on
     /// `d` precomputed.
     #[inline]
-    fn bary(&self, d: Vec3) -> Option<Vec2> {
-        let pv = d.cross(self.e2);
+    fn bary(&self, d: Vec3A) -> Option<Vec2> {
+        let pv = exact::cross(d, self.e2);
         let det = self.e1.dot(pv);
         if det.abs() < 1e-30 {
             return None;
@@ -611,19 +617,22 @@ impl<'a> Ctx<'a, '_> {
     /// The [`TriData`] of triangle `t`, computed.
     fn make_tri_data(&self, t: u32) -> TriData<'a> {
         let idx = self.ps.triangles[t as usize].map(|i| i as usize);
-        let p = idx.map(|i| self.ps.positions[i]);
+        let p3 = idx.map(|i| self.ps.positions[i]);
+        // PreparedScene::face_normal(t), from the positions at hand.
+        let ng =
+            chiaro_core::geometry::normals::face_normal(p3[0], p3[1], p3[2]).unwrap_or(Vec3::Z);
+        let p = p3.map(Vec3A::from);
         let e1 = p[1] - p[0];
-        let s = self.rays.eye - p[0];
+        let s = Vec3A::from(self.rays.eye) - p[0];
         let material_id = self.ps.tri_material[t as usize];
         let material = self.ps.material(material_id);
         let mut d = TriData {
             t,
             idx,
             p,
-            // PreparedScene::face_normal(t), from the positions at hand.
-            ng: chiaro_core::geometry::normals::face_normal(p[0], p[1], p[2]).unwrap_or(Vec3::Z),
-            n: idx.map(|i| self.ps.normals[i]),
-            c: idx.map(|i| self.ps.colors[i]),
+            ng: ng.into(),
+            n: idx.map(|i| self.ps.normals[i].into()),
+            c: idx.map(|i| self.ps.colors[i].into()),
             mode: self.mode(t),
             material,
             material_id,
@@ -635,7 +644,7 @@ impl<'a> Ctx<'a, '_> {
             e1,
             e2: p[2] - p[0],
             s,
-            q: s.cross(e1),
+            q: exact::cross(s, e1),
             flat: Split::default(),
         };
         if d.mode == ShadeMode::Flat {
@@ -666,16 +675,15 @@ impl<'a> Ctx<'a, '_> {
         let lerp3 = |a: &[Vec3]| a[i0] * w + a[i1] * u + a[i2] * v;
         let ng = td.ng;
         let (ns, color) = if shading {
-            let mut ns = (td.n[0] * w + td.n[1] * u + td.n[2] * v)
-                .try_normalize()
-                .unwrap_or(ng);
+            let mut ns =
+                exact::try_normalize(td.n[0] * w + td.n[1] * u + td.n[2] * v).unwrap_or(ng);
             if ns.dot(ng) < 0.0 {
                 // Interpolated normals may point away from a thin face; keep the front side.
                 ns = ng;
             }
             (ns, td.c[0] * w + td.c[1] * u + td.c[2] * v)
         } else {
-            (ng, Vec3::ZERO)
+            (ng, Vec3A::ZERO)
         };
         let (uv, p_object, tangent) = if textured {
             let tan = ps.tangents[i0] * w + ps.tangents[i1] * u + ps.tangents[i2] * v;
@@ -690,13 +698,13 @@ impl<'a> Ctx<'a, '_> {
             (Vec2::ZERO, Vec3::ZERO, Vec4::ZERO)
         };
         SurfaceHit {
-            p: td.p[0] * w + td.p[1] * u + td.p[2] * v,
-            ng,
-            ns,
+            p: (td.p[0] * w + td.p[1] * u + td.p[2] * v).into(),
+            ng: ng.into(),
+            ns: ns.into(),
             uv,
             p_object,
             tangent,
-            color,
+            color: color.into(),
             material: td.material_id,
             object: td.object,
         }
@@ -1412,14 +1420,14 @@ fn shade_tile(
     let sample_x = |px: u32, o: &[i32; 2]| (rect.x + px) as f32 + o[0] as f32 / sub;
     let sample_y = |py: u32, o: &[i32; 2]| (rect.y + py) as f32 + o[1] as f32 / sub;
     let (wx0, wy0) = (win.x0 - rect.x, win.y0 - rect.y);
-    let columns: Vec<Vec3> = (wx0..win.x1 - rect.x)
+    let columns: Vec<Vec3A> = (wx0..win.x1 - rect.x)
         .flat_map(|px| {
             offsets
                 .iter()
                 .map(move |o| ctx.rays.column(sample_x(px, o)))
         })
         .collect();
-    let rows: Vec<Vec3> = (wy0..win.y1 - rect.y)
+    let rows: Vec<Vec3A> = (wy0..win.y1 - rect.y)
         .flat_map(|py| offsets.iter().map(move |o| ctx.rays.row(sample_y(py, o))))
         .collect();
     for (py, rows) in (wy0..win.y1 - rect.y).zip(rows.chunks_exact(spp)) {
@@ -1437,7 +1445,7 @@ fn shade_tile(
                 let mut r = if id == NONE {
                     SampleResult {
                         color: if env_background {
-                            background_radiance(ctx.ps.scene, dir)
+                            background_radiance(ctx.ps.scene, dir.into())
                         } else {
                             ctx.ps.scene.background
                         },
@@ -1503,7 +1511,7 @@ fn shade_sample(
     td: &TriData,
     sx: f32,
     sy: f32,
-    dir: Vec3,
+    dir: Vec3A,
     counts: Option<&[i32]>,
     want_specular: bool,
 ) -> SampleResult {
@@ -1519,7 +1527,7 @@ fn shade_sample(
     let hit = ctx.surface(td, b.x, b.y, needs_footprint, td.mode != ShadeMode::Flat);
     let (duv_dx, duv_dy) = if needs_footprint {
         let uv_at = |x: f32, y: f32| {
-            let bb = td.bary(ctx.rays.dir(x, y)).unwrap_or(b);
+            let bb = td.bary(ctx.rays.dir(x, y).into()).unwrap_or(b);
             ps.uvs[i0] * (1.0 - bb.x - bb.y) + ps.uvs[i1] * bb.x + ps.uvs[i2] * bb.y
         };
         let dx = uv_at(sx + 1.0, sy) - hit.uv;
@@ -1532,7 +1540,8 @@ fn shade_sample(
     } else {
         (Vec2::ZERO, Vec2::ZERO)
     };
-    let wo = (eye - hit.p).normalize_or_zero();
+    let (eye_a, p_a) = (Vec3A::from(eye), Vec3A::from(hit.p));
+    let wo = Vec3::from(exact::normalize_or_zero(eye_a - p_a));
     let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
     let sign = if flip { -1.0 } else { 1.0 };
     let mut specular = Vec3::ZERO;
@@ -1616,7 +1625,7 @@ fn shade_sample(
     if ctx.ps.scene.environment.is_some() && kr.max_element() > 0.0 {
         color += kr * environment_radiance(ctx.ps.scene, reflect(wo, n));
     }
-    let depth = (hit.p - eye).length();
+    let depth = (p_a - eye_a).length();
     if let Some(cue) = &ctx.settings.depth_cue {
         color = depth_cue(color, depth, cue);
     }

@@ -653,9 +653,9 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         for _ in 0..2 {
             let td = ctx.tri_data(t, &mut cache);
             assert_eq!(td.t, t);
-            let [p0, p1, p2] = td.p;
+            let [p0, p1, p2] = td.p.map(Vec3::from);
             let d = ctx.rays.dir(k as f32 * 0.37 % 32.0, k as f32 * 0.11 % 24.0);
-            let a = td.bary(d);
+            let a = td.bary(d.into());
             let b = ray_plane_bary(ctx.rays.eye, d, p0, p1, p2);
             assert_eq!(a.map(|v| v.to_array()), b.map(|v| v.to_array()));
             checked += usize::from(a.is_some());
