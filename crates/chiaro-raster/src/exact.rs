@@ -58,7 +58,7 @@ mod tests {
             // Spread over many magnitudes, both signs, with exact zeros.
             let m = (state >> 41) as f32 / (1u64 << 23) as f32 - 0.5;
             let e = ((state >> 8) % 40) as i32 - 20;
-            if state % 17 == 0 {
+            if state.is_multiple_of(17) {
                 0.0
             } else {
                 m * 2f32.powi(e)
