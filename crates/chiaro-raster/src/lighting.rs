@@ -75,7 +75,14 @@ impl PointLighting {
     /// radiance towards `sp.wo`.
     #[inline]
     pub(crate) fn shade(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> Vec3 {
-        self.model::<false>(m, sp)[0]
+        self.model::<false>(m, m.kd.into(), sp)[0]
+    }
+
+    /// [`PointLighting::shade`] of `m` with its diffuse colour replaced by
+    /// `kd` (a vertex colour applied), without copying the material.
+    #[inline]
+    pub(crate) fn shade_kd(&self, m: &SurfaceMaterial, kd: Vec3, sp: &ShadingPoint) -> Vec3 {
+        self.model::<false>(m, kd.into(), sp)[0]
     }
 
     /// `shade_local_split` with every light sample visible, bit-identical
@@ -83,14 +90,19 @@ impl PointLighting {
     /// with `kd` (emission and specular reflection).
     #[inline]
     pub(crate) fn shade_split(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> [Vec3; 2] {
-        self.model::<true>(m, sp)
+        self.model::<true>(m, m.kd.into(), sp)
     }
 
     /// The body of `chiaro_core::shading`'s `local_model` for these lights:
-    /// `[total, rest]`, `rest` zero unless `SPLIT`.
+    /// `[total, rest]`, `rest` zero unless `SPLIT`; `kd` stands for `m.kd`.
     #[inline(always)]
-    fn model<const SPLIT: bool>(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> [Vec3; 2] {
-        let (ka, kd, ks) = (Vec3A::from(m.ka), Vec3A::from(m.kd), Vec3A::from(m.ks));
+    fn model<const SPLIT: bool>(
+        &self,
+        m: &SurfaceMaterial,
+        kd: Vec3A,
+        sp: &ShadingPoint,
+    ) -> [Vec3; 2] {
+        let (ka, ks) = (Vec3A::from(m.ka), Vec3A::from(m.ks));
         let (p, n, wo) = (Vec3A::from(sp.p), Vec3A::from(sp.n), Vec3A::from(sp.wo));
         let mut out = Vec3A::from(m.emission);
         let mut rest = out;
@@ -237,6 +249,20 @@ mod tests {
                         shade_local_split(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
                     let got_split = fast.shade_split(&m, &sp);
                     assert_eq!(got_split.map(bits), want_split.map(bits));
+                    // A vertex colour applied to kd.
+                    let color = Vec3::new(0.9, 0.4, 0.7);
+                    let tinted = SurfaceMaterial {
+                        kd: m.kd * color,
+                        ..m
+                    };
+                    let want_kd = shade_local(
+                        &tinted,
+                        &sp,
+                        &env,
+                        |_, _| Vec2::splat(0.5),
+                        |_, _| Vec3::ONE,
+                    );
+                    assert_eq!(bits(fast.shade_kd(&m, m.kd * color, &sp)), bits(want_kd));
                 }
             }
         }

@@ -1546,6 +1546,41 @@ fn shade_sample(
     let sign = if flip { -1.0 } else { 1.0 };
     let mut specular = Vec3::ZERO;
     let (color, n, kr) = match td.mode {
+        ShadeMode::Phong if !needs_footprint && !want_specular && ctx.point_lighting.is_some() => {
+            // The common case without copying the material: untextured (so
+            // no bump or normal map), the point-light model, no pixel index.
+            let base = ctx.bases.get(td.material_id.index());
+            let owned;
+            let base = match base {
+                Some(b) => b,
+                None => {
+                    owned = ctx.base(td);
+                    &owned
+                }
+            };
+            let n = hit.ns * sign;
+            let sp = ShadingPoint {
+                p: hit.p,
+                n,
+                ng: hit.ng * sign,
+                wo,
+            };
+            let c = match &ctx.point_lighting {
+                Some(pl) => pl.shade_kd(base, base.kd * hit.color, &sp),
+                // Not reached: the arm's guard checked `point_lighting`.
+                None => ctx.illuminate(
+                    t,
+                    None,
+                    &SurfaceMaterial {
+                        kd: base.kd * hit.color,
+                        ..*base
+                    },
+                    &sp,
+                    counts,
+                ),
+            };
+            (c, n, base.kr)
+        }
         ShadeMode::Phong => {
             let sm = if needs_footprint {
                 ps.surface_material_lod(&hit, duv_dx, duv_dy)
