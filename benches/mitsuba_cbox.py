@@ -5,7 +5,8 @@ usage: mitsuba_cbox.py render VARIANT SPP FILTER SEED OUT.npy [REPEATS]
        mitsuba_cbox.py compare REF.npy IMG.npy [IMG.npy ...]
        mitsuba_cbox.py regions IMG.npy [IMG.npy ...]
 
-`render` renders mi.cornell_box() (256x256, path, max_depth 8) with VARIANT
+`render` renders mi.cornell_box() (256x256, path, max_depth 8; sampler from
+$MITSUBA_SAMPLER, default the scene's `independent`) with VARIANT
 (scalar_rgb | llvm_ad_rgb) and pixel FILTER (box | gaussian, Mitsuba's
 default), prints `render[i]=SECONDS s  M Msamples/s` per repeat (the render
 call only, as mi.render + dr.eval + sync) and writes the last image as .npy
@@ -14,6 +15,7 @@ call only, as mi.render + dr.eval + sync) and writes the last image as .npy
 against REF, and its mean. `regions` prints the mean colour of a few
 regions (walls, floor, boxes, light) for checking that two scenes match.
 """
+import os
 import sys
 import time
 import numpy as np
@@ -27,6 +29,11 @@ def render(variant, spp, filt, seed, out, repeats):
     d = mi.cornell_box()
     d["integrator"] = {"type": "path", "max_depth": 8}
     d["sensor"]["sampler"]["sample_count"] = spp
+    # MITSUBA_SAMPLER=multijitter|ldsampler|stratified|orthogonal replaces
+    # the scene's `independent` sampler (for comparing like with like).
+    sampler = os.environ.get("MITSUBA_SAMPLER")
+    if sampler:
+        d["sensor"]["sampler"]["type"] = sampler
     if filt != "gaussian":
         d["sensor"]["film"]["rfilter"] = {"type": filt}
     w, h = d["sensor"]["film"]["width"], d["sensor"]["film"]["height"]

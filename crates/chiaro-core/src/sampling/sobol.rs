@@ -25,8 +25,9 @@ use glam::Vec2;
 pub struct SobolSampler {
     /// Hash of the scene seed and the pixel (the same for all its samples).
     pixel: u64,
-    /// The sample's index among the pixel's samples.
-    index: u32,
+    /// The sample's index among the pixel's samples, bit-reversed (the
+    /// shuffle's first step, done once).
+    index_reversed: u32,
     /// `2^m - 1` for the smallest `2^m >= ` the pixel's sample count: the
     /// shuffle permutes indices within `[0, 2^m)`.
     mask: u32,
@@ -40,7 +41,7 @@ impl SobolSampler {
     pub fn new(seed: u64, x: u32, y: u32, index: u32, count: u32) -> Self {
         Self {
             pixel: mix64(seed ^ mix64((u64::from(x) << 32) | u64::from(y)) ^ 0x5EB0_1D00),
-            index,
+            index_reversed: index.reverse_bits(),
             mask: count.max(1).next_power_of_two().wrapping_sub(1),
             dim: 0,
         }
@@ -55,10 +56,12 @@ impl SobolSampler {
     fn next_pair(&mut self) -> (u32, u64) {
         let key = mix64(self.pixel ^ u64::from(self.dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         self.dim += 1;
-        (
-            nested_uniform_scramble(self.index, key as u32) & self.mask,
-            key,
-        )
+        // Nested uniform (Owen) scrambling of the index as a 32-bit
+        // fraction: reverse(LK(reverse(index))), each bit flipped depending
+        // on the bits above it (Burley 2020, listing 3); the first reversal
+        // is done once per sample.
+        let shuffled = laine_karras(self.index_reversed, key as u32).reverse_bits();
+        (shuffled & self.mask, key)
     }
 
     /// The next pair of numbers in `[0, 1)^2` (one fresh dimension pair).
@@ -107,6 +110,8 @@ fn sobol_second_reversed(mut index: u32) -> u32 {
 
 /// Burley's hash-based Laine-Karras permutation: a random permutation of
 /// 32-bit integers in which each bit depends only on the bits below it.
+/// Applied to a bit-reversed fraction and reversed back, it is a nested
+/// uniform (Owen) scramble of that fraction.
 #[inline]
 fn laine_karras(mut x: u32, seed: u32) -> u32 {
     x = x.wrapping_add(seed);
@@ -115,14 +120,6 @@ fn laine_karras(mut x: u32, seed: u32) -> u32 {
     x ^= x.wrapping_mul(0xc7af_e638);
     x ^= x.wrapping_mul(0x8d22_f6e6);
     x
-}
-
-/// Nested uniform (Owen) scrambling of the 32-bit fraction `x` (bit 31 is
-/// the coefficient of 1/2): each bit is flipped depending on the bits above
-/// it (Burley 2020, listing 3).
-#[inline]
-fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
-    laine_karras(x.reverse_bits(), seed).reverse_bits()
 }
 
 #[cfg(test)]
