@@ -602,20 +602,37 @@ impl<'a> Ctx<'a, '_> {
     fn tri_data<'c>(&self, t: u32, cache: &'c mut TriCache<'a>) -> &'c TriData<'a> {
         let slot = t as usize % cache.slots.len();
         let k = cache.slots[slot] as usize;
-        if k < cache.data.len() {
-            if cache.data[k].t != t {
-                cache.data[k] = self.make_tri_data(t);
+        let k = if k < cache.data.len() {
+            if cache.data[k].t == t {
+                return &cache.data[k];
             }
-            &cache.data[k]
+            // Built in place (inlined), not copied in.
+            cache.data[k] = self.tri_geometry(t);
+            k
         } else {
             cache.slots[slot] = cache.data.len() as u32;
-            cache.data.push(self.make_tri_data(t));
-            &cache.data[cache.data.len() - 1]
+            cache.data.push(self.tri_geometry(t));
+            cache.data.len() - 1
+        };
+        let d = &mut cache.data[k];
+        if d.mode == ShadeMode::Flat {
+            d.flat = self.flat_split(d);
         }
+        d
     }
 
     /// The [`TriData`] of triangle `t`, computed.
     fn make_tri_data(&self, t: u32) -> TriData<'a> {
+        let mut d = self.tri_geometry(t);
+        if d.mode == ShadeMode::Flat {
+            d.flat = self.flat_split(&d);
+        }
+        d
+    }
+
+    /// [`Ctx::make_tri_data`] without the flat-shading illumination.
+    #[inline(always)]
+    fn tri_geometry(&self, t: u32) -> TriData<'a> {
         let idx = self.ps.triangles[t as usize].map(|i| i as usize);
         let p3 = idx.map(|i| self.ps.positions[i]);
         // PreparedScene::face_normal(t), from the positions at hand.
@@ -626,7 +643,7 @@ impl<'a> Ctx<'a, '_> {
         let s = Vec3A::from(self.rays.eye) - p[0];
         let material_id = self.ps.tri_material[t as usize];
         let material = self.ps.material(material_id);
-        let mut d = TriData {
+        TriData {
             t,
             idx,
             p,
@@ -646,11 +663,7 @@ impl<'a> Ctx<'a, '_> {
             s,
             q: exact::cross(s, e1),
             flat: Split::default(),
-        };
-        if d.mode == ShadeMode::Flat {
-            d.flat = self.flat_split(&d);
         }
-        d
     }
 
     /// [`PreparedScene::triangle_surface`] at barycentrics `(u, v)`, the
