@@ -244,9 +244,14 @@ struct Split {
 impl Split {
     #[inline]
     fn lerp3(s: [Split; 3], w: Vec3) -> Split {
+        // On SSE vectors: the same operations lane by lane.
+        let l = |f: fn(&Split) -> Vec3| {
+            let [a, b, c] = [&s[0], &s[1], &s[2]].map(|x| Vec3A::from(f(x)));
+            Vec3::from(a * w.x + b * w.y + c * w.z)
+        };
         Split {
-            diffuse: s[0].diffuse * w.x + s[1].diffuse * w.y + s[2].diffuse * w.z,
-            rest: s[0].rest * w.x + s[1].rest * w.y + s[2].rest * w.z,
+            diffuse: l(|x| x.diffuse),
+            rest: l(|x| x.rest),
         }
     }
 }
@@ -1631,7 +1636,13 @@ fn shade_sample(
         }
         ShadeMode::Gouraud => {
             let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
-            let split = match poly.corners.get(&t) {
+            // (No hashing when no triangle needed per-corner values.)
+            let corners = if poly.corners.is_empty() {
+                None
+            } else {
+                poly.corners.get(&t)
+            };
+            let split = match corners {
                 Some(c) => Split::lerp3(*c, w),
                 None => {
                     let table = if flip {
@@ -1643,8 +1654,13 @@ fn shade_sample(
                     Split::lerp3([get(i0), get(i1), get(i2)], w)
                 }
             };
-            let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
-            let tex = ps.diffuse_texture_factor(hit.material, &tc);
+            // diffuse_texture_factor: one without a texture.
+            let tex = if material.texture.is_some() {
+                let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
+                ps.diffuse_texture_factor(hit.material, &tc)
+            } else {
+                Vec3::ONE
+            };
             specular = split.rest;
             (
                 split.diffuse * tex + split.rest,
