@@ -678,7 +678,7 @@ impl<'a> Ctx<'a, '_> {
     ///
     /// With `shading` false (flat-shaded samples, which read neither) the
     /// shading normal is the face normal and the vertex colour zero.
-    #[inline]
+    #[inline(always)]
     fn surface(
         &self,
         td: &TriData<'_>,
@@ -1559,7 +1559,16 @@ fn shade_sample(
         (Vec2::ZERO, Vec2::ZERO)
     };
     let (eye_a, p_a) = (Vec3A::from(eye), Vec3A::from(hit.p));
-    let wo = Vec3::from(exact::normalize_or_zero(eye_a - p_a));
+    // Flat and Gouraud samples read the view direction only to tell the
+    // back of a two-sided surface and for the reflection map.
+    let wo = if td.mode == ShadeMode::Phong
+        || material.two_sided
+        || ctx.ps.scene.environment.is_some()
+    {
+        Vec3::from(exact::normalize_or_zero(eye_a - p_a))
+    } else {
+        Vec3::ZERO
+    };
     let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
     let sign = if flip { -1.0 } else { 1.0 };
     let mut specular = Vec3::ZERO;
