@@ -839,16 +839,20 @@ fn bin_refs(
     out: &mut [Bin],
 ) {
     let (lo, scale) = (Vec3A::from(cb.min), Vec3A::from(scale));
-    let last = bins as i64 - 1;
+    let last = Vec3A::splat((bins - 1) as f32);
     let one = |refs: &[PrimRef], out: &mut [Bin]| {
         for r in refs {
             let (mn, mx) = (r.min(), r.max());
-            // The arithmetic of `bin_of`, three axes at once.
+            // The arithmetic of `bin_of`, three axes at once: clamping
+            // before truncating gives the same bin as truncating first
+            // (the values are finite).
             let c = (mn + mx) * 0.5;
-            let f = (c - lo) * scale;
-            for axis in 0..3 {
-                let k = (f[axis] as i64).clamp(0, last) as usize;
-                let b = &mut out[axis * bins + k];
+            let k = ((c - lo) * scale).max(Vec3A::ZERO).min(last).floor();
+            // Small non-negative integers as floats: adding 2^23 puts the
+            // integer in the low mantissa bits (a vector op, no casts).
+            let k = (k + Vec3A::splat(8_388_608.0)).to_array();
+            for (axis, k) in k.into_iter().enumerate() {
+                let b = &mut out[axis * bins + (k.to_bits() & 0x7f_ffff) as usize];
                 b.min = b.min.min(mn);
                 b.max = b.max.max(mx);
                 b.cmin = b.cmin.min(c);
@@ -929,22 +933,28 @@ fn choose_split(
         if ext[axis] <= 0.0 {
             continue;
         }
-        let (mut b, mut c) = (Aabb::EMPTY, 0u32);
+        // Boxes as SIMD corners: an empty bin's inverted box leaves min/max
+        // unchanged, and areas are only read where the side holds
+        // references (so the box is not empty and the area equals
+        // `Aabb::surface_area`).
+        let (mut lo, mut hi, mut c) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY, 0u32);
         for i in (1..bins).rev() {
-            b = b.union(row[i].bounds());
+            lo = lo.min(row[i].min);
+            hi = hi.max(row[i].max);
             c += row[i].count;
-            right_area[i] = b.surface_area();
+            right_area[i] = box_area(lo, hi);
             right_count[i] = c;
         }
-        let (mut b, mut c) = (Aabb::EMPTY, 0u32);
+        let (mut lo, mut hi, mut c) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY, 0u32);
         for i in 0..bins - 1 {
-            b = b.union(row[i].bounds());
+            lo = lo.min(row[i].min);
+            hi = hi.max(row[i].max);
             c += row[i].count;
             let rc = right_count[i + 1];
             if c == 0 || rc == 0 {
                 continue;
             }
-            let cost = b.surface_area() * blocks(c) + right_area[i + 1] * blocks(rc);
+            let cost = box_area(lo, hi) * blocks(c) + right_area[i + 1] * blocks(rc);
             if cost < best.0 {
                 best = (cost, axis, i);
             }
@@ -964,6 +974,13 @@ fn choose_split(
         bin: best.2,
         bins,
     }
+}
+
+/// Surface area of the non-empty box `[lo, hi]`, as `Aabb::surface_area`.
+#[inline(always)]
+fn box_area(lo: Vec3A, hi: Vec3A) -> f32 {
+    let e = hi - lo;
+    2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
 }
 
 /// Intersection cost of `n` primitives tested [`BLOCK`] at a time, in
