@@ -820,12 +820,16 @@ fn ref_bounds(refs: &[PrimRef], parallel: bool) -> (Aabb, Aabb) {
     }
 }
 
-/// Bin index of a centroid coordinate; the build and the partition use this
-/// one function so they always agree.
+/// Bin index of a centroid coordinate, for the partition. `bin_refs`
+/// computes the same three at once with the same operations, so binning and
+/// partition always agree (`child_bounds` checks the counts and falls back
+/// to a pass over the references if they ever did not).
 #[inline(always)]
 fn bin_of(c: f32, lo: f32, scale: f32, bins: usize) -> usize {
-    let b = ((c - lo) * scale) as i64;
-    b.clamp(0, bins as i64 - 1) as usize
+    // As `bin_refs` computes it: clamp, floor, and read the integer from
+    // the mantissa of `k + 2^23`.
+    let k = ((c - lo) * scale).max(0.0).min((bins - 1) as f32).floor();
+    ((k + 8_388_608.0).to_bits() & 0x7f_ffff) as usize
 }
 
 /// Bins the references' centroids and boxes into `out` (`3 * bins`
