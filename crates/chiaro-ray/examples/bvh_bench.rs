@@ -16,33 +16,13 @@
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
-use chiaro_core::geometry::Ray;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
-use chiaro_core::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
 use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
+use chiaro_testkit::bench::{bvh_rays, cpu_seconds, median};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::io::Write;
 use std::time::Instant;
-
-/// CPU time of this process so far, seconds: the sum of the run times in
-/// `/proc/self/task/*/schedstat` (Linux). Unlike wall-clock time it does not
-/// count time spent descheduled by other processes, so it is the steadier
-/// figure on a shared machine. `None` where the files are unavailable.
-fn cpu_seconds() -> Option<f64> {
-    let mut total = 0u64;
-    for e in std::fs::read_dir("/proc/self/task").ok()? {
-        let s = std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok()?;
-        total += s.split_whitespace().next()?.parse::<u64>().ok()?;
-    }
-    Some(total as f64 * 1e-9)
-}
-
-/// Median of `v` (sorted in place).
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn write_f32(dir: &str, name: &str, data: impl Iterator<Item = f32>) -> std::io::Result<()> {
     let mut out = std::io::BufWriter::new(std::fs::File::create(format!("{dir}/wl_{name}.bin"))?);
@@ -110,28 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Rays: the pinhole camera of embree_rays.py, and random rays.
     let (w, h) = (1000usize, 1000usize);
     let tan = (N as f32 / 2.0) / 20.0;
-    let coherent: Vec<Ray> = (0..w * h)
-        .map(|k| {
-            let (x, y) = (k % w, k / w);
-            let sx = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan;
-            let sy = -((y as f32 + 0.5) / h as f32 * 2.0 - 1.0) * tan;
-            Ray::new(
-                Vec3::new(0.0, 0.0, 20.0),
-                Vec3::new(sx, sy, -1.0).normalize(),
-            )
-        })
-        .collect();
-    let (lo, hi) = (ps.bounds.min, ps.bounds.max);
-    let incoherent: Vec<Ray> = (0..(w * h) as u32)
-        .map(|k| {
-            let mut rng = pixel_rng(1, k, 0, 0);
-            let u = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
-            Ray::new(
-                lo + u * (hi - lo),
-                sample_uniform_sphere(uniform2(&mut rng)),
-            )
-        })
-        .collect();
+    let (coherent, incoherent) = bvh_rays(w, h, tan, &ps.bounds);
 
     if let Some(dir) = &dump {
         std::fs::create_dir_all(dir)?;

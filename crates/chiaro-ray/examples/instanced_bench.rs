@@ -25,31 +25,13 @@
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::accel::instanced::{InstancedBvh, scene_bvh_memory_bytes};
-use chiaro_core::geometry::Ray;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
-use chiaro_core::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
 use chiaro_core::scene::{Camera, Geometry, Material, Object, RenderSettings, Scene, Transform};
+use chiaro_testkit::bench::{bvh_rays, cpu_seconds, median};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
-
-/// CPU time of this process so far, seconds (Linux schedstat); `None`
-/// where unavailable.
-fn cpu_seconds() -> Option<f64> {
-    let mut total = 0u64;
-    for e in std::fs::read_dir("/proc/self/task").ok()? {
-        let s = std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok()?;
-        total += s.split_whitespace().next()?.parse::<u64>().ok()?;
-    }
-    Some(total as f64 * 1e-9)
-}
-
-/// Median of `v` (sorted in place); 0 for an empty slice.
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(0.0)
-}
 
 /// Runs `f` `reps` times: the last result, and the medians of wall and CPU
 /// seconds (CPU `None` where unavailable).
@@ -129,28 +111,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // Rays: the pinhole camera of bvh_bench, and random rays.
     let (w, h) = (1000usize, 1000usize);
-    let coherent: Vec<Ray> = (0..w * h)
-        .map(|k| {
-            let (x, y) = (k % w, k / w);
-            let sx = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan;
-            let sy = -((y as f32 + 0.5) / h as f32 * 2.0 - 1.0) * tan;
-            Ray::new(
-                Vec3::new(0.0, 0.0, 20.0),
-                Vec3::new(sx, sy, -1.0).normalize(),
-            )
-        })
-        .collect();
-    let (lo, hi) = (ps.bounds.min, ps.bounds.max);
-    let incoherent: Vec<Ray> = (0..(w * h) as u32)
-        .map(|k| {
-            let mut rng = pixel_rng(1, k, 0, 0);
-            let u = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
-            Ray::new(
-                lo + u * (hi - lo),
-                sample_uniform_sphere(uniform2(&mut rng)),
-            )
-        })
-        .collect();
+    let (coherent, incoherent) = bvh_rays(w, h, tan, &ps.bounds);
 
     let cpu_note = |c: Option<f64>| c.map_or(String::new(), |c| format!(", cpu {c:.3}s"));
     let (flat, fw, fc) = timed(reps, || pool.install(|| SceneBvh::new(&ps)));

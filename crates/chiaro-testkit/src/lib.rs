@@ -2,6 +2,7 @@
 //! with a report of where two films differ, and small analytic scenes that
 //! several crates' tests share.
 
+pub mod bench;
 pub mod scenes;
 
 use chiaro_core::film::Film;

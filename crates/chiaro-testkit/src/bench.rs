@@ -1,0 +1,56 @@
+//! What the benchmark examples share: process CPU time, medians, and the
+//! ray workload of the BVH benchmarks (the camera of
+//! `shared/peers/embree_rays.py` and uniformly random rays).
+
+use chiaro_core::geometry::{Aabb, Ray};
+use chiaro_core::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
+use glam::Vec3;
+
+/// CPU time of this process so far, seconds: the sum of the run times in
+/// `/proc/self/task/*/schedstat` (Linux). Unlike wall-clock time it does not
+/// count time spent descheduled by other processes, so it is the steadier
+/// figure on a shared machine. `None` where the files are unavailable.
+pub fn cpu_seconds() -> Option<f64> {
+    let mut total = 0u64;
+    for e in std::fs::read_dir("/proc/self/task").ok()? {
+        let s = std::fs::read_to_string(e.ok()?.path().join("schedstat")).ok()?;
+        total += s.split_whitespace().next()?.parse::<u64>().ok()?;
+    }
+    Some(total as f64 * 1e-9)
+}
+
+/// Median of `v` (sorted in place); 0 for an empty slice.
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// The BVH benchmarks' rays, `w * h` of each kind: coherent pinhole rays
+/// from `(0, 0, 20)` looking down `-z` with `tan_half` the tangent of the
+/// half field of view, row by row; and incoherent rays from uniform points
+/// of `bounds` in uniform directions (seeded, the same on every run).
+pub fn bvh_rays(w: usize, h: usize, tan_half: f32, bounds: &Aabb) -> (Vec<Ray>, Vec<Ray>) {
+    let coherent = (0..w * h)
+        .map(|k| {
+            let (x, y) = (k % w, k / w);
+            let sx = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan_half;
+            let sy = -((y as f32 + 0.5) / h as f32 * 2.0 - 1.0) * tan_half;
+            Ray::new(
+                Vec3::new(0.0, 0.0, 20.0),
+                Vec3::new(sx, sy, -1.0).normalize(),
+            )
+        })
+        .collect();
+    let (lo, hi) = (bounds.min, bounds.max);
+    let incoherent = (0..(w * h) as u32)
+        .map(|k| {
+            let mut rng = pixel_rng(1, k, 0, 0);
+            let u = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+            Ray::new(
+                lo + u * (hi - lo),
+                sample_uniform_sphere(uniform2(&mut rng)),
+            )
+        })
+        .collect();
+    (coherent, incoherent)
+}
