@@ -62,6 +62,7 @@ use chiaro_core::scene::{
     Material, RenderSettings, Scene, Severity, ShadeMode, ShadowMethod, Technique, TransparencyMode,
 };
 use chiaro_core::scene::{MaterialId, PixelFilter};
+use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
     LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
@@ -75,9 +76,6 @@ use std::sync::{Mutex, PoisonError};
 
 #[path = "exact.rs"]
 mod exact;
-#[path = "lighting.rs"]
-mod lighting;
-use lighting::PointLighting;
 
 /// Side of the square screen tiles, in pixels.
 pub const TILE_SIZE: u32 = 64;

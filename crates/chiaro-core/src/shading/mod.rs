@@ -23,11 +23,13 @@ pub mod brdf;
 pub mod fresnel;
 pub mod lights;
 pub mod microfacet;
+pub mod point;
 pub mod texture;
 
 pub use brdf::{SurfaceMaterial, eval_brdf_cos};
 pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract};
 pub use lights::{LightSample, sample_light};
+pub use point::PointLighting;
 
 use crate::scene::{DepthCue, Light};
 use glam::{Vec2, Vec3};

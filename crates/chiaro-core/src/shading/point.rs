@@ -1,8 +1,11 @@
-//! The local illumination model specialised for the rasterizer's common
-//! case: no shadows and only point and ambient lights.
+//! The local illumination model specialised for the common case of the
+//! scan converter: no shadows and only point and ambient lights. It lives
+//! here, beside [`shade_local`](super::shade_local), as part of the one
+//! shading function: the same terms in the same order, tested bit for bit
+//! against it, so no technique carries a model of its own.
 //!
 //! [`PointLighting::shade`] returns bit-for-bit what
-//! [`chiaro_core::shading::shade_local`] returns with every light sample
+//! [`super::shade_local`] returns with every light sample
 //! visible: the same floating-point operations in the same order, with the
 //! per-light constants (`color * intensity`) computed once per frame instead
 //! of once per sample, the Phong mirror direction computed once per sample
@@ -15,9 +18,9 @@
 //! makes [`PointLighting::new`] return `None`, and the caller keeps using
 //! `shade_local`.
 
-use chiaro_core::scene::{Attenuation, Light, ReflectanceModel};
-use chiaro_core::shading::brdf::specular_cos;
-use chiaro_core::shading::{ShadingPoint, SurfaceMaterial};
+use super::brdf::specular_cos;
+use super::{ShadingPoint, SurfaceMaterial};
+use crate::scene::{Attenuation, Light, ReflectanceModel};
 use glam::{Vec3, Vec3A};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -37,7 +40,7 @@ enum Source {
 /// The lights of a scene whose lights are all point or ambient lights, in
 /// scene order (the order `shade_local` sums them in).
 #[derive(Debug, Clone)]
-pub(crate) struct PointLighting {
+pub struct PointLighting {
     sources: Vec<Source>,
 }
 
@@ -45,7 +48,7 @@ impl PointLighting {
     /// The lighting of `lights`, or `None` when one of them is neither a
     /// point nor an ambient light. Ambient lights are dropped unless
     /// `ambient` (as `LocalLighting::ambient` does).
-    pub(crate) fn new(lights: &[Light], ambient: bool) -> Option<Self> {
+    pub fn new(lights: &[Light], ambient: bool) -> Option<Self> {
         let mut sources = Vec::with_capacity(lights.len());
         for light in lights {
             match light {
@@ -71,17 +74,17 @@ impl PointLighting {
 
     /// `shade_local(m, sp, lighting, |_, _| (0.5, 0.5), |_, _| 1)`: emission
     /// plus ambient plus, per point light, `pi f(wo, wi) cos_i I / att(d)`
-    /// (see `chiaro_core::shading`), bit-identical to it. Linear RGB
+    /// (see `crate::shading`), bit-identical to it. Linear RGB
     /// radiance towards `sp.wo`.
     #[inline]
-    pub(crate) fn shade(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> Vec3 {
+    pub fn shade(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> Vec3 {
         self.model::<false>(m, m.kd.into(), sp)[0]
     }
 
     /// [`PointLighting::shade`] of `m` with its diffuse colour replaced by
     /// `kd` (a vertex colour applied), without copying the material.
     #[inline]
-    pub(crate) fn shade_kd(&self, m: &SurfaceMaterial, kd: Vec3, sp: &ShadingPoint) -> Vec3 {
+    pub fn shade_kd(&self, m: &SurfaceMaterial, kd: Vec3, sp: &ShadingPoint) -> Vec3 {
         self.model::<false>(m, kd.into(), sp)[0]
     }
 
@@ -89,11 +92,11 @@ impl PointLighting {
     /// to it: `[total, rest]`, `rest` being the part that does not scale
     /// with `kd` (emission and specular reflection).
     #[inline]
-    pub(crate) fn shade_split(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> [Vec3; 2] {
+    pub fn shade_split(&self, m: &SurfaceMaterial, sp: &ShadingPoint) -> [Vec3; 2] {
         self.model::<true>(m, m.kd.into(), sp)
     }
 
-    /// The body of `chiaro_core::shading`'s `local_model` for these lights:
+    /// The body of this module's parent's `local_model` for these lights:
     /// `[total, rest]`, `rest` zero unless `SPLIT`; `kd` stands for `m.kd`.
     #[inline(always)]
     fn model<const SPLIT: bool>(
@@ -165,8 +168,8 @@ impl PointLighting {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chiaro_core::scene::Material;
-    use chiaro_core::shading::{LocalLighting, shade_local, shade_local_split};
+    use crate::scene::Material;
+    use crate::shading::{LocalLighting, shade_local, shade_local_split};
     use glam::Vec2;
 
     /// A seeded xorshift generator of numbers in `[-1, 1)`.
