@@ -18,7 +18,7 @@ use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
-use chiaro_testkit::bench::{bvh_rays, cpu_seconds, median};
+use chiaro_testkit::bench::{bvh_rays, cpu_seconds, flag_value, median};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::io::Write;
@@ -34,12 +34,7 @@ fn write_f32(dir: &str, name: &str, data: impl Iterator<Item = f32>) -> std::io:
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let arg = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
+    let arg = |name: &str| flag_value(&args, name);
     let threads: usize = arg("--threads").map_or(Ok(2), |s| s.parse())?;
     let reps: usize = arg("--reps").map_or(Ok(5), |s| s.parse())?;
     let dump = arg("--dump");

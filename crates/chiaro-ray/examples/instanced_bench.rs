@@ -28,7 +28,7 @@ use chiaro_core::accel::instanced::{InstancedBvh, scene_bvh_memory_bytes};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{Camera, Geometry, Material, Object, RenderSettings, Scene, Transform};
-use chiaro_testkit::bench::{bvh_rays, cpu_seconds, median};
+use chiaro_testkit::bench::{bvh_rays, cpu_seconds, flag_value, median};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -56,12 +56,7 @@ fn timed<T>(reps: usize, mut f: impl FnMut() -> T) -> (T, f64, Option<f64>) {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let arg = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
+    let arg = |name: &str| flag_value(&args, name);
     let threads: usize = arg("--threads").map_or(Ok(2), |s| s.parse())?;
     let reps: usize = arg("--reps").map_or(Ok(5), |s| s.parse())?;
     let png = arg("--png");

@@ -17,6 +17,7 @@ use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::Technique;
 use chiaro_ray::path;
+use chiaro_testkit::bench::flag_value;
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
@@ -30,12 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (Some(scene_path), Some(prefix)) = (args.get(1), args.get(2)) else {
         return Err("usage: path_bench SCENE OUT_PREFIX [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]".into());
     };
-    let arg = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
+    let arg = |name: &str| flag_value(&args, name);
     let loaded = chiaro_io::load_scene(Path::new(scene_path))?;
     for w in &loaded.warnings {
         eprintln!("warning: {w}");

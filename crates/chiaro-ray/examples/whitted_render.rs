@@ -9,6 +9,7 @@
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{AaMode, Technique};
 use chiaro_ray::whitted;
+use chiaro_testkit::bench::flag_value;
 use std::path::Path;
 use std::time::Instant;
 
@@ -17,12 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (Some(scene_path), Some(out)) = (args.get(1), args.get(2)) else {
         return Err("usage: whitted_render SCENE OUT.png [--size WxH] [--samples N] [--adaptive] [--light-samples N] [--threads N]".into());
     };
-    let arg = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
+    let arg = |name: &str| flag_value(&args, name);
     let loaded = chiaro_io::load_scene(Path::new(scene_path))?;
     for w in &loaded.warnings {
         eprintln!("warning: {w}");

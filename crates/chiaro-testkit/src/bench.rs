@@ -54,3 +54,12 @@ pub fn bvh_rays(w: usize, h: usize, tan_half: f32, bounds: &Aabb) -> (Vec<Ray>, 
         .collect();
     (coherent, incoherent)
 }
+
+/// The value after `--name` among command-line `args` (`None` when the
+/// flag is absent or last).
+pub fn flag_value(args: &[String], name: &str) -> Option<String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .cloned()
+}
