@@ -41,7 +41,7 @@
 //! (pbrt-v4 section 6.8.2) so that rounding never culls a primitive the
 //! exact test would hit.
 
-use super::{Accelerator, Hit, WatertightRay, intersect_sphere};
+use super::{Accelerator, Hit, WatertightRay, intersect_sphere, sphere_roots};
 use crate::geometry::{Aabb, Ray};
 use crate::prepared::PreparedScene;
 use glam::{Vec3, Vec3A, Vec4};
@@ -1243,16 +1243,6 @@ impl TriBlock {
     }
 }
 
-/// Both roots of a ray-sphere intersection inside `(t_min, t_max)`, with
-/// the same arithmetic as [`intersect_sphere`].
-fn sphere_roots(ray: &Ray, center: Vec3, radius: f32) -> [Option<f32>; 2] {
-    let Some(t0) = intersect_sphere(ray, center, radius) else {
-        return [None, None];
-    };
-    let rest = Ray { t_min: t0, ..*ray };
-    [Some(t0), intersect_sphere(&rest, center, radius)]
-}
-
 /// The lane mask of slots `first..end` inside block `b`.
 #[inline(always)]
 fn block_lanes(b: usize, first: usize, end: usize) -> u32 {
@@ -1459,6 +1449,10 @@ impl Accelerator for SceneBvh {
                 found
             });
         best
+    }
+
+    fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool {
+        self.visit_hits(ray, visit)
     }
 
     fn occluded(&self, ray: &Ray) -> bool {

@@ -514,6 +514,20 @@ impl Accelerator for InstancedBvh {
         best
     }
 
+    fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool {
+        let order = self.top.prim_order();
+        self.top.traverse_any_leaves(ray, |first, count| {
+            order[first..first + count].iter().any(|&i| {
+                self.instances.get(i as usize).is_some_and(|inst| {
+                    let local = Self::local_ray(inst, ray, ray.t_max);
+                    self.levels[inst.level as usize]
+                        .bvh
+                        .visit_hits(&local, |h| visit(&self.flattened(inst, *h)))
+                })
+            })
+        })
+    }
+
     fn occluded(&self, ray: &Ray) -> bool {
         let order = self.top.prim_order();
         self.top.traverse_any_leaves(ray, |first, count| {
@@ -781,6 +795,68 @@ mod tests {
             "{} vs {flat}",
             bvh.memory_bytes()
         );
+    }
+
+    /// Every hit along `ray`, sorted by prim and `t`.
+    fn all_hits(accel: &dyn Accelerator, ray: &Ray) -> Vec<Hit> {
+        let mut hits = Vec::new();
+        let stopped = accel.for_each_hit(ray, &mut |h| {
+            hits.push(*h);
+            false
+        });
+        assert!(!stopped, "no visit asked to stop");
+        hits.sort_by(|a, b| a.prim.cmp(&b.prim).then(a.t.total_cmp(&b.t)));
+        hits
+    }
+
+    #[test]
+    fn every_hit_matches_brute_force() {
+        let s = instanced_scene();
+        for analytic in [true, false] {
+            let ps = prepare(&s, analytic);
+            let nt = ps.triangles.len() as u32;
+            let list = ListAccel::new(&ps);
+            let accels: [Box<dyn Accelerator>; 2] = [
+                Box::new(InstancedBvh::new(&ps)),
+                Box::new(SceneBvh::new(&ps)),
+            ];
+            let rays = random_rays(&ps, 4000, 11 + analytic as u64);
+            let mut total = 0;
+            for accel in &accels {
+                for r in &rays {
+                    let want = all_hits(&list, r);
+                    let got = all_hits(accel.as_ref(), r);
+                    // Hits near an edge may be reported by either neighbour
+                    // (watertightness promises at least one); the rest must
+                    // be the same hits on the same prims.
+                    let firm = |v: &[Hit]| -> Vec<Hit> {
+                        v.iter()
+                            .filter(|h| h.prim >= nt || edge_distance(h) >= 1e-4)
+                            .copied()
+                            .collect()
+                    };
+                    let (w, g) = (firm(&want), firm(&got));
+                    assert_eq!(w.len(), g.len(), "{r:?}: {want:?} vs {got:?}");
+                    for (b, a) in w.iter().zip(&g) {
+                        assert!(
+                            a.prim == b.prim && same_hit(&ps, r, a, b),
+                            "{r:?}: {a:?} vs {b:?}"
+                        );
+                    }
+                    total += w.len();
+                    // Stopping at the first hit reports it.
+                    let mut seen = 0;
+                    let stopped = accel.for_each_hit(r, &mut |_| {
+                        seen += 1;
+                        true
+                    });
+                    assert_eq!(stopped, !got.is_empty());
+                    assert_eq!(seen, usize::from(stopped));
+                }
+            }
+            // Rays cross several surfaces: the comparison is not vacuous.
+            assert!(total > rays.len() * 2, "{total} hits");
+        }
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The brute-force accelerator: tests every primitive. Slow and obviously
 //! correct; the oracle the BVH is tested against.
 
-use super::{Accelerator, Hit, intersect_sphere, intersect_triangle};
+use super::{Accelerator, Hit, intersect_sphere, intersect_triangle, sphere_roots};
 use crate::geometry::Ray;
 use crate::prepared::PreparedScene;
 use glam::Vec3;
@@ -65,5 +65,31 @@ impl Accelerator for ListAccel {
                 .spheres
                 .iter()
                 .any(|&(c, r)| intersect_sphere(ray, c, r).is_some())
+    }
+
+    fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool {
+        let n = self.tris.len() as u32;
+        for (i, t) in self.tris.iter().enumerate() {
+            if let Some((t, u, v)) = intersect_triangle(ray, t[0], t[1], t[2]) {
+                let prim = i as u32;
+                if visit(&Hit { t, prim, u, v }) {
+                    return true;
+                }
+            }
+        }
+        for (i, &(c, rad)) in self.spheres.iter().enumerate() {
+            let prim = n + i as u32;
+            for t in sphere_roots(ray, c, rad).into_iter().flatten() {
+                if visit(&Hit {
+                    t,
+                    prim,
+                    u: 0.0,
+                    v: 0.0,
+                }) {
+                    return true;
+                }
+            }
+        }
+        false
     }
 }

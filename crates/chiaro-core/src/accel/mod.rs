@@ -29,6 +29,12 @@ pub trait Accelerator: Send + Sync {
     fn intersect(&self, ray: &Ray) -> Option<Hit>;
     /// True if anything is hit with `t` in `(ray.t_min, ray.t_max)`.
     fn occluded(&self, ray: &Ray) -> bool;
+    /// Calls `visit(hit)` for every intersection with `t` in
+    /// `(ray.t_min, ray.t_max)`, in no particular order (a sphere crossed
+    /// twice reports both roots), until `visit` returns true; returns true
+    /// if it did. Shadow rays use it to skip objects that cast no shadow
+    /// and to attenuate light through transparent surfaces.
+    fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool;
 }
 
 /// Watertight ray-triangle intersection (Woop, Benthin and Wald 2013),
@@ -171,6 +177,16 @@ pub fn intersect_sphere(ray: &Ray, center: glam::Vec3, radius: f32) -> Option<f3
     } else {
         None
     }
+}
+
+/// Both hits of a sphere in `(ray.t_min, ray.t_max)`, nearer first (the
+/// second is `None` when the ray leaves the range inside the sphere).
+pub(crate) fn sphere_roots(ray: &Ray, center: glam::Vec3, radius: f32) -> [Option<f32>; 2] {
+    let Some(t0) = intersect_sphere(ray, center, radius) else {
+        return [None, None];
+    };
+    let rest = Ray { t_min: t0, ..*ray };
+    [Some(t0), intersect_sphere(&rest, center, radius)]
 }
 
 #[cfg(test)]
