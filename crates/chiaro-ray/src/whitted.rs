@@ -33,7 +33,7 @@
 //! ambient term, and cross-technique tests call [`Tracer::light_visibility`].
 
 use chiaro_core::accel::Accelerator;
-use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::accel::instanced::build_accelerator;
 use chiaro_core::error::{CoreError, Result};
 use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles_in};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
@@ -180,12 +180,13 @@ pub fn specular_rays(
 }
 
 /// The Whitted ray tracer over one prepared scene: the flattened scene, its
-/// BVH, the settings, and optionally an indirect-diffuse lookup.
+/// accelerator, the settings, and optionally an indirect-diffuse lookup.
 pub struct Tracer<'s> {
     /// The flattened scene (analytic spheres kept).
     pub prepared: PreparedScene<'s>,
-    /// The BVH over `prepared`.
-    pub bvh: SceneBvh,
+    /// The accelerator over `prepared`: the flat BVH, or the two-level BVH
+    /// when meshes are shared enough ([`build_accelerator`]).
+    pub accel: Box<dyn Accelerator>,
     /// The render settings.
     pub settings: RenderSettings,
     indirect: Option<Box<IndirectFn<'s>>>,
@@ -203,14 +204,13 @@ impl std::fmt::Debug for Tracer<'_> {
         f.debug_struct("Tracer")
             .field("triangles", &self.prepared.triangles.len())
             .field("spheres", &self.prepared.spheres.len())
-            .field("bvh_nodes", &self.bvh.bvh().node_count())
             .field("indirect", &self.indirect.is_some())
             .finish_non_exhaustive()
     }
 }
 
 impl<'s> Tracer<'s> {
-    /// Flattens `scene` (analytic spheres) and builds its BVH.
+    /// Flattens `scene` (analytic spheres) and builds its accelerator.
     pub fn new(scene: &'s Scene, settings: &RenderSettings) -> Self {
         let prepared = PreparedScene::new(
             scene,
@@ -224,7 +224,7 @@ impl<'s> Tracer<'s> {
 
     /// A tracer over an already prepared scene.
     pub fn from_prepared(prepared: PreparedScene<'s>, settings: &RenderSettings) -> Self {
-        let bvh = SceneBvh::new(&prepared);
+        let accel = build_accelerator(&prepared);
         let scene = prepared.scene;
         let material_kt: Vec<Vec3> = scene
             .materials
@@ -244,13 +244,20 @@ impl<'s> Tracer<'s> {
                 });
         Self {
             prepared,
-            bvh,
+            accel,
             settings: settings.clone(),
             indirect: None,
             material_kt,
             object_casts,
             all_opaque,
         }
+    }
+
+    /// Replaces the accelerator (built by [`build_accelerator`]) with
+    /// `accel`, which must be built over this tracer's `prepared` scene.
+    pub fn with_accelerator(mut self, accel: Box<dyn Accelerator>) -> Self {
+        self.accel = accel;
+        self
     }
 
     /// Installs an indirect-diffuse lookup (see [`IndirectFn`]): at every hit
@@ -325,7 +332,7 @@ impl<'s> Tracer<'s> {
         // an emissive triangle).
         let ray = Ray::segment(origin, sample.point);
         if self.all_opaque {
-            return if self.bvh.occluded(&ray) {
+            return if self.accel.occluded(&ray) {
                 Vec3::ZERO
             } else {
                 Vec3::ONE
@@ -337,26 +344,28 @@ impl<'s> Tracer<'s> {
         // watertight test reports on both) must tint once.
         let mut seen = [(0.0f32, u32::MAX); 16];
         let mut nseen = 0usize;
-        let blocked = self.bvh.visit_hits(&ray, |h| match self.blocker(h.prim) {
-            Blocker::Ignore => false,
-            Blocker::Opaque => true,
-            Blocker::Filter(kt) => {
-                let object = self.object_of(h.prim);
-                let tol = 1e-5 * h.t.abs().max(1e-3);
-                if seen[..nseen]
-                    .iter()
-                    .any(|&(t, o)| o == object && (t - h.t).abs() <= tol)
-                {
-                    return false;
+        let blocked = self
+            .accel
+            .for_each_hit(&ray, &mut |h| match self.blocker(h.prim) {
+                Blocker::Ignore => false,
+                Blocker::Opaque => true,
+                Blocker::Filter(kt) => {
+                    let object = self.object_of(h.prim);
+                    let tol = 1e-5 * h.t.abs().max(1e-3);
+                    if seen[..nseen]
+                        .iter()
+                        .any(|&(t, o)| o == object && (t - h.t).abs() <= tol)
+                    {
+                        return false;
+                    }
+                    if nseen < seen.len() {
+                        seen[nseen] = (h.t, object);
+                        nseen += 1;
+                    }
+                    tr *= kt;
+                    tr.max_element() <= 0.0
                 }
-                if nseen < seen.len() {
-                    seen[nseen] = (h.t, object);
-                    nseen += 1;
-                }
-                tr *= kt;
-                tr.max_element() <= 0.0
-            }
-        });
+            });
         if blocked { Vec3::ZERO } else { tr }
     }
 
@@ -391,7 +400,7 @@ impl<'s> Tracer<'s> {
         state: &mut TraceState,
     ) -> (Vec3, f32, Vec3) {
         state.rays += 1;
-        let Some(hit) = self.bvh.intersect(ray) else {
+        let Some(hit) = self.accel.intersect(ray) else {
             return (
                 self.miss_radiance(ray.dir, depth),
                 f32::INFINITY,
@@ -889,7 +898,7 @@ mod tests {
             let mut ray = Ray::new(Vec3::new(0.0, 0.5, 0.0) - 2.0 * d_in, d_in);
             let mut points = Vec::new();
             for _ in 0..2 {
-                let hit = t.bvh.intersect(&ray).expect("slab face");
+                let hit = t.accel.intersect(&ray).expect("slab face");
                 let sh = t.prepared.surface(&ray, &hit);
                 let wo = -ray.dir.normalize();
                 let front = sh.ng.dot(wo) >= 0.0;
@@ -1005,6 +1014,66 @@ mod tests {
             (v - Vec3::new(0.5, 0.25, 1.0)).abs().max_element() < 1e-6,
             "{v}"
         );
+    }
+
+    #[test]
+    fn two_level_bvh_renders_like_the_flat_bvh() {
+        use chiaro_core::accel::bvh::SceneBvh;
+        use chiaro_core::accel::instanced::{
+            InstancedBvh, MIN_DUPLICATED_TRIANGLES, duplicated_triangles,
+        };
+        let mut s = floor_scene();
+        let opaque = s.add_material(lambert(0.7));
+        let tinted = s.add_material(Material {
+            transmit: Vec3::new(0.6, 0.4, 0.8),
+            ..glass(1.0, false)
+        });
+        // Eight placements of one 5120-triangle sphere, half of them
+        // transparent filters (their shadow rays visit every hit).
+        let ball = s.add_mesh(primitives::icosphere(0.45, 4));
+        for i in 0..8 {
+            s.objects.push(Object {
+                geometry: Geometry::Mesh(ball),
+                material: if i % 2 == 0 { opaque } else { tinted },
+                smooth: true,
+                transform: Transform {
+                    translate: Vec3::new(i as f32 - 3.5, 0.6 + 0.3 * (i % 3) as f32, -0.5),
+                    scale: Vec3::new(1.0, 1.0 + 0.1 * i as f32, 1.0),
+                    ..Default::default()
+                },
+                ..Default::default()
+            });
+        }
+        let mut st = settings(48, 32);
+        st.light_samples = 1;
+        let flat_tracer = Tracer::new(&s, &st);
+        assert!(duplicated_triangles(&flat_tracer.prepared) >= MIN_DUPLICATED_TRIANGLES);
+        let flat = SceneBvh::new(&flat_tracer.prepared);
+        let flat_tracer = flat_tracer.with_accelerator(Box::new(flat));
+        let two_level_tracer = Tracer::new(&s, &st);
+        let two_level = InstancedBvh::new(&two_level_tracer.prepared);
+        assert_eq!(two_level.instance_count(), 8 + 1);
+        let two_level_tracer = two_level_tracer.with_accelerator(Box::new(two_level));
+        let (a, _) = flat_tracer.render(&NoProgress).expect("flat render");
+        let (b, _) = two_level_tracer
+            .render(&NoProgress)
+            .expect("two-level render");
+        // Tinted shadows and tinted views through the filters are present.
+        let tinted_px = a
+            .color
+            .iter()
+            .filter(|c| (c.x - c.y).abs() > 0.02 && c.z > c.y)
+            .count();
+        assert!(tinted_px > 20, "{tinted_px} tinted pixels");
+        // Object-space rounding may move a silhouette or a shadow edge by a
+        // pixel; everything else is the same up to float noise.
+        let differ = a
+            .color
+            .iter()
+            .zip(&b.color)
+            .filter(|(x, y)| (**x - **y).abs().max_element() > 1e-3)
+            .count();
+        assert!(differ * 100 <= a.color.len(), "{differ} pixels differ");
     }
 
     #[test]
