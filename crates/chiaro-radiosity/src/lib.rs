@@ -221,9 +221,10 @@ impl Config {
     }
 }
 
-/// The ray accelerator used for visibility (one line to switch).
+/// The ray accelerator used for visibility: the flat BVH, or the
+/// two-level BVH when meshes are shared enough.
 fn make_accel(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
-    Box::new(chiaro_core::accel::bvh::SceneBvh::new(ps))
+    chiaro_core::accel::instanced::build_accelerator(ps)
 }
 
 fn check_scene(scene: &Scene) -> Result<(), CoreError> {
