@@ -130,6 +130,20 @@ pub struct Imported {
     pub warnings: Vec<String>,
 }
 
+/// Where [`Imported::add_shared`] put a file's meshes and materials in a
+/// scene: what [`Imported::place`] needs to place the file again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SharedImport {
+    /// Scene id of the file's first mesh.
+    pub mesh_base: u32,
+    /// Scene id of the file's first material (unused with an override).
+    pub mat_base: u32,
+    /// The material that replaces the file's, if any.
+    pub material_override: Option<MaterialId>,
+    /// The material of objects that name none (the override if given).
+    pub default_material: Option<MaterialId>,
+}
+
 impl Imported {
     /// Adds everything to `scene`, placing the file with `world_from_file`.
     ///
@@ -140,6 +154,10 @@ impl Imported {
     /// its name prefixes the object names when not empty. Lights and cameras
     /// are *not* added; the caller decides. Returns the indices of the new
     /// objects in `scene.objects`.
+    ///
+    /// Equivalent to [`Imported::add_shared`] followed by
+    /// [`Imported::place`]; call those to place one file several times
+    /// over one copy of its meshes and materials.
     pub fn merge_into(
         &self,
         scene: &mut Scene,
@@ -147,6 +165,21 @@ impl Imported {
         material_override: Option<MaterialId>,
         template: &Object,
     ) -> Vec<usize> {
+        let shared = self.add_shared(scene, material_override);
+        self.place(scene, &shared, world_from_file, template)
+    }
+
+    /// Adds the file's meshes, and unless `material_override` is given its
+    /// textures and materials (plus a default material if an object has
+    /// none), to `scene`, without placing any object. The result says
+    /// where they went; [`Imported::place`] places the file over them any
+    /// number of times, so the placements share one object-space copy of
+    /// each mesh (instances, for the two-level BVH).
+    pub fn add_shared(
+        &self,
+        scene: &mut Scene,
+        material_override: Option<MaterialId>,
+    ) -> SharedImport {
         let tex_base = scene.textures.len() as u32;
         let shift_tex = |t: Option<TextureId>| t.map(|t| TextureId(t.0 + tex_base));
         let mat_base = scene.materials.len() as u32;
@@ -164,10 +197,6 @@ impl Imported {
                 scene.materials.push(m);
             }
         }
-        let mut default_material: Option<MaterialId> = material_override;
-        let mut get_default = |scene: &mut Scene| {
-            *default_material.get_or_insert_with(|| scene.add_material(Material::default()))
-        };
         for mesh in &self.meshes {
             let mut mesh = mesh.clone();
             if material_override.is_some() {
@@ -179,12 +208,42 @@ impl Imported {
             }
             scene.meshes.push(mesh);
         }
+        let needs_default = self.objects.iter().any(|o| o.material.is_none());
+        let default_material = match material_override {
+            Some(m) => Some(m),
+            None if needs_default => Some(scene.add_material(Material::default())),
+            None => None,
+        };
+        SharedImport {
+            mesh_base,
+            mat_base,
+            material_override,
+            default_material,
+        }
+    }
+
+    /// Places the file's objects with `world_from_file` over meshes and
+    /// materials that [`Imported::add_shared`] added to this `scene`.
+    /// `template` is as in [`Imported::merge_into`]. Returns the indices of
+    /// the new objects in `scene.objects`.
+    pub fn place(
+        &self,
+        scene: &mut Scene,
+        shared: &SharedImport,
+        world_from_file: Mat4,
+        template: &Object,
+    ) -> Vec<usize> {
         let mut out = Vec::with_capacity(self.objects.len());
         for o in &self.objects {
-            let material = match (material_override, o.material) {
+            let material = match (shared.material_override, o.material) {
                 (Some(m), _) => m,
-                (None, Some(local)) => MaterialId(mat_base + local as u32),
-                (None, None) => get_default(scene),
+                (None, Some(local)) => MaterialId(shared.mat_base + local as u32),
+                // `add_shared` made one when the file needs it; a
+                // `SharedImport` of another file may lack it.
+                (None, None) => match shared.default_material {
+                    Some(m) => m,
+                    None => scene.add_material(Material::default()),
+                },
             };
             let name = if template.name.is_empty() {
                 o.name.clone()
@@ -194,7 +253,7 @@ impl Imported {
             out.push(scene.objects.len());
             scene.objects.push(Object {
                 name,
-                geometry: Geometry::Mesh(MeshId(mesh_base + o.mesh as u32)),
+                geometry: Geometry::Mesh(MeshId(shared.mesh_base + o.mesh as u32)),
                 material,
                 transform: Transform::from_matrix(world_from_file * o.matrix),
                 ..template.clone()

@@ -149,6 +149,7 @@ pub fn parse_scene(text: &str, base: &Path, path: &Path) -> Result<Loaded> {
         warnings: Vec::new(),
         images: HashMap::new(),
         primitive_meshes: HashMap::new(),
+        mesh_files: HashMap::new(),
         spans: SpanIndex::default(),
     };
     // Parse once with spans, refuse NaN/Inf anywhere, then deserialize.
@@ -226,8 +227,16 @@ struct Ctx<'a> {
     /// primitive share one object-space mesh (instances, which the
     /// two-level BVH builds once).
     primitive_meshes: HashMap<String, chiaro_core::scene::MeshId>,
+    /// Mesh files already read, by resolved path and material override:
+    /// later objects naming the same file place it again over the same
+    /// meshes and materials (instances) instead of reading it again.
+    mesh_files: MeshFiles,
     spans: SpanIndex,
 }
+
+/// See [`Ctx::mesh_files`].
+type MeshFiles =
+    HashMap<(PathBuf, Option<MaterialId>), (std::rc::Rc<crate::Imported>, crate::SharedImport)>;
 
 /// A field name and the span of its value, for "does not apply" checks.
 type Present<'r> = Vec<(&'static str, Option<Range<usize>>)>;
@@ -1305,25 +1314,28 @@ impl Ctx<'_> {
                 ),
             ));
         }
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .unwrap_or_default();
-        let imported = match ext.as_str() {
-            "obj" => crate::obj::load_obj_meshes(&path),
-            "gltf" | "glb" => crate::gltf_import::load_gltf(&path),
-            _ => {
-                return Err(self.at(
-                    file.span(),
-                    format!(
-                        "mesh file {:?}: expected a .obj, .gltf or .glb file",
-                        file.get_ref()
-                    ),
-                ));
+        let key = (
+            std::fs::canonicalize(&path).unwrap_or(path.clone()),
+            material,
+        );
+        let (imported, shared) = match self.mesh_files.get(&key) {
+            Some((imported, shared)) => (imported.clone(), *shared),
+            None => {
+                let imported = std::rc::Rc::new(self.read_mesh_file(&path, file)?);
+                let mesh_start = scene.meshes.len();
+                let mat_start = scene.materials.len();
+                let shared = imported.add_shared(scene, material);
+                for _ in mat_start..scene.materials.len() {
+                    self.spans.materials.push(file.span());
+                }
+                for _ in mesh_start..scene.meshes.len() {
+                    self.spans.meshes.push(span.clone());
+                }
+                self.warnings.extend(imported.warnings.iter().cloned());
+                self.mesh_files.insert(key, (imported.clone(), shared));
+                (imported, shared)
             }
-        }
-        .map_err(|e| self.at(file.span(), format!("cannot load mesh file: {e}")))?;
+        };
         if imported.objects.is_empty() {
             self.warnings.push(format!(
                 "{}: mesh file {:?} contains no triangles",
@@ -1337,15 +1349,7 @@ impl Ctx<'_> {
         if tmpl.name.is_empty() {
             tmpl.name = file.get_ref().clone();
         }
-        let mesh_start = scene.meshes.len();
-        let mat_start = scene.materials.len();
-        let new = imported.merge_into(scene, world_from_file, material, &tmpl);
-        for _ in mat_start..scene.materials.len() {
-            self.spans.materials.push(file.span());
-        }
-        for _ in mesh_start..scene.meshes.len() {
-            self.spans.meshes.push(span.clone());
-        }
+        let new = imported.place(scene, &shared, world_from_file, &tmpl);
         for _ in new {
             self.spans.objects.push(span.clone());
         }
@@ -1355,8 +1359,30 @@ impl Ctx<'_> {
                 .push(crate::transform_light(l, world_from_file));
             self.spans.lights.push(file.span());
         }
-        self.warnings.extend(imported.warnings);
         Ok(())
+    }
+
+    /// Reads an OBJ or glTF file (`path`, resolved from `file`).
+    fn read_mesh_file(&self, path: &Path, file: &Sp<String>) -> Result<crate::Imported> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
+        match ext.as_str() {
+            "obj" => crate::obj::load_obj_meshes(path),
+            "gltf" | "glb" => crate::gltf_import::load_gltf(path),
+            _ => {
+                return Err(self.at(
+                    file.span(),
+                    format!(
+                        "mesh file {:?}: expected a .obj, .gltf or .glb file",
+                        file.get_ref()
+                    ),
+                ));
+            }
+        }
+        .map_err(|e| self.at(file.span(), format!("cannot load mesh file: {e}")))
     }
 
     fn where_(&self, span: Range<usize>) -> String {

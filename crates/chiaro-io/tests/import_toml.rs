@@ -330,3 +330,69 @@ transform = { translate = [0, 1, 0], scale = 0.01 }
     let box_objects = s.objects.len() - duck.len();
     assert!(box_objects >= 5, "{box_objects}");
 }
+
+/// A mesh file named by several objects is read once and its meshes and
+/// materials are shared by the placements (instances); a material override
+/// gets its own copy (its faces drop the file's materials).
+#[test]
+fn one_mesh_file_placed_twice_shares_its_meshes() {
+    let scenes = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes"));
+    let text = r#"
+[material.gold]
+diffuse = [0.8, 0.6, 0.2]
+
+[[object]]
+name = "a"
+mesh = "meshes/cornell-tall-block.obj"
+
+[[object]]
+name = "b"
+mesh = "meshes/../meshes/cornell-tall-block.obj"
+transform = { translate = [2, 0, 0], rotate = [0, 30, 0] }
+
+[[object]]
+name = "c"
+mesh = "meshes/cornell-tall-block.obj"
+material = "gold"
+"#;
+    let once = load_scene_str(
+        r#"
+[[object]]
+mesh = "meshes/cornell-tall-block.obj"
+"#,
+        scenes,
+        "once.toml",
+    )
+    .expect("loads");
+    let l = load_scene_str(text, scenes, "twice.toml").expect("loads");
+    let s = &l.scene;
+    let meshes_of = |prefix: &str| -> Vec<Geometry> {
+        s.objects
+            .iter()
+            .filter(|o| o.name.starts_with(prefix))
+            .map(|o| o.geometry)
+            .collect()
+    };
+    let (a, b, c) = (meshes_of("a/"), meshes_of("b/"), meshes_of("c/"));
+    assert!(!a.is_empty());
+    assert_eq!(a, b, "the same file through another path shares its meshes");
+    assert_eq!(a.len(), c.len());
+    assert!(a.iter().zip(&c).all(|(x, y)| x != y), "the override copies");
+    // Meshes: one copy for a and b, one for c; materials: the file's once,
+    // plus gold.
+    assert_eq!(s.meshes.len(), 2 * once.scene.meshes.len());
+    assert_eq!(s.materials.len(), once.scene.materials.len() + 1);
+    // The placements differ only by the transform.
+    let pa = s
+        .objects
+        .iter()
+        .find(|o| o.name.starts_with("a/"))
+        .expect("a");
+    let pb = s
+        .objects
+        .iter()
+        .find(|o| o.name.starts_with("b/"))
+        .expect("b");
+    assert_eq!(pa.material, pb.material);
+    assert_ne!(pa.transform, pb.transform);
+}
