@@ -233,12 +233,14 @@ fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     s.radiosity.solver = "hierarchical".into();
     s.radiosity.formfactor = "raycast".into();
     s.radiosity.patch_size = 40.0;
-    // Converged: the BF refinement threshold scales with the tolerance, and
-    // the default 0.01 leaves the back wall ~5% dark (0.001: within 1.5%).
-    s.radiosity.tolerance = 0.001;
+    // At the default tolerance (0.01), which also sets the BF refinement
+    // threshold of the hierarchical solver.
+    s.radiosity.tolerance = 0.01;
     let rad = render(&scene, &s);
     s.technique = Technique::Path;
-    s.samples = 256;
+    // Enough samples that the reference's own noise on a wall mean is well
+    // under the bound (about 1 %).
+    s.samples = 1024;
     s.path.max_depth = 64;
     let path = render(&scene, &s);
     let (a, b) = (wall_means(&scene, &rad), wall_means(&scene, &path));
