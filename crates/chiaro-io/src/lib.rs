@@ -47,6 +47,14 @@ pub struct Loaded {
     pub warnings: Vec<String>,
 }
 
+/// The extension of `path` in lower case, or an empty string.
+pub(crate) fn lowercase_extension(path: &Path) -> String {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default()
+}
+
 /// Reads a scene file, choosing the reader by extension (case-insensitive):
 /// `.toml` (the chiaro scene format, see [`scene_toml`]), `.obj` (with its
 /// `.mtl`), `.gltf` or `.glb`.
@@ -60,11 +68,7 @@ pub struct Loaded {
 /// glTF JSON path) when the file cannot be read, does not parse, or
 /// describes a scene that `Scene::validate` rejects.
 pub fn load_scene(path: &Path) -> Result<Loaded> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
+    let ext = lowercase_extension(path);
     match ext.as_str() {
         "toml" => {
             let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;

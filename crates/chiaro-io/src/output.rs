@@ -81,11 +81,7 @@ impl ImageFormat {
     /// [`IoError::Format`] naming the file and listing
     /// [`SUPPORTED_EXTENSIONS`] for any other extension or none.
     pub fn from_path(path: &Path) -> Result<Self> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .unwrap_or_default();
+        let ext = crate::lowercase_extension(path);
         match ext.as_str() {
             "png" => Ok(Self::Png),
             "exr" => Ok(Self::Exr),

@@ -1364,11 +1364,7 @@ impl Ctx<'_> {
 
     /// Reads an OBJ or glTF file (`path`, resolved from `file`).
     fn read_mesh_file(&self, path: &Path, file: &Sp<String>) -> Result<crate::Imported> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .unwrap_or_default();
+        let ext = crate::lowercase_extension(path);
         match ext.as_str() {
             "obj" => crate::obj::load_obj_meshes(path),
             "gltf" | "glb" => crate::gltf_import::load_gltf(path),
