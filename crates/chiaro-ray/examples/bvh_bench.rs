@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --release -p chiaro-ray --example bvh_bench -- [--threads 2] [--reps 5] [--dump DIR]
-//!     [--max-leaf 4] [--traversal-cost 1] [--bins 16] [--stats]
+//!     [--max-leaf 4] [--traversal-cost 1] [--bins 16] [--stats] [--build-only]
 //! ```
 //! `--dump DIR` writes the mesh and both ray sets as `DIR/wl_{V,F,O,D,Or,Dr}.bin`
 //! (raw little-endian f32 / u32 triples), the files `embree3_native` reads,
@@ -135,6 +135,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         bvh.bvh().depth()
     );
 
+    if args.iter().any(|a| a == "--build-only") {
+        return Ok(());
+    }
     if args.iter().any(|a| a == "--stats") {
         for (name, rays) in [("coherent", &coherent), ("incoherent", &incoherent)] {
             let mut tests = 0u64;

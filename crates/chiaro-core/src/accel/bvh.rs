@@ -44,7 +44,7 @@
 use super::{Accelerator, Hit, WatertightRay, intersect_sphere, sphere_roots};
 use crate::geometry::{Aabb, Ray};
 use crate::prepared::PreparedScene;
-use glam::{Vec3, Vec3A, Vec4};
+use glam::{BVec3A, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
 /// Most bins a build may use.
@@ -367,14 +367,12 @@ pub struct Bvh {
 }
 
 /// One SAH bin: the box of its references (SIMD corners) and their count.
+/// The children's centroid bounds are gathered by [`partition`], which
+/// computes every centroid anyway, rather than per bin on every axis.
 #[derive(Debug, Clone, Copy)]
 struct Bin {
     min: Vec3A,
     max: Vec3A,
-    /// Bounds of the references' centroids, so that a split knows its
-    /// children's centroid bounds without another pass.
-    cmin: Vec3A,
-    cmax: Vec3A,
     count: u32,
 }
 
@@ -391,31 +389,32 @@ impl Bin {
 const EMPTY_BIN: Bin = Bin {
     min: Vec3A::INFINITY,
     max: Vec3A::NEG_INFINITY,
-    cmin: Vec3A::INFINITY,
-    cmax: Vec3A::NEG_INFINITY,
     count: 0,
 };
 
-/// Bounds and centroid bounds of the two sides of a binned split: bins
-/// `0..=bin` of `axis` and the rest. Exact unions, so they equal what
-/// [`ref_bounds`] would compute over each side's references.
-fn split_bounds(binned: &[Bin], axis: usize, bin: usize, bins: usize) -> [(Aabb, Aabb); 2] {
-    let row = &binned[axis * bins..(axis + 1) * bins];
+/// The bins of one node, axis-major; a node with `bins` bins uses the first
+/// `bins` of each row. Fixed rows of [`MAX_BINS`] let the binning loop
+/// index by a masked bin number with no bounds check.
+type Bins = [[Bin; MAX_BINS]; 3];
+
+/// A fresh set of bins, on the heap (9 KiB).
+fn new_bins() -> Box<Bins> {
+    Box::new([[EMPTY_BIN; MAX_BINS]; 3])
+}
+
+/// Bounds of the two sides of a binned split: bins `0..=bin` of `axis`
+/// and the rest. Exact unions, so they equal what [`ref_bounds`] would
+/// compute over each side's references.
+fn split_bounds(binned: &Bins, axis: usize, bin: usize, bins: usize) -> [Aabb; 2] {
+    let row = &binned[axis][..bins];
     let side = |r: &[Bin]| {
-        let b = r.iter().fold(EMPTY_BIN, |a, b| Bin {
-            min: a.min.min(b.min),
-            max: a.max.max(b.max),
-            cmin: a.cmin.min(b.cmin),
-            cmax: a.cmax.max(b.cmax),
-            count: 0,
-        });
-        (
-            b.bounds(),
-            Aabb {
-                min: b.cmin.into(),
-                max: b.cmax.into(),
-            },
-        )
+        r.iter()
+            .fold(EMPTY_BIN, |a, b| Bin {
+                min: a.min.min(b.min),
+                max: a.max.max(b.max),
+                count: 0,
+            })
+            .bounds()
     };
     [side(&row[..=bin]), side(&row[bin + 1..])]
 }
@@ -455,12 +454,21 @@ impl Bvh {
             },
             parallel_threshold: opts.parallel_threshold.max(2),
         };
-        let make = |(i, b): (usize, &Aabb)| {
-            (!b.is_empty() && b.min.is_finite() && b.max.is_finite())
-                .then_some(PrimRef::new(b, i as u32))
-        };
+        let usable = |b: &Aabb| !b.is_empty() && b.min.is_finite() && b.max.is_finite();
+        let make = |(i, b): (usize, &Aabb)| usable(b).then_some(PrimRef::new(b, i as u32));
         let mut refs: Vec<PrimRef> = if bounds.len() >= opts.parallel_threshold {
-            bounds.par_iter().enumerate().filter_map(make).collect()
+            // An indexed `map` collects straight into place; `filter_map`
+            // would gather pieces and copy them, so it is kept for the
+            // rare input with unusable boxes.
+            if bounds.par_iter().all(usable) {
+                bounds
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, b)| PrimRef::new(b, i as u32))
+                    .collect()
+            } else {
+                bounds.par_iter().enumerate().filter_map(make).collect()
+            }
         } else {
             bounds.iter().enumerate().filter_map(make).collect()
         };
@@ -701,25 +709,29 @@ impl Bvh {
 /// Slot order with every leaf starting at a multiple of [`BLOCK`], so that
 /// a leaf of up to four primitives is one block of a [`SceneBvh`]; the gaps
 /// hold [`PAD_SLOT`]. Rewrites the leaves' first slots to match.
+///
+/// Leaves are disjoint runs covering every slot, and [`collapse`] keeps
+/// each node's children in slot order, so a depth-first walk in lane order
+/// meets the leaves in slot order: no sort is needed.
 fn align_leaves(nodes: &mut [BvhNode], refs: &[PrimRef]) -> Vec<u32> {
-    // Leaves are disjoint runs covering every slot; visit them in slot order.
-    let mut leaves: Vec<(u32, usize, usize)> = Vec::new();
-    for (k, n) in nodes.iter().enumerate() {
+    fn walk(nodes: &mut [BvhNode], k: usize, refs: &[PrimRef], order: &mut Vec<u32>) {
         for lane in 0..WIDTH {
-            let c = n.count[lane];
-            if c != 0 && c != EMPTY_LANE {
-                leaves.push((n.child[lane], k, lane));
+            let (c, first) = (nodes[k].count[lane], nodes[k].child[lane] as usize);
+            if c == EMPTY_LANE {
+                continue;
             }
+            if c == 0 {
+                walk(nodes, first, refs, order);
+                continue;
+            }
+            order.resize(order.len().next_multiple_of(BLOCK), PAD_SLOT);
+            nodes[k].child[lane] = order.len() as u32;
+            order.extend(refs[first..first + c as usize].iter().map(|r| r.index()));
         }
     }
-    leaves.sort_unstable();
     let mut order = Vec::with_capacity(refs.len() + refs.len() / 2);
-    for &(first, k, lane) in &leaves {
-        order.resize(order.len().next_multiple_of(BLOCK), PAD_SLOT);
-        let count = nodes[k].count[lane] as usize;
-        nodes[k].child[lane] = order.len() as u32;
-        let first = first as usize;
-        order.extend(refs[first..first + count].iter().map(|r| r.index()));
+    if !nodes.is_empty() {
+        walk(nodes, 0, refs, &mut order);
     }
     order
 }
@@ -834,17 +846,10 @@ fn bin_of(c: f32, lo: f32, scale: f32, bins: usize) -> usize {
 
 /// Bins the references' centroids and boxes into `out` (`3 * bins`
 /// entries: axis-major).
-fn bin_refs(
-    refs: &[PrimRef],
-    cb: &Aabb,
-    scale: Vec3,
-    bins: usize,
-    parallel: bool,
-    out: &mut [Bin],
-) {
+fn bin_refs(refs: &[PrimRef], cb: &Aabb, scale: Vec3, bins: usize, parallel: bool, out: &mut Bins) {
     let (lo, scale) = (Vec3A::from(cb.min), Vec3A::from(scale));
     let last = Vec3A::splat((bins - 1) as f32);
-    let one = |refs: &[PrimRef], out: &mut [Bin]| {
+    let one = |refs: &[PrimRef], out: &mut Bins| {
         for r in refs {
             let (mn, mx) = (r.min(), r.max());
             // The arithmetic of `bin_of`, three axes at once: clamping
@@ -856,36 +861,42 @@ fn bin_refs(
             // integer in the low mantissa bits (a vector op, no casts).
             let k = (k + Vec3A::splat(8_388_608.0)).to_array();
             for (axis, k) in k.into_iter().enumerate() {
-                let b = &mut out[axis * bins + (k.to_bits() & 0x7f_ffff) as usize];
+                // `k < bins <= MAX_BINS`: the mask only spares the bounds check.
+                let b = &mut out[axis][(k.to_bits() & 0x7f_ffff) as usize & (MAX_BINS - 1)];
                 b.min = b.min.min(mn);
                 b.max = b.max.max(mx);
-                b.cmin = b.cmin.min(c);
-                b.cmax = b.cmax.max(c);
                 b.count += 1;
             }
         }
     };
-    out.fill(EMPTY_BIN);
+    for row in out.iter_mut() {
+        row[..bins].fill(EMPTY_BIN);
+    }
     if parallel {
-        let parts: Vec<Vec<Bin>> = refs
+        let parts: Vec<Box<Bins>> = refs
             .par_chunks(16 * 1024)
             .map(|chunk| {
-                let mut v = vec![EMPTY_BIN; 3 * bins];
+                let mut v = new_bins();
                 one(chunk, &mut v);
                 v
             })
             .collect();
         for part in parts {
-            for (o, b) in out.iter_mut().zip(part) {
-                o.min = o.min.min(b.min);
-                o.max = o.max.max(b.max);
-                o.cmin = o.cmin.min(b.cmin);
-                o.cmax = o.cmax.max(b.cmax);
-                o.count += b.count;
+            for (orow, prow) in out.iter_mut().zip(part.iter()) {
+                merge_bins(&mut orow[..bins], &prow[..bins]);
             }
         }
     } else {
         one(refs, out);
+    }
+}
+
+/// Adds the bins `from` into `to`, bin by bin.
+fn merge_bins(to: &mut [Bin], from: &[Bin]) {
+    for (o, b) in to.iter_mut().zip(from) {
+        o.min = o.min.min(b.min);
+        o.max = o.max.max(b.max);
+        o.count += b.count;
     }
 }
 
@@ -897,7 +908,7 @@ fn choose_split(
     depth: u32,
     opts: &BvhOptions,
     parallel: bool,
-    scratch: &mut Vec<Bin>,
+    scratch: &mut Bins,
 ) -> Split {
     let n = refs.len();
     if n <= 1 {
@@ -921,14 +932,13 @@ fn choose_split(
     }
     // Small nodes need fewer bins.
     let bins = opts.bins.min((n / 2).max(4));
-    scratch.resize(3 * bins, EMPTY_BIN);
     let scale = Vec3::select(
         ext.cmpgt(Vec3::ZERO),
         Vec3::splat(bins as f32 * (1.0 - 1e-6)) / ext,
         Vec3::ZERO,
     );
-    bin_refs(refs, cb, scale, bins, parallel, &mut scratch[..3 * bins]);
-    let binned = scratch[..3 * bins].chunks(bins);
+    bin_refs(refs, cb, scale, bins, parallel, scratch);
+    let binned = scratch.iter().map(|row| &row[..bins]);
     // Sweep each axis: SAH cost of splitting after bin i (Wald 2007, eq. 1).
     let mut best = (f32::INFINITY, 0usize, 0usize);
     let mut right_area = [0.0f32; MAX_BINS];
@@ -938,9 +948,8 @@ fn choose_split(
             continue;
         }
         // Boxes as SIMD corners: an empty bin's inverted box leaves min/max
-        // unchanged, and areas are only read where the side holds
-        // references (so the box is not empty and the area equals
-        // `Aabb::surface_area`).
+        // unchanged, and a side that holds references has a box that is not
+        // empty, whose area equals `Aabb::surface_area`.
         let (mut lo, mut hi, mut c) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY, 0u32);
         for i in (1..bins).rev() {
             lo = lo.min(row[i].min);
@@ -954,10 +963,10 @@ fn choose_split(
             lo = lo.min(row[i].min);
             hi = hi.max(row[i].max);
             c += row[i].count;
+            // A side with no references has an inverted box of infinite
+            // area and no blocks: its cost is NaN, which never compares
+            // below `best`.
             let rc = right_count[i + 1];
-            if c == 0 || rc == 0 {
-                continue;
-            }
             let cost = box_area(lo, hi) * blocks(c) + right_area[i + 1] * blocks(rc);
             if cost < best.0 {
                 best = (cost, axis, i);
@@ -995,48 +1004,110 @@ fn blocks(n: u32) -> f32 {
     n.div_ceil(BLOCK as u32) as f32
 }
 
-/// Applies a split; returns the size of the left part (always in `1..n`).
-fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb) -> usize {
+/// What [`partition`] made: the size of the left part (always in `1..n`)
+/// and, for a binned split, the centroid bounds of both parts.
+struct Parted {
+    mid: usize,
+    centroids: Option<[Aabb; 2]>,
+}
+
+/// Applies a split.
+fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb, parallel: bool) -> Parted {
     let n = refs.len();
     match *split {
-        Split::Leaf => n,
+        Split::Leaf => Parted {
+            mid: n,
+            centroids: None,
+        },
         Split::Median { axis } => {
             let mid = n / 2;
             refs.select_nth_unstable_by(mid, |a, b| {
                 a.centroid()[axis].total_cmp(&b.centroid()[axis])
             });
-            mid
+            Parted {
+                mid,
+                centroids: None,
+            }
         }
         Split::Binned { axis, bin, bins } => {
             let ext = cb.extent()[axis];
             let scale = bins as f32 * (1.0 - 1e-6) / ext;
             let lo = cb.min[axis];
-            let goes_left = |r: &PrimRef| bin_of(r.centroid()[axis], lo, scale, bins) <= bin;
-            // Hoare-style in-place partition.
-            let (mut i, mut j) = (0usize, n);
-            loop {
-                while i < j && goes_left(&refs[i]) {
-                    i += 1;
-                }
-                while i < j && !goes_left(&refs[j - 1]) {
-                    j -= 1;
-                }
-                if i >= j {
-                    break;
-                }
-                refs.swap(i, j - 1);
-                i += 1;
-                j -= 1;
-            }
+            let goes_left = move |c: Vec3A| bin_of(c[axis], lo, scale, bins) <= bin;
+            let (i, [l, r]) = partition_by(refs, &goes_left, parallel);
             if i == 0 || i == n {
                 // Cannot happen (both sides of the chosen plane are
                 // non-empty), but never build an infinite recursion.
-                n / 2
+                Parted {
+                    mid: n / 2,
+                    centroids: None,
+                }
             } else {
-                i
+                Parted {
+                    mid: i,
+                    centroids: Some([l, r]),
+                }
             }
         }
     }
+}
+
+/// References below which [`partition_by`] does not split its work.
+const PARTITION_GRAIN: usize = 64 * 1024;
+
+/// Moves the references that `goes_left` accepts to the front; returns how
+/// many it accepted and the centroid bounds of both sides.
+///
+/// Branch-free Lomuto partition: `[0, i)` goes left, `[i, k)` right. Every
+/// reference is swapped with the first right one whichever side it takes
+/// (a right one swaps with a right one), so the loop has no data-dependent
+/// branch to mispredict: on shuffled centroids a branching partition
+/// mispredicts about half of its tests. Large inputs (`parallel`) split in
+/// halves that partition in parallel; the left half's right part and the
+/// right half's left part then trade places by swapping the shorter run
+/// with the far end of the longer. The halves are fixed by the length, so
+/// the result does not depend on the number of threads.
+fn partition_by(
+    refs: &mut [PrimRef],
+    goes_left: &(impl Fn(Vec3A) -> bool + Sync),
+    parallel: bool,
+) -> (usize, [Aabb; 2]) {
+    let n = refs.len();
+    if parallel && n >= 2 * PARTITION_GRAIN {
+        let (a, b) = refs.split_at_mut(n / 2);
+        let ((la, [al, ar]), (lb, [bl, br])) = rayon::join(
+            || partition_by(a, goes_left, true),
+            || partition_by(b, goes_left, true),
+        );
+        // [L_a | R_a | L_b | R_b] -> [L_a | L_b | R_a | R_b], up to order
+        // within each side.
+        let (ra, half) = (n / 2 - la, n / 2);
+        let swap = ra.min(lb);
+        let (x, y) = refs.split_at_mut(half);
+        x[la..la + swap].swap_with_slice(&mut y[lb - swap..lb]);
+        return (la + lb, [al.union(bl), ar.union(br)]);
+    }
+    let (mut l, mut r) = (
+        [Vec3A::INFINITY, Vec3A::NEG_INFINITY],
+        [Vec3A::INFINITY, Vec3A::NEG_INFINITY],
+    );
+    let mut i = 0usize;
+    for k in 0..n {
+        let c = refs[k].centroid();
+        let left = goes_left(c);
+        let m = BVec3A::splat(left);
+        l[0] = Vec3A::select(m, l[0].min(c), l[0]);
+        l[1] = Vec3A::select(m, l[1].max(c), l[1]);
+        r[0] = Vec3A::select(m, r[0], r[0].min(c));
+        r[1] = Vec3A::select(m, r[1], r[1].max(c));
+        refs.swap(i, k);
+        i += left as usize;
+    }
+    let aabb = |b: [Vec3A; 2]| Aabb {
+        min: b[0].into(),
+        max: b[1].into(),
+    };
+    (i, [aabb(l), aabb(r)])
 }
 
 /// Builds the subtree over `refs` (whose first slot is `base`) and returns
@@ -1051,7 +1122,7 @@ fn build_subtree(
     opts: &BvhOptions,
 ) -> Vec<BinNode> {
     let n = refs.len();
-    let mut scratch = Vec::new();
+    let mut scratch = new_bins();
     if n < opts.parallel_threshold {
         let mut out = Vec::with_capacity(2 * n + 2);
         out.push(BinNode::EMPTY);
@@ -1064,8 +1135,9 @@ fn build_subtree(
     if let Split::Leaf = split {
         return vec![BinNode::new(&bounds, base, n as u32), BinNode::EMPTY];
     }
-    let mid = partition(refs, &split, &cb);
-    let [lk, rk] = child_bounds(&split, &scratch, mid);
+    let parted = partition(refs, &split, &cb, true);
+    let mid = parted.mid;
+    let [lk, rk] = child_bounds(&split, &scratch, &parted);
     let (left, right) = refs.split_at_mut(mid);
     let (ln, rn) = rayon::join(
         || build_subtree(left, lk, base, depth + 1, opts),
@@ -1092,19 +1164,19 @@ fn build_subtree(
 }
 
 /// The children's (bounds, centroid bounds) when the split's bins (still
-/// in `scratch`) give them.
-/// `mid` is the size of the left part the partition made; the bins are
-/// only trusted when it matches theirs.
-fn child_bounds(split: &Split, scratch: &[Bin], mid: usize) -> [Option<(Aabb, Aabb)>; 2] {
-    match *split {
-        Split::Binned { axis, bin, bins }
-            if scratch[axis * bins..=axis * bins + bin]
+/// in `scratch`) and the partition give them. The bins are only trusted
+/// when their left count matches the partition's.
+fn child_bounds(split: &Split, scratch: &Bins, parted: &Parted) -> [Option<(Aabb, Aabb)>; 2] {
+    match (split, parted.centroids) {
+        (&Split::Binned { axis, bin, bins }, Some([lc, rc]))
+            if scratch[axis][..=bin]
                 .iter()
                 .map(|b| b.count as usize)
                 .sum::<usize>()
-                == mid =>
+                == parted.mid =>
         {
-            split_bounds(scratch, axis, bin, bins).map(Some)
+            let [lb, rb] = split_bounds(scratch, axis, bin, bins);
+            [Some((lb, lc)), Some((rb, rc))]
         }
         _ => [None, None],
     }
@@ -1119,7 +1191,7 @@ fn build_serial(
     depth: u32,
     out: &mut Vec<BinNode>,
     opts: &BvhOptions,
-    scratch: &mut Vec<Bin>,
+    scratch: &mut Bins,
 ) {
     let n = refs.len();
     let (bounds, cb) = known.unwrap_or_else(|| ref_bounds(refs, false));
@@ -1128,8 +1200,9 @@ fn build_serial(
         out[index] = BinNode::new(&bounds, base, n as u32);
         return;
     }
-    let mid = partition(refs, &split, &cb);
-    let [lk, rk] = child_bounds(&split, scratch, mid);
+    let parted = partition(refs, &split, &cb, false);
+    let mid = parted.mid;
+    let [lk, rk] = child_bounds(&split, scratch, &parted);
     let left = out.len();
     out.push(BinNode::EMPTY);
     out.push(BinNode::EMPTY);
