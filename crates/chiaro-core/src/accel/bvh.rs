@@ -1,26 +1,30 @@
-//! The bounding volume hierarchy: an 8-wide BVH (BVH8) collapsed from a
-//! binary tree built with the binned surface-area heuristic, and
-//! [`SceneBvh`], the scene-level [`Accelerator`] over a [`PreparedScene`]'s
-//! triangles and analytic spheres.
+//! The bounding volume hierarchy: an 8-wide BVH (BVH8) built top-down with
+//! the binned surface-area heuristic, and [`SceneBvh`], the scene-level
+//! [`Accelerator`] over a [`PreparedScene`]'s triangles and analytic
+//! spheres.
 //!
-//! Build (after Wald 2007, "On fast Construction of SAH-based Bounding Volume
-//! Hierarchies", and pbrt-v4 `BVHAggregate::buildRecursive`): primitive
-//! references are binned by centroid into `bins` buckets on each axis, the
-//! split with the least SAH cost `C_trav + (A_l N_l + A_r N_r) / A` is taken
-//! (or a leaf when that is cheaper and the node holds at most `max_leaf`
-//! primitives), and the references are partitioned in place, so the final
-//! reference order is the leaf order and primitives can be stored in it for
-//! locality. Each level costs O(n), the tree has O(log n) levels: O(n log n).
-//! Large nodes bin in parallel and build their two halves with
-//! `rayon::join`; the result does not depend on the number of threads.
+//! Splits (after Wald 2007, "On fast Construction of SAH-based Bounding
+//! Volume Hierarchies", and pbrt-v4 `BVHAggregate::buildRecursive`):
+//! primitive references are binned by centroid into `bins` buckets on each
+//! axis, the split with the least SAH cost `C_trav + (A_l N_l + A_r N_r) / A`
+//! is taken (or a leaf when that is cheaper and the node holds at most
+//! `max_leaf` primitives), and the references are partitioned in place by a
+//! branch-free partition that also gathers each side's centroid bounds, so
+//! the final reference order is the leaf order and primitives can be stored
+//! in it for locality. Each level costs O(n), the tree has O(log n) levels:
+//! O(n log n).
 //!
-//! Collapse (Wald, Benthin and Boulos 2008, "Getting Rid of Packets",
-//! section 3; Embree's BVH4/BVH8): each [`WIDTH`]-wide node takes a binary
-//! node's two children and keeps opening the interior child with the
-//! largest surface area until it has `WIDTH` children or only leaves. Eight
-//! children cut the depth to about a third of the binary tree's, so a ray
-//! waits on fewer dependent node loads (measured against four: about 10 %
-//! more rays per second, the same instruction count, `bvh_bench`).
+//! Wide nodes (Wald, Benthin and Boulos 2008, "Getting Rid of Packets",
+//! section 3; Embree's BVH8 builder): each [`WIDTH`]-wide node starts from
+//! its two halves and keeps splitting the child with the largest surface
+//! area that the SAH would split, until it has `WIDTH` children or only
+//! leaves. This is the tree that collapsing the binary tree would give,
+//! built without it. Eight children cut the depth to about a third of the
+//! binary tree's, so a ray waits on fewer dependent node loads (measured
+//! against four: about 10 % more rays per second, the same instruction
+//! count, `bvh_bench`). Large nodes bin and partition in parallel and build
+//! their children with rayon; the result does not depend on the number of
+//! threads.
 //!
 //! Layout: 256-byte [`BvhNode`]s (four cache lines, loaded independently)
 //! holding the child boxes in structure-of-arrays form,
@@ -44,7 +48,7 @@
 use super::{Accelerator, Hit, WatertightRay, intersect_sphere, sphere_roots};
 use crate::geometry::{Aabb, Ray};
 use crate::prepared::PreparedScene;
-use glam::{BVec3A, Vec3, Vec3A, Vec4};
+use glam::{Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
 /// Most bins a build may use.
@@ -322,38 +326,6 @@ impl PrimRef {
     }
 }
 
-/// A node of the intermediate binary tree: its box, and either two
-/// children (`offset`, `offset + 1`) or a run of primitives.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct BinNode {
-    bounds: Aabb,
-    /// Inner node: index of the left child. Leaf: first slot.
-    offset: u32,
-    /// Primitives of a leaf; 0 for an inner node.
-    count: u32,
-}
-
-impl BinNode {
-    const EMPTY: BinNode = BinNode {
-        bounds: Aabb::EMPTY,
-        offset: 0,
-        count: 0,
-    };
-
-    fn new(b: &Aabb, offset: u32, count: u32) -> Self {
-        Self {
-            bounds: *b,
-            offset,
-            count,
-        }
-    }
-
-    #[inline]
-    fn is_leaf(&self) -> bool {
-        self.count > 0
-    }
-}
-
 /// A [`WIDTH`]-wide BVH over primitive boxes. It knows nothing about the
 /// primitives themselves: queries call back with *slots*, positions in
 /// [`Bvh::prim_order`], which maps each slot to the index of the box given
@@ -420,6 +392,7 @@ fn split_bounds(binned: &Bins, axis: usize, bin: usize, bins: usize) -> [Aabb; 2
 }
 
 /// How to cut a node's references.
+#[derive(Debug, Clone, Copy)]
 enum Split {
     Leaf,
     /// Partition along `axis` into `bins` bins: bins `0..=bin` go left.
@@ -475,13 +448,15 @@ impl Bvh {
         if refs.is_empty() {
             return Self::default();
         }
-        let binary = build_subtree(&mut refs, None, 0, 0, &opts);
-        let mut nodes = collapse(&binary);
+        let mut scratch = new_bins();
+        let root = Item::plan(&refs, None, 0, &opts, &mut scratch);
+        let bounds = root.bounds;
+        let mut nodes = build_tree(&mut refs, root, &opts);
         let prim_order = align_leaves(&mut nodes, &refs);
         Self {
             nodes,
             prim_order,
-            bounds: binary[0].bounds,
+            bounds,
         }
     }
 
@@ -736,69 +711,6 @@ fn align_leaves(nodes: &mut [BvhNode], refs: &[PrimRef]) -> Vec<u32> {
     order
 }
 
-/// Collapses the binary tree (root at 0, children of `n` at `n.offset`
-/// and `n.offset + 1`) into [`WIDTH`]-wide nodes, depth first, each node's inner
-/// children directly after it in order.
-fn collapse(binary: &[BinNode]) -> Vec<BvhNode> {
-    fn fill(binary: &[BinNode], b: usize, slot: usize, out: &mut Vec<BvhNode>) {
-        // Gather up to `WIDTH` children, opening the largest inner one first.
-        let mut kids = [0usize; WIDTH];
-        let mut k;
-        let root = &binary[b];
-        if root.is_leaf() {
-            kids[0] = b;
-            k = 1;
-        } else {
-            kids[0] = root.offset as usize;
-            kids[1] = root.offset as usize + 1;
-            k = 2;
-        }
-        while k < WIDTH {
-            let mut best: Option<(usize, f32)> = None;
-            for (j, &c) in kids[..k].iter().enumerate() {
-                let n = &binary[c];
-                let area = n.bounds.surface_area();
-                if !n.is_leaf() && best.is_none_or(|(_, a)| area > a) {
-                    best = Some((j, area));
-                }
-            }
-            let Some((j, _)) = best else { break };
-            let l = binary[kids[j]].offset as usize;
-            // Keep the order: the left child replaces the parent, the right
-            // one follows it.
-            for m in (j + 1..k).rev() {
-                kids[m + 1] = kids[m];
-            }
-            kids[j] = l;
-            kids[j + 1] = l + 1;
-            k += 1;
-        }
-        let mut node = BvhNode::EMPTY;
-        let mut inner = [(0usize, 0usize); WIDTH];
-        let mut ni = 0;
-        for (lane, &c) in kids[..k].iter().enumerate() {
-            let n = &binary[c];
-            if n.is_leaf() {
-                node.set_lane(lane, &n.bounds, n.offset, n.count);
-            } else {
-                let idx = out.len();
-                out.push(BvhNode::EMPTY);
-                node.set_lane(lane, &n.bounds, idx as u32, 0);
-                inner[ni] = (c, idx);
-                ni += 1;
-            }
-        }
-        out[slot] = node;
-        for &(c, idx) in &inner[..ni] {
-            fill(binary, c, idx, out);
-        }
-    }
-    let mut out = Vec::with_capacity(binary.len() / 3 + 1);
-    out.push(BvhNode::EMPTY);
-    fill(binary, 0, 0, &mut out);
-    out
-}
-
 /// Bounds of the references and of their centroids.
 fn ref_bounds(refs: &[PrimRef], parallel: bool) -> (Aabb, Aabb) {
     let one = |refs: &[PrimRef]| {
@@ -832,18 +744,6 @@ fn ref_bounds(refs: &[PrimRef], parallel: bool) -> (Aabb, Aabb) {
     }
 }
 
-/// Bin index of a centroid coordinate, for the partition. `bin_refs`
-/// computes the same three at once with the same operations, so binning and
-/// partition always agree (`child_bounds` checks the counts and falls back
-/// to a pass over the references if they ever did not).
-#[inline(always)]
-fn bin_of(c: f32, lo: f32, scale: f32, bins: usize) -> usize {
-    // As `bin_refs` computes it: clamp, floor, and read the integer from
-    // the mantissa of `k + 2^23`.
-    let k = ((c - lo) * scale).max(0.0).min((bins - 1) as f32).floor();
-    ((k + 8_388_608.0).to_bits() & 0x7f_ffff) as usize
-}
-
 /// Bins the references' centroids and boxes into `out` (`3 * bins`
 /// entries: axis-major).
 fn bin_refs(refs: &[PrimRef], cb: &Aabb, scale: Vec3, bins: usize, parallel: bool, out: &mut Bins) {
@@ -852,9 +752,9 @@ fn bin_refs(refs: &[PrimRef], cb: &Aabb, scale: Vec3, bins: usize, parallel: boo
     let one = |refs: &[PrimRef], out: &mut Bins| {
         for r in refs {
             let (mn, mx) = (r.min(), r.max());
-            // The arithmetic of `bin_of`, three axes at once: clamping
-            // before truncating gives the same bin as truncating first
-            // (the values are finite).
+            // Three axes at once: `floor(clamp((c - lo) * scale, 0,
+            // bins - 1))` (the partition's `Plane` compares the same
+            // product).
             let c = (mn + mx) * 0.5;
             let k = ((c - lo) * scale).max(Vec3A::ZERO).min(last).floor();
             // Small non-negative integers as floats: adding 2^23 puts the
@@ -1033,8 +933,21 @@ fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb, parallel: bool) -> 
             let ext = cb.extent()[axis];
             let scale = bins as f32 * (1.0 - 1e-6) / ext;
             let lo = cb.min[axis];
-            let goes_left = move |c: Vec3A| bin_of(c[axis], lo, scale, bins) <= bin;
-            let (i, [l, r]) = partition_by(refs, &goes_left, parallel);
+            // `bin_refs` puts a centroid in bin
+            // `floor(clamp((c - lo) * scale, 0, bins - 1))`, which is at most
+            // `bin` (< bins - 1) exactly when `(c - lo) * scale < bin + 1`:
+            // the same product compared with a small integer, so binning
+            // and partition always agree.
+            let plane = Plane {
+                lo: Vec3A::splat(lo),
+                scale: Vec3A::splat(scale),
+                limit: Vec3A::splat((bin + 1) as f32),
+            };
+            let (i, [l, r]) = match axis {
+                0 => partition_by::<0>(refs, &plane, parallel),
+                1 => partition_by::<1>(refs, &plane, parallel),
+                _ => partition_by::<2>(refs, &plane, parallel),
+            };
             if i == 0 || i == n {
                 // Cannot happen (both sides of the chosen plane are
                 // non-empty), but never build an infinite recursion.
@@ -1055,29 +968,40 @@ fn partition(refs: &mut [PrimRef], split: &Split, cb: &Aabb, parallel: bool) -> 
 /// References below which [`partition_by`] does not split its work.
 const PARTITION_GRAIN: usize = 64 * 1024;
 
-/// Moves the references that `goes_left` accepts to the front; returns how
-/// many it accepted and the centroid bounds of both sides.
+/// A binned split plane: a centroid goes left when
+/// `(c[axis] - lo) * scale < limit` (each splat over the lanes).
+#[derive(Debug, Clone, Copy)]
+struct Plane {
+    lo: Vec3A,
+    scale: Vec3A,
+    limit: Vec3A,
+}
+
+/// Moves the references whose centroid lies left of `plane` on `AXIS` to
+/// the front; returns how many and the centroid bounds of both sides.
 ///
 /// Branch-free Lomuto partition: `[0, i)` goes left, `[i, k)` right. Every
 /// reference is swapped with the first right one whichever side it takes
 /// (a right one swaps with a right one), so the loop has no data-dependent
 /// branch to mispredict: on shuffled centroids a branching partition
-/// mispredicts about half of its tests. Large inputs (`parallel`) split in
-/// halves that partition in parallel; the left half's right part and the
-/// right half's left part then trade places by swapping the shorter run
-/// with the far end of the longer. The halves are fixed by the length, so
-/// the result does not depend on the number of threads.
-fn partition_by(
+/// mispredicts about half of its tests. The side test is one vector
+/// compare whose mask also selects which side's bounds grow. Large inputs
+/// (`parallel`) split in halves that partition in parallel; the left
+/// half's right part and the right half's left part then trade places by
+/// swapping the shorter run with the far end of the longer. The halves are
+/// fixed by the length, so the result does not depend on the number of
+/// threads.
+fn partition_by<const AXIS: usize>(
     refs: &mut [PrimRef],
-    goes_left: &(impl Fn(Vec3A) -> bool + Sync),
+    plane: &Plane,
     parallel: bool,
 ) -> (usize, [Aabb; 2]) {
     let n = refs.len();
     if parallel && n >= 2 * PARTITION_GRAIN {
         let (a, b) = refs.split_at_mut(n / 2);
         let ((la, [al, ar]), (lb, [bl, br])) = rayon::join(
-            || partition_by(a, goes_left, true),
-            || partition_by(b, goes_left, true),
+            || partition_by::<AXIS>(a, plane, true),
+            || partition_by::<AXIS>(b, plane, true),
         );
         // [L_a | R_a | L_b | R_b] -> [L_a | L_b | R_a | R_b], up to order
         // within each side.
@@ -1094,8 +1018,8 @@ fn partition_by(
     let mut i = 0usize;
     for k in 0..n {
         let c = refs[k].centroid();
-        let left = goes_left(c);
-        let m = BVec3A::splat(left);
+        let m = ((Vec3A::splat(c[AXIS]) - plane.lo) * plane.scale).cmplt(plane.limit);
+        let left = m.bitmask() & 1;
         l[0] = Vec3A::select(m, l[0].min(c), l[0]);
         l[1] = Vec3A::select(m, l[1].max(c), l[1]);
         r[0] = Vec3A::select(m, r[0], r[0].min(c));
@@ -1110,115 +1034,202 @@ fn partition_by(
     (i, [aabb(l), aabb(r)])
 }
 
-/// Builds the subtree over `refs` (whose first slot is `base`) and returns
-/// its nodes laid out as `[root, padding, sibling pairs...]` (an even
-/// number of nodes, every pair at an even index), child indices relative to
-/// the returned vector.
-fn build_subtree(
-    refs: &mut [PrimRef],
-    known: Option<(Aabb, Aabb)>,
-    base: u32,
+/// A child-to-be of a node under construction: a run of references (from
+/// `start` in the slice being built), their bounds and centroid bounds, its
+/// depth in the binary tree that the binned splits make, and how it will be
+/// cut. The boxes of its two parts are read from the bins when the split is
+/// chosen, since the bins are reused by the next choice.
+#[derive(Debug, Clone, Copy)]
+struct Item {
+    start: usize,
+    len: usize,
+    bounds: Aabb,
+    cb: Aabb,
     depth: u32,
-    opts: &BvhOptions,
-) -> Vec<BinNode> {
-    let n = refs.len();
-    let mut scratch = new_bins();
-    if n < opts.parallel_threshold {
-        let mut out = Vec::with_capacity(2 * n + 2);
-        out.push(BinNode::EMPTY);
-        out.push(BinNode::EMPTY);
-        build_serial(refs, known, base, 0, depth, &mut out, opts, &mut scratch);
-        return out;
-    }
-    let (bounds, cb) = known.unwrap_or_else(|| ref_bounds(refs, true));
-    let split = choose_split(refs, &bounds, &cb, depth, opts, true, &mut scratch);
-    if let Split::Leaf = split {
-        return vec![BinNode::new(&bounds, base, n as u32), BinNode::EMPTY];
-    }
-    let parted = partition(refs, &split, &cb, true);
-    let mid = parted.mid;
-    let [lk, rk] = child_bounds(&split, &scratch, &parted);
-    let (left, right) = refs.split_at_mut(mid);
-    let (ln, rn) = rayon::join(
-        || build_subtree(left, lk, base, depth + 1, opts),
-        || build_subtree(right, rk, base + mid as u32, depth + 1, opts),
-    );
-    // Lay out [root, pad, L0, R0, L2.., R2..] and renumber the children:
-    // left nodes move by 2, right ones by |L|, both even, so pairs stay at
-    // even indices.
-    let nl = ln.len();
-    let mut out = Vec::with_capacity(nl + rn.len());
-    out.push(BinNode::new(&bounds, 2, 0));
-    out.push(BinNode::EMPTY);
-    let remap = |mut node: BinNode, shift: usize| {
-        if !node.is_leaf() {
-            node.offset += shift as u32;
+    split: Split,
+    /// For a binned split: the parts' boxes and the left part's size, as
+    /// the bins counted them.
+    parts: Option<([Aabb; 2], usize)>,
+}
+
+impl Item {
+    /// Bounds (unless `known`) and the split of `refs`.
+    fn plan(
+        refs: &[PrimRef],
+        known: Option<(Aabb, Aabb)>,
+        depth: u32,
+        opts: &BvhOptions,
+        scratch: &mut Bins,
+    ) -> Self {
+        let parallel = refs.len() >= opts.parallel_threshold;
+        let (bounds, cb) = known.unwrap_or_else(|| ref_bounds(refs, parallel));
+        let split = choose_split(refs, &bounds, &cb, depth, opts, parallel, scratch);
+        let parts = match split {
+            Split::Binned { axis, bin, bins } => Some((
+                split_bounds(scratch, axis, bin, bins),
+                scratch[axis][..=bin].iter().map(|b| b.count as usize).sum(),
+            )),
+            _ => None,
+        };
+        Self {
+            start: 0,
+            len: refs.len(),
+            bounds,
+            cb,
+            depth,
+            split,
+            parts,
         }
-        node
-    };
-    out.push(remap(ln[0], 2));
-    out.push(remap(rn[0], nl));
-    out.extend(ln[2..].iter().map(|&x| remap(x, 2)));
-    out.extend(rn[2..].iter().map(|&x| remap(x, nl)));
+    }
+
+    fn is_leaf(&self) -> bool {
+        matches!(self.split, Split::Leaf)
+    }
+
+    /// Cuts this item's references (`refs` is the slice it indexes into)
+    /// and plans the two parts.
+    fn open(&self, refs: &mut [PrimRef], opts: &BvhOptions, scratch: &mut Bins) -> [Item; 2] {
+        let mine = &mut refs[self.start..self.start + self.len];
+        let parallel = self.len >= opts.parallel_threshold;
+        let parted = partition(mine, &self.split, &self.cb, parallel);
+        let mid = parted.mid;
+        // The bins' boxes are trusted only when their count matches the
+        // partition's (they always should).
+        let known = match (self.parts, parted.centroids) {
+            (Some(([lb, rb], count)), Some([lc, rc])) if count == mid => {
+                [Some((lb, lc)), Some((rb, rc))]
+            }
+            _ => [None, None],
+        };
+        let (l, r) = mine.split_at_mut(mid);
+        let mut left = Item::plan(l, known[0], self.depth + 1, opts, scratch);
+        let mut right = Item::plan(r, known[1], self.depth + 1, opts, scratch);
+        left.start = self.start;
+        right.start = self.start + mid;
+        [left, right]
+    }
+}
+
+/// Builds the [`WIDTH`]-wide tree over `refs` from its planned root
+/// (Wald, Benthin and Boulos 2008, section 3; Embree's BVH8 builder): each
+/// node starts from its item's two parts and keeps opening the inner part
+/// with the largest surface area until it has `WIDTH` children or only
+/// leaves. Nodes are laid out depth first, each node's inner children
+/// directly after one another. Subtrees of at least
+/// `opts.parallel_threshold` references build in parallel into their own
+/// vectors, which are then appended with their child indices shifted.
+fn build_tree(refs: &mut [PrimRef], root: Item, opts: &BvhOptions) -> Vec<BvhNode> {
+    let mut out = Vec::with_capacity(refs.len() / 12 + 1);
+    out.push(BvhNode::EMPTY);
+    let mut scratch = new_bins();
+    if root.is_leaf() {
+        out[0].set_lane(0, &root.bounds, 0, root.len as u32);
+    } else {
+        fill_node(refs, 0, root, 0, opts, &mut scratch, &mut out);
+    }
     out
 }
 
-/// The children's (bounds, centroid bounds) when the split's bins (still
-/// in `scratch`) and the partition give them. The bins are only trusted
-/// when their left count matches the partition's.
-fn child_bounds(split: &Split, scratch: &Bins, parted: &Parted) -> [Option<(Aabb, Aabb)>; 2] {
-    match (split, parted.centroids) {
-        (&Split::Binned { axis, bin, bins }, Some([lc, rc]))
-            if scratch[axis][..=bin]
-                .iter()
-                .map(|b| b.count as usize)
-                .sum::<usize>()
-                == parted.mid =>
-        {
-            let [lb, rb] = split_bounds(scratch, axis, bin, bins);
-            [Some((lb, lc)), Some((rb, rc))]
+/// Fills the reserved node `out[slot]` for the inner `item`, whose
+/// references are `refs` (item positions are relative to it, slots to
+/// `base`), and appends its subtree.
+fn fill_node(
+    refs: &mut [PrimRef],
+    base: u32,
+    item: Item,
+    slot: usize,
+    opts: &BvhOptions,
+    scratch: &mut Bins,
+    out: &mut Vec<BvhNode>,
+) {
+    // Gather up to `WIDTH` children, opening the largest inner one first;
+    // the left part replaces its parent and the right one follows it, so
+    // children stay in slot order.
+    let [a, b] = item.open(refs, opts, scratch);
+    let mut kids = [a; WIDTH];
+    kids[1] = b;
+    let mut k = 2;
+    while k < WIDTH {
+        let mut best: Option<(usize, f32)> = None;
+        for (j, c) in kids[..k].iter().enumerate() {
+            let area = c.bounds.surface_area();
+            if !c.is_leaf() && best.is_none_or(|(_, a)| area > a) {
+                best = Some((j, area));
+            }
         }
-        _ => [None, None],
+        let Some((j, _)) = best else { break };
+        let [l, r] = kids[j].open(refs, opts, scratch);
+        kids.copy_within(j + 1..k, j + 2);
+        kids[j] = l;
+        kids[j + 1] = r;
+        k += 1;
+    }
+    let kids = &kids[..k];
+    let mut node = BvhNode::EMPTY;
+    let mut inner = [0usize; WIDTH];
+    let mut ni = 0;
+    for (lane, c) in kids.iter().enumerate() {
+        if c.is_leaf() {
+            node.set_lane(lane, &c.bounds, base + c.start as u32, c.len as u32);
+        } else {
+            inner[ni] = lane;
+            ni += 1;
+        }
+    }
+    let first = out.len();
+    for (m, &lane) in inner[..ni].iter().enumerate() {
+        node.set_lane(lane, &kids[lane].bounds, (first + m) as u32, 0);
+    }
+    out.resize(first + ni, BvhNode::EMPTY);
+    out[slot] = node;
+    // The inner children's disjoint runs of references, in order, each
+    // with its first slot.
+    let mut runs: Vec<(&mut [PrimRef], Item, u32)> = Vec::with_capacity(ni);
+    let (mut rest, mut at) = (refs, 0);
+    for &lane in &inner[..ni] {
+        let c = kids[lane];
+        let (mine, tail) = rest[c.start - at..].split_at_mut(c.len);
+        rest = tail;
+        at = c.start + c.len;
+        runs.push((mine, Item { start: 0, ..c }, base + c.start as u32));
+    }
+    if item.len >= opts.parallel_threshold {
+        let subs: Vec<Vec<BvhNode>> = runs
+            .into_par_iter()
+            .map(|(mine, c, first_slot)| {
+                let mut sub = vec![BvhNode::EMPTY];
+                fill_node(mine, first_slot, c, 0, opts, &mut new_bins(), &mut sub);
+                sub
+            })
+            .collect();
+        for (m, sub) in subs.into_iter().enumerate() {
+            append_subtree(out, first + m, &sub);
+        }
+    } else {
+        for (m, (mine, c, first_slot)) in runs.into_iter().enumerate() {
+            fill_node(mine, first_slot, c, first + m, opts, scratch, out);
+        }
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn build_serial(
-    refs: &mut [PrimRef],
-    known: Option<(Aabb, Aabb)>,
-    base: u32,
-    index: usize,
-    depth: u32,
-    out: &mut Vec<BinNode>,
-    opts: &BvhOptions,
-    scratch: &mut Bins,
-) {
-    let n = refs.len();
-    let (bounds, cb) = known.unwrap_or_else(|| ref_bounds(refs, false));
-    let split = choose_split(refs, &bounds, &cb, depth, opts, false, scratch);
-    if let Split::Leaf = split {
-        out[index] = BinNode::new(&bounds, base, n as u32);
-        return;
+/// Puts a subtree built on its own (root at 0, child indices relative to
+/// it) into `out`: its root at the reserved `slot`, the rest appended.
+fn append_subtree(out: &mut Vec<BvhNode>, slot: usize, sub: &[BvhNode]) {
+    // Node `j >= 1` of `sub` lands at `out.len() + j - 1`.
+    let shift = (out.len() - 1) as u32;
+    out[slot] = shifted(&sub[0], shift);
+    out.extend(sub[1..].iter().map(|n| shifted(n, shift)));
+}
+
+/// `n` with its inner children's indices moved by `shift`.
+fn shifted(n: &BvhNode, shift: u32) -> BvhNode {
+    let mut n = *n;
+    for lane in 0..WIDTH {
+        if n.count[lane] == 0 {
+            n.child[lane] += shift;
+        }
     }
-    let parted = partition(refs, &split, &cb, false);
-    let mid = parted.mid;
-    let [lk, rk] = child_bounds(&split, scratch, &parted);
-    let left = out.len();
-    out.push(BinNode::EMPTY);
-    out.push(BinNode::EMPTY);
-    out[index] = BinNode::new(&bounds, left as u32, 0);
-    let (l, r) = refs.split_at_mut(mid);
-    build_serial(l, lk, base, left, depth + 1, out, opts, scratch);
-    build_serial(
-        r,
-        rk,
-        base + mid as u32,
-        left + 1,
-        depth + 1,
-        out,
-        opts,
-        scratch,
-    );
+    n
 }
 
 /// Four primitives in consecutive BVH slots (`4 k .. 4 k + 4`), triangles
