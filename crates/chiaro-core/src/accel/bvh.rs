@@ -451,11 +451,10 @@ impl Bvh {
         let mut scratch = new_bins();
         let root = Item::plan(&refs, None, 0, &opts, &mut scratch);
         let bounds = root.bounds;
-        let mut nodes = build_tree(&mut refs, root, &opts);
-        let prim_order = align_leaves(&mut nodes, &refs);
+        let Tree { nodes, order } = build_tree(&mut refs, root, &opts);
         Self {
             nodes,
-            prim_order,
+            prim_order: order,
             bounds,
         }
     }
@@ -679,36 +678,6 @@ impl Bvh {
             (child, count) = (e.child, e.count);
         }
     }
-}
-
-/// Slot order with every leaf starting at a multiple of [`BLOCK`], so that
-/// a leaf of up to four primitives is one block of a [`SceneBvh`]; the gaps
-/// hold [`PAD_SLOT`]. Rewrites the leaves' first slots to match.
-///
-/// Leaves are disjoint runs covering every slot, and [`collapse`] keeps
-/// each node's children in slot order, so a depth-first walk in lane order
-/// meets the leaves in slot order: no sort is needed.
-fn align_leaves(nodes: &mut [BvhNode], refs: &[PrimRef]) -> Vec<u32> {
-    fn walk(nodes: &mut [BvhNode], k: usize, refs: &[PrimRef], order: &mut Vec<u32>) {
-        for lane in 0..WIDTH {
-            let (c, first) = (nodes[k].count[lane], nodes[k].child[lane] as usize);
-            if c == EMPTY_LANE {
-                continue;
-            }
-            if c == 0 {
-                walk(nodes, first, refs, order);
-                continue;
-            }
-            order.resize(order.len().next_multiple_of(BLOCK), PAD_SLOT);
-            nodes[k].child[lane] = order.len() as u32;
-            order.extend(refs[first..first + c as usize].iter().map(|r| r.index()));
-        }
-    }
-    let mut order = Vec::with_capacity(refs.len() + refs.len() / 2);
-    if !nodes.is_empty() {
-        walk(nodes, 0, refs, &mut order);
-    }
-    order
 }
 
 /// Bounds of the references and of their centroids.
@@ -1118,33 +1087,90 @@ impl Item {
 /// directly after one another. Subtrees of at least
 /// `opts.parallel_threshold` references build in parallel into their own
 /// vectors, which are then appended with their child indices shifted.
-fn build_tree(refs: &mut [PrimRef], root: Item, opts: &BvhOptions) -> Vec<BvhNode> {
-    let mut out = Vec::with_capacity(refs.len() / 12 + 1);
-    out.push(BvhNode::EMPTY);
+fn build_tree(refs: &mut [PrimRef], root: Item, opts: &BvhOptions) -> Tree {
+    let mut out = Tree {
+        nodes: Vec::with_capacity(refs.len() / 12 + 1),
+        order: Vec::with_capacity(refs.len() + refs.len() / 2),
+    };
+    out.nodes.push(BvhNode::EMPTY);
     let mut scratch = new_bins();
     if root.is_leaf() {
-        out[0].set_lane(0, &root.bounds, 0, root.len as u32);
+        let first = out.leaf(refs);
+        out.nodes[0].set_lane(0, &root.bounds, first, root.len as u32);
     } else {
-        fill_node(refs, 0, root, 0, opts, &mut scratch, &mut out);
+        fill_node(refs, root, 0, opts, &mut scratch, &mut out);
     }
     out
 }
 
-/// Fills the reserved node `out[slot]` for the inner `item`, whose
-/// references are `refs` (item positions are relative to it, slots to
-/// `base`), and appends its subtree.
+/// A tree (or subtree) being built: its nodes (root first) and its slot
+/// order, in which every leaf starts at a multiple of [`BLOCK`] so that a
+/// leaf of up to four primitives is one block of a [`SceneBvh`]; the gaps
+/// hold [`PAD_SLOT`]. Leaves are placed as they are made, so the order
+/// follows the build's depth-first walk.
+struct Tree {
+    nodes: Vec<BvhNode>,
+    order: Vec<u32>,
+}
+
+impl Tree {
+    /// Places a leaf of `refs` at the next multiple of [`BLOCK`]; returns
+    /// its first slot.
+    fn leaf(&mut self, refs: &[PrimRef]) -> u32 {
+        let first = self.order.len().next_multiple_of(BLOCK);
+        self.order.resize(first, PAD_SLOT);
+        self.order.extend(refs.iter().map(|r| r.index()));
+        first as u32
+    }
+
+    /// Puts a subtree built on its own (root at 0, indices relative to it)
+    /// into this one: its root at the reserved node `slot`, the rest of its
+    /// nodes and its slots appended, every index moved to match.
+    fn append(&mut self, slot: usize, sub: &Tree) {
+        // Node `j >= 1` of `sub` lands at `nodes.len() + j - 1`; its slots
+        // start at the next multiple of `BLOCK`, so leaves stay aligned.
+        let node_shift = (self.nodes.len() - 1) as u32;
+        let slot_shift = self.order.len().next_multiple_of(BLOCK);
+        self.order.resize(slot_shift, PAD_SLOT);
+        self.order.extend_from_slice(&sub.order);
+        let slot_shift = slot_shift as u32;
+        self.nodes[slot] = shifted(&sub.nodes[0], node_shift, slot_shift);
+        self.nodes.extend(
+            sub.nodes[1..]
+                .iter()
+                .map(|n| shifted(n, node_shift, slot_shift)),
+        );
+    }
+}
+
+/// `n` with its inner children's indices moved by `node_shift` and its
+/// leaves' first slots by `slot_shift`.
+fn shifted(n: &BvhNode, node_shift: u32, slot_shift: u32) -> BvhNode {
+    let mut n = *n;
+    for lane in 0..WIDTH {
+        match n.count[lane] {
+            EMPTY_LANE => {}
+            0 => n.child[lane] += node_shift,
+            _ => n.child[lane] += slot_shift,
+        }
+    }
+    n
+}
+
+/// Fills the reserved node `out.nodes[slot]` for the inner `item`, whose
+/// references are `refs` (item positions are relative to it), and appends
+/// its subtree.
 fn fill_node(
     refs: &mut [PrimRef],
-    base: u32,
     item: Item,
     slot: usize,
     opts: &BvhOptions,
     scratch: &mut Bins,
-    out: &mut Vec<BvhNode>,
+    out: &mut Tree,
 ) {
     // Gather up to `WIDTH` children, opening the largest inner one first;
     // the left part replaces its parent and the right one follows it, so
-    // children stay in slot order.
+    // children stay in reference order.
     let [a, b] = item.open(refs, opts, scratch);
     let mut kids = [a; WIDTH];
     kids[1] = b;
@@ -1170,66 +1196,49 @@ fn fill_node(
     let mut ni = 0;
     for (lane, c) in kids.iter().enumerate() {
         if c.is_leaf() {
-            node.set_lane(lane, &c.bounds, base + c.start as u32, c.len as u32);
+            let first = out.leaf(&refs[c.start..c.start + c.len]);
+            node.set_lane(lane, &c.bounds, first, c.len as u32);
         } else {
             inner[ni] = lane;
             ni += 1;
         }
     }
-    let first = out.len();
+    let first = out.nodes.len();
     for (m, &lane) in inner[..ni].iter().enumerate() {
         node.set_lane(lane, &kids[lane].bounds, (first + m) as u32, 0);
     }
-    out.resize(first + ni, BvhNode::EMPTY);
-    out[slot] = node;
-    // The inner children's disjoint runs of references, in order, each
-    // with its first slot.
-    let mut runs: Vec<(&mut [PrimRef], Item, u32)> = Vec::with_capacity(ni);
+    out.nodes.resize(first + ni, BvhNode::EMPTY);
+    out.nodes[slot] = node;
+    // The inner children's disjoint runs of references, in order.
+    let mut runs: Vec<(&mut [PrimRef], Item)> = Vec::with_capacity(ni);
     let (mut rest, mut at) = (refs, 0);
     for &lane in &inner[..ni] {
         let c = kids[lane];
         let (mine, tail) = rest[c.start - at..].split_at_mut(c.len);
         rest = tail;
         at = c.start + c.len;
-        runs.push((mine, Item { start: 0, ..c }, base + c.start as u32));
+        runs.push((mine, Item { start: 0, ..c }));
     }
     if item.len >= opts.parallel_threshold {
-        let subs: Vec<Vec<BvhNode>> = runs
+        let subs: Vec<Tree> = runs
             .into_par_iter()
-            .map(|(mine, c, first_slot)| {
-                let mut sub = vec![BvhNode::EMPTY];
-                fill_node(mine, first_slot, c, 0, opts, &mut new_bins(), &mut sub);
+            .map(|(mine, c)| {
+                let mut sub = Tree {
+                    nodes: vec![BvhNode::EMPTY],
+                    order: Vec::with_capacity(c.len + c.len / 2),
+                };
+                fill_node(mine, c, 0, opts, &mut new_bins(), &mut sub);
                 sub
             })
             .collect();
-        for (m, sub) in subs.into_iter().enumerate() {
-            append_subtree(out, first + m, &sub);
+        for (m, sub) in subs.iter().enumerate() {
+            out.append(first + m, sub);
         }
     } else {
-        for (m, (mine, c, first_slot)) in runs.into_iter().enumerate() {
-            fill_node(mine, first_slot, c, first + m, opts, scratch, out);
+        for (m, (mine, c)) in runs.into_iter().enumerate() {
+            fill_node(mine, c, first + m, opts, scratch, out);
         }
     }
-}
-
-/// Puts a subtree built on its own (root at 0, child indices relative to
-/// it) into `out`: its root at the reserved `slot`, the rest appended.
-fn append_subtree(out: &mut Vec<BvhNode>, slot: usize, sub: &[BvhNode]) {
-    // Node `j >= 1` of `sub` lands at `out.len() + j - 1`.
-    let shift = (out.len() - 1) as u32;
-    out[slot] = shifted(&sub[0], shift);
-    out.extend(sub[1..].iter().map(|n| shifted(n, shift)));
-}
-
-/// `n` with its inner children's indices moved by `shift`.
-fn shifted(n: &BvhNode, shift: u32) -> BvhNode {
-    let mut n = *n;
-    for lane in 0..WIDTH {
-        if n.count[lane] == 0 {
-            n.child[lane] += shift;
-        }
-    }
-    n
 }
 
 /// Four primitives in consecutive BVH slots (`4 k .. 4 k + 4`), triangles
