@@ -45,6 +45,7 @@
 //! (pbrt-v4 section 6.8.2) so that rounding never culls a primitive the
 //! exact test would hit.
 
+use super::pages::HugeArray;
 use super::{Accelerator, Hit, WatertightRay, intersect_sphere, sphere_roots};
 use crate::geometry::{Aabb, Ray};
 use crate::prepared::PreparedScene;
@@ -75,7 +76,7 @@ pub const EMPTY_LANE: u32 = u32::MAX;
 
 /// One [`WIDTH`]-wide node: up to `WIDTH` children, each an inner node or
 /// a leaf (a run of primitive slots). `32 * WIDTH` bytes, 64-byte aligned.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C, align(64))]
 pub struct BvhNode {
     /// Child boxes, structure of arrays: rows 0-2 hold the lower corners'
@@ -333,7 +334,7 @@ impl PrimRef {
 #[derive(Debug, Clone, Default)]
 pub struct Bvh {
     /// The root is node 0.
-    nodes: Vec<BvhNode>,
+    nodes: HugeArray<BvhNode>,
     prim_order: Vec<u32>,
     bounds: Aabb,
 }
@@ -453,7 +454,7 @@ impl Bvh {
         let bounds = root.bounds;
         let Tree { nodes, order } = build_tree(&mut refs, root, &opts);
         Self {
-            nodes,
+            nodes: HugeArray::from_slice(&nodes),
             prim_order: order,
             bounds,
         }
@@ -1244,7 +1245,7 @@ fn fill_node(
 /// Four primitives in consecutive BVH slots (`4 k .. 4 k + 4`), triangles
 /// in structure-of-arrays form so that [`TriBlock::intersect`] tests all
 /// four at once. 160 bytes.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C, align(32))]
 struct TriBlock {
     /// `v[3 * vertex + axis][lane]`; NaN for a sphere or unused lane.
@@ -1352,7 +1353,7 @@ fn block_lanes(b: usize, first: usize, end: usize) -> u32 {
 pub struct SceneBvh {
     bvh: Bvh,
     /// Slot `s` is lane `s % 4` of block `s / 4`.
-    blocks: Vec<TriBlock>,
+    blocks: HugeArray<TriBlock>,
     /// Mask per block of the lanes holding spheres.
     sphere_lanes: Vec<u8>,
     spheres: Vec<(Vec3, f32)>,
@@ -1415,11 +1416,27 @@ impl SceneBvh {
             }
             (b, spheres)
         };
-        let (blocks, sphere_lanes) = if bvh.prim_order.len() >= opts.parallel_threshold {
-            bvh.prim_order.par_chunks(BLOCK).map(block).unzip()
-        } else {
-            bvh.prim_order.chunks(BLOCK).map(block).unzip()
+        // Written in place: the mapping's pages are touched (and zeroed by
+        // the kernel) by the thread that fills them.
+        let count = bvh.prim_order.len().div_ceil(BLOCK);
+        let mut blocks = HugeArray::<TriBlock>::zeroed(count);
+        let mut sphere_lanes = vec![0u8; count];
+        let fill = |((blk, lanes), slots): ((&mut TriBlock, &mut u8), &[u32])| {
+            (*blk, *lanes) = block(slots);
         };
+        if bvh.prim_order.len() >= opts.parallel_threshold {
+            blocks
+                .par_iter_mut()
+                .zip(sphere_lanes.par_iter_mut())
+                .zip(bvh.prim_order.par_chunks(BLOCK))
+                .for_each(fill);
+        } else {
+            blocks
+                .iter_mut()
+                .zip(sphere_lanes.iter_mut())
+                .zip(bvh.prim_order.chunks(BLOCK))
+                .for_each(fill);
+        }
         Self {
             bvh,
             blocks,

@@ -1,10 +1,12 @@
 //! Ray acceleration: the [`Accelerator`] trait, the brute-force
 //! [`list::ListAccel`] (the test oracle), and the BVH ([`bvh::Bvh`], with the
-//! scene-level [`bvh::SceneBvh`]).
+//! scene-level [`bvh::SceneBvh`]), whose large arrays live in
+//! huge-page-advised memory ([`pages::HugeArray`]).
 
 pub mod bvh;
 pub mod instanced;
 pub mod list;
+pub mod pages;
 
 use crate::geometry::Ray;
 
