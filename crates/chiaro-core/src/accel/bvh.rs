@@ -1124,23 +1124,48 @@ impl Tree {
         first as u32
     }
 
-    /// Puts a subtree built on its own (root at 0, indices relative to it)
-    /// into this one: its root at the reserved node `slot`, the rest of its
-    /// nodes and its slots appended, every index moved to match.
-    fn append(&mut self, slot: usize, sub: &Tree) {
-        // Node `j >= 1` of `sub` lands at `nodes.len() + j - 1`; its slots
-        // start at the next multiple of `BLOCK`, so leaves stay aligned.
-        let node_shift = (self.nodes.len() - 1) as u32;
-        let slot_shift = self.order.len().next_multiple_of(BLOCK);
-        self.order.resize(slot_shift, PAD_SLOT);
-        self.order.extend_from_slice(&sub.order);
-        let slot_shift = slot_shift as u32;
-        self.nodes[slot] = shifted(&sub.nodes[0], node_shift, slot_shift);
-        self.nodes.extend(
-            sub.nodes[1..]
-                .iter()
-                .map(|n| shifted(n, node_shift, slot_shift)),
-        );
+    /// Puts subtrees built on their own (root at 0, indices relative to
+    /// it) into this one: the root of `subs[m]` at the reserved node
+    /// `first + m`, the rest of their nodes and their slots appended in
+    /// order, every index moved to match. The copies run in parallel, each
+    /// output element found by a binary search over the subtrees' offsets.
+    fn append(&mut self, first: usize, subs: &[Tree]) {
+        // Node `j >= 1` of `subs[m]` lands at `node_at[m] + j - 1`; its
+        // slots start at `slot_at[m]`, a multiple of `BLOCK`, so leaves
+        // stay aligned (the gaps are padding).
+        let (mut node_at, mut slot_at) = (Vec::with_capacity(subs.len()), Vec::new());
+        let (mut nodes, mut slots) = (self.nodes.len(), self.order.len());
+        for sub in subs {
+            node_at.push(nodes);
+            let at = slots.next_multiple_of(BLOCK);
+            slot_at.push(at);
+            nodes += sub.nodes.len() - 1;
+            slots = at + sub.order.len();
+        }
+        let moved = |m: usize, n: &BvhNode| shifted(n, (node_at[m] - 1) as u32, slot_at[m] as u32);
+        for (m, sub) in subs.iter().enumerate() {
+            self.nodes[first + m] = moved(m, &sub.nodes[0]);
+        }
+        let owner = |at: &[usize], j: usize| at.partition_point(|&a| a <= j) - 1;
+        let base = self.nodes.len();
+        self.nodes
+            .par_extend((base..nodes).into_par_iter().map(|j| {
+                let m = owner(&node_at, j);
+                moved(m, &subs[m].nodes[1 + j - node_at[m]])
+            }));
+        let base = self.order.len();
+        self.order
+            .par_extend((base..slots).into_par_iter().map(|j| {
+                if j < slot_at[0] {
+                    return PAD_SLOT;
+                }
+                let m = owner(&slot_at, j);
+                subs[m]
+                    .order
+                    .get(j - slot_at[m])
+                    .copied()
+                    .unwrap_or(PAD_SLOT)
+            }));
     }
 }
 
@@ -1232,9 +1257,7 @@ fn fill_node(
                 sub
             })
             .collect();
-        for (m, sub) in subs.iter().enumerate() {
-            out.append(first + m, sub);
-        }
+        out.append(first, &subs);
     } else {
         for (m, (mine, c)) in runs.into_iter().enumerate() {
             fill_node(mine, c, first + m, opts, scratch, out);

@@ -11,6 +11,7 @@
 //! only change speed, never results.
 
 use bytemuck::Pod;
+use rayon::prelude::*;
 use std::fmt;
 use std::ops::{Deref, DerefMut};
 
@@ -41,10 +42,20 @@ impl<T: Pod> HugeArray<T> {
         Self { store, len }
     }
 
-    /// A copy of `data`.
-    pub fn from_slice(data: &[T]) -> Self {
+    /// A copy of `data` (copied in parallel when it is large).
+    pub fn from_slice(data: &[T]) -> Self
+    where
+        T: Send + Sync,
+    {
         let mut a = Self::zeroed(data.len());
-        a.copy_from_slice(data);
+        const CHUNK: usize = 1 << 16;
+        if data.len() > CHUNK {
+            a.par_chunks_mut(CHUNK)
+                .zip(data.par_chunks(CHUNK))
+                .for_each(|(d, s)| d.copy_from_slice(s));
+        } else {
+            a.copy_from_slice(data);
+        }
         a
     }
 
@@ -91,7 +102,7 @@ impl<T: Pod> DerefMut for HugeArray<T> {
     }
 }
 
-impl<T: Pod> Clone for HugeArray<T> {
+impl<T: Pod + Send + Sync> Clone for HugeArray<T> {
     fn clone(&self) -> Self {
         Self::from_slice(self)
     }
