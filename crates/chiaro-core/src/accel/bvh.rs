@@ -51,6 +51,7 @@ use crate::geometry::{Aabb, Ray};
 use crate::prepared::PreparedScene;
 use glam::{Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Most bins a build may use.
 pub const MAX_BINS: usize = 64;
@@ -321,6 +322,13 @@ impl PrimRef {
         self.lo.w.to_bits()
     }
 
+    fn aabb(&self) -> Aabb {
+        Aabb {
+            min: self.min().into(),
+            max: self.max().into(),
+        }
+    }
+
     #[inline(always)]
     fn centroid(&self) -> Vec3A {
         (self.min() + self.max()) * 0.5
@@ -418,6 +426,16 @@ impl Bvh {
     /// Builds a BVH over `bounds` (one box per primitive). Empty or
     /// non-finite boxes are left out: nothing can hit them.
     pub fn build_with(bounds: &[Aabb], opts: &BvhOptions) -> Self {
+        Self::build_boxes(bounds.len(), |i| bounds[i], opts)
+    }
+
+    /// [`Bvh::build_with`] over `count` boxes given by `box_of(index)`, so
+    /// that a caller computing them need not store them first.
+    pub fn build_boxes(
+        count: usize,
+        box_of: impl Fn(usize) -> Aabb + Sync,
+        opts: &BvhOptions,
+    ) -> Self {
         let opts = BvhOptions {
             bins: opts.bins.clamp(2, MAX_BINS),
             max_leaf: opts.max_leaf.clamp(1, 255),
@@ -429,22 +447,32 @@ impl Bvh {
             parallel_threshold: opts.parallel_threshold.max(2),
         };
         let usable = |b: &Aabb| !b.is_empty() && b.min.is_finite() && b.max.is_finite();
-        let make = |(i, b): (usize, &Aabb)| usable(b).then_some(PrimRef::new(b, i as u32));
-        let mut refs: Vec<PrimRef> = if bounds.len() >= opts.parallel_threshold {
-            // An indexed `map` collects straight into place; `filter_map`
-            // would gather pieces and copy them, so it is kept for the
-            // rare input with unusable boxes.
-            if bounds.par_iter().all(usable) {
-                bounds
-                    .par_iter()
-                    .enumerate()
-                    .map(|(i, b)| PrimRef::new(b, i as u32))
-                    .collect()
-            } else {
-                bounds.par_iter().enumerate().filter_map(make).collect()
+        let mut refs: Vec<PrimRef> = if count >= opts.parallel_threshold {
+            // An indexed `map` collects straight into place (`filter_map`
+            // would gather pieces and copy them); the rare unusable box is
+            // flagged and dropped afterwards, keeping the order.
+            let unusable = AtomicBool::new(false);
+            let mut refs: Vec<PrimRef> = (0..count)
+                .into_par_iter()
+                .map(|i| {
+                    let b = box_of(i);
+                    if !usable(&b) {
+                        unusable.store(true, Ordering::Relaxed);
+                    }
+                    PrimRef::new(&b, i as u32)
+                })
+                .collect();
+            if unusable.into_inner() {
+                refs.retain(|r| usable(&r.aabb()));
             }
+            refs
         } else {
-            bounds.iter().enumerate().filter_map(make).collect()
+            (0..count)
+                .filter_map(|i| {
+                    let b = box_of(i);
+                    usable(&b).then_some(PrimRef::new(&b, i as u32))
+                })
+                .collect()
         };
         if refs.is_empty() {
             return Self::default();
@@ -1401,25 +1429,17 @@ impl SceneBvh {
             })
         };
         let n = scene.triangles.len();
-        let bounds: Vec<Aabb> = if n >= opts.parallel_threshold {
-            scene
-                .triangles
-                .par_iter()
-                .map(|t| Aabb::from_points(tri(t)))
-                .collect()
-        } else {
-            scene
-                .triangles
-                .iter()
-                .map(|t| Aabb::from_points(tri(t)))
-                .collect()
+        let box_of = |i: usize| match scene.triangles.get(i) {
+            Some(t) => Aabb::from_points(tri(t)),
+            None => {
+                let s = &scene.spheres[i - n];
+                Aabb {
+                    min: s.center - Vec3::splat(s.radius.abs()),
+                    max: s.center + Vec3::splat(s.radius.abs()),
+                }
+            }
         };
-        let mut bounds = bounds;
-        bounds.extend(scene.spheres.iter().map(|s| Aabb {
-            min: s.center - Vec3::splat(s.radius.abs()),
-            max: s.center + Vec3::splat(s.radius.abs()),
-        }));
-        let bvh = Bvh::build_with(&bounds, opts);
+        let bvh = Bvh::build_boxes(n + scene.spheres.len(), box_of, opts);
         let block = |slots: &[u32]| {
             let mut b = TriBlock::EMPTY;
             let mut spheres = 0u8;
