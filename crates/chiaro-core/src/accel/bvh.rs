@@ -1910,6 +1910,58 @@ mod tests {
     }
 
     #[test]
+    fn parallel_and_serial_builds_drop_the_same_unusable_boxes() {
+        // Boxes on a line, every seventh empty or NaN; a threshold of 2
+        // takes the parallel paths (reference collection, binning,
+        // partition, subtrees) everywhere, the default none of them here.
+        let boxes: Vec<Aabb> = (0..3000)
+            .map(|i| match i % 7 {
+                3 => Aabb::EMPTY,
+                5 => Aabb {
+                    min: Vec3::new(f32::NAN, 0.0, 0.0),
+                    max: Vec3::ONE,
+                },
+                _ => {
+                    let p = Vec3::new(
+                        i as f32 * 0.37 % 11.0,
+                        (i * 13 % 17) as f32,
+                        i as f32 * 0.01,
+                    );
+                    Aabb {
+                        min: p,
+                        max: p + Vec3::splat(0.25),
+                    }
+                }
+            })
+            .collect();
+        let serial = Bvh::build(&boxes);
+        let parallel = Bvh::build_with(
+            &boxes,
+            &BvhOptions {
+                parallel_threshold: 2,
+                ..BvhOptions::default()
+            },
+        );
+        let kept = |b: &Bvh| {
+            let mut v: Vec<u32> = b
+                .prim_order()
+                .iter()
+                .copied()
+                .filter(|&p| p != PAD_SLOT)
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        let expected: Vec<u32> = (0..3000).filter(|i| i % 7 != 3 && i % 7 != 5).collect();
+        assert_eq!(kept(&serial), expected);
+        assert_eq!(kept(&parallel), expected);
+        // The same tree either way: the build does not depend on how it is
+        // split into tasks.
+        assert_eq!(serial.node_count(), parallel.node_count());
+        assert_eq!(serial.bounds(), parallel.bounds());
+    }
+
+    #[test]
     fn rays_leaving_a_surface_do_not_hit_it_again() {
         let mesh =
             read_obj(BUNNY).unwrap_or_else(|| crate::geometry::primitives::uv_sphere(1.0, 64, 32));
