@@ -809,7 +809,10 @@ fn choose_split(
     scratch: &mut Bins,
 ) -> Split {
     let n = refs.len();
-    if n <= 1 {
+    // At most one block of primitives the leaf test below always passes
+    // (the leaf costs `area`, any split `traversal_cost * area` plus two
+    // non-negative child costs), so skip the binning.
+    if n <= 1 || n as u32 <= opts.max_leaf.min(BLOCK as u32) {
         return Split::Leaf;
     }
     let ext = cb.extent();
