@@ -1645,7 +1645,12 @@ mod tests {
     use crate::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
     use crate::scene::{Geometry, Material, Mesh, Object, Scene, Transform};
 
-    const BUNNY: &str = "/work/shared/assets/common-3d-test-models/stanford-bunny.obj";
+    /// The Stanford bunny in the shared assets beside the repository
+    /// (`../shared`, as laid out for developers and CI).
+    const BUNNY: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/assets/common-3d-test-models/stanford-bunny.obj"
+    );
 
     /// A tiny OBJ reader: `v` and `f` lines only (polygons fanned).
     fn read_obj(path: &str) -> Option<Mesh> {
