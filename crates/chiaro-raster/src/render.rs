@@ -269,6 +269,9 @@ struct Ctx<'a, 's> {
     point_lighting: Option<PointLighting>,
     /// `SurfaceMaterial::from_material` of each scene material, by index.
     bases: Vec<SurfaceMaterial>,
+    /// True when the frame allows [`lean_sample`]: no environment and no
+    /// depth cueing (Phong samples also need `point_lighting`).
+    lean_frame: bool,
 }
 
 /// How the visibility pass treats a material.
@@ -550,6 +553,12 @@ struct TriData<'a> {
     /// The flat-shading illumination of the polygon (zero unless `mode` is
     /// flat): computed with the triangle's data, once per tile that shows it.
     flat: Split,
+    /// True when its opaque samples take [`lean_sample`] (set by
+    /// [`Ctx::tri_data`]; false elsewhere).
+    lean: bool,
+    /// Lean Gouraud triangles: the vertex illumination of the three
+    /// corners (zero otherwise).
+    corners: [Split; 3],
     /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
     /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
     e1: Vec3A,
@@ -600,9 +609,15 @@ impl TriCache<'_> {
 
 impl<'a> Ctx<'a, '_> {
     /// The data of triangle `t`, from `cache` when it holds `t` (the
-    /// cache then holds `t`).
+    /// cache then holds `t`), with [`TriData::lean`] and the Gouraud
+    /// corners from `poly` set.
     #[inline]
-    fn tri_data<'c>(&self, t: u32, cache: &'c mut TriCache<'a>) -> &'c TriData<'a> {
+    fn tri_data<'c>(
+        &self,
+        t: u32,
+        cache: &'c mut TriCache<'a>,
+        poly: &PolyShading,
+    ) -> &'c TriData<'a> {
         let slot = t as usize % cache.slots.len();
         let k = cache.slots[slot] as usize;
         let k = if k < cache.data.len() {
@@ -620,6 +635,22 @@ impl<'a> Ctx<'a, '_> {
         let d = &mut cache.data[k];
         if d.mode == ShadeMode::Flat {
             d.flat = self.flat_split(d);
+        }
+        // The cases shade_sample handles without textures, two-sided
+        // flips, reflection maps, depth cueing or per-corner values.
+        d.lean = self.lean_frame
+            && !d.textured
+            && !d.material.two_sided
+            && match d.mode {
+                ShadeMode::Phong => {
+                    self.point_lighting.is_some() && self.bases.get(d.material_id.index()).is_some()
+                }
+                ShadeMode::Gouraud => poly.corners.is_empty() || !poly.corners.contains_key(&t),
+                ShadeMode::Flat => true,
+            };
+        if d.lean && d.mode == ShadeMode::Gouraud {
+            let get = |i: usize| poly.vertex_front.get(i).copied().unwrap_or_default();
+            d.corners = d.idx.map(get);
         }
         d
     }
@@ -666,6 +697,8 @@ impl<'a> Ctx<'a, '_> {
             s,
             q: exact::cross(s, e1),
             flat: Split::default(),
+            lean: false,
+            corners: [Split::default(); 3],
         }
     }
 
@@ -1091,6 +1124,7 @@ pub fn render_prepared_with(
             .iter()
             .map(SurfaceMaterial::from_material)
             .collect(),
+        lean_frame: scene.environment.is_none() && settings.depth_cue.is_none(),
         shadows,
         class,
     };
@@ -1470,8 +1504,12 @@ fn shade_tile(
                         specular: Vec3::ZERO,
                     }
                 } else {
-                    let td = ctx.tri_data(id, &mut cache);
-                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
+                    let td = ctx.tri_data(id, &mut cache, poly);
+                    if td.lean {
+                        lean_sample(ctx, td, dir)
+                    } else {
+                        shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
+                    }
                 };
                 // Transparent fragments, composited back to front.
                 let n = tv.ids.len();
@@ -1481,7 +1519,7 @@ fn shade_tile(
                     let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
                     let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
                         == Some(&Class::Blend(TransparencyMode::Interpolated));
-                    let td = ctx.tri_data(t, &mut cache);
+                    let td = ctx.tri_data(t, &mut cache, poly);
                     let front =
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);
@@ -1514,6 +1552,67 @@ fn shade_tile(
         }
     }
     (out, kept)
+}
+
+/// [`shade_sample`] of an opaque sample (no specular part asked for) of a
+/// [`TriData::lean`] triangle: untextured, one-sided, without reflection
+/// map or depth cueing, and for Phong lit by `point_lighting` (flat and
+/// Gouraud samples only interpolate what was lit with any lights and
+/// shadows). The same
+/// floating-point operations in the same order as `shade_sample` for that
+/// case, without what it does not read (uv footprint, the view direction
+/// of flat and Gouraud samples, per-corner lookups).
+#[inline(always)]
+fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
+    let b = td.bary(dir).unwrap_or(Vec2::splat(1.0 / 3.0));
+    let (u, v) = (b.x, b.y);
+    // Ctx::surface: w = 1 - u - v and the same interpolations.
+    let w = 1.0 - u - v;
+    let p = td.p[0] * w + td.p[1] * u + td.p[2] * v;
+    let eye = Vec3A::from(ctx.rays.eye);
+    let depth = (p - eye).length();
+    let ng = td.ng;
+    let ns = || {
+        let ns = exact::try_normalize(td.n[0] * w + td.n[1] * u + td.n[2] * v).unwrap_or(ng);
+        if ns.dot(ng) < 0.0 { ng } else { ns }
+    };
+    let (color, normal) = match td.mode {
+        ShadeMode::Phong => {
+            let ns = ns();
+            let color = td.c[0] * w + td.c[1] * u + td.c[2] * v;
+            // exact::normalize_or_zero(eye - p): |eye - p| is `depth`, bit
+            // for bit (the same squares summed in the same order).
+            let rcp = 1.0 / depth;
+            let wo = if rcp.is_finite() && rcp > 0.0 {
+                (eye - p) * rcp
+            } else {
+                Vec3A::ZERO
+            };
+            let sp = ShadingPoint {
+                p: p.into(),
+                n: ns.into(),
+                ng: ng.into(),
+                wo: wo.into(),
+            };
+            let c = match (&ctx.point_lighting, ctx.bases.get(td.material_id.index())) {
+                (Some(pl), Some(base)) => pl.shade_kd(base, base.kd * Vec3::from(color), &sp),
+                // Not reached: TriData::lean checked both.
+                _ => Vec3::ZERO,
+            };
+            (c, ns)
+        }
+        ShadeMode::Gouraud => {
+            let split = Split::lerp3(td.corners, Vec3::new(w, u, v));
+            (split.diffuse * Vec3::ONE + split.rest, ns())
+        }
+        ShadeMode::Flat => (td.flat.diffuse * Vec3::ONE + td.flat.rest, ng),
+    };
+    SampleResult {
+        color,
+        depth,
+        normal: normal.into(),
+        specular: Vec3::ZERO,
+    }
 }
 
 /// Shades the sample at film position `(sx, sy)` (direction `dir`) where

@@ -642,6 +642,7 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         class: Vec::new(),
         point_lighting: None,
         bases: Vec::new(),
+        lean_frame: false,
     };
     let mut cache = TriCache::new();
     let nt = ps.triangles.len() as u32;
@@ -651,7 +652,7 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         let t = (k * 7919) % nt;
         // Twice: a miss, then a hit of the same entry.
         for _ in 0..2 {
-            let td = ctx.tri_data(t, &mut cache);
+            let td = ctx.tri_data(t, &mut cache, &PolyShading::default());
             assert_eq!(td.t, t);
             let [p0, p1, p2] = td.p.map(Vec3::from);
             let d = ctx.rays.dir(k as f32 * 0.37 % 32.0, k as f32 * 0.11 % 24.0);
@@ -662,6 +663,85 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         }
     }
     assert!(checked > 300);
+}
+
+#[test]
+fn lean_samples_equal_shade_sample_bit_for_bit() {
+    let mut s = test_scene();
+    // Point and ambient lights only, so that PointLighting applies.
+    s.lights.truncate(3);
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let (w, h) = (40u32, 30u32);
+    let mut checked = 0;
+    for model in [ReflectanceModel::Phong, ReflectanceModel::Blinn] {
+        s.materials[0].model = model;
+        let ps = PreparedScene::new(
+            &s,
+            PrepareOptions {
+                analytic_spheres: false,
+                ..PrepareOptions::default()
+            },
+        );
+        // Arbitrary vertex illumination for the Gouraud corners.
+        let poly = PolyShading {
+            vertex_front: (0..ps.positions.len())
+                .map(|_| Split {
+                    diffuse: Vec3::new(next(), next(), next()),
+                    rest: Vec3::new(next(), next(), next()),
+                })
+                .collect(),
+            ..PolyShading::default()
+        };
+        for mode in [ShadeMode::Phong, ShadeMode::Gouraud, ShadeMode::Flat] {
+            let st = settings(Technique::Phong, w, h);
+            let ctx = Ctx {
+                ps: &ps,
+                settings: &st,
+                rays: Rays::new(&s, w, h),
+                lighting: LocalLighting {
+                    lights: &ps.lights,
+                    area_samples: 1,
+                    ambient: true,
+                },
+                object_mode: vec![mode; s.objects.len()],
+                shadows: Shadows::None,
+                class: Vec::new(),
+                point_lighting: PointLighting::new(&ps.lights, true),
+                bases: s
+                    .materials
+                    .iter()
+                    .map(SurfaceMaterial::from_material)
+                    .collect(),
+                lean_frame: true,
+            };
+            assert!(ctx.point_lighting.is_some());
+            let mut cache = TriCache::new();
+            let nt = ps.triangles.len() as u32;
+            for k in 0..300u32 {
+                let t = (k * 7919) % nt;
+                let td = *ctx.tri_data(t, &mut cache, &poly);
+                assert!(td.lean);
+                for _ in 0..4 {
+                    let (sx, sy) = (next() * w as f32, next() * h as f32);
+                    let dir = Rays::dir_from(ctx.rays.column(sx), ctx.rays.row(sy));
+                    let a = lean_sample(&ctx, &td, dir);
+                    let b = shade_sample(&ctx, &poly, &td, sx, sy, dir, None, false);
+                    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                    assert_eq!(bits(a.color), bits(b.color), "{mode:?} {model:?} t {t}");
+                    assert_eq!(a.depth.to_bits(), b.depth.to_bits());
+                    assert_eq!(bits(a.normal), bits(b.normal));
+                    checked += usize::from(a.color != Vec3::ZERO);
+                }
+            }
+        }
+    }
+    assert!(checked > 3000, "{checked}");
 }
 
 #[test]
