@@ -502,6 +502,29 @@ impl Ctx<'_, '_> {
         self.illuminate_split(t, &sm, &sp)
     }
 
+    /// [`Ctx::corner_split`] at vertex `v` of an untextured material whose
+    /// [`SurfaceMaterial`] is `base`, lit by the point-light model,
+    /// for any corner of any triangle with that material at `v`: the
+    /// model reads no geometric normal, and a corner's interpolated position
+    /// and colour (weights 1, 0, 0) are the vertex's own but for the sign of
+    /// a zero component, which changes no non-zero result (and the film's
+    /// sanitising makes every zero positive).
+    /// Requires `point_lighting` (without it the triangle would matter for
+    /// shadows).
+    fn vertex_split(&self, base: &SurfaceMaterial, v: usize, back: bool) -> Split {
+        debug_assert!(self.point_lighting.is_some());
+        let p = self.ps.positions[v];
+        let mut n = self.ps.normals[v];
+        if back {
+            n = -n;
+        }
+        let mut sm = *base;
+        sm.kd *= self.ps.colors[v];
+        let wo = (self.rays.eye - p).normalize_or_zero();
+        // No triangle: point lighting has no visibility to ask about.
+        self.illuminate_split(u32::MAX, &sm, &ShadingPoint { p, n, ng: n, wo })
+    }
+
     /// Gouraud illumination at corner `k` of triangle `t`, on the front side
     /// or (for the back of a two-sided surface) the back side.
     fn corner_split(&self, t: u32, k: usize, back: bool) -> Split {
@@ -1327,6 +1350,24 @@ fn count_volumes(
     tv.counts = counts;
 }
 
+/// With the point-light model, the base material when every Gouraud
+/// triangle has the same material and it has no emission texture (the one
+/// texture vertex illumination reads).
+fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
+    ctx.point_lighting.as_ref()?;
+    let ps = ctx.ps;
+    let is_gouraud = |t: usize| ctx.mode(t as u32) == ShadeMode::Gouraud;
+    let first = (0..ps.triangles.len()).find(|&t| is_gouraud(t))?;
+    let m = ps.tri_material[first];
+    let uniform = ps
+        .tri_material
+        .par_iter()
+        .enumerate()
+        .all(|(t, &mt)| mt == m || !is_gouraud(t));
+    let base = ctx.bases.get(m.index())?;
+    (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
+}
+
 /// Step 4: finds the visible Gouraud triangles and illuminates their
 /// vertices (flat polygons are illuminated with their [`TriData`]).
 fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
@@ -1366,6 +1407,29 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         for &v in &ps.triangles[t as usize] {
             need[v as usize] |= if back { 2 } else { 1 };
         }
+    }
+    if let Some(base) = uniform_gouraud(ctx) {
+        // One untextured material on every Gouraud face and the point-light
+        // model: a vertex's illumination is its own (see Ctx::vertex_split),
+        // whichever face it is lit for, and no vertex is shared by faces of
+        // different materials.
+        let shade_side = |side: u8| -> Vec<Split> {
+            (0..nv)
+                .into_par_iter()
+                .map(|v| {
+                    if need[v] & side == 0 {
+                        Split::default()
+                    } else {
+                        ctx.vertex_split(base, v, side == 2)
+                    }
+                })
+                .collect()
+        };
+        out.vertex_front = shade_side(1);
+        if need.iter().any(|&n| n & 2 != 0) {
+            out.vertex_back = shade_side(2);
+        }
+        return out;
     }
     // A representative (triangle, corner) for each vertex: the first
     // Gouraud triangle using it, visible or not (so that a vertex's colour

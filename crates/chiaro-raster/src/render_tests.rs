@@ -745,6 +745,64 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
 }
 
 #[test]
+fn vertex_split_equals_corner_split_of_every_face() {
+    let mut s = test_scene();
+    s.lights.truncate(3);
+    // Vertex colours, so that kd varies per vertex.
+    let ps0 = PreparedScene::new(
+        &s,
+        PrepareOptions {
+            analytic_spheres: false,
+            ..PrepareOptions::default()
+        },
+    );
+    let mut ps = ps0;
+    for (i, c) in ps.colors.iter_mut().enumerate() {
+        *c = Vec3::new(
+            0.5 + (i % 7) as f32 / 14.0,
+            1.0,
+            0.25 + (i % 3) as f32 / 4.0,
+        );
+    }
+    let st = settings(Technique::Gouraud, 40, 30);
+    let ctx = Ctx {
+        ps: &ps,
+        settings: &st,
+        rays: Rays::new(&s, 40, 30),
+        lighting: LocalLighting {
+            lights: &ps.lights,
+            area_samples: 1,
+            ambient: true,
+        },
+        object_mode: vec![ShadeMode::Gouraud; s.objects.len()],
+        shadows: Shadows::None,
+        class: Vec::new(),
+        point_lighting: PointLighting::new(&ps.lights, true),
+        bases: s
+            .materials
+            .iter()
+            .map(SurfaceMaterial::from_material)
+            .collect(),
+        lean_frame: true,
+    };
+    assert!(ctx.point_lighting.is_some());
+    let mut compared = 0;
+    for (t, tri) in ps.triangles.iter().enumerate() {
+        let base = &ctx.bases[ps.tri_material[t].index()];
+        for (k, &v) in tri.iter().enumerate() {
+            for back in [false, true] {
+                let a = ctx.vertex_split(base, v as usize, back);
+                let b = ctx.corner_split(t as u32, k, back);
+                // Equal as numbers (a zero's sign aside).
+                assert_eq!(a, b, "t {t} corner {k} back {back}");
+                compared += usize::from(a.diffuse != Vec3::ZERO);
+            }
+        }
+    }
+    assert!(compared > 1000, "{compared}");
+}
+
+#[test]
 fn tent_filter_widens_edges_keeps_interiors_and_crops_exactly() {
     let mut s = test_scene();
     s.background = Vec3::new(0.2, 0.3, 0.4);
