@@ -617,6 +617,45 @@ fn crop_window_matches_the_full_render_and_leaves_the_rest_black() {
     assert!(empty.depth.iter().all(|d| d.is_infinite()));
 }
 
+/// A shading context for tests: `mode` everywhere, no shadows, with the
+/// point-light model and base materials when `point` (which needs point and
+/// ambient lights only).
+fn test_ctx<'a, 's>(
+    ps: &'a PreparedScene<'s>,
+    st: &'a RenderSettings,
+    mode: ShadeMode,
+    point: bool,
+) -> Ctx<'a, 's> {
+    let s = ps.scene;
+    Ctx {
+        ps,
+        settings: st,
+        rays: Rays::new(s, st.width, st.height),
+        lighting: LocalLighting {
+            lights: &ps.lights,
+            area_samples: 1,
+            ambient: true,
+        },
+        object_mode: vec![mode; s.objects.len()],
+        shadows: Shadows::None,
+        class: Vec::new(),
+        point_lighting: if point {
+            PointLighting::new(&ps.lights, true)
+        } else {
+            None
+        },
+        bases: if point {
+            s.materials
+                .iter()
+                .map(SurfaceMaterial::from_material)
+                .collect()
+        } else {
+            Vec::new()
+        },
+        lean_frame: point,
+    }
+}
+
 #[test]
 fn cached_bary_equals_ray_plane_bary_exactly() {
     let s = test_scene();
@@ -628,22 +667,7 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         },
     );
     let st = settings(Technique::Phong, 32, 24);
-    let ctx = Ctx {
-        ps: &ps,
-        settings: &st,
-        rays: Rays::new(&s, 32, 24),
-        lighting: LocalLighting {
-            lights: &ps.lights,
-            area_samples: 1,
-            ambient: true,
-        },
-        object_mode: vec![ShadeMode::Phong; s.objects.len()],
-        shadows: Shadows::None,
-        class: Vec::new(),
-        point_lighting: None,
-        bases: Vec::new(),
-        lean_frame: false,
-    };
+    let ctx = test_ctx(&ps, &st, ShadeMode::Phong, false);
     let mut cache = TriCache::new();
     let nt = ps.triangles.len() as u32;
     assert!(nt > 10);
@@ -700,26 +724,7 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
         };
         for mode in [ShadeMode::Phong, ShadeMode::Gouraud, ShadeMode::Flat] {
             let st = settings(Technique::Phong, w, h);
-            let ctx = Ctx {
-                ps: &ps,
-                settings: &st,
-                rays: Rays::new(&s, w, h),
-                lighting: LocalLighting {
-                    lights: &ps.lights,
-                    area_samples: 1,
-                    ambient: true,
-                },
-                object_mode: vec![mode; s.objects.len()],
-                shadows: Shadows::None,
-                class: Vec::new(),
-                point_lighting: PointLighting::new(&ps.lights, true),
-                bases: s
-                    .materials
-                    .iter()
-                    .map(SurfaceMaterial::from_material)
-                    .collect(),
-                lean_frame: true,
-            };
+            let ctx = test_ctx(&ps, &st, mode, true);
             assert!(ctx.point_lighting.is_some());
             let mut cache = TriCache::new();
             let nt = ps.triangles.len() as u32;
@@ -765,26 +770,7 @@ fn vertex_split_equals_corner_split_of_every_face() {
         );
     }
     let st = settings(Technique::Gouraud, 40, 30);
-    let ctx = Ctx {
-        ps: &ps,
-        settings: &st,
-        rays: Rays::new(&s, 40, 30),
-        lighting: LocalLighting {
-            lights: &ps.lights,
-            area_samples: 1,
-            ambient: true,
-        },
-        object_mode: vec![ShadeMode::Gouraud; s.objects.len()],
-        shadows: Shadows::None,
-        class: Vec::new(),
-        point_lighting: PointLighting::new(&ps.lights, true),
-        bases: s
-            .materials
-            .iter()
-            .map(SurfaceMaterial::from_material)
-            .collect(),
-        lean_frame: true,
-    };
+    let ctx = test_ctx(&ps, &st, ShadeMode::Gouraud, true);
     assert!(ctx.point_lighting.is_some());
     let mut compared = 0;
     for (t, tri) in ps.triangles.iter().enumerate() {
