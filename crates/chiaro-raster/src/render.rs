@@ -617,14 +617,14 @@ const TRI_CACHE_SIZE: usize = 256;
 /// have neighbouring ids, so most lookups hit.
 struct TriCache<'a> {
     /// Index into `data` of each slot's entry (`u32::MAX`: empty).
-    slots: Vec<u32>,
+    slots: [u32; TRI_CACHE_SIZE],
     data: Vec<TriData<'a>>,
 }
 
 impl TriCache<'_> {
     fn new() -> Self {
         Self {
-            slots: vec![u32::MAX; TRI_CACHE_SIZE],
+            slots: [u32::MAX; TRI_CACHE_SIZE],
             data: Vec::with_capacity(TRI_CACHE_SIZE),
         }
     }
@@ -641,7 +641,7 @@ impl<'a> Ctx<'a, '_> {
         cache: &'c mut TriCache<'a>,
         poly: &PolyShading,
     ) -> &'c TriData<'a> {
-        let slot = t as usize % cache.slots.len();
+        let slot = t as usize & (TRI_CACHE_SIZE - 1);
         let k = cache.slots[slot] as usize;
         let k = if k < cache.data.len() {
             if cache.data[k].t == t {
@@ -1544,6 +1544,45 @@ fn shade_tile(
     let rows: Vec<Vec3A> = (wy0..win.y1 - rect.y)
         .flat_map(|py| offsets.iter().map(move |o| ctx.rays.row(sample_y(py, o))))
         .collect();
+    if spp == 1 && !keep_samples && tv.start.is_empty() {
+        // One opaque sample per pixel, none kept: the loop below with its
+        // sum and nearest-depth choice folded (the sanitised colour c is
+        // 0 + c times 1; the sample is nearest when its depth is below
+        // infinity), and the direction made only where it is read.
+        let background = sanitize(ctx.ps.scene.background);
+        let tw = rect.width as usize;
+        let o = &offsets[0];
+        for (py, &row) in (wy0..win.y1 - rect.y).zip(&rows) {
+            let line = py as usize * tw;
+            for (px, &column) in (wx0..win.x1 - rect.x).zip(&columns) {
+                let pi = line + px as usize;
+                let id = tv.ids[pi];
+                if id == NONE {
+                    out.color[pi] = if env_background {
+                        let dir = Rays::dir_from(column, row);
+                        sanitize(background_radiance(ctx.ps.scene, dir.into()))
+                    } else {
+                        background
+                    };
+                    continue;
+                }
+                let dir = Rays::dir_from(column, row);
+                let td = ctx.tri_data(id, &mut cache, poly);
+                let r = if td.lean {
+                    lean_sample(ctx, td, dir)
+                } else {
+                    let (sx, sy) = (sample_x(px, o), sample_y(py, o));
+                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(pi), false)
+                };
+                out.color[pi] = sanitize(r.color);
+                if r.depth < f32::INFINITY {
+                    out.depth[pi] = r.depth;
+                    out.normal[pi] = r.normal;
+                }
+            }
+        }
+        return (out, kept);
+    }
     for (py, rows) in (wy0..win.y1 - rect.y).zip(rows.chunks_exact(spp)) {
         for (px, columns) in (wx0..win.x1 - rect.x).zip(columns.chunks_exact(spp)) {
             let pi = (py * rect.width + px) as usize;
