@@ -862,6 +862,36 @@ pub fn render_prepared_with(
     progress: &dyn Progress,
 ) -> Result<Film, CoreError> {
     check_size(settings)?;
+    let mut film = Film::new(settings.width, settings.height);
+    render_prepared_into(ps, settings, mode, options, progress, &mut film)?;
+    Ok(film)
+}
+
+/// [`render_prepared_with`] into `film`, whose buffers are reused when it
+/// already has the image's size (so that frames rendered one after another
+/// neither allocate nor fault in a new film each time, as a GPU's
+/// framebuffer is reused); it is resized otherwise. On success `film` holds
+/// exactly the picture [`render_prepared_with`] returns, whatever it held
+/// before; on an error its pixels are unspecified.
+///
+/// # Errors
+/// As [`render_prepared`].
+pub fn render_prepared_into(
+    ps: &PreparedScene<'_>,
+    settings: &RenderSettings,
+    mode: ShadeMode,
+    options: &RasterOptions,
+    progress: &dyn Progress,
+    film: &mut Film,
+) -> Result<(), CoreError> {
+    check_size(settings)?;
+    let n = settings.width as usize * settings.height as usize;
+    if film.width != settings.width
+        || film.height != settings.height
+        || [film.color.len(), film.depth.len(), film.normal.len()] != [n; 3]
+    {
+        *film = Film::new(settings.width, settings.height);
+    }
     progress.begin("shadows", 1);
     let shadows = Shadows::new(ps, settings)?;
     progress.advance(1);
@@ -1028,6 +1058,15 @@ pub fn render_prepared_with(
             (win.x0 < win.x1 && win.y0 < win.y1).then_some((ti, rect, win))
         })
         .collect();
+    // Tiles outside the crop window stay black with infinite depth (the
+    // shaded tiles overwrite every pixel of theirs).
+    let mut drawn = vec![false; rects.len()];
+    for &(ti, ..) in &active {
+        drawn[ti] = true;
+    }
+    for (&rect, _) in rects.iter().zip(&drawn).filter(|(_, d)| !**d) {
+        film.write_tile(&TilePixels::new(rect));
+    }
     progress.begin("raster", active.len() as u64);
     let spp_us = spp as usize;
     let vis: Vec<Option<TileVis>> = active
@@ -1161,8 +1200,7 @@ pub fn render_prepared_with(
     // shaded, so that its buffers are freed and reused by the next tile
     // instead of every tile's pixels being alive (and fresh pages) at once.
     progress.begin("shade", vis.len() as u64);
-    // Tiles outside the crop window stay black with infinite depth.
-    let film = Mutex::new(Film::new(w, h));
+    let film = Mutex::new(film);
     let kept: Mutex<Vec<(TileRect, Vec<Vec3>)>> = Mutex::new(Vec::new());
     let finished = vis.par_iter().all(|tv| {
         if progress.cancelled() {
@@ -1183,12 +1221,12 @@ pub fn render_prepared_with(
     if !finished {
         return Err(CoreError::Cancelled);
     }
-    let mut film = film.into_inner().unwrap_or_else(PoisonError::into_inner);
+    let film = film.into_inner().unwrap_or_else(PoisonError::into_inner);
     let kept = kept.into_inner().unwrap_or_else(PoisonError::into_inner);
     if tent {
-        tent_filter(&mut film, &kept, crop, out_crop, &offsets);
+        tent_filter(film, &kept, crop, out_crop, &offsets);
     }
-    Ok(film)
+    Ok(())
 }
 
 /// Replaces the box-filtered colours of the pixels of `out` (the crop

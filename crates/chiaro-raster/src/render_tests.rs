@@ -617,6 +617,17 @@ fn crop_window_matches_the_full_render_and_leaves_the_rest_black() {
     assert!(empty.depth.iter().all(|d| d.is_infinite()));
 }
 
+/// `s` prepared for scan conversion (spheres tessellated).
+fn tessellated(s: &Scene) -> PreparedScene<'_> {
+    PreparedScene::new(
+        s,
+        PrepareOptions {
+            analytic_spheres: false,
+            ..PrepareOptions::default()
+        },
+    )
+}
+
 /// A shading context for tests: `mode` everywhere, no shadows, with the
 /// point-light model and base materials when `point` (which needs point and
 /// ambient lights only).
@@ -659,13 +670,7 @@ fn test_ctx<'a, 's>(
 #[test]
 fn cached_bary_equals_ray_plane_bary_exactly() {
     let s = test_scene();
-    let ps = PreparedScene::new(
-        &s,
-        PrepareOptions {
-            analytic_spheres: false,
-            ..PrepareOptions::default()
-        },
-    );
+    let ps = tessellated(&s);
     let st = settings(Technique::Phong, 32, 24);
     let ctx = test_ctx(&ps, &st, ShadeMode::Phong, false);
     let mut cache = TriCache::new();
@@ -705,13 +710,7 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
     let mut checked = 0;
     for model in [ReflectanceModel::Phong, ReflectanceModel::Blinn] {
         s.materials[0].model = model;
-        let ps = PreparedScene::new(
-            &s,
-            PrepareOptions {
-                analytic_spheres: false,
-                ..PrepareOptions::default()
-            },
-        );
+        let ps = tessellated(&s);
         // Arbitrary vertex illumination for the Gouraud corners.
         let poly = PolyShading {
             vertex_front: (0..ps.positions.len())
@@ -754,13 +753,7 @@ fn vertex_split_equals_corner_split_of_every_face() {
     let mut s = test_scene();
     s.lights.truncate(3);
     // Vertex colours, so that kd varies per vertex.
-    let ps0 = PreparedScene::new(
-        &s,
-        PrepareOptions {
-            analytic_spheres: false,
-            ..PrepareOptions::default()
-        },
-    );
+    let ps0 = tessellated(&s);
     let mut ps = ps0;
     for (i, c) in ps.colors.iter_mut().enumerate() {
         *c = Vec3::new(
@@ -786,6 +779,31 @@ fn vertex_split_equals_corner_split_of_every_face() {
         }
     }
     assert!(compared > 1000, "{compared}");
+}
+
+#[test]
+fn rendering_into_a_used_film_gives_the_fresh_picture() {
+    let s = test_scene();
+    let ps = tessellated(&s);
+    let (w, h) = (150u32, 90u32);
+    // A film of the wrong size, then one holding another picture.
+    let mut film = Film::new(7, 5);
+    for (technique, crop) in [
+        (Technique::Phong, None),
+        (Technique::Gouraud, Some([10, 70, 140, 90])),
+        (Technique::Flat, None),
+        (Technique::Phong, Some([0, 0, 64, 20])),
+    ] {
+        let st = RenderSettings {
+            crop,
+            ..settings(technique, w, h)
+        };
+        let mode = shade_mode_of(technique).expect("raster technique");
+        let opts = RasterOptions::default();
+        let fresh = render_prepared_with(&ps, &st, mode, &opts, &NoProgress).expect("fresh");
+        render_prepared_into(&ps, &st, mode, &opts, &NoProgress, &mut film).expect("into");
+        assert!(film == fresh, "{technique:?} {crop:?}");
+    }
 }
 
 #[test]
