@@ -72,6 +72,7 @@ use glam::{Vec2, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 use std::cell::Cell;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 #[path = "exact.rs"]
@@ -1414,29 +1415,27 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
     if ctx.object_mode.iter().all(|&m| m != ShadeMode::Gouraud) {
         return out;
     }
-    // Visible triangles (deduplicated, sorted: deterministic).
-    let mut seen = vec![false; ps.triangles.len()];
-    for tv in vis {
-        for &id in &tv.ids {
-            if id != NONE {
-                seen[id as usize] = true;
-            }
+    // Visible triangles, marked in parallel (every mark stores `true`, so
+    // the order of the stores does not matter).
+    let seen: Vec<AtomicBool> = (0..ps.triangles.len())
+        .into_par_iter()
+        .map(|_| AtomicBool::new(false))
+        .collect();
+    vis.par_iter().for_each(|tv| {
+        let ids = tv.ids.iter().copied().filter(|&id| id != NONE);
+        for id in ids.chain(tv.frags.iter().map(|f| f.0)) {
+            seen[id as usize].store(true, Ordering::Relaxed);
         }
-        for &(id, _) in &tv.frags {
-            seen[id as usize] = true;
-        }
-    }
-    let visible: Vec<u32> = (0..ps.triangles.len() as u32)
-        .filter(|&t| seen[t as usize])
+    });
+    // The visible Gouraud triangles in id order (deterministic) and whether
+    // their back is seen.
+    let nv = ps.positions.len();
+    let gouraud: Vec<(u32, bool)> = (0..ps.triangles.len() as u32)
+        .into_par_iter()
+        .filter(|&t| seen[t as usize].load(Ordering::Relaxed) && ctx.mode(t) == ShadeMode::Gouraud)
+        .map(|t| (t, ctx.flipped(t)))
         .collect();
     drop(seen);
-    // Gouraud: which vertex sides are needed (by the visible triangles).
-    let nv = ps.positions.len();
-    let gouraud: Vec<(u32, bool)> = visible
-        .iter()
-        .filter(|&&t| ctx.mode(t) == ShadeMode::Gouraud)
-        .map(|&t| (t, ctx.flipped(t)))
-        .collect();
     if gouraud.is_empty() {
         return out;
     }
