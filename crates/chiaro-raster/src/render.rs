@@ -564,7 +564,8 @@ struct TriData<'a> {
     p: [Vec3A; 3],
     /// `PreparedScene::face_normal(t)`.
     ng: Vec3A,
-    /// The vertex normals and colours.
+    /// The vertex normals and colours (in [`TriCache`], zero where the
+    /// triangle's samples do not read them: see [`Ctx::tri_geometry`]).
     n: [Vec3A; 3],
     c: [Vec3A; 3],
     mode: ShadeMode,
@@ -649,11 +650,11 @@ impl<'a> Ctx<'a, '_> {
                 return &cache.data[k];
             }
             // Built in place (inlined), not copied in.
-            cache.data[k] = self.tri_geometry(t);
+            cache.data[k] = self.tri_geometry(t, false);
             k
         } else {
             cache.slots[slot] = cache.data.len() as u32;
-            cache.data.push(self.tri_geometry(t));
+            cache.data.push(self.tri_geometry(t, false));
             cache.data.len() - 1
         };
         let d = &mut cache.data[k];
@@ -681,16 +682,20 @@ impl<'a> Ctx<'a, '_> {
 
     /// The [`TriData`] of triangle `t`, computed.
     fn make_tri_data(&self, t: u32) -> TriData<'a> {
-        let mut d = self.tri_geometry(t);
+        let mut d = self.tri_geometry(t, true);
         if d.mode == ShadeMode::Flat {
             d.flat = self.flat_split(&d);
         }
         d
     }
 
-    /// [`Ctx::make_tri_data`] without the flat-shading illumination.
+    /// [`Ctx::make_tri_data`] without the flat-shading illumination; unless
+    /// `all`, without the vertex data its samples do not read (the normals
+    /// of a flat triangle, the colours of a Gouraud one: zero), which
+    /// the triangle cache then need not fetch.
     #[inline(always)]
-    fn tri_geometry(&self, t: u32) -> TriData<'a> {
+    fn tri_geometry(&self, t: u32, all: bool) -> TriData<'a> {
+        let mode = self.mode(t);
         let idx = self.ps.triangles[t as usize].map(|i| i as usize);
         let p3 = idx.map(|i| self.ps.positions[i]);
         // PreparedScene::face_normal(t), from the positions at hand.
@@ -706,9 +711,17 @@ impl<'a> Ctx<'a, '_> {
             idx,
             p,
             ng: ng.into(),
-            n: idx.map(|i| self.ps.normals[i].into()),
-            c: idx.map(|i| self.ps.colors[i].into()),
-            mode: self.mode(t),
+            n: if all || mode != ShadeMode::Flat {
+                idx.map(|i| self.ps.normals[i].into())
+            } else {
+                [Vec3A::ZERO; 3]
+            },
+            c: if all || mode != ShadeMode::Gouraud {
+                idx.map(|i| self.ps.colors[i].into())
+            } else {
+                [Vec3A::ZERO; 3]
+            },
+            mode,
             material,
             material_id,
             object: self.ps.tri_object[t as usize],
