@@ -938,7 +938,6 @@ pub fn render_prepared_into(
             let clip = clip_from_world * p.extend(1.0);
             let inside = outcode(clip) == 0;
             ScreenVertex {
-                clip,
                 inside,
                 xy: if inside { vp_all.snap(clip) } else { [0; 2] },
                 // The key `Viewport::setup` gives an unclipped vertex:
@@ -1012,7 +1011,12 @@ pub fn render_prepared_into(
                             &mut out,
                         );
                     } else {
-                        vp.setup(v.map(|v| v.clip), t, &mut scratch, &mut out);
+                        // The clip-space corners again (the vertex pass's
+                        // product, bit for bit) for the clipper: few
+                        // triangles get here, so the vertices do not keep them.
+                        let clip =
+                            tri.map(|i| clip_from_world * ps.positions[i as usize].extend(1.0));
+                        vp.setup(clip, t, &mut scratch, &mut out);
                     }
                     for (j, rt) in out.iter().enumerate().skip(first) {
                         binner.bin(rt, j as u32, &mut bins);
@@ -1298,10 +1302,9 @@ fn tent_filter(
     }
 }
 
-/// A vertex of the scene in clip space and, when it is inside the clip
-/// volume, on the screen.
+/// A vertex of the scene on the screen, when it is inside the clip volume
+/// (16 bytes: the vertex pass writes and setup reads half a million).
 struct ScreenVertex {
-    clip: Vec4,
     /// Inside the near plane and the guard band: `xy` and `key` are valid.
     inside: bool,
     /// Snapped screen position (see [`Viewport::snap`]).
