@@ -273,6 +273,11 @@ struct Ctx<'a, 's> {
     /// True when the frame allows [`lean_sample`]: no environment and no
     /// depth cueing (Phong samples also need `point_lighting`).
     lean_frame: bool,
+    /// The shading mode of every object, when they all have the same one,
+    /// and the material of every triangle, when it is the same: per-triangle
+    /// lookups (cache misses) that the triangle cache then skips.
+    one_mode: Option<ShadeMode>,
+    one_material: Option<MaterialId>,
 }
 
 /// How the visibility pass treats a material.
@@ -321,6 +326,9 @@ pub fn dither_threshold(x: u32, y: u32, s: u32) -> f32 {
 
 impl Ctx<'_, '_> {
     fn mode(&self, t: u32) -> ShadeMode {
+        if let Some(m) = self.one_mode {
+            return m;
+        }
         let o = self.ps.tri_object[t as usize] as usize;
         self.object_mode.get(o).copied().unwrap_or(ShadeMode::Phong)
     }
@@ -571,7 +579,6 @@ struct TriData<'a> {
     mode: ShadeMode,
     material: &'a Material,
     material_id: MaterialId,
-    object: u32,
     /// True when the material has a texture, bump, normal or emission map
     /// (which need the uv footprint).
     textured: bool,
@@ -704,7 +711,9 @@ impl<'a> Ctx<'a, '_> {
         let p = p3.map(Vec3A::from);
         let e1 = p[1] - p[0];
         let s = Vec3A::from(self.rays.eye) - p[0];
-        let material_id = self.ps.tri_material[t as usize];
+        let material_id = self
+            .one_material
+            .unwrap_or_else(|| self.ps.tri_material[t as usize]);
         let material = self.ps.material(material_id);
         TriData {
             t,
@@ -724,7 +733,6 @@ impl<'a> Ctx<'a, '_> {
             mode,
             material,
             material_id,
-            object: self.ps.tri_object[t as usize],
             textured: material.texture.is_some()
                 || material.bump.is_some()
                 || material.normal_map.is_some()
@@ -792,7 +800,7 @@ impl<'a> Ctx<'a, '_> {
             tangent,
             color: color.into(),
             material: td.material_id,
-            object: td.object,
+            object: ps.tri_object[td.t as usize],
         }
     }
 }
@@ -1032,6 +1040,7 @@ pub fn render_prepared_into(
         .iter()
         .map(|m| Class::of(m, settings))
         .collect();
+    let all_opaque = class.iter().all(|&c| c == Class::Opaque);
     let class_of = |t: u32| {
         class
             .get(ps.tri_material[t as usize].index())
@@ -1112,7 +1121,13 @@ pub fn render_prepared_into(
             for c in &chunks {
                 for &j in &c.bins[ti] {
                     let rt = &c.tris[j as usize];
-                    match class_of(rt.id) {
+                    // (No per-triangle material lookup when all are opaque.)
+                    let class = if all_opaque {
+                        Class::Opaque
+                    } else {
+                        class_of(rt.id)
+                    };
+                    match class {
                         Class::Opaque => rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
                             let i = index(x, y, s);
                             if k > key[i] {
@@ -1179,6 +1194,11 @@ pub fn render_prepared_into(
         .collect::<Option<Vec<_>>>()
         .ok_or(CoreError::Cancelled)?;
 
+    let object_mode: Vec<ShadeMode> = scene
+        .objects
+        .iter()
+        .map(|o| o.shade_mode.unwrap_or(mode))
+        .collect();
     let ctx = Ctx {
         ps,
         settings,
@@ -1188,11 +1208,11 @@ pub fn render_prepared_into(
             area_samples: settings.light_samples.max(1),
             ambient: true,
         },
-        object_mode: scene
-            .objects
-            .iter()
-            .map(|o| o.shade_mode.unwrap_or(mode))
-            .collect(),
+        one_mode: object_mode
+            .first()
+            .copied()
+            .filter(|&m| object_mode.iter().all(|&o| o == m)),
+        object_mode,
         point_lighting: if matches!(shadows, Shadows::None) {
             PointLighting::new(&ps.lights, true)
         } else {
@@ -1205,6 +1225,10 @@ pub fn render_prepared_into(
             .map(SurfaceMaterial::from_material)
             .collect(),
         lean_frame: scene.environment.is_none() && settings.depth_cue.is_none(),
+        one_material: ps.tri_material.first().copied().filter(|&m| {
+            // Parallel, and stops at the first other material.
+            ps.tri_material.par_iter().all(|&mt| mt == m)
+        }),
         shadows,
         class,
     };

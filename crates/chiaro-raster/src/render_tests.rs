@@ -664,6 +664,8 @@ fn test_ctx<'a, 's>(
             Vec::new()
         },
         lean_frame: point,
+        one_mode: None,
+        one_material: None,
     }
 }
 
