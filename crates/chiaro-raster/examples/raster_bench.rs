@@ -1,9 +1,11 @@
 //! Scan-conversion benchmark: the llvmpipe peer's scene (a 14x14 grid of
 //! 5120-triangle icospheres, 1,003,520 triangles, 1920x1080, two point
 //! lights, `/work/shared/peers/gl_llvmpipe.py`) rendered with flat, Gouraud
-//! and Phong shading. Prints ms/frame (median of `frames` after one warm-up)
-//! and the peak resident memory; writes PNGs of the frames to `$OUT_DIR` or
-//! /tmp when given `--png`.
+//! and Phong shading, each into one film reused across frames
+//! (`render_prepared_into`, as the peer reuses its framebuffer). Prints
+//! ms/frame (median of `frames` after one warm-up) and the peak resident
+//! memory; writes PNGs of the frames to `$OUT_DIR` or /tmp when given
+//! `--png`.
 //!
 //! Shadows are off (the peer draws none); `--issue4` instead times every
 //! shadow method and transparency mode (issue 4). Each line also splits the
@@ -415,23 +417,30 @@ fn main() {
         let mut cpu = Vec::new();
         let mut phases: Vec<(String, Vec<f64>)> = Vec::new();
         let mut film = None;
+        // One film reused by every frame, as the peer reuses its framebuffer.
+        let mut target = chiaro_core::film::Film::new(0, 0);
         for frame in 0..=frames {
             let timer = PhaseTimer::default();
             let c0 = cpu_ms();
             let t = Instant::now();
-            let f =
-                chiaro_raster::render_prepared(ps, &case.settings, case.mode, &timer).map(|f| {
-                    if case.post {
-                        timer.begin("fxaa", 0);
-                        chiaro_core::film::postfilter::fxaa(&f)
-                    } else {
-                        f
-                    }
-                });
+            let f = chiaro_raster::render_prepared_into(
+                ps,
+                &case.settings,
+                case.mode,
+                &chiaro_raster::RasterOptions::default(),
+                &timer,
+                &mut target,
+            )
+            .map(|()| {
+                case.post.then(|| {
+                    timer.begin("fxaa", 0);
+                    chiaro_core::film::postfilter::fxaa(&target)
+                })
+            });
             let end = Instant::now();
             let c1 = cpu_ms();
             film = match f {
-                Ok(f) => Some(f),
+                Ok(post) => Some(post),
                 Err(e) => {
                     eprintln!("{}: {e}", case.name);
                     None
@@ -449,10 +458,11 @@ fn main() {
                 phases[k].1.push(ms);
             }
         }
-        let Some(film) = film else {
+        let Some(post) = film else {
             eprintln!("{}: render failed", case.name);
             continue;
         };
+        let film = post.as_ref().unwrap_or(&target);
         let (min, max) = (
             times.iter().copied().fold(f64::INFINITY, f64::min),
             times.iter().copied().fold(0.0, f64::max),

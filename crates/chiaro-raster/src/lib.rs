@@ -25,6 +25,7 @@ pub mod shadow;
 pub mod zbuffer;
 
 pub use render::{
-    RasterOptions, dither_threshold, render, render_prepared, render_prepared_with, shade_mode_of,
+    RasterOptions, dither_threshold, render, render_prepared, render_prepared_into,
+    render_prepared_with, shade_mode_of,
 };
 pub use shadow::VolumeCounting;

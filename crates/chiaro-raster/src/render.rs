@@ -72,6 +72,7 @@ use glam::{Vec2, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 use std::cell::Cell;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 #[path = "exact.rs"]
@@ -269,6 +270,14 @@ struct Ctx<'a, 's> {
     point_lighting: Option<PointLighting>,
     /// `SurfaceMaterial::from_material` of each scene material, by index.
     bases: Vec<SurfaceMaterial>,
+    /// True when the frame allows [`lean_sample`]: no environment and no
+    /// depth cueing (Phong samples also need `point_lighting`).
+    lean_frame: bool,
+    /// The shading mode of every object, when they all have the same one,
+    /// and the material of every triangle, when it is the same: per-triangle
+    /// lookups (cache misses) that the triangle cache then skips.
+    one_mode: Option<ShadeMode>,
+    one_material: Option<MaterialId>,
 }
 
 /// How the visibility pass treats a material.
@@ -317,6 +326,9 @@ pub fn dither_threshold(x: u32, y: u32, s: u32) -> f32 {
 
 impl Ctx<'_, '_> {
     fn mode(&self, t: u32) -> ShadeMode {
+        if let Some(m) = self.one_mode {
+            return m;
+        }
         let o = self.ps.tri_object[t as usize] as usize;
         self.object_mode.get(o).copied().unwrap_or(ShadeMode::Phong)
     }
@@ -499,6 +511,29 @@ impl Ctx<'_, '_> {
         self.illuminate_split(t, &sm, &sp)
     }
 
+    /// [`Ctx::corner_split`] at vertex `v` of an untextured material whose
+    /// [`SurfaceMaterial`] is `base`, lit by the point-light model,
+    /// for any corner of any triangle with that material at `v`: the
+    /// model reads no geometric normal, and a corner's interpolated position
+    /// and colour (weights 1, 0, 0) are the vertex's own but for the sign of
+    /// a zero component, which changes no non-zero result (and the film's
+    /// sanitising makes every zero positive).
+    /// Requires `point_lighting` (without it the triangle would matter for
+    /// shadows).
+    fn vertex_split(&self, base: &SurfaceMaterial, v: usize, back: bool) -> Split {
+        debug_assert!(self.point_lighting.is_some());
+        let p = self.ps.positions[v];
+        let mut n = self.ps.normals[v];
+        if back {
+            n = -n;
+        }
+        let mut sm = *base;
+        sm.kd *= self.ps.colors[v];
+        let wo = (self.rays.eye - p).normalize_or_zero();
+        // No triangle: point lighting has no visibility to ask about.
+        self.illuminate_split(u32::MAX, &sm, &ShadingPoint { p, n, ng: n, wo })
+    }
+
     /// Gouraud illumination at corner `k` of triangle `t`, on the front side
     /// or (for the back of a two-sided surface) the back side.
     fn corner_split(&self, t: u32, k: usize, back: bool) -> Split {
@@ -537,19 +572,25 @@ struct TriData<'a> {
     p: [Vec3A; 3],
     /// `PreparedScene::face_normal(t)`.
     ng: Vec3A,
-    /// The vertex normals and colours.
+    /// The vertex normals and colours (in [`TriCache`], zero where the
+    /// triangle's samples do not read them: see [`Ctx::tri_geometry`]).
     n: [Vec3A; 3],
     c: [Vec3A; 3],
     mode: ShadeMode,
     material: &'a Material,
     material_id: MaterialId,
-    object: u32,
     /// True when the material has a texture, bump, normal or emission map
     /// (which need the uv footprint).
     textured: bool,
     /// The flat-shading illumination of the polygon (zero unless `mode` is
     /// flat): computed with the triangle's data, once per tile that shows it.
     flat: Split,
+    /// True when its opaque samples take [`lean_sample`] (set by
+    /// [`Ctx::tri_data`]; false elsewhere).
+    lean: bool,
+    /// Lean Gouraud triangles: the vertex illumination of the three
+    /// corners (zero otherwise).
+    corners: [Split; 3],
     /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
     /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
     e1: Vec3A,
@@ -585,14 +626,14 @@ const TRI_CACHE_SIZE: usize = 256;
 /// have neighbouring ids, so most lookups hit.
 struct TriCache<'a> {
     /// Index into `data` of each slot's entry (`u32::MAX`: empty).
-    slots: Vec<u32>,
+    slots: [u32; TRI_CACHE_SIZE],
     data: Vec<TriData<'a>>,
 }
 
 impl TriCache<'_> {
     fn new() -> Self {
         Self {
-            slots: vec![u32::MAX; TRI_CACHE_SIZE],
+            slots: [u32::MAX; TRI_CACHE_SIZE],
             data: Vec::with_capacity(TRI_CACHE_SIZE),
         }
     }
@@ -600,42 +641,68 @@ impl TriCache<'_> {
 
 impl<'a> Ctx<'a, '_> {
     /// The data of triangle `t`, from `cache` when it holds `t` (the
-    /// cache then holds `t`).
+    /// cache then holds `t`), with [`TriData::lean`] and the Gouraud
+    /// corners from `poly` set.
     #[inline]
-    fn tri_data<'c>(&self, t: u32, cache: &'c mut TriCache<'a>) -> &'c TriData<'a> {
-        let slot = t as usize % cache.slots.len();
+    fn tri_data<'c>(
+        &self,
+        t: u32,
+        cache: &'c mut TriCache<'a>,
+        poly: &PolyShading,
+    ) -> &'c TriData<'a> {
+        let slot = t as usize & (TRI_CACHE_SIZE - 1);
         let k = cache.slots[slot] as usize;
         let k = if k < cache.data.len() {
             if cache.data[k].t == t {
                 return &cache.data[k];
             }
             // Built in place (inlined), not copied in.
-            cache.data[k] = self.tri_geometry(t);
+            cache.data[k] = self.tri_geometry(t, false);
             k
         } else {
             cache.slots[slot] = cache.data.len() as u32;
-            cache.data.push(self.tri_geometry(t));
+            cache.data.push(self.tri_geometry(t, false));
             cache.data.len() - 1
         };
         let d = &mut cache.data[k];
         if d.mode == ShadeMode::Flat {
             d.flat = self.flat_split(d);
         }
+        // The cases shade_sample handles without textures, two-sided
+        // flips, reflection maps, depth cueing or per-corner values.
+        d.lean = self.lean_frame
+            && !d.textured
+            && !d.material.two_sided
+            && match d.mode {
+                ShadeMode::Phong => {
+                    self.point_lighting.is_some() && self.bases.get(d.material_id.index()).is_some()
+                }
+                ShadeMode::Gouraud => poly.corners.is_empty() || !poly.corners.contains_key(&t),
+                ShadeMode::Flat => true,
+            };
+        if d.lean && d.mode == ShadeMode::Gouraud {
+            let get = |i: usize| poly.vertex_front.get(i).copied().unwrap_or_default();
+            d.corners = d.idx.map(get);
+        }
         d
     }
 
     /// The [`TriData`] of triangle `t`, computed.
     fn make_tri_data(&self, t: u32) -> TriData<'a> {
-        let mut d = self.tri_geometry(t);
+        let mut d = self.tri_geometry(t, true);
         if d.mode == ShadeMode::Flat {
             d.flat = self.flat_split(&d);
         }
         d
     }
 
-    /// [`Ctx::make_tri_data`] without the flat-shading illumination.
+    /// [`Ctx::make_tri_data`] without the flat-shading illumination; unless
+    /// `all`, without the vertex data its samples do not read (the normals
+    /// of a flat triangle, the colours of a Gouraud one: zero), which
+    /// the triangle cache then need not fetch.
     #[inline(always)]
-    fn tri_geometry(&self, t: u32) -> TriData<'a> {
+    fn tri_geometry(&self, t: u32, all: bool) -> TriData<'a> {
+        let mode = self.mode(t);
         let idx = self.ps.triangles[t as usize].map(|i| i as usize);
         let p3 = idx.map(|i| self.ps.positions[i]);
         // PreparedScene::face_normal(t), from the positions at hand.
@@ -644,19 +711,28 @@ impl<'a> Ctx<'a, '_> {
         let p = p3.map(Vec3A::from);
         let e1 = p[1] - p[0];
         let s = Vec3A::from(self.rays.eye) - p[0];
-        let material_id = self.ps.tri_material[t as usize];
+        let material_id = self
+            .one_material
+            .unwrap_or_else(|| self.ps.tri_material[t as usize]);
         let material = self.ps.material(material_id);
         TriData {
             t,
             idx,
             p,
             ng: ng.into(),
-            n: idx.map(|i| self.ps.normals[i].into()),
-            c: idx.map(|i| self.ps.colors[i].into()),
-            mode: self.mode(t),
+            n: if all || mode != ShadeMode::Flat {
+                idx.map(|i| self.ps.normals[i].into())
+            } else {
+                [Vec3A::ZERO; 3]
+            },
+            c: if all || mode != ShadeMode::Gouraud {
+                idx.map(|i| self.ps.colors[i].into())
+            } else {
+                [Vec3A::ZERO; 3]
+            },
+            mode,
             material,
             material_id,
-            object: self.ps.tri_object[t as usize],
             textured: material.texture.is_some()
                 || material.bump.is_some()
                 || material.normal_map.is_some()
@@ -666,6 +742,8 @@ impl<'a> Ctx<'a, '_> {
             s,
             q: exact::cross(s, e1),
             flat: Split::default(),
+            lean: false,
+            corners: [Split::default(); 3],
         }
     }
 
@@ -722,7 +800,7 @@ impl<'a> Ctx<'a, '_> {
             tangent,
             color: color.into(),
             material: td.material_id,
-            object: td.object,
+            object: ps.tri_object[td.t as usize],
         }
     }
 }
@@ -806,6 +884,36 @@ pub fn render_prepared_with(
     progress: &dyn Progress,
 ) -> Result<Film, CoreError> {
     check_size(settings)?;
+    let mut film = Film::new(settings.width, settings.height);
+    render_prepared_into(ps, settings, mode, options, progress, &mut film)?;
+    Ok(film)
+}
+
+/// [`render_prepared_with`] into `film`, whose buffers are reused when it
+/// already has the image's size (so that frames rendered one after another
+/// neither allocate nor fault in a new film each time, as a GPU's
+/// framebuffer is reused); it is resized otherwise. On success `film` holds
+/// exactly the picture [`render_prepared_with`] returns, whatever it held
+/// before; on an error its pixels are unspecified.
+///
+/// # Errors
+/// As [`render_prepared`].
+pub fn render_prepared_into(
+    ps: &PreparedScene<'_>,
+    settings: &RenderSettings,
+    mode: ShadeMode,
+    options: &RasterOptions,
+    progress: &dyn Progress,
+    film: &mut Film,
+) -> Result<(), CoreError> {
+    check_size(settings)?;
+    let n = settings.width as usize * settings.height as usize;
+    if film.width != settings.width
+        || film.height != settings.height
+        || [film.color.len(), film.depth.len(), film.normal.len()] != [n; 3]
+    {
+        *film = Film::new(settings.width, settings.height);
+    }
     progress.begin("shadows", 1);
     let shadows = Shadows::new(ps, settings)?;
     progress.advance(1);
@@ -838,7 +946,6 @@ pub fn render_prepared_with(
             let clip = clip_from_world * p.extend(1.0);
             let inside = outcode(clip) == 0;
             ScreenVertex {
-                clip,
                 inside,
                 xy: if inside { vp_all.snap(clip) } else { [0; 2] },
                 // The key `Viewport::setup` gives an unclipped vertex:
@@ -912,7 +1019,12 @@ pub fn render_prepared_with(
                             &mut out,
                         );
                     } else {
-                        vp.setup(v.map(|v| v.clip), t, &mut scratch, &mut out);
+                        // The clip-space corners again (the vertex pass's
+                        // product, bit for bit) for the clipper: few
+                        // triangles get here, so the vertices do not keep them.
+                        let clip =
+                            tri.map(|i| clip_from_world * ps.positions[i as usize].extend(1.0));
+                        vp.setup(clip, t, &mut scratch, &mut out);
                     }
                     for (j, rt) in out.iter().enumerate().skip(first) {
                         binner.bin(rt, j as u32, &mut bins);
@@ -928,6 +1040,7 @@ pub fn render_prepared_with(
         .iter()
         .map(|m| Class::of(m, settings))
         .collect();
+    let all_opaque = class.iter().all(|&c| c == Class::Opaque);
     let class_of = |t: u32| {
         class
             .get(ps.tri_material[t as usize].index())
@@ -972,6 +1085,15 @@ pub fn render_prepared_with(
             (win.x0 < win.x1 && win.y0 < win.y1).then_some((ti, rect, win))
         })
         .collect();
+    // Tiles outside the crop window stay black with infinite depth (the
+    // shaded tiles overwrite every pixel of theirs).
+    let mut drawn = vec![false; rects.len()];
+    for &(ti, ..) in &active {
+        drawn[ti] = true;
+    }
+    for (&rect, _) in rects.iter().zip(&drawn).filter(|(_, d)| !**d) {
+        film.write_tile(&TilePixels::new(rect));
+    }
     progress.begin("raster", active.len() as u64);
     let spp_us = spp as usize;
     let vis: Vec<Option<TileVis>> = active
@@ -999,7 +1121,13 @@ pub fn render_prepared_with(
             for c in &chunks {
                 for &j in &c.bins[ti] {
                     let rt = &c.tris[j as usize];
-                    match class_of(rt.id) {
+                    // (No per-triangle material lookup when all are opaque.)
+                    let class = if all_opaque {
+                        Class::Opaque
+                    } else {
+                        class_of(rt.id)
+                    };
+                    match class {
                         Class::Opaque => rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
                             let i = index(x, y, s);
                             if k > key[i] {
@@ -1066,6 +1194,11 @@ pub fn render_prepared_with(
         .collect::<Option<Vec<_>>>()
         .ok_or(CoreError::Cancelled)?;
 
+    let object_mode: Vec<ShadeMode> = scene
+        .objects
+        .iter()
+        .map(|o| o.shade_mode.unwrap_or(mode))
+        .collect();
     let ctx = Ctx {
         ps,
         settings,
@@ -1075,11 +1208,11 @@ pub fn render_prepared_with(
             area_samples: settings.light_samples.max(1),
             ambient: true,
         },
-        object_mode: scene
-            .objects
-            .iter()
-            .map(|o| o.shade_mode.unwrap_or(mode))
-            .collect(),
+        one_mode: object_mode
+            .first()
+            .copied()
+            .filter(|&m| object_mode.iter().all(|&o| o == m)),
+        object_mode,
         point_lighting: if matches!(shadows, Shadows::None) {
             PointLighting::new(&ps.lights, true)
         } else {
@@ -1091,6 +1224,11 @@ pub fn render_prepared_with(
             .iter()
             .map(SurfaceMaterial::from_material)
             .collect(),
+        lean_frame: scene.environment.is_none() && settings.depth_cue.is_none(),
+        one_material: ps.tri_material.first().copied().filter(|&m| {
+            // Parallel, and stops at the first other material.
+            ps.tri_material.par_iter().all(|&mt| mt == m)
+        }),
         shadows,
         class,
     };
@@ -1104,8 +1242,7 @@ pub fn render_prepared_with(
     // shaded, so that its buffers are freed and reused by the next tile
     // instead of every tile's pixels being alive (and fresh pages) at once.
     progress.begin("shade", vis.len() as u64);
-    // Tiles outside the crop window stay black with infinite depth.
-    let film = Mutex::new(Film::new(w, h));
+    let film = Mutex::new(film);
     let kept: Mutex<Vec<(TileRect, Vec<Vec3>)>> = Mutex::new(Vec::new());
     let finished = vis.par_iter().all(|tv| {
         if progress.cancelled() {
@@ -1126,12 +1263,12 @@ pub fn render_prepared_with(
     if !finished {
         return Err(CoreError::Cancelled);
     }
-    let mut film = film.into_inner().unwrap_or_else(PoisonError::into_inner);
+    let film = film.into_inner().unwrap_or_else(PoisonError::into_inner);
     let kept = kept.into_inner().unwrap_or_else(PoisonError::into_inner);
     if tent {
-        tent_filter(&mut film, &kept, crop, out_crop, &offsets);
+        tent_filter(film, &kept, crop, out_crop, &offsets);
     }
-    Ok(film)
+    Ok(())
 }
 
 /// Replaces the box-filtered colours of the pixels of `out` (the crop
@@ -1189,10 +1326,9 @@ fn tent_filter(
     }
 }
 
-/// A vertex of the scene in clip space and, when it is inside the clip
-/// volume, on the screen.
+/// A vertex of the scene on the screen, when it is inside the clip volume
+/// (16 bytes: the vertex pass writes and setup reads half a million).
 struct ScreenVertex {
-    clip: Vec4,
     /// Inside the near plane and the guard band: `xy` and `key` are valid.
     inside: bool,
     /// Snapped screen position (see [`Viewport::snap`]).
@@ -1293,6 +1429,24 @@ fn count_volumes(
     tv.counts = counts;
 }
 
+/// With the point-light model, the base material when every Gouraud
+/// triangle has the same material and it has no emission texture (the one
+/// texture vertex illumination reads).
+fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
+    ctx.point_lighting.as_ref()?;
+    let ps = ctx.ps;
+    let is_gouraud = |t: usize| ctx.mode(t as u32) == ShadeMode::Gouraud;
+    let first = (0..ps.triangles.len()).find(|&t| is_gouraud(t))?;
+    let m = ps.tri_material[first];
+    let uniform = ps
+        .tri_material
+        .par_iter()
+        .enumerate()
+        .all(|(t, &mt)| mt == m || !is_gouraud(t));
+    let base = ctx.bases.get(m.index())?;
+    (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
+}
+
 /// Step 4: finds the visible Gouraud triangles and illuminates their
 /// vertices (flat polygons are illuminated with their [`TriData`]).
 fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
@@ -1301,29 +1455,27 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
     if ctx.object_mode.iter().all(|&m| m != ShadeMode::Gouraud) {
         return out;
     }
-    // Visible triangles (deduplicated, sorted: deterministic).
-    let mut seen = vec![false; ps.triangles.len()];
-    for tv in vis {
-        for &id in &tv.ids {
-            if id != NONE {
-                seen[id as usize] = true;
-            }
+    // Visible triangles, marked in parallel (every mark stores `true`, so
+    // the order of the stores does not matter).
+    let seen: Vec<AtomicBool> = (0..ps.triangles.len())
+        .into_par_iter()
+        .map(|_| AtomicBool::new(false))
+        .collect();
+    vis.par_iter().for_each(|tv| {
+        let ids = tv.ids.iter().copied().filter(|&id| id != NONE);
+        for id in ids.chain(tv.frags.iter().map(|f| f.0)) {
+            seen[id as usize].store(true, Ordering::Relaxed);
         }
-        for &(id, _) in &tv.frags {
-            seen[id as usize] = true;
-        }
-    }
-    let visible: Vec<u32> = (0..ps.triangles.len() as u32)
-        .filter(|&t| seen[t as usize])
+    });
+    // The visible Gouraud triangles in id order (deterministic) and whether
+    // their back is seen.
+    let nv = ps.positions.len();
+    let gouraud: Vec<(u32, bool)> = (0..ps.triangles.len() as u32)
+        .into_par_iter()
+        .filter(|&t| seen[t as usize].load(Ordering::Relaxed) && ctx.mode(t) == ShadeMode::Gouraud)
+        .map(|t| (t, ctx.flipped(t)))
         .collect();
     drop(seen);
-    // Gouraud: which vertex sides are needed (by the visible triangles).
-    let nv = ps.positions.len();
-    let gouraud: Vec<(u32, bool)> = visible
-        .iter()
-        .filter(|&&t| ctx.mode(t) == ShadeMode::Gouraud)
-        .map(|&t| (t, ctx.flipped(t)))
-        .collect();
     if gouraud.is_empty() {
         return out;
     }
@@ -1332,6 +1484,29 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         for &v in &ps.triangles[t as usize] {
             need[v as usize] |= if back { 2 } else { 1 };
         }
+    }
+    if let Some(base) = uniform_gouraud(ctx) {
+        // One untextured material on every Gouraud face and the point-light
+        // model: a vertex's illumination is its own (see Ctx::vertex_split),
+        // whichever face it is lit for, and no vertex is shared by faces of
+        // different materials.
+        let shade_side = |side: u8| -> Vec<Split> {
+            (0..nv)
+                .into_par_iter()
+                .map(|v| {
+                    if need[v] & side == 0 {
+                        Split::default()
+                    } else {
+                        ctx.vertex_split(base, v, side == 2)
+                    }
+                })
+                .collect()
+        };
+        out.vertex_front = shade_side(1);
+        if need.iter().any(|&n| n & 2 != 0) {
+            out.vertex_back = shade_side(2);
+        }
+        return out;
     }
     // A representative (triangle, corner) for each vertex: the first
     // Gouraud triangle using it, visible or not (so that a vertex's colour
@@ -1446,6 +1621,45 @@ fn shade_tile(
     let rows: Vec<Vec3A> = (wy0..win.y1 - rect.y)
         .flat_map(|py| offsets.iter().map(move |o| ctx.rays.row(sample_y(py, o))))
         .collect();
+    if spp == 1 && !keep_samples && tv.start.is_empty() {
+        // One opaque sample per pixel, none kept: the loop below with its
+        // sum and nearest-depth choice folded (the sanitised colour c is
+        // 0 + c times 1; the sample is nearest when its depth is below
+        // infinity), and the direction made only where it is read.
+        let background = sanitize(ctx.ps.scene.background);
+        let tw = rect.width as usize;
+        let o = &offsets[0];
+        for (py, &row) in (wy0..win.y1 - rect.y).zip(&rows) {
+            let line = py as usize * tw;
+            for (px, &column) in (wx0..win.x1 - rect.x).zip(&columns) {
+                let pi = line + px as usize;
+                let id = tv.ids[pi];
+                if id == NONE {
+                    out.color[pi] = if env_background {
+                        let dir = Rays::dir_from(column, row);
+                        sanitize(background_radiance(ctx.ps.scene, dir.into()))
+                    } else {
+                        background
+                    };
+                    continue;
+                }
+                let dir = Rays::dir_from(column, row);
+                let td = ctx.tri_data(id, &mut cache, poly);
+                let r = if td.lean {
+                    lean_sample(ctx, td, dir)
+                } else {
+                    let (sx, sy) = (sample_x(px, o), sample_y(py, o));
+                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(pi), false)
+                };
+                out.color[pi] = sanitize(r.color);
+                if r.depth < f32::INFINITY {
+                    out.depth[pi] = r.depth;
+                    out.normal[pi] = r.normal;
+                }
+            }
+        }
+        return (out, kept);
+    }
     for (py, rows) in (wy0..win.y1 - rect.y).zip(rows.chunks_exact(spp)) {
         for (px, columns) in (wx0..win.x1 - rect.x).zip(columns.chunks_exact(spp)) {
             let pi = (py * rect.width + px) as usize;
@@ -1470,8 +1684,12 @@ fn shade_tile(
                         specular: Vec3::ZERO,
                     }
                 } else {
-                    let td = ctx.tri_data(id, &mut cache);
-                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
+                    let td = ctx.tri_data(id, &mut cache, poly);
+                    if td.lean {
+                        lean_sample(ctx, td, dir)
+                    } else {
+                        shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
+                    }
                 };
                 // Transparent fragments, composited back to front.
                 let n = tv.ids.len();
@@ -1481,7 +1699,7 @@ fn shade_tile(
                     let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
                     let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
                         == Some(&Class::Blend(TransparencyMode::Interpolated));
-                    let td = ctx.tri_data(t, &mut cache);
+                    let td = ctx.tri_data(t, &mut cache, poly);
                     let front =
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);
@@ -1514,6 +1732,67 @@ fn shade_tile(
         }
     }
     (out, kept)
+}
+
+/// [`shade_sample`] of an opaque sample (no specular part asked for) of a
+/// [`TriData::lean`] triangle: untextured, one-sided, without reflection
+/// map or depth cueing, and for Phong lit by `point_lighting` (flat and
+/// Gouraud samples only interpolate what was lit with any lights and
+/// shadows). The same
+/// floating-point operations in the same order as `shade_sample` for that
+/// case, without what it does not read (uv footprint, the view direction
+/// of flat and Gouraud samples, per-corner lookups).
+#[inline(always)]
+fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
+    let b = td.bary(dir).unwrap_or(Vec2::splat(1.0 / 3.0));
+    let (u, v) = (b.x, b.y);
+    // Ctx::surface: w = 1 - u - v and the same interpolations.
+    let w = 1.0 - u - v;
+    let p = td.p[0] * w + td.p[1] * u + td.p[2] * v;
+    let eye = Vec3A::from(ctx.rays.eye);
+    let depth = (p - eye).length();
+    let ng = td.ng;
+    let ns = || {
+        let ns = exact::try_normalize(td.n[0] * w + td.n[1] * u + td.n[2] * v).unwrap_or(ng);
+        if ns.dot(ng) < 0.0 { ng } else { ns }
+    };
+    let (color, normal) = match td.mode {
+        ShadeMode::Phong => {
+            let ns = ns();
+            let color = td.c[0] * w + td.c[1] * u + td.c[2] * v;
+            // exact::normalize_or_zero(eye - p): |eye - p| is `depth`, bit
+            // for bit (the same squares summed in the same order).
+            let rcp = 1.0 / depth;
+            let wo = if rcp.is_finite() && rcp > 0.0 {
+                (eye - p) * rcp
+            } else {
+                Vec3A::ZERO
+            };
+            let sp = ShadingPoint {
+                p: p.into(),
+                n: ns.into(),
+                ng: ng.into(),
+                wo: wo.into(),
+            };
+            let c = match (&ctx.point_lighting, ctx.bases.get(td.material_id.index())) {
+                (Some(pl), Some(base)) => pl.shade_kd(base, base.kd * Vec3::from(color), &sp),
+                // Not reached: TriData::lean checked both.
+                _ => Vec3::ZERO,
+            };
+            (c, ns)
+        }
+        ShadeMode::Gouraud => {
+            let split = Split::lerp3(td.corners, Vec3::new(w, u, v));
+            (split.diffuse * Vec3::ONE + split.rest, ns())
+        }
+        ShadeMode::Flat => (td.flat.diffuse * Vec3::ONE + td.flat.rest, ng),
+    };
+    SampleResult {
+        color,
+        depth,
+        normal: normal.into(),
+        specular: Vec3::ZERO,
+    }
 }
 
 /// Shades the sample at film position `(sx, sy)` (direction `dir`) where

@@ -617,32 +617,64 @@ fn crop_window_matches_the_full_render_and_leaves_the_rest_black() {
     assert!(empty.depth.iter().all(|d| d.is_infinite()));
 }
 
-#[test]
-fn cached_bary_equals_ray_plane_bary_exactly() {
-    let s = test_scene();
-    let ps = PreparedScene::new(
-        &s,
+/// `s` prepared for scan conversion (spheres tessellated).
+fn tessellated(s: &Scene) -> PreparedScene<'_> {
+    PreparedScene::new(
+        s,
         PrepareOptions {
             analytic_spheres: false,
             ..PrepareOptions::default()
         },
-    );
-    let st = settings(Technique::Phong, 32, 24);
-    let ctx = Ctx {
-        ps: &ps,
-        settings: &st,
-        rays: Rays::new(&s, 32, 24),
+    )
+}
+
+/// A shading context for tests: `mode` everywhere, no shadows, with the
+/// point-light model and base materials when `point` (which needs point and
+/// ambient lights only).
+fn test_ctx<'a, 's>(
+    ps: &'a PreparedScene<'s>,
+    st: &'a RenderSettings,
+    mode: ShadeMode,
+    point: bool,
+) -> Ctx<'a, 's> {
+    let s = ps.scene;
+    Ctx {
+        ps,
+        settings: st,
+        rays: Rays::new(s, st.width, st.height),
         lighting: LocalLighting {
             lights: &ps.lights,
             area_samples: 1,
             ambient: true,
         },
-        object_mode: vec![ShadeMode::Phong; s.objects.len()],
+        object_mode: vec![mode; s.objects.len()],
         shadows: Shadows::None,
         class: Vec::new(),
-        point_lighting: None,
-        bases: Vec::new(),
-    };
+        point_lighting: if point {
+            PointLighting::new(&ps.lights, true)
+        } else {
+            None
+        },
+        bases: if point {
+            s.materials
+                .iter()
+                .map(SurfaceMaterial::from_material)
+                .collect()
+        } else {
+            Vec::new()
+        },
+        lean_frame: point,
+        one_mode: None,
+        one_material: None,
+    }
+}
+
+#[test]
+fn cached_bary_equals_ray_plane_bary_exactly() {
+    let s = test_scene();
+    let ps = tessellated(&s);
+    let st = settings(Technique::Phong, 32, 24);
+    let ctx = test_ctx(&ps, &st, ShadeMode::Phong, false);
     let mut cache = TriCache::new();
     let nt = ps.triangles.len() as u32;
     assert!(nt > 10);
@@ -651,7 +683,7 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         let t = (k * 7919) % nt;
         // Twice: a miss, then a hit of the same entry.
         for _ in 0..2 {
-            let td = ctx.tri_data(t, &mut cache);
+            let td = ctx.tri_data(t, &mut cache, &PolyShading::default());
             assert_eq!(td.t, t);
             let [p0, p1, p2] = td.p.map(Vec3::from);
             let d = ctx.rays.dir(k as f32 * 0.37 % 32.0, k as f32 * 0.11 % 24.0);
@@ -662,6 +694,118 @@ fn cached_bary_equals_ray_plane_bary_exactly() {
         }
     }
     assert!(checked > 300);
+}
+
+#[test]
+fn lean_samples_equal_shade_sample_bit_for_bit() {
+    let mut s = test_scene();
+    // Point and ambient lights only, so that PointLighting applies.
+    s.lights.truncate(3);
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let (w, h) = (40u32, 30u32);
+    let mut checked = 0;
+    for model in [ReflectanceModel::Phong, ReflectanceModel::Blinn] {
+        s.materials[0].model = model;
+        let ps = tessellated(&s);
+        // Arbitrary vertex illumination for the Gouraud corners.
+        let poly = PolyShading {
+            vertex_front: (0..ps.positions.len())
+                .map(|_| Split {
+                    diffuse: Vec3::new(next(), next(), next()),
+                    rest: Vec3::new(next(), next(), next()),
+                })
+                .collect(),
+            ..PolyShading::default()
+        };
+        for mode in [ShadeMode::Phong, ShadeMode::Gouraud, ShadeMode::Flat] {
+            let st = settings(Technique::Phong, w, h);
+            let ctx = test_ctx(&ps, &st, mode, true);
+            assert!(ctx.point_lighting.is_some());
+            let mut cache = TriCache::new();
+            let nt = ps.triangles.len() as u32;
+            for k in 0..300u32 {
+                let t = (k * 7919) % nt;
+                let td = *ctx.tri_data(t, &mut cache, &poly);
+                assert!(td.lean);
+                for _ in 0..4 {
+                    let (sx, sy) = (next() * w as f32, next() * h as f32);
+                    let dir = Rays::dir_from(ctx.rays.column(sx), ctx.rays.row(sy));
+                    let a = lean_sample(&ctx, &td, dir);
+                    let b = shade_sample(&ctx, &poly, &td, sx, sy, dir, None, false);
+                    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                    assert_eq!(bits(a.color), bits(b.color), "{mode:?} {model:?} t {t}");
+                    assert_eq!(a.depth.to_bits(), b.depth.to_bits());
+                    assert_eq!(bits(a.normal), bits(b.normal));
+                    checked += usize::from(a.color != Vec3::ZERO);
+                }
+            }
+        }
+    }
+    assert!(checked > 3000, "{checked}");
+}
+
+#[test]
+fn vertex_split_equals_corner_split_of_every_face() {
+    let mut s = test_scene();
+    s.lights.truncate(3);
+    // Vertex colours, so that kd varies per vertex.
+    let ps0 = tessellated(&s);
+    let mut ps = ps0;
+    for (i, c) in ps.colors.iter_mut().enumerate() {
+        *c = Vec3::new(
+            0.5 + (i % 7) as f32 / 14.0,
+            1.0,
+            0.25 + (i % 3) as f32 / 4.0,
+        );
+    }
+    let st = settings(Technique::Gouraud, 40, 30);
+    let ctx = test_ctx(&ps, &st, ShadeMode::Gouraud, true);
+    assert!(ctx.point_lighting.is_some());
+    let mut compared = 0;
+    for (t, tri) in ps.triangles.iter().enumerate() {
+        let base = &ctx.bases[ps.tri_material[t].index()];
+        for (k, &v) in tri.iter().enumerate() {
+            for back in [false, true] {
+                let a = ctx.vertex_split(base, v as usize, back);
+                let b = ctx.corner_split(t as u32, k, back);
+                // Equal as numbers (a zero's sign aside).
+                assert_eq!(a, b, "t {t} corner {k} back {back}");
+                compared += usize::from(a.diffuse != Vec3::ZERO);
+            }
+        }
+    }
+    assert!(compared > 1000, "{compared}");
+}
+
+#[test]
+fn rendering_into_a_used_film_gives_the_fresh_picture() {
+    let s = test_scene();
+    let ps = tessellated(&s);
+    let (w, h) = (150u32, 90u32);
+    // A film of the wrong size, then one holding another picture.
+    let mut film = Film::new(7, 5);
+    for (technique, crop) in [
+        (Technique::Phong, None),
+        (Technique::Gouraud, Some([10, 70, 140, 90])),
+        (Technique::Flat, None),
+        (Technique::Phong, Some([0, 0, 64, 20])),
+    ] {
+        let st = RenderSettings {
+            crop,
+            ..settings(technique, w, h)
+        };
+        let mode = shade_mode_of(technique).expect("raster technique");
+        let opts = RasterOptions::default();
+        let fresh = render_prepared_with(&ps, &st, mode, &opts, &NoProgress).expect("fresh");
+        render_prepared_into(&ps, &st, mode, &opts, &NoProgress, &mut film).expect("into");
+        assert!(film == fresh, "{technique:?} {crop:?}");
+    }
 }
 
 #[test]

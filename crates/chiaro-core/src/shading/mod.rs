@@ -253,8 +253,11 @@ pub fn depth_cue(c: Vec3, d: f32, cue: &DepthCue) -> Vec3 {
 /// the guard every technique applies before writing a pixel.
 #[inline]
 pub fn sanitize(c: Vec3) -> Vec3 {
-    let f = |x: f32| if x.is_finite() && x > 0.0 { x } else { 0.0 };
-    Vec3::new(f(c.x), f(c.y), f(c.z))
+    // `x.is_finite() && x > 0` is `0 < x < inf` (NaN fails both), tested
+    // on the three lanes at once and selected without branches.
+    let v = glam::Vec3A::from(c);
+    let keep = v.cmpgt(glam::Vec3A::ZERO) & v.cmplt(glam::Vec3A::INFINITY);
+    glam::Vec3A::select(keep, v, glam::Vec3A::ZERO).into()
 }
 
 #[cfg(test)]
@@ -432,5 +435,39 @@ mod tests {
             sanitize(Vec3::new(f32::NAN, f32::INFINITY, -1.0)),
             Vec3::ZERO
         );
+    }
+
+    #[test]
+    fn sanitize_is_the_scalar_guard_bit_for_bit() {
+        let scalar = |x: f32| if x.is_finite() && x > 0.0 { x } else { 0.0 };
+        let specials = [
+            0.0,
+            -0.0,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            1e-45,
+            -1e-45,
+            1.0,
+            -1.0,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
+        let mut state = 0x853c_49e6_748f_ea9bu64;
+        let mut values = specials.to_vec();
+        for _ in 0..3000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            values.push(f32::from_bits((state >> 32) as u32));
+        }
+        for w in values.windows(3) {
+            let got = sanitize(Vec3::new(w[0], w[1], w[2]));
+            let want = [w[0], w[1], w[2]].map(|x| scalar(x).to_bits());
+            assert_eq!(got.to_array().map(f32::to_bits), want, "{w:?}");
+        }
     }
 }
