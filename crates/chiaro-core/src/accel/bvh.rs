@@ -810,9 +810,10 @@ fn choose_split(
 ) -> Split {
     let n = refs.len();
     // At most one block of primitives the leaf test below always passes
-    // (the leaf costs `area`, any split `traversal_cost * area` plus two
-    // non-negative child costs), so skip the binning.
-    if n <= 1 || n as u32 <= opts.max_leaf.min(BLOCK as u32) {
+    // when a traversal step costs at least a block test (the leaf costs
+    // `area`, any split `traversal_cost * area` plus two non-negative child
+    // costs), so skip the binning.
+    if n <= 1 || (n as u32 <= opts.max_leaf.min(BLOCK as u32) && opts.traversal_cost >= 1.0) {
         return Split::Leaf;
     }
     let ext = cb.extent();
@@ -1915,6 +1916,35 @@ mod tests {
             b,
         ]);
         assert_eq!(bvh.prim_order(), &[2]);
+    }
+
+    #[test]
+    fn small_nodes_split_when_traversal_is_cheap() {
+        // Four small boxes at the corners of a large square: one leaf costs
+        // the square's area, a split into single boxes a quarter of it plus
+        // four tiny areas when a traversal step costs 0.25 of a block test.
+        let boxes: Vec<Aabb> = [(0.0, 0.0), (10.0, 0.0), (0.0, 10.0), (10.0, 10.0)]
+            .iter()
+            .map(|&(x, y)| Aabb {
+                min: Vec3::new(x, y, 0.0),
+                max: Vec3::new(x + 0.1, y + 0.1, 0.1),
+            })
+            .collect();
+        let leaves = |b: &Bvh| {
+            b.nodes()
+                .flat_map(|n| n.children())
+                .filter(|(_, c)| matches!(c, Child::Leaf { .. }))
+                .count()
+        };
+        assert_eq!(leaves(&Bvh::build(&boxes)), 1);
+        let cheap = Bvh::build_with(
+            &boxes,
+            &BvhOptions {
+                traversal_cost: 0.25,
+                ..BvhOptions::default()
+            },
+        );
+        assert!(leaves(&cheap) > 1);
     }
 
     #[test]
