@@ -5,14 +5,19 @@
 //! ```text
 //! cargo run --release -p chiaro-ray --example path_bench -- SCENE.toml OUT_PREFIX \
 //!     [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]
+//!     [--max-leaf N] [--traversal-cost C]
 //! ```
+//!
+//! The accelerator is [`SceneBvh`] with [`BvhOptions::default`], as the
+//! facade builds it for a scene without shared meshes; `--max-leaf` and
+//! `--traversal-cost` replace those two build options (for measuring them).
 //!
 //! Prints one line per repeat (`render[i]=SECONDS s  M Msamples/s`, timed
 //! from the loaded scene: BVH build included, file loading and image writing
 //! excluded) and the median; the image written is the last repeat's.
 
 use chiaro_core::accel::Accelerator;
-use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::Technique;
@@ -21,10 +26,6 @@ use chiaro_testkit::bench::flag_value;
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
-
-fn accel(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
-    Box::new(SceneBvh::new(p))
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -48,6 +49,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(s) = arg("--seed") {
         settings.seed = s.parse()?;
     }
+    let mut bvh_options = BvhOptions::default();
+    if let Some(n) = arg("--max-leaf") {
+        bvh_options.max_leaf = n.parse()?;
+    }
+    if let Some(c) = arg("--traversal-cost") {
+        bvh_options.traversal_cost = c.parse()?;
+    }
+    let accel = |p: &PreparedScene<'_>| -> Box<dyn Accelerator> {
+        Box::new(SceneBvh::with_options(p, &bvh_options))
+    };
     let repeats: usize = arg("--repeats").map_or(Ok(1), |s| s.parse())?;
     let threads: usize = arg("--threads").map_or(Ok(0), |s| s.parse())?;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -56,13 +67,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let samples =
         u64::from(settings.width) * u64::from(settings.height) * u64::from(settings.samples);
     println!(
-        "chiaro path {}x{} spp={} max_depth={} rr_depth={} threads={}",
+        "chiaro path {}x{} spp={} max_depth={} rr_depth={} threads={} bvh max_leaf={} traversal_cost={}",
         settings.width,
         settings.height,
         settings.samples,
         settings.path.max_depth,
         settings.path.rr_depth,
-        pool.current_num_threads()
+        pool.current_num_threads(),
+        bvh_options.max_leaf,
+        bvh_options.traversal_cost
     );
     let mut times = Vec::new();
     let mut last = None;

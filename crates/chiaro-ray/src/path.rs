@@ -584,7 +584,14 @@ impl<'a, 's> PathTracer<'a, 's> {
         rng: &mut SobolSampler,
         rays: &mut u64,
     ) -> Vec3 {
-        let u_pick = rng.next_1d();
+        // The light choice's number, unless there is only one light (then
+        // its pair is skipped, which leaves every later number unchanged).
+        let u_pick = if self.lights.len() > 1 {
+            rng.next_1d()
+        } else {
+            rng.skip(1);
+            0.0
+        };
         let u = rng.next_2d();
         let Some(li) = self.pick_light(u_pick) else {
             return Vec3::ZERO;
@@ -697,7 +704,17 @@ impl<'a, 's> PathTracer<'a, 's> {
         if total <= 0.0 {
             return None;
         }
-        let pick = rng.next_1d() * total;
+        // The lobe choice's number, unless only one lobe can be chosen (then
+        // its pair is skipped, which leaves every later number unchanged).
+        let single = weights.iter().filter(|&&w| w > 0.0).count() == 1;
+        let pick = if single {
+            rng.skip(1);
+            // Inside the one lobe's interval of `[0, total)`.
+            let lobe = weights.iter().position(|&w| w > 0.0).unwrap_or(0);
+            weights[..lobe].iter().sum::<f32>() + 0.5 * weights[lobe]
+        } else {
+            rng.next_1d() * total
+        };
         let u = rng.next_2d();
         if pick < wd + ws {
             // A non-delta lobe: sample one, weight by the mixture pdf.

@@ -70,9 +70,12 @@ impl SobolSampler {
         let (i, key) = self.next_pair();
         // Owen scrambling of Sobol's first dimension (the bit reversal of
         // i): reverse(LK(reverse(reverse(i)))) = reverse(LK(i)).
-        let x = laine_karras(i, (key >> 32) as u32).reverse_bits();
-        let y = laine_karras(sobol_second_reversed(i), mix64(key) as u32).reverse_bits();
-        Vec2::new(to_unit(x), to_unit(y))
+        let x = laine_karras(i, (key >> 32) as u32);
+        let y = laine_karras(sobol_second_reversed(i), mix64(key) as u32);
+        // Both reversals in one: reversing `x << 32 | y` puts reverse(x) in
+        // the low half and reverse(y) in the high half.
+        let r = ((u64::from(x) << 32) | u64::from(y)).reverse_bits();
+        Vec2::new(to_unit(r as u32), to_unit((r >> 32) as u32))
     }
 
     /// The next number in `[0, 1)` (the first coordinate of a fresh pair:
@@ -82,6 +85,15 @@ impl SobolSampler {
         let (i, key) = self.next_pair();
         to_unit(laine_karras(i, (key >> 32) as u32).reverse_bits())
     }
+
+    /// Skips `pairs` dimension pairs exactly as drawing and discarding
+    /// them would, without computing them: a caller whose decision needs
+    /// no number (a single lobe or light to choose) keeps the numbers of
+    /// every later decision unchanged.
+    #[inline]
+    pub fn skip(&mut self, pairs: u32) {
+        self.dim += pairs;
+    }
 }
 
 /// The top 24 bits of `x` as a number in `[0, 1)` (exact, never 1).
@@ -90,22 +102,57 @@ fn to_unit(x: u32) -> f32 {
     (x >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
-/// The second dimension of the Sobol sequence, bit-reversed (so bit `k` of
-/// the result is the coefficient of `2^-(k+1)`): direction numbers
-/// `v_1 = 1`, `v_{k+1} = v_k ^ (v_k << 1)` in reversed order (the primitive
+/// Direction numbers of the second dimension of the Sobol sequence,
+/// bit-reversed (so bit `k` is the coefficient of `2^-(k+1)`): `v_1 = 1`,
+/// `v_{k+1} = v_k ^ (v_k << 1)` in reversed order (the primitive
 /// polynomial `x + 1`; the first dimension is the index itself reversed).
-#[inline]
-fn sobol_second_reversed(mut index: u32) -> u32 {
-    let mut v = 1u32;
-    let mut r = 0u32;
-    while index != 0 {
-        if index & 1 == 1 {
-            r ^= v;
-        }
-        index >>= 1;
-        v ^= v << 1;
+const fn second_directions() -> [u32; 32] {
+    let mut v = [0u32; 32];
+    let mut d = 1u32;
+    let mut k = 0;
+    while k < 32 {
+        v[k] = d;
+        d ^= d << 1;
+        k += 1;
     }
-    r
+    v
+}
+
+/// [`sobol_second_reversed`] by bytes of the index: entry `[b][x]` is the
+/// XOR of the direction numbers of the set bits of byte value `x` in
+/// byte `b` (4 KiB, built at compile time).
+static SECOND_BY_BYTE: [[u32; 256]; 4] = {
+    let v = second_directions();
+    let mut t = [[0u32; 256]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut x = 0;
+        while x < 256 {
+            let mut r = 0u32;
+            let mut j = 0;
+            while j < 8 {
+                if (x >> j) & 1 == 1 {
+                    r ^= v[8 * b + j];
+                }
+                j += 1;
+            }
+            t[b][x] = r;
+            x += 1;
+        }
+        b += 1;
+    }
+    t
+};
+
+/// The second dimension of the Sobol sequence at `index`, bit-reversed: the
+/// XOR of the direction numbers of the index's set bits, four table
+/// look-ups (the same value as the bit-by-bit loop of the tests'
+/// `second_by_bits`).
+#[inline]
+fn sobol_second_reversed(index: u32) -> u32 {
+    let t = &SECOND_BY_BYTE;
+    let byte = |b: u32| ((index >> (8 * b)) & 0xff) as usize;
+    t[0][byte(0)] ^ t[1][byte(1)] ^ t[2][byte(2)] ^ t[3][byte(3)]
 }
 
 /// Burley's hash-based Laine-Karras permutation: a random permutation of
@@ -125,6 +172,31 @@ fn laine_karras(mut x: u32, seed: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The second Sobol dimension, bit-reversed, one index bit at a time
+    /// (the definition [`sobol_second_reversed`]'s tables tabulate).
+    fn second_by_bits(mut index: u32) -> u32 {
+        let (mut v, mut r) = (1u32, 0u32);
+        while index != 0 {
+            if index & 1 == 1 {
+                r ^= v;
+            }
+            index >>= 1;
+            v ^= v << 1;
+        }
+        r
+    }
+
+    #[test]
+    fn second_dimension_tables_match_the_definition() {
+        let mut x = 0x1234_5678u32;
+        for i in (0..70_000u32).chain((0..10_000).map(|_| {
+            x = x.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+            x
+        })) {
+            assert_eq!(sobol_second_reversed(i), second_by_bits(i), "index {i}");
+        }
+    }
 
     /// Sobol's first two dimensions form a (0, 2)-sequence, and Owen
     /// scrambling keeps it one: every 2^m points of a pixel put one point
