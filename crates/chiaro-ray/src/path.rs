@@ -99,12 +99,14 @@ pub fn render_with(
     let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
         let mut tile = TilePixels::new(rect);
         let mut count = 0u64;
+        let mut rng = SobolSampler::new(settings.seed, rect.x, rect.y, 0, spp);
         for ty in 0..rect.height {
             for tx in 0..rect.width {
                 let (px, py) = (rect.x + tx, rect.y + ty);
                 let mut sum = Vec3::ZERO;
+                rng.set_pixel(px, py);
                 for s in 0..spp {
-                    let mut rng = SobolSampler::new(settings.seed, px, py, s, spp);
+                    rng.set_sample(s);
                     let j = rng.next_2d();
                     let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
                     let (l, first) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);

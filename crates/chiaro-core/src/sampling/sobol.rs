@@ -21,8 +21,13 @@ use glam::Vec2;
 /// Draws the numbers of one sample of one pixel (see the module doc).
 /// Results depend only on the seed, the pixel, the sample index, the
 /// number of samples and the order of the draws, never on threads or tiles.
+/// [`SobolSampler::set_sample`] moves it to another sample of the same
+/// pixel, reusing the scramble keys it has hashed (they depend on the pixel
+/// and the pair, not on the sample).
 #[derive(Debug, Clone)]
 pub struct SobolSampler {
+    /// The scene seed.
+    seed: u64,
     /// Hash of the scene seed and the pixel (the same for all its samples).
     pixel: u64,
     /// The sample's index among the pixel's samples, bit-reversed (the
@@ -33,6 +38,36 @@ pub struct SobolSampler {
     mask: u32,
     /// Pairs drawn so far.
     dim: u32,
+    /// The keys of pairs `0..keys.len()`, hashed on first use.
+    keys: Vec<PairKeys>,
+}
+
+/// The hash of the scene seed and pixel `(x, y)` that keys its pairs.
+#[inline]
+fn pixel_hash(seed: u64, x: u32, y: u32) -> u64 {
+    mix64(seed ^ mix64((u64::from(x) << 32) | u64::from(y)) ^ 0x5EB0_1D00)
+}
+
+/// The scramble keys of one dimension pair of one pixel.
+#[derive(Debug, Clone, Copy)]
+struct PairKeys {
+    /// Seeds the shuffle of the sample index.
+    shuffle: u32,
+    /// Seed the Owen scrambling of the first and second coordinate.
+    x: u32,
+    y: u32,
+}
+
+impl PairKeys {
+    /// The keys of pair `dim` of the pixel hashed to `pixel`.
+    fn new(pixel: u64, dim: u32) -> Self {
+        let key = mix64(pixel ^ u64::from(dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        Self {
+            shuffle: key as u32,
+            x: (key >> 32) as u32,
+            y: mix64(key) as u32,
+        }
+    }
 }
 
 impl SobolSampler {
@@ -40,11 +75,54 @@ impl SobolSampler {
     /// `(x, y)` under `seed`.
     pub fn new(seed: u64, x: u32, y: u32, index: u32, count: u32) -> Self {
         Self {
-            pixel: mix64(seed ^ mix64((u64::from(x) << 32) | u64::from(y)) ^ 0x5EB0_1D00),
+            seed,
+            pixel: pixel_hash(seed, x, y),
             index_reversed: index.reverse_bits(),
             mask: count.max(1).next_power_of_two().wrapping_sub(1),
             dim: 0,
+            keys: Vec::new(),
         }
+    }
+
+    /// Moves to sample 0 of pixel `(x, y)` (same seed and sample count):
+    /// the numbers are those of `SobolSampler::new(seed, x, y, 0, count)`;
+    /// the key cache keeps its memory.
+    #[inline]
+    pub fn set_pixel(&mut self, x: u32, y: u32) {
+        self.pixel = pixel_hash(self.seed, x, y);
+        self.keys.clear();
+        self.set_sample(0);
+    }
+
+    /// Restarts at the first pair for sample `index` of the same pixel:
+    /// the numbers are those of `SobolSampler::new(seed, x, y, index,
+    /// count)`, without hashing again the keys of pairs drawn before.
+    #[inline]
+    pub fn set_sample(&mut self, index: u32) {
+        self.index_reversed = index.reverse_bits();
+        self.dim = 0;
+    }
+
+    /// The keys of the next dimension pair.
+    #[inline]
+    fn next_keys(&mut self) -> PairKeys {
+        let d = self.dim;
+        self.dim += 1;
+        match self.keys.get(d as usize) {
+            Some(&k) => k,
+            None => self.hash_keys(d),
+        }
+    }
+
+    /// Hashes the keys of every pair up to `dim` not yet known (pairs that
+    /// [`Self::skip`] passed over included) and returns those of `dim`.
+    #[cold]
+    fn hash_keys(&mut self, dim: u32) -> PairKeys {
+        while self.keys.len() <= dim as usize {
+            let k = PairKeys::new(self.pixel, self.keys.len() as u32);
+            self.keys.push(k);
+        }
+        self.keys[dim as usize]
     }
 
     /// The shuffled sample index of the next dimension pair, and the keys
@@ -53,15 +131,14 @@ impl SobolSampler {
     /// are one constant, so masking them leaves a permutation of `[0, 2^m)`
     /// (and keeps the Sobol loop short).
     #[inline]
-    fn next_pair(&mut self) -> (u32, u64) {
-        let key = mix64(self.pixel ^ u64::from(self.dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        self.dim += 1;
+    fn next_pair(&mut self) -> (u32, PairKeys) {
+        let keys = self.next_keys();
         // Nested uniform (Owen) scrambling of the index as a 32-bit
         // fraction: reverse(LK(reverse(index))), each bit flipped depending
         // on the bits above it (Burley 2020, listing 3); the first reversal
         // is done once per sample.
-        let shuffled = laine_karras(self.index_reversed, key as u32).reverse_bits();
-        (shuffled & self.mask, key)
+        let shuffled = laine_karras(self.index_reversed, keys.shuffle).reverse_bits();
+        (shuffled & self.mask, keys)
     }
 
     /// The next pair of numbers in `[0, 1)^2` (one fresh dimension pair).
@@ -70,8 +147,8 @@ impl SobolSampler {
         let (i, key) = self.next_pair();
         // Owen scrambling of Sobol's first dimension (the bit reversal of
         // i): reverse(LK(reverse(reverse(i)))) = reverse(LK(i)).
-        let x = laine_karras(i, (key >> 32) as u32);
-        let y = laine_karras(sobol_second_reversed(i), mix64(key) as u32);
+        let x = laine_karras(i, key.x);
+        let y = laine_karras(sobol_second_reversed(i), key.y);
         // Both reversals in one: reversing `x << 32 | y` puts reverse(x) in
         // the low half and reverse(y) in the high half.
         let r = ((u64::from(x) << 32) | u64::from(y)).reverse_bits();
@@ -83,7 +160,7 @@ impl SobolSampler {
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
         let (i, key) = self.next_pair();
-        to_unit(laine_karras(i, (key >> 32) as u32).reverse_bits())
+        to_unit(laine_karras(i, key.x).reverse_bits())
     }
 
     /// Skips `pairs` dimension pairs exactly as drawing and discarding
@@ -185,6 +262,26 @@ mod tests {
             v ^= v << 1;
         }
         r
+    }
+
+    #[test]
+    fn set_sample_draws_what_a_new_sampler_draws() {
+        let mut reused = SobolSampler::new(4, 3, 1, 0, 16);
+        reused.next_2d();
+        reused.set_pixel(7, 9);
+        for i in 0..16 {
+            reused.set_sample(i);
+            let mut fresh = SobolSampler::new(4, 7, 9, i, 16);
+            // Skips of different lengths leave gaps in the key cache.
+            for k in 0..12 {
+                if (i + k) % 5 == 0 {
+                    reused.skip(1 + k % 3);
+                    fresh.skip(1 + k % 3);
+                }
+                assert_eq!(reused.next_2d(), fresh.next_2d(), "sample {i} draw {k}");
+                assert_eq!(reused.next_1d(), fresh.next_1d(), "sample {i} draw {k}");
+            }
+        }
     }
 
     #[test]
