@@ -708,14 +708,15 @@ impl<'a, 's> PathTracer<'a, 's> {
         }
         // The lobe choice's number, unless only one lobe can be chosen (then
         // its pair is skipped, which leaves every later number unchanged).
-        let single = weights.iter().filter(|&&w| w > 0.0).count() == 1;
-        let pick = if single {
-            rng.skip(1);
-            // Inside the one lobe's interval of `[0, total)`.
-            let lobe = weights.iter().position(|&w| w > 0.0).unwrap_or(0);
-            weights[..lobe].iter().sum::<f32>() + 0.5 * weights[lobe]
-        } else {
-            rng.next_1d() * total
+        // (`total > 0`, so a lone non-zero weight is the positive one.)
+        let single = weights.iter().filter(|&&w| w != 0.0).count() == 1;
+        let pick = match weights.iter().position(|&w| w > 0.0) {
+            Some(k) if single => {
+                rng.skip(1);
+                // The middle of the one lobe's interval of `[0, total)`.
+                weights[..k].iter().sum::<f32>() + 0.5 * weights[k]
+            }
+            _ => rng.next_1d() * total,
         };
         let u = rng.next_2d();
         if pick < wd + ws {
