@@ -137,7 +137,14 @@ impl SobolSampler {
         // fraction: reverse(LK(reverse(index))), each bit flipped depending
         // on the bits above it (Burley 2020, listing 3); the first reversal
         // is done once per sample.
-        let shuffled = laine_karras(self.index_reversed, keys.shuffle).reverse_bits();
+        let z = laine_karras(self.index_reversed, keys.shuffle);
+        // Only the low m bits of reverse(z) are kept: for m <= 8 they are
+        // the top byte of z reversed, one table look-up.
+        let shuffled = if self.mask <= 0xff {
+            u32::from(REVERSED_BYTE[(z >> 24) as usize])
+        } else {
+            z.reverse_bits()
+        };
         (shuffled & self.mask, keys)
     }
 
@@ -178,6 +185,17 @@ impl SobolSampler {
 fn to_unit(x: u32) -> f32 {
     (x >> 8) as f32 * (1.0 / 16_777_216.0)
 }
+
+/// `REVERSED_BYTE[b] = b.reverse_bits()`.
+static REVERSED_BYTE: [u8; 256] = {
+    let mut t = [0u8; 256];
+    let mut b = 0;
+    while b < 256 {
+        t[b] = (b as u8).reverse_bits();
+        b += 1;
+    }
+    t
+};
 
 /// Direction numbers of the second dimension of the Sobol sequence,
 /// bit-reversed (so bit `k` is the coefficient of `2^-(k+1)`): `v_1 = 1`,
@@ -262,6 +280,27 @@ mod tests {
             v ^= v << 1;
         }
         r
+    }
+
+    #[test]
+    fn shuffle_by_byte_table_matches_the_full_reversal() {
+        // Sample counts up to 256 take the table, larger ones the full
+        // reversal: both must be the masked reverse(LK(reverse(index))).
+        for count in [1u32, 3, 64, 200, 256, 257, 5000] {
+            let mask = count.next_power_of_two() - 1;
+            for index in (0..count).step_by(7) {
+                let mut s = SobolSampler::new(5, 2, 8, index, count);
+                for dim in 0..4 {
+                    let k = PairKeys::new(s.pixel, dim);
+                    let want = laine_karras(index.reverse_bits(), k.shuffle).reverse_bits() & mask;
+                    assert_eq!(
+                        s.next_pair().0,
+                        want,
+                        "count {count} index {index} dim {dim}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
