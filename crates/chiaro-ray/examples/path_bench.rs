@@ -14,7 +14,9 @@
 //!
 //! Prints one line per repeat (`render[i]=SECONDS s  M Msamples/s`, timed
 //! from the loaded scene: BVH build included, file loading and image writing
-//! excluded) and the median; the image written is the last repeat's.
+//! excluded; then the process's CPU seconds over the same interval and
+//! samples per CPU second, the steadier figure on a shared machine) and the
+//! median; the image written is the last repeat's.
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
@@ -22,7 +24,7 @@ use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::Technique;
 use chiaro_ray::path;
-use chiaro_testkit::bench::flag_value;
+use chiaro_testkit::bench::{cpu_seconds, flag_value};
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
@@ -80,14 +82,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut times = Vec::new();
     let mut last = None;
     for i in 0..repeats.max(1) {
-        let t0 = Instant::now();
+        let (t0, cpu0) = (Instant::now(), cpu_seconds());
         let (film, stats) =
             pool.install(|| path::render_with(&scene, &settings, &NoProgress, &accel))?;
         let secs = t0.elapsed().as_secs_f64();
+        let cpu = cpu_seconds().zip(cpu0).map_or(f64::NAN, |(b, a)| b - a);
         println!(
-            "render[{i}]={secs:.3}s  {:.3} Msamples/s  {:.2} Mrays/s",
+            "render[{i}]={secs:.3}s  {:.3} Msamples/s  {:.2} Mrays/s  cpu {cpu:.3}s  {:.3} Msamples/cpu-s",
             samples as f64 / secs / 1e6,
-            stats.rays as f64 / secs / 1e6
+            stats.rays as f64 / secs / 1e6,
+            samples as f64 / cpu / 1e6
         );
         times.push(secs);
         last = Some(film);
