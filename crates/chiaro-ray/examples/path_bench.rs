@@ -5,26 +5,29 @@
 //! ```text
 //! cargo run --release -p chiaro-ray --example path_bench -- SCENE.toml OUT_PREFIX \
 //!     [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]
+//!     [--max-leaf N] [--traversal-cost C]
 //! ```
+//!
+//! The accelerator is [`SceneBvh`] with [`BvhOptions::default`], as the
+//! facade builds it for a scene without shared meshes; `--max-leaf` and
+//! `--traversal-cost` replace those two build options (for measuring them).
 //!
 //! Prints one line per repeat (`render[i]=SECONDS s  M Msamples/s`, timed
 //! from the loaded scene: BVH build included, file loading and image writing
-//! excluded) and the median; the image written is the last repeat's.
+//! excluded; then the process's CPU seconds over the same interval and
+//! samples per CPU second, the steadier figure on a shared machine) and the
+//! median; the image written is the last repeat's.
 
 use chiaro_core::accel::Accelerator;
-use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::Technique;
 use chiaro_ray::path;
-use chiaro_testkit::bench::flag_value;
+use chiaro_testkit::bench::{cpu_seconds, flag_value};
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
-
-fn accel(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
-    Box::new(SceneBvh::new(p))
-}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -48,6 +51,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(s) = arg("--seed") {
         settings.seed = s.parse()?;
     }
+    let mut bvh_options = BvhOptions::default();
+    if let Some(n) = arg("--max-leaf") {
+        bvh_options.max_leaf = n.parse()?;
+    }
+    if let Some(c) = arg("--traversal-cost") {
+        bvh_options.traversal_cost = c.parse()?;
+    }
+    let accel = |p: &PreparedScene<'_>| -> Box<dyn Accelerator> {
+        Box::new(SceneBvh::with_options(p, &bvh_options))
+    };
     let repeats: usize = arg("--repeats").map_or(Ok(1), |s| s.parse())?;
     let threads: usize = arg("--threads").map_or(Ok(0), |s| s.parse())?;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -56,25 +69,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let samples =
         u64::from(settings.width) * u64::from(settings.height) * u64::from(settings.samples);
     println!(
-        "chiaro path {}x{} spp={} max_depth={} rr_depth={} threads={}",
+        "chiaro path {}x{} spp={} max_depth={} rr_depth={} threads={} bvh max_leaf={} traversal_cost={}",
         settings.width,
         settings.height,
         settings.samples,
         settings.path.max_depth,
         settings.path.rr_depth,
-        pool.current_num_threads()
+        pool.current_num_threads(),
+        bvh_options.max_leaf,
+        bvh_options.traversal_cost
     );
     let mut times = Vec::new();
     let mut last = None;
     for i in 0..repeats.max(1) {
-        let t0 = Instant::now();
+        let (t0, cpu0) = (Instant::now(), cpu_seconds());
         let (film, stats) =
             pool.install(|| path::render_with(&scene, &settings, &NoProgress, &accel))?;
         let secs = t0.elapsed().as_secs_f64();
+        let cpu = cpu_seconds().zip(cpu0).map_or(f64::NAN, |(b, a)| b - a);
         println!(
-            "render[{i}]={secs:.3}s  {:.3} Msamples/s  {:.2} Mrays/s",
+            "render[{i}]={secs:.3}s  {:.3} Msamples/s  {:.2} Mrays/s  cpu {cpu:.3}s  {:.3} Msamples/cpu-s",
             samples as f64 / secs / 1e6,
-            stats.rays as f64 / secs / 1e6
+            stats.rays as f64 / secs / 1e6,
+            samples as f64 / cpu / 1e6
         );
         times.push(secs);
         last = Some(film);

@@ -99,12 +99,14 @@ pub fn render_with(
     let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
         let mut tile = TilePixels::new(rect);
         let mut count = 0u64;
+        let mut rng = SobolSampler::new(settings.seed, rect.x, rect.y, 0, spp);
         for ty in 0..rect.height {
             for tx in 0..rect.width {
                 let (px, py) = (rect.x + tx, rect.y + ty);
                 let mut sum = Vec3::ZERO;
+                rng.set_pixel(px, py);
                 for s in 0..spp {
-                    let mut rng = SobolSampler::new(settings.seed, px, py, s, spp);
+                    rng.set_sample(s);
                     let j = rng.next_2d();
                     let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
                     let (l, first) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
@@ -584,7 +586,14 @@ impl<'a, 's> PathTracer<'a, 's> {
         rng: &mut SobolSampler,
         rays: &mut u64,
     ) -> Vec3 {
-        let u_pick = rng.next_1d();
+        // The light choice's number, unless there is only one light (then
+        // its pair is skipped, which leaves every later number unchanged).
+        let u_pick = if self.lights.len() > 1 {
+            rng.next_1d()
+        } else {
+            rng.skip(1);
+            0.0
+        };
         let u = rng.next_2d();
         let Some(li) = self.pick_light(u_pick) else {
             return Vec3::ZERO;
@@ -697,7 +706,18 @@ impl<'a, 's> PathTracer<'a, 's> {
         if total <= 0.0 {
             return None;
         }
-        let pick = rng.next_1d() * total;
+        // The lobe choice's number, unless only one lobe can be chosen (then
+        // its pair is skipped, which leaves every later number unchanged).
+        // (`total > 0`, so a lone non-zero weight is the positive one.)
+        let single = weights.iter().filter(|&&w| w != 0.0).count() == 1;
+        let pick = match weights.iter().position(|&w| w > 0.0) {
+            Some(k) if single => {
+                rng.skip(1);
+                // The middle of the one lobe's interval of `[0, total)`.
+                weights[..k].iter().sum::<f32>() + 0.5 * weights[k]
+            }
+            _ => rng.next_1d() * total,
+        };
         let u = rng.next_2d();
         if pick < wd + ws {
             // A non-delta lobe: sample one, weight by the mixture pdf.

@@ -11,7 +11,7 @@ pub use sobol::SobolSampler;
 
 use glam::{Vec2, Vec3};
 use rand::{RngExt, SeedableRng};
-use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_4, PI};
 
 /// The generator used by every technique: PCG32.
 pub type Rng = rand_pcg::Pcg32;
@@ -49,17 +49,41 @@ pub fn uniform2(rng: &mut Rng) -> Vec2 {
 }
 
 /// Concentric map from the square to the unit disk (Shirley and Chiu 1997).
+///
+/// Branch-free: the wedge (|x| > |y| or not) selects operands, and both
+/// wedges need the sine and cosine of one angle in `[-pi/4, pi/4]` (the
+/// second wedge's angle `pi/2 - a` swaps them), evaluated by
+/// [`sin_cos_quarter`] instead of the library's full-range `sin_cos`.
+#[inline]
 pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;
     if o.x == 0.0 && o.y == 0.0 {
         return Vec2::ZERO;
     }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, FRAC_PI_4 * (o.y / o.x))
+    let x_wedge = o.x.abs() > o.y.abs();
+    let (r, ratio) = if x_wedge {
+        (o.x, o.y / o.x)
     } else {
-        (o.y, FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
+        (o.y, o.x / o.y)
     };
-    Vec2::new(r * theta.cos(), r * theta.sin())
+    let (s, c) = sin_cos_quarter(FRAC_PI_4 * ratio);
+    if x_wedge {
+        Vec2::new(r * c, r * s)
+    } else {
+        Vec2::new(r * s, r * c)
+    }
+}
+
+/// `(sin a, cos a)` for `a` in `[-pi/4, pi/4]`, accurate to about one
+/// float ulp: the minimax polynomials of Cephes' `sinf`/`cosf`
+/// (Moshier, `cephes/single/sinf.c`) for that range, with no range
+/// reduction.
+#[inline]
+fn sin_cos_quarter(a: f32) -> (f32, f32) {
+    let z = a * a;
+    let s = ((-1.951_529_6e-4 * z + 8.332_161e-3) * z - 1.666_665_5e-1) * z * a + a;
+    let c = (((2.443_315_7e-5 * z - 1.388_731_6e-3) * z + 4.166_664_6e-2) * z * z) - 0.5 * z + 1.0;
+    (s, c)
 }
 
 /// Cosine-weighted direction about +z (local frame).
@@ -178,6 +202,41 @@ mod tests {
             let b = sample_uniform_triangle(u);
             assert!(b.x >= 0.0 && b.y >= 0.0 && b.x + b.y <= 1.0 + 1e-6);
         }
+    }
+
+    #[test]
+    fn quarter_sin_cos_matches_the_library() {
+        for i in -1000..=1000 {
+            let a = FRAC_PI_4 * i as f32 / 1000.0;
+            let (s, c) = sin_cos_quarter(a);
+            let (s0, c0) = a.sin_cos();
+            assert!(
+                (s - s0).abs() <= 2.0 * f32::EPSILON * s0.abs().max(0.1),
+                "sin {a}: {s} vs {s0}"
+            );
+            assert!((c - c0).abs() <= 2.0 * f32::EPSILON, "cos {a}: {c} vs {c0}");
+        }
+    }
+
+    #[test]
+    fn concentric_disk_matches_its_polar_definition() {
+        // Shirley and Chiu's map with the library's sin/cos, both wedges.
+        let reference = |u: Vec2| {
+            let o = 2.0 * u - Vec2::ONE;
+            let (r, theta) = if o.x.abs() > o.y.abs() {
+                (o.x, FRAC_PI_4 * (o.y / o.x))
+            } else {
+                (o.y, std::f32::consts::FRAC_PI_2 - FRAC_PI_4 * (o.x / o.y))
+            };
+            Vec2::new(r * theta.cos(), r * theta.sin())
+        };
+        let mut r = pixel_rng(2, 0, 0, 0);
+        for _ in 0..10_000 {
+            let u = uniform2(&mut r);
+            let (a, b) = (sample_concentric_disk(u), reference(u));
+            assert!((a - b).abs().max_element() < 4e-7, "{u}: {a} vs {b}");
+        }
+        assert_eq!(sample_concentric_disk(Vec2::splat(0.5)), Vec2::ZERO);
     }
 
     #[test]

@@ -21,8 +21,13 @@ use glam::Vec2;
 /// Draws the numbers of one sample of one pixel (see the module doc).
 /// Results depend only on the seed, the pixel, the sample index, the
 /// number of samples and the order of the draws, never on threads or tiles.
+/// [`SobolSampler::set_sample`] moves it to another sample of the same
+/// pixel, reusing the scramble keys it has hashed (they depend on the pixel
+/// and the pair, not on the sample).
 #[derive(Debug, Clone)]
 pub struct SobolSampler {
+    /// The scene seed.
+    seed: u64,
     /// Hash of the scene seed and the pixel (the same for all its samples).
     pixel: u64,
     /// The sample's index among the pixel's samples, bit-reversed (the
@@ -33,6 +38,36 @@ pub struct SobolSampler {
     mask: u32,
     /// Pairs drawn so far.
     dim: u32,
+    /// The keys of pairs `0..keys.len()`, hashed on first use.
+    keys: Vec<PairKeys>,
+}
+
+/// The hash of the scene seed and pixel `(x, y)` that keys its pairs.
+#[inline]
+fn pixel_hash(seed: u64, x: u32, y: u32) -> u64 {
+    mix64(seed ^ mix64((u64::from(x) << 32) | u64::from(y)) ^ 0x5EB0_1D00)
+}
+
+/// The scramble keys of one dimension pair of one pixel.
+#[derive(Debug, Clone, Copy)]
+struct PairKeys {
+    /// Seeds the shuffle of the sample index.
+    shuffle: u32,
+    /// Seed the Owen scrambling of the first and second coordinate.
+    x: u32,
+    y: u32,
+}
+
+impl PairKeys {
+    /// The keys of pair `dim` of the pixel hashed to `pixel`.
+    fn new(pixel: u64, dim: u32) -> Self {
+        let key = mix64(pixel ^ u64::from(dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        Self {
+            shuffle: key as u32,
+            x: (key >> 32) as u32,
+            y: mix64(key) as u32,
+        }
+    }
 }
 
 impl SobolSampler {
@@ -40,11 +75,54 @@ impl SobolSampler {
     /// `(x, y)` under `seed`.
     pub fn new(seed: u64, x: u32, y: u32, index: u32, count: u32) -> Self {
         Self {
-            pixel: mix64(seed ^ mix64((u64::from(x) << 32) | u64::from(y)) ^ 0x5EB0_1D00),
+            seed,
+            pixel: pixel_hash(seed, x, y),
             index_reversed: index.reverse_bits(),
             mask: count.max(1).next_power_of_two().wrapping_sub(1),
             dim: 0,
+            keys: Vec::new(),
         }
+    }
+
+    /// Moves to sample 0 of pixel `(x, y)` (same seed and sample count):
+    /// the numbers are those of `SobolSampler::new(seed, x, y, 0, count)`;
+    /// the key cache keeps its memory.
+    #[inline]
+    pub fn set_pixel(&mut self, x: u32, y: u32) {
+        self.pixel = pixel_hash(self.seed, x, y);
+        self.keys.clear();
+        self.set_sample(0);
+    }
+
+    /// Restarts at the first pair for sample `index` of the same pixel:
+    /// the numbers are those of `SobolSampler::new(seed, x, y, index,
+    /// count)`, without hashing again the keys of pairs drawn before.
+    #[inline]
+    pub fn set_sample(&mut self, index: u32) {
+        self.index_reversed = index.reverse_bits();
+        self.dim = 0;
+    }
+
+    /// The keys of the next dimension pair.
+    #[inline]
+    fn next_keys(&mut self) -> PairKeys {
+        let d = self.dim;
+        self.dim += 1;
+        match self.keys.get(d as usize) {
+            Some(&k) => k,
+            None => self.hash_keys(d),
+        }
+    }
+
+    /// Hashes the keys of every pair up to `dim` not yet known (pairs that
+    /// [`Self::skip`] passed over included) and returns those of `dim`.
+    #[cold]
+    fn hash_keys(&mut self, dim: u32) -> PairKeys {
+        while self.keys.len() <= dim as usize {
+            let k = PairKeys::new(self.pixel, self.keys.len() as u32);
+            self.keys.push(k);
+        }
+        self.keys[dim as usize]
     }
 
     /// The shuffled sample index of the next dimension pair, and the keys
@@ -53,15 +131,21 @@ impl SobolSampler {
     /// are one constant, so masking them leaves a permutation of `[0, 2^m)`
     /// (and keeps the Sobol loop short).
     #[inline]
-    fn next_pair(&mut self) -> (u32, u64) {
-        let key = mix64(self.pixel ^ u64::from(self.dim).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        self.dim += 1;
+    fn next_pair(&mut self) -> (u32, PairKeys) {
+        let keys = self.next_keys();
         // Nested uniform (Owen) scrambling of the index as a 32-bit
         // fraction: reverse(LK(reverse(index))), each bit flipped depending
         // on the bits above it (Burley 2020, listing 3); the first reversal
         // is done once per sample.
-        let shuffled = laine_karras(self.index_reversed, key as u32).reverse_bits();
-        (shuffled & self.mask, key)
+        let z = laine_karras(self.index_reversed, keys.shuffle);
+        // Only the low m bits of reverse(z) are kept: for m <= 8 they are
+        // the top byte of z reversed, one table look-up.
+        let shuffled = if self.mask <= 0xff {
+            u32::from(REVERSED_BYTE[(z >> 24) as usize])
+        } else {
+            z.reverse_bits()
+        };
+        (shuffled & self.mask, keys)
     }
 
     /// The next pair of numbers in `[0, 1)^2` (one fresh dimension pair).
@@ -70,9 +154,12 @@ impl SobolSampler {
         let (i, key) = self.next_pair();
         // Owen scrambling of Sobol's first dimension (the bit reversal of
         // i): reverse(LK(reverse(reverse(i)))) = reverse(LK(i)).
-        let x = laine_karras(i, (key >> 32) as u32).reverse_bits();
-        let y = laine_karras(sobol_second_reversed(i), mix64(key) as u32).reverse_bits();
-        Vec2::new(to_unit(x), to_unit(y))
+        let x = laine_karras(i, key.x);
+        let y = laine_karras(sobol_second_reversed(i), key.y);
+        // Both reversals in one: reversing `x << 32 | y` puts reverse(x) in
+        // the low half and reverse(y) in the high half.
+        let r = ((u64::from(x) << 32) | u64::from(y)).reverse_bits();
+        Vec2::new(to_unit(r as u32), to_unit((r >> 32) as u32))
     }
 
     /// The next number in `[0, 1)` (the first coordinate of a fresh pair:
@@ -80,7 +167,16 @@ impl SobolSampler {
     #[inline]
     pub fn next_1d(&mut self) -> f32 {
         let (i, key) = self.next_pair();
-        to_unit(laine_karras(i, (key >> 32) as u32).reverse_bits())
+        to_unit(laine_karras(i, key.x).reverse_bits())
+    }
+
+    /// Skips `pairs` dimension pairs exactly as drawing and discarding
+    /// them would, without computing them: a caller whose decision needs
+    /// no number (a single lobe or light to choose) keeps the numbers of
+    /// every later decision unchanged.
+    #[inline]
+    pub fn skip(&mut self, pairs: u32) {
+        self.dim += pairs;
     }
 }
 
@@ -90,22 +186,68 @@ fn to_unit(x: u32) -> f32 {
     (x >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
-/// The second dimension of the Sobol sequence, bit-reversed (so bit `k` of
-/// the result is the coefficient of `2^-(k+1)`): direction numbers
-/// `v_1 = 1`, `v_{k+1} = v_k ^ (v_k << 1)` in reversed order (the primitive
-/// polynomial `x + 1`; the first dimension is the index itself reversed).
-#[inline]
-fn sobol_second_reversed(mut index: u32) -> u32 {
-    let mut v = 1u32;
-    let mut r = 0u32;
-    while index != 0 {
-        if index & 1 == 1 {
-            r ^= v;
-        }
-        index >>= 1;
-        v ^= v << 1;
+/// `REVERSED_BYTE[b] = b.reverse_bits()`.
+static REVERSED_BYTE: [u8; 256] = {
+    let mut t = [0u8; 256];
+    let mut b = 0;
+    while b < 256 {
+        t[b] = (b as u8).reverse_bits();
+        b += 1;
     }
-    r
+    t
+};
+
+/// Direction numbers of the second dimension of the Sobol sequence,
+/// bit-reversed (so bit `k` is the coefficient of `2^-(k+1)`): `v_1 = 1`,
+/// `v_{k+1} = v_k ^ (v_k << 1)` in reversed order (the primitive
+/// polynomial `x + 1`; the first dimension is the index itself reversed).
+const fn second_directions() -> [u32; 32] {
+    let mut v = [0u32; 32];
+    let mut d = 1u32;
+    let mut k = 0;
+    while k < 32 {
+        v[k] = d;
+        d ^= d << 1;
+        k += 1;
+    }
+    v
+}
+
+/// [`sobol_second_reversed`] by bytes of the index: entry `[b][x]` is the
+/// XOR of the direction numbers of the set bits of byte value `x` in
+/// byte `b` (4 KiB, built at compile time).
+static SECOND_BY_BYTE: [[u32; 256]; 4] = {
+    let v = second_directions();
+    let mut t = [[0u32; 256]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut x = 0;
+        while x < 256 {
+            let mut r = 0u32;
+            let mut j = 0;
+            while j < 8 {
+                if (x >> j) & 1 == 1 {
+                    r ^= v[8 * b + j];
+                }
+                j += 1;
+            }
+            t[b][x] = r;
+            x += 1;
+        }
+        b += 1;
+    }
+    t
+};
+
+/// The second dimension of the Sobol sequence at `index`, bit-reversed: the
+/// XOR of the direction numbers of the index's set bits, four table
+/// look-ups (the same value as the bit-by-bit loop of the tests'
+/// `second_by_bits`).
+#[inline]
+fn sobol_second_reversed(index: u32) -> u32 {
+    let t = &SECOND_BY_BYTE;
+    let byte = |b: u32| ((index >> (8 * b)) & 0xff) as usize;
+    t[0][byte(0)] ^ t[1][byte(1)] ^ t[2][byte(2)] ^ t[3][byte(3)]
 }
 
 /// Burley's hash-based Laine-Karras permutation: a random permutation of
@@ -125,6 +267,72 @@ fn laine_karras(mut x: u32, seed: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The second Sobol dimension, bit-reversed, one index bit at a time
+    /// (the definition [`sobol_second_reversed`]'s tables tabulate).
+    fn second_by_bits(mut index: u32) -> u32 {
+        let (mut v, mut r) = (1u32, 0u32);
+        while index != 0 {
+            if index & 1 == 1 {
+                r ^= v;
+            }
+            index >>= 1;
+            v ^= v << 1;
+        }
+        r
+    }
+
+    #[test]
+    fn shuffle_by_byte_table_matches_the_full_reversal() {
+        // Sample counts up to 256 take the table, larger ones the full
+        // reversal: both must be the masked reverse(LK(reverse(index))).
+        for count in [1u32, 3, 64, 200, 256, 257, 5000] {
+            let mask = count.next_power_of_two() - 1;
+            for index in (0..count).step_by(7) {
+                let mut s = SobolSampler::new(5, 2, 8, index, count);
+                for dim in 0..4 {
+                    let k = PairKeys::new(s.pixel, dim);
+                    let want = laine_karras(index.reverse_bits(), k.shuffle).reverse_bits() & mask;
+                    assert_eq!(
+                        s.next_pair().0,
+                        want,
+                        "count {count} index {index} dim {dim}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn set_sample_draws_what_a_new_sampler_draws() {
+        let mut reused = SobolSampler::new(4, 3, 1, 0, 16);
+        reused.next_2d();
+        reused.set_pixel(7, 9);
+        for i in 0..16 {
+            reused.set_sample(i);
+            let mut fresh = SobolSampler::new(4, 7, 9, i, 16);
+            // Skips of different lengths leave gaps in the key cache.
+            for k in 0..12 {
+                if (i + k) % 5 == 0 {
+                    reused.skip(1 + k % 3);
+                    fresh.skip(1 + k % 3);
+                }
+                assert_eq!(reused.next_2d(), fresh.next_2d(), "sample {i} draw {k}");
+                assert_eq!(reused.next_1d(), fresh.next_1d(), "sample {i} draw {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn second_dimension_tables_match_the_definition() {
+        let mut x = 0x1234_5678u32;
+        for i in (0..70_000u32).chain((0..10_000).map(|_| {
+            x = x.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+            x
+        })) {
+            assert_eq!(sobol_second_reversed(i), second_by_bits(i), "index {i}");
+        }
+    }
 
     /// Sobol's first two dimensions form a (0, 2)-sequence, and Owen
     /// scrambling keeps it one: every 2^m points of a pixel put one point
