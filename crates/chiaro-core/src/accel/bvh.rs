@@ -580,12 +580,14 @@ impl Bvh {
             return t_max;
         }
         let pre = RayPre::new(ray);
+        // One look-up of the (possibly mapped) node array per ray.
+        let nodes: &[BvhNode] = &self.nodes;
         let t_min = ray.t_min;
         let mut stack = Stack::new();
         let (mut child, mut count) = (0u32, 0u32);
         loop {
             if count == 0 {
-                let n = &self.nodes[child as usize];
+                let n = &nodes[child as usize];
                 let (near, mask) = n.intersect(&pre, t_min, t_max);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -676,12 +678,14 @@ impl Bvh {
             return false;
         }
         let pre = RayPre::new(ray);
+        // One look-up of the (possibly mapped) node array per ray.
+        let nodes: &[BvhNode] = &self.nodes;
         let (t_min, t_max) = (ray.t_min, ray.t_max);
         let mut stack = Stack::new();
         let (mut child, mut count) = (0u32, 0u32);
         loop {
             if count == 0 {
-                let n = &self.nodes[child as usize];
+                let n = &nodes[child as usize];
                 let (_, mut mask) = n.intersect(&pre, t_min, t_max);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
@@ -1515,11 +1519,11 @@ impl SceneBvh {
     /// attenuate light through transparent surfaces.
     pub fn visit_hits(&self, ray: &Ray, mut visit: impl FnMut(&Hit) -> bool) -> bool {
         let wr = WatertightRay::new(ray);
+        let blocks: &[TriBlock] = &self.blocks;
         self.bvh.traverse_any_leaves(ray, |first, count| {
             let end = first + count;
-            for b in first / BLOCK..=(end - 1) / BLOCK {
+            for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
                 let lanes = block_lanes(b, first, end);
-                let blk = &self.blocks[b];
                 let spheres = self.sphere_lanes[b] as u32 & lanes;
                 let r = blk.intersect(&wr, lanes & !spheres);
                 for i in 0..BLOCK {
@@ -1559,14 +1563,14 @@ impl Accelerator for SceneBvh {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
         let mut wr = WatertightRay::new(ray);
         let mut best = None;
+        let blocks: &[TriBlock] = &self.blocks;
         self.bvh
             .traverse_closest_leaves(ray, |first, count, t_max| {
                 let end = first + count;
                 wr.t_max = t_max;
                 let mut found = None;
-                for b in first / BLOCK..=(end - 1) / BLOCK {
+                for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
                     let lanes = block_lanes(b, first, end);
-                    let blk = &self.blocks[b];
                     let spheres = self.sphere_lanes[b] as u32 & lanes;
                     let r = blk.intersect(&wr, lanes & !spheres);
                     // In slot order, keep a hit only if strictly nearer (as a
@@ -1614,11 +1618,11 @@ impl Accelerator for SceneBvh {
 
     fn occluded(&self, ray: &Ray) -> bool {
         let wr = WatertightRay::new(ray);
+        let blocks: &[TriBlock] = &self.blocks;
         self.bvh.traverse_any_leaves(ray, |first, count| {
             let end = first + count;
-            for b in first / BLOCK..=(end - 1) / BLOCK {
+            for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
                 let lanes = block_lanes(b, first, end);
-                let blk = &self.blocks[b];
                 let mut spheres = self.sphere_lanes[b] as u32 & lanes;
                 if blk.intersect(&wr, lanes & !spheres).mask != 0 {
                     return true;
