@@ -348,10 +348,10 @@ impl Casters {
             .collect();
         // Coarse leaves: with the fine leaves of small BVHs the casters come
         // in another order, and `tests/exact_shadows.rs`
-        // (`lit_fragments_tile_the_lit_area`) then finds two lit fragments
-        // overlapping at one sample point. The fragment clipping is
-        // sensitive to caster order; that is a robustness bug of its own,
-        // not fixed here, and this keeps the order it was tested with.
+        // (`lit_fragments_tile_the_lit_area`, "one square") then finds two
+        // lit fragments overlapping at one sample point. Whether the
+        // clipping or the test's f32 inside check is what depends on the
+        // order is not yet known; this keeps the order it was tested with.
         let coarse = chiaro_core::accel::bvh::BvhOptions {
             fine_leaves_below: 0,
             ..Default::default()
