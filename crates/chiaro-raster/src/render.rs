@@ -1438,13 +1438,87 @@ fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
     let is_gouraud = |t: usize| ctx.mode(t as u32) == ShadeMode::Gouraud;
     let first = (0..ps.triangles.len()).find(|&t| is_gouraud(t))?;
     let m = ps.tri_material[first];
-    let uniform = ps
-        .tri_material
-        .par_iter()
-        .enumerate()
-        .all(|(t, &mt)| mt == m || !is_gouraud(t));
+    // (No scan when every triangle has the same material.)
+    let uniform = ctx.one_material == Some(m)
+        || ps
+            .tri_material
+            .par_iter()
+            .enumerate()
+            .all(|(t, &mt)| mt == m || !is_gouraud(t));
     let base = ctx.bases.get(m.index())?;
     (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
+}
+
+/// Step 4 when [`uniform_gouraud`] gives the base material: the vertices of
+/// the visible Gouraud triangles, marked straight from the tiles' samples
+/// (once per run of samples on one triangle, every mark a store of `true`
+/// so that their order does not matter), each lit from its own position,
+/// normal and colour ([`Ctx::vertex_split`]), the same values as the
+/// general path of [`poly_shading`] gives them.
+fn uniform_vertex_shading(
+    ctx: &Ctx<'_, '_>,
+    vis: &[TileVis],
+    base: &SurfaceMaterial,
+) -> PolyShading {
+    let ps = ctx.ps;
+    let nv = ps.positions.len();
+    // Without two-sided materials no back is seen (Ctx::flipped).
+    let two_sided = ps.scene.materials.iter().any(|m| m.two_sided);
+    let flags = |n: usize| -> Vec<AtomicBool> { (0..n).map(|_| AtomicBool::new(false)).collect() };
+    let front = flags(nv);
+    let back = if two_sided { flags(nv) } else { Vec::new() };
+    let (any_front, any_back) = vis
+        .par_iter()
+        .map(|tv| {
+            let mut any = [false; 2];
+            let mut mark = |id: u32| {
+                if ctx.mode(id) != ShadeMode::Gouraud {
+                    return;
+                }
+                let flip = two_sided && ctx.flipped(id);
+                let side = if flip { &back } else { &front };
+                for &v in &ps.triangles[id as usize] {
+                    side[v as usize].store(true, Ordering::Relaxed);
+                }
+                any[usize::from(flip)] = true;
+            };
+            // A plain loop over the samples (an iterator chain costs more
+            // per sample), once per run of samples on one triangle.
+            let mut last = NONE;
+            for &id in &tv.ids {
+                if id != last {
+                    last = id;
+                    if id != NONE {
+                        mark(id);
+                    }
+                }
+            }
+            for f in &tv.frags {
+                mark(f.0);
+            }
+            (any[0], any[1])
+        })
+        .reduce(|| (false, false), |a, b| (a.0 | b.0, a.1 | b.1));
+    let shade_side = |need: &[AtomicBool], flip: bool| -> Vec<Split> {
+        need.par_iter()
+            .enumerate()
+            .map(|(v, n)| {
+                if n.load(Ordering::Relaxed) {
+                    ctx.vertex_split(base, v, flip)
+                } else {
+                    Split::default()
+                }
+            })
+            .collect()
+    };
+    let mut out = PolyShading::default();
+    if any_front || any_back {
+        out.vertex_front = shade_side(&front, false);
+    }
+    if any_back {
+        out.vertex_back = shade_side(&back, true);
+    }
+    out
 }
 
 /// Step 4: finds the visible Gouraud triangles and illuminates their
@@ -1454,6 +1528,9 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
     let mut out = PolyShading::default();
     if ctx.object_mode.iter().all(|&m| m != ShadeMode::Gouraud) {
         return out;
+    }
+    if let Some(base) = uniform_gouraud(ctx) {
+        return uniform_vertex_shading(ctx, vis, base);
     }
     // Visible triangles, marked in parallel (every mark stores `true`, so
     // the order of the stores does not matter).
@@ -1484,29 +1561,6 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         for &v in &ps.triangles[t as usize] {
             need[v as usize] |= if back { 2 } else { 1 };
         }
-    }
-    if let Some(base) = uniform_gouraud(ctx) {
-        // One untextured material on every Gouraud face and the point-light
-        // model: a vertex's illumination is its own (see Ctx::vertex_split),
-        // whichever face it is lit for, and no vertex is shared by faces of
-        // different materials.
-        let shade_side = |side: u8| -> Vec<Split> {
-            (0..nv)
-                .into_par_iter()
-                .map(|v| {
-                    if need[v] & side == 0 {
-                        Split::default()
-                    } else {
-                        ctx.vertex_split(base, v, side == 2)
-                    }
-                })
-                .collect()
-        };
-        out.vertex_front = shade_side(1);
-        if need.iter().any(|&n| n & 2 != 0) {
-            out.vertex_back = shade_side(2);
-        }
-        return out;
     }
     // A representative (triangle, corner) for each vertex: the first
     // Gouraud triangle using it, visible or not (so that a vertex's colour
