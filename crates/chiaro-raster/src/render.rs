@@ -643,8 +643,25 @@ impl<'a> Ctx<'a, '_> {
     /// The data of triangle `t`, from `cache` when it holds `t` (the
     /// cache then holds `t`), with [`TriData::lean`] and the Gouraud
     /// corners from `poly` set.
-    #[inline]
+    #[inline(always)]
     fn tri_data<'c>(
+        &self,
+        t: u32,
+        cache: &'c mut TriCache<'a>,
+        poly: &PolyShading,
+    ) -> &'c TriData<'a> {
+        // The hit, inlined into the sample loops; the miss is a call.
+        let k = cache.slots[t as usize & (TRI_CACHE_SIZE - 1)] as usize;
+        if k < cache.data.len() && cache.data[k].t == t {
+            return &cache.data[k];
+        }
+        self.fetch_tri(t, cache, poly)
+    }
+
+    /// [`Ctx::tri_data`] of a triangle that `cache` does not hold: fetched
+    /// into its slot.
+    #[inline(never)]
+    fn fetch_tri<'c>(
         &self,
         t: u32,
         cache: &'c mut TriCache<'a>,
@@ -653,9 +670,6 @@ impl<'a> Ctx<'a, '_> {
         let slot = t as usize & (TRI_CACHE_SIZE - 1);
         let k = cache.slots[slot] as usize;
         let k = if k < cache.data.len() {
-            if cache.data[k].t == t {
-                return &cache.data[k];
-            }
             // Built in place (inlined), not copied in.
             cache.data[k] = self.tri_geometry(t, false);
             k
