@@ -1502,12 +1502,17 @@ fn uniform_vertex_shading(
                 any[usize::from(flip)] = true;
             };
             // A plain loop over the samples (an iterator chain costs more
-            // per sample), once per run of samples on one triangle.
+            // per sample), once per run of samples on one triangle, and
+            // not again for a triangle marked lately (its run on the row
+            // above): a direct-mapped table of the last ids marked.
             let mut last = NONE;
+            let mut recent = [NONE; 256];
             for &id in &tv.ids {
                 if id != last {
                     last = id;
-                    if id != NONE {
+                    let r = &mut recent[id as usize & 255];
+                    if id != NONE && *r != id {
+                        *r = id;
                         mark(id);
                     }
                 }
