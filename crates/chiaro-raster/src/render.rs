@@ -589,8 +589,8 @@ struct TriData<'a> {
     /// [`Ctx::tri_data`]; false elsewhere).
     lean: bool,
     /// Lean Gouraud triangles: the vertex illumination of the three
-    /// corners (zero otherwise).
-    corners: [Split; 3],
+    /// corners, `[diffuse, rest]` as SSE vectors (zero otherwise).
+    corners: [[Vec3A; 2]; 3],
     /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
     /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
     e1: Vec3A,
@@ -695,7 +695,10 @@ impl<'a> Ctx<'a, '_> {
                 ShadeMode::Flat => true,
             };
         if d.lean && d.mode == ShadeMode::Gouraud {
-            let get = |i: usize| poly.vertex_front.get(i).copied().unwrap_or_default();
+            let get = |i: usize| {
+                let s = poly.vertex_front.get(i).copied().unwrap_or_default();
+                [s.diffuse.into(), s.rest.into()]
+            };
             d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
         }
         d
@@ -762,7 +765,7 @@ impl<'a> Ctx<'a, '_> {
             q: exact::cross(s, e1),
             flat: Split::default(),
             lean: false,
-            corners: [Split::default(); 3],
+            corners: [[Vec3A::ZERO; 2]; 3],
         }
     }
 
@@ -1860,8 +1863,12 @@ fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
             (c, ns)
         }
         ShadeMode::Gouraud => {
-            let split = Split::lerp3(td.corners, Vec3::new(w, u, v));
-            (split.diffuse * Vec3::ONE + split.rest, ns())
+            // Split::lerp3 and `diffuse * 1 + rest` on the corners' SSE
+            // vectors: the same operations lane by lane.
+            let [a, b, c] = td.corners;
+            let diffuse = a[0] * w + b[0] * u + c[0] * v;
+            let rest = a[1] * w + b[1] * u + c[1] * v;
+            ((diffuse * Vec3A::ONE + rest).into(), ns())
         }
         ShadeMode::Flat => (td.flat.diffuse * Vec3::ONE + td.flat.rest, ng),
     };
