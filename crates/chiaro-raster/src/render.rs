@@ -589,8 +589,8 @@ struct TriData<'a> {
     /// [`Ctx::tri_data`]; false elsewhere).
     lean: bool,
     /// Lean Gouraud triangles: the vertex illumination of the three
-    /// corners (zero otherwise).
-    corners: [Split; 3],
+    /// corners, `[diffuse, rest]` as SSE vectors (zero otherwise).
+    corners: [[Vec3A; 2]; 3],
     /// The per-triangle terms of `ray_plane_bary` for rays from the eye:
     /// the edges `p1 - p0`, `p2 - p0`, `eye - p0` and `(eye - p0) x (p1 - p0)`.
     e1: Vec3A,
@@ -643,8 +643,25 @@ impl<'a> Ctx<'a, '_> {
     /// The data of triangle `t`, from `cache` when it holds `t` (the
     /// cache then holds `t`), with [`TriData::lean`] and the Gouraud
     /// corners from `poly` set.
-    #[inline]
+    #[inline(always)]
     fn tri_data<'c>(
+        &self,
+        t: u32,
+        cache: &'c mut TriCache<'a>,
+        poly: &PolyShading,
+    ) -> &'c TriData<'a> {
+        // The hit, inlined into the sample loops; the miss is a call.
+        let k = cache.slots[t as usize & (TRI_CACHE_SIZE - 1)] as usize;
+        if k < cache.data.len() && cache.data[k].t == t {
+            return &cache.data[k];
+        }
+        self.fetch_tri(t, cache, poly)
+    }
+
+    /// [`Ctx::tri_data`] of a triangle that `cache` does not hold: fetched
+    /// into its slot.
+    #[inline(never)]
+    fn fetch_tri<'c>(
         &self,
         t: u32,
         cache: &'c mut TriCache<'a>,
@@ -653,9 +670,6 @@ impl<'a> Ctx<'a, '_> {
         let slot = t as usize & (TRI_CACHE_SIZE - 1);
         let k = cache.slots[slot] as usize;
         let k = if k < cache.data.len() {
-            if cache.data[k].t == t {
-                return &cache.data[k];
-            }
             // Built in place (inlined), not copied in.
             cache.data[k] = self.tri_geometry(t, false);
             k
@@ -681,8 +695,11 @@ impl<'a> Ctx<'a, '_> {
                 ShadeMode::Flat => true,
             };
         if d.lean && d.mode == ShadeMode::Gouraud {
-            let get = |i: usize| poly.vertex_front.get(i).copied().unwrap_or_default();
-            d.corners = d.idx.map(get);
+            let get = |i: usize| {
+                let s = poly.vertex_front.get(i).copied().unwrap_or_default();
+                [s.diffuse.into(), s.rest.into()]
+            };
+            d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
         }
         d
     }
@@ -703,12 +720,17 @@ impl<'a> Ctx<'a, '_> {
     #[inline(always)]
     fn tri_geometry(&self, t: u32, all: bool) -> TriData<'a> {
         let mode = self.mode(t);
-        let idx = self.ps.triangles[t as usize].map(|i| i as usize);
-        let p3 = idx.map(|i| self.ps.positions[i]);
+        // (Arrays written out rather than `map`ped: cheaper per fetch.)
+        let [i0, i1, i2] = self.ps.triangles[t as usize];
+        let idx = [i0 as usize, i1 as usize, i2 as usize];
+        let pos = &self.ps.positions;
+        let p3 = [pos[idx[0]], pos[idx[1]], pos[idx[2]]];
         // PreparedScene::face_normal(t), from the positions at hand.
         let ng =
             chiaro_core::geometry::normals::face_normal(p3[0], p3[1], p3[2]).unwrap_or(Vec3::Z);
-        let p = p3.map(Vec3A::from);
+        let p = [p3[0].into(), p3[1].into(), p3[2].into()];
+        let of =
+            |a: &[Vec3]| -> [Vec3A; 3] { [a[idx[0]].into(), a[idx[1]].into(), a[idx[2]].into()] };
         let e1 = p[1] - p[0];
         let s = Vec3A::from(self.rays.eye) - p[0];
         let material_id = self
@@ -721,12 +743,12 @@ impl<'a> Ctx<'a, '_> {
             p,
             ng: ng.into(),
             n: if all || mode != ShadeMode::Flat {
-                idx.map(|i| self.ps.normals[i].into())
+                of(&self.ps.normals)
             } else {
                 [Vec3A::ZERO; 3]
             },
             c: if all || mode != ShadeMode::Gouraud {
-                idx.map(|i| self.ps.colors[i].into())
+                of(&self.ps.colors)
             } else {
                 [Vec3A::ZERO; 3]
             },
@@ -743,7 +765,7 @@ impl<'a> Ctx<'a, '_> {
             q: exact::cross(s, e1),
             flat: Split::default(),
             lean: false,
-            corners: [Split::default(); 3],
+            corners: [[Vec3A::ZERO; 2]; 3],
         }
     }
 
@@ -1438,13 +1460,92 @@ fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
     let is_gouraud = |t: usize| ctx.mode(t as u32) == ShadeMode::Gouraud;
     let first = (0..ps.triangles.len()).find(|&t| is_gouraud(t))?;
     let m = ps.tri_material[first];
-    let uniform = ps
-        .tri_material
-        .par_iter()
-        .enumerate()
-        .all(|(t, &mt)| mt == m || !is_gouraud(t));
+    // (No scan when every triangle has the same material.)
+    let uniform = ctx.one_material == Some(m)
+        || ps
+            .tri_material
+            .par_iter()
+            .enumerate()
+            .all(|(t, &mt)| mt == m || !is_gouraud(t));
     let base = ctx.bases.get(m.index())?;
     (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
+}
+
+/// Step 4 when [`uniform_gouraud`] gives the base material: the vertices of
+/// the visible Gouraud triangles, marked straight from the tiles' samples
+/// (once per run of samples on one triangle, every mark a store of `true`
+/// so that their order does not matter), each lit from its own position,
+/// normal and colour ([`Ctx::vertex_split`]), the same values as the
+/// general path of [`poly_shading`] gives them.
+fn uniform_vertex_shading(
+    ctx: &Ctx<'_, '_>,
+    vis: &[TileVis],
+    base: &SurfaceMaterial,
+) -> PolyShading {
+    let ps = ctx.ps;
+    let nv = ps.positions.len();
+    // Without two-sided materials no back is seen (Ctx::flipped).
+    let two_sided = ps.scene.materials.iter().any(|m| m.two_sided);
+    let flags = |n: usize| -> Vec<AtomicBool> { (0..n).map(|_| AtomicBool::new(false)).collect() };
+    let front = flags(nv);
+    let back = if two_sided { flags(nv) } else { Vec::new() };
+    let (any_front, any_back) = vis
+        .par_iter()
+        .map(|tv| {
+            let mut any = [false; 2];
+            let mut mark = |id: u32| {
+                if ctx.mode(id) != ShadeMode::Gouraud {
+                    return;
+                }
+                let flip = two_sided && ctx.flipped(id);
+                let side = if flip { &back } else { &front };
+                for &v in &ps.triangles[id as usize] {
+                    side[v as usize].store(true, Ordering::Relaxed);
+                }
+                any[usize::from(flip)] = true;
+            };
+            // A plain loop over the samples (an iterator chain costs more
+            // per sample), once per run of samples on one triangle, and
+            // not again for a triangle marked lately (its run on the row
+            // above): a direct-mapped table of the last ids marked.
+            let mut last = NONE;
+            let mut recent = [NONE; 256];
+            for &id in &tv.ids {
+                if id != last {
+                    last = id;
+                    let r = &mut recent[id as usize & 255];
+                    if id != NONE && *r != id {
+                        *r = id;
+                        mark(id);
+                    }
+                }
+            }
+            for f in &tv.frags {
+                mark(f.0);
+            }
+            (any[0], any[1])
+        })
+        .reduce(|| (false, false), |a, b| (a.0 | b.0, a.1 | b.1));
+    let shade_side = |need: &[AtomicBool], flip: bool| -> Vec<Split> {
+        need.par_iter()
+            .enumerate()
+            .map(|(v, n)| {
+                if n.load(Ordering::Relaxed) {
+                    ctx.vertex_split(base, v, flip)
+                } else {
+                    Split::default()
+                }
+            })
+            .collect()
+    };
+    let mut out = PolyShading::default();
+    if any_front || any_back {
+        out.vertex_front = shade_side(&front, false);
+    }
+    if any_back {
+        out.vertex_back = shade_side(&back, true);
+    }
+    out
 }
 
 /// Step 4: finds the visible Gouraud triangles and illuminates their
@@ -1454,6 +1555,9 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
     let mut out = PolyShading::default();
     if ctx.object_mode.iter().all(|&m| m != ShadeMode::Gouraud) {
         return out;
+    }
+    if let Some(base) = uniform_gouraud(ctx) {
+        return uniform_vertex_shading(ctx, vis, base);
     }
     // Visible triangles, marked in parallel (every mark stores `true`, so
     // the order of the stores does not matter).
@@ -1484,29 +1588,6 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         for &v in &ps.triangles[t as usize] {
             need[v as usize] |= if back { 2 } else { 1 };
         }
-    }
-    if let Some(base) = uniform_gouraud(ctx) {
-        // One untextured material on every Gouraud face and the point-light
-        // model: a vertex's illumination is its own (see Ctx::vertex_split),
-        // whichever face it is lit for, and no vertex is shared by faces of
-        // different materials.
-        let shade_side = |side: u8| -> Vec<Split> {
-            (0..nv)
-                .into_par_iter()
-                .map(|v| {
-                    if need[v] & side == 0 {
-                        Split::default()
-                    } else {
-                        ctx.vertex_split(base, v, side == 2)
-                    }
-                })
-                .collect()
-        };
-        out.vertex_front = shade_side(1);
-        if need.iter().any(|&n| n & 2 != 0) {
-            out.vertex_back = shade_side(2);
-        }
-        return out;
     }
     // A representative (triangle, corner) for each vertex: the first
     // Gouraud triangle using it, visible or not (so that a vertex's colour
@@ -1782,8 +1863,12 @@ fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
             (c, ns)
         }
         ShadeMode::Gouraud => {
-            let split = Split::lerp3(td.corners, Vec3::new(w, u, v));
-            (split.diffuse * Vec3::ONE + split.rest, ns())
+            // Split::lerp3 and `diffuse * 1 + rest` on the corners' SSE
+            // vectors: the same operations lane by lane.
+            let [a, b, c] = td.corners;
+            let diffuse = a[0] * w + b[0] * u + c[0] * v;
+            let rest = a[1] * w + b[1] * u + c[1] * v;
+            ((diffuse * Vec3A::ONE + rest).into(), ns())
         }
         ShadeMode::Flat => (td.flat.diffuse * Vec3::ONE + td.flat.rest, ng),
     };

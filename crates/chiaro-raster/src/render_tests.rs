@@ -784,6 +784,75 @@ fn vertex_split_equals_corner_split_of_every_face() {
 }
 
 #[test]
+fn uniform_vertex_shading_lights_the_vertices_of_the_samples_triangles() {
+    let mut s = test_scene();
+    s.lights.truncate(3);
+    for two_sided in [false, true] {
+        s.materials[0].two_sided = two_sided;
+        let ps = tessellated(&s);
+        let st = settings(Technique::Gouraud, 40, 30);
+        let ctx = test_ctx(&ps, &st, ShadeMode::Gouraud, true);
+        let base = &ctx.bases[0];
+        let nt = ps.triangles.len() as u32;
+        // Runs of samples on a few triangles (repeats and gaps included),
+        // some of them again in a second tile, and a transparent fragment.
+        let listed: Vec<u32> = (0..40u32).map(|k| (k * 7919) % nt).collect();
+        let tile = |ids: Vec<u32>, frags: Vec<(u32, f32)>| TileVis {
+            rect: TileRect {
+                x: 0,
+                y: 0,
+                width: ids.len() as u32,
+                height: 1,
+            },
+            window: Rect {
+                x0: 0,
+                y0: 0,
+                x1: ids.len() as u32,
+                y1: 1,
+            },
+            keys: vec![1.0; ids.len()],
+            ids,
+            start: Vec::new(),
+            frags,
+            counts: Vec::new(),
+        };
+        let first: Vec<u32> = listed[..30].iter().flat_map(|&t| [t, t, NONE, t]).collect();
+        let second: Vec<u32> = listed[20..39].to_vec();
+        let vis = [
+            tile(first, Vec::new()),
+            tile(second, vec![(listed[39], 0.5)]),
+        ];
+        let out = uniform_vertex_shading(&ctx, &vis, base);
+        let mut want_front = vec![Split::default(); ps.positions.len()];
+        let mut want_back = Vec::new();
+        for &t in &listed {
+            let flip = ctx.flipped(t);
+            if flip && want_back.is_empty() {
+                want_back = vec![Split::default(); ps.positions.len()];
+            }
+            for &v in &ps.triangles[t as usize] {
+                let table = if flip {
+                    &mut want_back
+                } else {
+                    &mut want_front
+                };
+                table[v as usize] = ctx.vertex_split(base, v as usize, flip);
+            }
+        }
+        assert_eq!(out.vertex_front, want_front, "two-sided {two_sided}");
+        assert_eq!(out.vertex_back, want_back, "two-sided {two_sided}");
+        assert!(out.corners.is_empty());
+        assert!(
+            want_front
+                .iter()
+                .filter(|s| s.diffuse != Vec3::ZERO)
+                .count()
+                > 20
+        );
+    }
+}
+
+#[test]
 fn rendering_into_a_used_film_gives_the_fresh_picture() {
     let s = test_scene();
     let ps = tessellated(&s);
