@@ -346,17 +346,7 @@ impl Casters {
             .iter()
             .map(|p| p.map_or(Aabb::EMPTY, |p| Aabb::from_points(p.map(Vec3::from))))
             .collect();
-        // Coarse leaves: with the fine leaves of small BVHs the casters come
-        // in another order, and `tests/exact_shadows.rs`
-        // (`lit_fragments_tile_the_lit_area`, "one square") then finds two
-        // lit fragments overlapping at one sample point. Whether the
-        // clipping or the test's f32 inside check is what depends on the
-        // order is not yet known; this keeps the order it was tested with.
-        let coarse = chiaro_core::accel::bvh::BvhOptions {
-            fine_leaves_below: 0,
-            ..Default::default()
-        };
-        let bvh = Bvh::build_with(&boxes, &coarse);
+        let bvh = Bvh::build(&boxes);
         Self { bvh, points }
     }
 

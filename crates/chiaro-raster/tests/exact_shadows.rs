@@ -153,15 +153,33 @@ fn check_tiling(scene: &Scene, light_pos: Vec3, lit: f32, what: &str) {
             }
             let p = tri[0] + (tri[1] - tri[0]) * u + (tri[2] - tri[0]) * v;
             // Fragments containing p (strictly, in the fragment's plane).
+            // Clipping can leave two corners a float apart (the fragment's
+            // world corners are f32), and an edge that short has no usable
+            // direction: such corners are merged first, and the winding
+            // comes from the fragment's signed area.
             let inside = frags
                 .iter()
                 .filter(|f| {
-                    let k = f.points.len();
+                    let mut q: Vec<Vec3> = Vec::with_capacity(f.points.len());
+                    for &x in &f.points {
+                        if q.last().is_none_or(|&l: &Vec3| (x - l).length() > 1e-5) {
+                            q.push(x);
+                        }
+                    }
+                    while q.len() > 1 && (q[0] - q[q.len() - 1]).length() <= 1e-5 {
+                        q.pop();
+                    }
+                    let k = q.len();
+                    if k < 3 {
+                        return false;
+                    }
+                    let winding: f32 = (1..k - 1)
+                        .map(|i| (q[i] - q[0]).cross(q[i + 1] - q[0]).dot(ng))
+                        .sum::<f32>()
+                        .signum();
                     (0..k).all(|i| {
-                        let (a, b) = (f.points[i], f.points[(i + 1) % k]);
-                        (b - a).cross(p - a).dot(ng).abs() > 1e-7
-                            && ((b - a).cross(p - a).dot(ng) > 0.0)
-                                == (f.points[(i + 2) % k] - a).cross(b - a).dot(ng).lt(&0.0)
+                        let (a, b) = (q[i], q[(i + 1) % k]);
+                        (b - a).cross(p - a).dot(ng) * winding > 1e-7
                     })
                 })
                 .count();
