@@ -778,8 +778,8 @@ fn ref_bounds(refs: &[PrimRef], parallel: bool) -> (Aabb, Aabb) {
     }
 }
 
-/// Bins the references' centroids and boxes into `out` (`3 * bins`
-/// entries: axis-major).
+/// Bins the references' centroids and boxes into the first `bins` bins of
+/// each of `out`'s three axis rows.
 fn bin_refs(refs: &[PrimRef], cb: &Aabb, scale: Vec3, bins: usize, parallel: bool, out: &mut Bins) {
     let (lo, scale) = (Vec3A::from(cb.min), Vec3A::from(scale));
     let last = Vec3A::splat((bins - 1) as f32);
@@ -1166,11 +1166,7 @@ impl Item {
 /// `opts.parallel_threshold` references build in parallel into their own
 /// vectors, which are then appended with their child indices shifted.
 fn build_tree(refs: &mut [PrimRef], root: Item, opts: &Build) -> Tree {
-    let mut out = Tree {
-        nodes: Vec::with_capacity(refs.len() / 12 + 1),
-        order: Vec::with_capacity(refs.len() + refs.len() / 2),
-    };
-    out.nodes.push(BvhNode::EMPTY);
+    let mut out = Tree::new(refs.len());
     let mut scratch = new_bins();
     if root.is_leaf() {
         let first = out.leaf(refs);
@@ -1192,6 +1188,17 @@ struct Tree {
 }
 
 impl Tree {
+    /// A tree for `refs` references: a reserved root node, room for the
+    /// usual node count and slot padding.
+    fn new(refs: usize) -> Self {
+        let mut nodes = Vec::with_capacity(refs / 12 + 1);
+        nodes.push(BvhNode::EMPTY);
+        Self {
+            nodes,
+            order: Vec::with_capacity(refs + refs / 2),
+        }
+    }
+
     /// Places a leaf of `refs` at the next multiple of [`BLOCK`]; returns
     /// its first slot.
     fn leaf(&mut self, refs: &[PrimRef]) -> u32 {
@@ -1326,10 +1333,7 @@ fn fill_node(
         let subs: Vec<Tree> = runs
             .into_par_iter()
             .map(|(mine, c)| {
-                let mut sub = Tree {
-                    nodes: vec![BvhNode::EMPTY],
-                    order: Vec::with_capacity(c.len + c.len / 2),
-                };
+                let mut sub = Tree::new(c.len);
                 fill_node(mine, c, 0, opts, &mut new_bins(), &mut sub);
                 sub
             })
