@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo run --release -p chiaro-ray --example bvh_bench -- [--threads 2] [--reps 5] [--dump DIR]
-//!     [--max-leaf 4] [--traversal-cost 1] [--bins 16] [--stats] [--build-only]
+//!     [--max-leaf 4] [--traversal-cost 1] [--bins 16] [--stats] [--build-only] [--fingerprint]
 //! ```
 //! `--dump DIR` writes the mesh and both ray sets as `DIR/wl_{V,F,O,D,Or,Dr}.bin`
 //! (raw little-endian f32 / u32 triples), the files `embree3_native` reads,
@@ -135,6 +135,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         bvh.bvh().depth()
     );
 
+    if args.iter().any(|a| a == "--fingerprint") {
+        // FNV-1a over every node's lanes and the slot order: equal
+        // fingerprints mean a build change left the tree as it was.
+        let b = bvh.bvh();
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        let mut eat = |x: u32| h = (h ^ u64::from(x)).wrapping_mul(0x100_0000_01b3);
+        for n in b.nodes() {
+            n.bounds.iter().flatten().for_each(|v| eat(v.to_bits()));
+            n.child.iter().chain(&n.count).for_each(|&v| eat(v));
+        }
+        b.prim_order().iter().for_each(|&v| eat(v));
+        println!("tree fingerprint {h:016x}");
+    }
     if args.iter().any(|a| a == "--build-only") {
         return Ok(());
     }

@@ -1064,14 +1064,30 @@ fn partition_by<const AXIS: usize>(
     );
     let mut i = 0usize;
     for k in 0..n {
-        let c = refs[k].centroid();
+        let at_k = refs[k];
+        let c = at_k.centroid();
         let m = ((Vec3A::splat(c[AXIS]) - plane.lo) * plane.scale).cmplt(plane.limit);
         let left = m.bitmask() & 1;
-        l[0] = Vec3A::select(m, l[0].min(c), l[0]);
-        l[1] = Vec3A::select(m, l[1].max(c), l[1]);
-        r[0] = Vec3A::select(m, r[0], r[0].min(c));
-        r[1] = Vec3A::select(m, r[1], r[1].max(c));
-        refs.swap(i, k);
+        // The centroid for the side it takes and NaN for the other: `min`
+        // and `max` keep their receiver's bound when that is NaN (SSE's
+        // `minps` returns its second operand, the scalar `f32::min` its
+        // non-NaN one), so each side's bounds grow by one select and two
+        // min/max, with no select of the bounds themselves. (Centroids of
+        // the usable boxes are finite.)
+        let (cl, cr) = (
+            Vec3A::select(m, c, Vec3A::NAN),
+            Vec3A::select(m, Vec3A::NAN, c),
+        );
+        l[0] = cl.min(l[0]);
+        l[1] = cl.max(l[1]);
+        r[0] = cr.min(r[0]);
+        r[1] = cr.max(r[1]);
+        // The swap with both references in registers (`slice::swap` goes
+        // through a stack temporary); `i <= k`, and for `i == k` both
+        // stores write the same reference.
+        let at_i = refs[i];
+        refs[i] = at_k;
+        refs[k] = at_i;
         i += left as usize;
     }
     let aabb = |b: [Vec3A; 2]| Aabb {
