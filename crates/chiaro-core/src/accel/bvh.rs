@@ -512,10 +512,10 @@ impl Bvh {
         let mut scratch = new_bins();
         let root = Item::plan(&refs, None, 0, &opts, &mut scratch);
         let bounds = root.bounds;
-        let Tree { nodes, order } = build_tree(&mut refs, root, &opts);
+        let (nodes, prim_order) = build_tree(&mut refs, root, &opts).flatten();
         Self {
-            nodes: HugeArray::from_slice(&nodes),
-            prim_order: order,
+            nodes,
+            prim_order,
             bounds,
         }
     }
@@ -1179,8 +1179,8 @@ impl Item {
 /// with the largest surface area until it has `WIDTH` children or only
 /// leaves. Nodes are laid out depth first, each node's inner children
 /// directly after one another. Subtrees of at least
-/// `opts.parallel_threshold` references build in parallel into their own
-/// vectors, which are then appended with their child indices shifted.
+/// `opts.parallel_threshold` references build in parallel into trees of
+/// their own, which [`Tree::flatten`] then places.
 fn build_tree(refs: &mut [PrimRef], root: Item, opts: &Build) -> Tree {
     let mut out = Tree::new(refs.len());
     let mut scratch = new_bins();
@@ -1193,14 +1193,55 @@ fn build_tree(refs: &mut [PrimRef], root: Item, opts: &Build) -> Tree {
     out
 }
 
-/// A tree (or subtree) being built: its nodes (root first) and its slot
+/// A tree (or subtree) being built: its nodes (root first), its slot
 /// order, in which every leaf starts at a multiple of [`BLOCK`] so that a
-/// leaf of up to four primitives is one block of a [`SceneBvh`]; the gaps
-/// hold [`PAD_SLOT`]. Leaves are placed as they are made, so the order
-/// follows the build's depth-first walk.
+/// leaf of up to four primitives is one block of a [`SceneBvh`] (the gaps
+/// hold [`PAD_SLOT`]), and the subtrees built in parallel below it. Leaves
+/// are placed as they are made, so the order follows the build's
+/// depth-first walk.
 struct Tree {
     nodes: Vec<BvhNode>,
     order: Vec<u32>,
+    /// Subtrees built on their own (root at 0, indices relative to it),
+    /// each with the node of `nodes` reserved for its root. They are placed
+    /// once, by [`Tree::flatten`], after this tree's own nodes and slots and
+    /// in this order: the layout that appending each level's subtrees as it
+    /// finishes would give (a parallel node appends nothing after them),
+    /// without copying every node once per parallel level.
+    subs: Vec<(usize, Tree)>,
+}
+
+/// Where [`Tree::flatten`] puts one tree of the nest: its root node, its
+/// other nodes from `node_at` on, its slots from `slot_at` on.
+struct Placed<'t> {
+    tree: &'t Tree,
+    root_at: usize,
+    node_at: usize,
+    slot_at: usize,
+}
+
+impl Placed<'_> {
+    /// The final index of this tree's node `j`.
+    fn node(&self, j: usize) -> usize {
+        if j == 0 {
+            self.root_at
+        } else {
+            self.node_at + j - 1
+        }
+    }
+
+    /// This tree's node `j` with its children's indices made final.
+    fn moved(&self, j: usize) -> BvhNode {
+        let mut n = self.tree.nodes[j];
+        for lane in 0..WIDTH {
+            match n.count[lane] {
+                EMPTY_LANE => {}
+                0 => n.child[lane] = self.node(n.child[lane] as usize) as u32,
+                _ => n.child[lane] += self.slot_at as u32,
+            }
+        }
+        n
+    }
 }
 
 impl Tree {
@@ -1212,6 +1253,7 @@ impl Tree {
         Self {
             nodes,
             order: Vec::with_capacity(refs + refs / 2),
+            subs: Vec::new(),
         }
     }
 
@@ -1224,63 +1266,78 @@ impl Tree {
         first as u32
     }
 
-    /// Puts subtrees built on their own (root at 0, indices relative to
-    /// it) into this one: the root of `subs[m]` at the reserved node
-    /// `first + m`, the rest of their nodes and their slots appended in
-    /// order, every index moved to match. The copies run in parallel, each
-    /// output element found by a binary search over the subtrees' offsets.
-    fn append(&mut self, first: usize, subs: &[Tree]) {
-        // Node `j >= 1` of `subs[m]` lands at `node_at[m] + j - 1`; its
-        // slots start at `slot_at[m]`, a multiple of `BLOCK`, so leaves
-        // stay aligned (the gaps are padding).
-        let (mut node_at, mut slot_at) = (Vec::with_capacity(subs.len()), Vec::new());
+    /// The whole nest as one node array (in huge-page-advised memory when
+    /// large) and one slot order: each tree's nodes and slots written once,
+    /// the trees in parallel, every index moved to its final place.
+    fn flatten(&self) -> (HugeArray<BvhNode>, Vec<u32>) {
+        // Depth first: a tree, then each of its subtrees followed by theirs.
+        fn place<'t>(
+            parent: usize,
+            placed: &mut Vec<Placed<'t>>,
+            nodes: &mut usize,
+            slots: &mut usize,
+        ) {
+            let tree = placed[parent].tree;
+            for (reserved, sub) in &tree.subs {
+                let slot_at = slots.next_multiple_of(BLOCK);
+                placed.push(Placed {
+                    tree: sub,
+                    root_at: placed[parent].node(*reserved),
+                    node_at: *nodes,
+                    slot_at,
+                });
+                *nodes += sub.nodes.len() - 1;
+                *slots = slot_at + sub.order.len();
+                place(placed.len() - 1, placed, nodes, slots);
+            }
+        }
+        let mut placed = vec![Placed {
+            tree: self,
+            root_at: 0,
+            node_at: 1,
+            slot_at: 0,
+        }];
         let (mut nodes, mut slots) = (self.nodes.len(), self.order.len());
-        for sub in subs {
-            node_at.push(nodes);
-            let at = slots.next_multiple_of(BLOCK);
-            slot_at.push(at);
-            nodes += sub.nodes.len() - 1;
-            slots = at + sub.order.len();
+        place(0, &mut placed, &mut nodes, &mut slots);
+        let mut out = HugeArray::<BvhNode>::zeroed(nodes);
+        let mut order = vec![PAD_SLOT; slots];
+        // Split both outputs into each tree's run (ascending in depth-first
+        // order), fill the runs in parallel, then the subtrees' roots (in
+        // their parents' reserved nodes).
+        let mut node_runs = Vec::with_capacity(placed.len());
+        let mut slot_runs = Vec::with_capacity(placed.len());
+        let (mut rest_n, mut rest_s): (&mut [BvhNode], &mut [u32]) = (&mut out, &mut order);
+        let (mut at_n, mut at_s) = (0, 0);
+        for (k, p) in placed.iter().enumerate() {
+            let (first, len) = if k == 0 {
+                (0, p.tree.nodes.len())
+            } else {
+                (p.node_at, p.tree.nodes.len() - 1)
+            };
+            let (run, tail) = std::mem::take(&mut rest_n)[first - at_n..].split_at_mut(len);
+            node_runs.push(run);
+            (rest_n, at_n) = (tail, first + len);
+            let (run, tail) =
+                std::mem::take(&mut rest_s)[p.slot_at - at_s..].split_at_mut(p.tree.order.len());
+            slot_runs.push(run);
+            (rest_s, at_s) = (tail, p.slot_at + p.tree.order.len());
         }
-        let moved = |m: usize, n: &BvhNode| shifted(n, (node_at[m] - 1) as u32, slot_at[m] as u32);
-        for (m, sub) in subs.iter().enumerate() {
-            self.nodes[first + m] = moved(m, &sub.nodes[0]);
-        }
-        let owner = |at: &[usize], j: usize| at.partition_point(|&a| a <= j) - 1;
-        let base = self.nodes.len();
-        self.nodes
-            .par_extend((base..nodes).into_par_iter().map(|j| {
-                let m = owner(&node_at, j);
-                moved(m, &subs[m].nodes[1 + j - node_at[m]])
-            }));
-        let base = self.order.len();
-        self.order
-            .par_extend((base..slots).into_par_iter().map(|j| {
-                if j < slot_at[0] {
-                    return PAD_SLOT;
+        placed
+            .par_iter()
+            .zip(node_runs.into_par_iter().zip(slot_runs.into_par_iter()))
+            .enumerate()
+            .for_each(|(k, (p, (nodes, slots)))| {
+                let skip = usize::from(k != 0);
+                for (j, n) in nodes.iter_mut().enumerate() {
+                    *n = p.moved(j + skip);
                 }
-                let m = owner(&slot_at, j);
-                subs[m]
-                    .order
-                    .get(j - slot_at[m])
-                    .copied()
-                    .unwrap_or(PAD_SLOT)
-            }));
-    }
-}
-
-/// `n` with its inner children's indices moved by `node_shift` and its
-/// leaves' first slots by `slot_shift`.
-fn shifted(n: &BvhNode, node_shift: u32, slot_shift: u32) -> BvhNode {
-    let mut n = *n;
-    for lane in 0..WIDTH {
-        match n.count[lane] {
-            EMPTY_LANE => {}
-            0 => n.child[lane] += node_shift,
-            _ => n.child[lane] += slot_shift,
+                slots.copy_from_slice(&p.tree.order);
+            });
+        for p in &placed[1..] {
+            out[p.root_at] = p.moved(0);
         }
+        (out, order)
     }
-    n
 }
 
 /// Fills the reserved node `out.nodes[slot]` for the inner `item`, whose
@@ -1354,7 +1411,11 @@ fn fill_node(
                 sub
             })
             .collect();
-        out.append(first, &subs);
+        out.subs.extend(
+            subs.into_iter()
+                .enumerate()
+                .map(|(m, sub)| (first + m, sub)),
+        );
     } else {
         for (m, (mine, c)) in runs.into_iter().enumerate() {
             fill_node(mine, c, first + m, opts, scratch, out);
