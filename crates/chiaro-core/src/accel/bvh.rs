@@ -1068,20 +1068,7 @@ fn partition_by<const AXIS: usize>(
         let c = at_k.centroid();
         let m = ((Vec3A::splat(c[AXIS]) - plane.lo) * plane.scale).cmplt(plane.limit);
         let left = m.bitmask() & 1;
-        // The centroid for the side it takes and NaN for the other: `min`
-        // and `max` keep their receiver's bound when that is NaN (SSE's
-        // `minps` returns its second operand, the scalar `f32::min` its
-        // non-NaN one), so each side's bounds grow by one select and two
-        // min/max, with no select of the bounds themselves. (Centroids of
-        // the usable boxes are finite.)
-        let (cl, cr) = (
-            Vec3A::select(m, c, Vec3A::NAN),
-            Vec3A::select(m, Vec3A::NAN, c),
-        );
-        l[0] = cl.min(l[0]);
-        l[1] = cl.max(l[1]);
-        r[0] = cr.min(r[0]);
-        r[1] = cr.max(r[1]);
+        (l, r) = grow_sides(m, c, l, r);
         // The swap with both references in registers (`slice::swap` goes
         // through a stack temporary); `i <= k`, and for `i == k` both
         // stores write the same reference.
@@ -1095,6 +1082,38 @@ fn partition_by<const AXIS: usize>(
         max: b[1].into(),
     };
     (i, [aabb(l), aabb(r)])
+}
+
+/// The centroid bounds `[min, max]` of the left and right sides after `c`
+/// joins the side `m` selects (all lanes true: left).
+///
+/// On x86 the centroid is made NaN for the side it does not join, and the
+/// bounds grow by `min`/`max` with it as the receiver: SSE's `minps` and
+/// `maxps` return their second operand when either is NaN, so that side
+/// keeps its bound, and each side costs one select rather than two (the
+/// centroids of usable boxes are finite). `Vec3A`'s `min`/`max` on other
+/// targets may propagate NaN (NEON does), so there both sides' bounds are
+/// selected.
+#[inline(always)]
+fn grow_sides(m: glam::BVec3A, c: Vec3A, l: [Vec3A; 2], r: [Vec3A; 2]) -> ([Vec3A; 2], [Vec3A; 2]) {
+    if cfg!(any(target_arch = "x86", target_arch = "x86_64")) {
+        let (cl, cr) = (
+            Vec3A::select(m, c, Vec3A::NAN),
+            Vec3A::select(m, Vec3A::NAN, c),
+        );
+        ([cl.min(l[0]), cl.max(l[1])], [cr.min(r[0]), cr.max(r[1])])
+    } else {
+        (
+            [
+                Vec3A::select(m, l[0].min(c), l[0]),
+                Vec3A::select(m, l[1].max(c), l[1]),
+            ],
+            [
+                Vec3A::select(m, r[0], r[0].min(c)),
+                Vec3A::select(m, r[1], r[1].max(c)),
+            ],
+        )
+    }
 }
 
 /// A child-to-be of a node under construction: a run of references (from
@@ -2012,6 +2031,25 @@ mod tests {
         }
         assert!(a.depth() < 25, "depth {}", a.depth());
         assert_eq!(std::mem::size_of::<BvhNode>(), 32 * WIDTH);
+    }
+
+    #[test]
+    fn partition_side_bounds_ignore_the_other_side() {
+        // `grow_sides` relies on x86's min/max keeping the receiver's
+        // bound beside a NaN; check the bounds it produces on this target.
+        let empty = [Vec3A::INFINITY, Vec3A::NEG_INFINITY];
+        let (mut l, mut r) = (empty, empty);
+        let pts = [
+            (Vec3A::new(1.0, -2.0, 3.0), true),
+            (Vec3A::new(-4.0, 5.0, 0.5), false),
+            (Vec3A::new(2.0, 0.0, -1.0), true),
+            (Vec3A::new(7.0, -3.0, 2.0), false),
+        ];
+        for (c, left) in pts {
+            (l, r) = grow_sides(glam::BVec3A::splat(left), c, l, r);
+        }
+        assert_eq!(l, [Vec3A::new(1.0, -2.0, -1.0), Vec3A::new(2.0, 0.0, 3.0)]);
+        assert_eq!(r, [Vec3A::new(-4.0, -3.0, 0.5), Vec3A::new(7.0, 5.0, 2.0)]);
     }
 
     #[test]
