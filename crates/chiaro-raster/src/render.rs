@@ -618,16 +618,38 @@ impl TriData<'_> {
     }
 }
 
+/// True when `m` has a texture, bump, normal or emission map (which need
+/// the uv footprint): [`TriData::textured`].
+fn needs_footprint(m: &Material) -> bool {
+    m.texture.is_some()
+        || m.bump.is_some()
+        || m.normal_map.is_some()
+        || m.emission_texture.is_some()
+}
+
 /// Number of entries of [`TriCache`] (a power of two).
 const TRI_CACHE_SIZE: usize = 256;
 
-/// A direct-mapped cache of [`TriData`] keyed by triangle id, for one tile:
-/// a triangle covers a few pixels on a few rows, and neighbouring triangles
-/// have neighbouring ids, so most lookups hit.
+/// Number of entries of the vertex illumination cache of [`TriCache`] (a
+/// power of two): a few tiles' worth of vertices.
+const VERTEX_CACHE_SIZE: usize = 4096;
+
+/// A direct-mapped cache of [`TriData`] keyed by triangle id: a triangle
+/// covers a few pixels on a few rows, and neighbouring triangles have
+/// neighbouring ids, so most lookups hit. What it holds depends only on the
+/// triangle, so one cache serves every tile a shading thread takes.
+///
+/// With [`PolyShading::on_demand`] it also caches the illumination of the
+/// vertices the fetched Gouraud triangles use, keyed by vertex index.
 struct TriCache<'a> {
     /// Index into `data` of each slot's entry (`u32::MAX`: empty).
     slots: [u32; TRI_CACHE_SIZE],
     data: Vec<TriData<'a>>,
+    /// The vertex of each vertex slot (`u32::MAX`: empty; allocated on
+    /// first use).
+    vertex_ids: Vec<u32>,
+    /// Its [`Ctx::vertex_split`], `[diffuse, rest]` as in [`TriData::corners`].
+    vertex_splits: Vec<[Vec3A; 2]>,
 }
 
 impl TriCache<'_> {
@@ -635,6 +657,8 @@ impl TriCache<'_> {
         Self {
             slots: [u32::MAX; TRI_CACHE_SIZE],
             data: Vec::with_capacity(TRI_CACHE_SIZE),
+            vertex_ids: Vec::new(),
+            vertex_splits: Vec::new(),
         }
     }
 }
@@ -678,7 +702,13 @@ impl<'a> Ctx<'a, '_> {
             cache.data.push(self.tri_geometry(t, false));
             cache.data.len() - 1
         };
-        let d = &mut cache.data[k];
+        let TriCache {
+            data,
+            vertex_ids,
+            vertex_splits,
+            ..
+        } = cache;
+        let d = &mut data[k];
         if d.mode == ShadeMode::Flat {
             d.flat = self.flat_split(d);
         }
@@ -695,11 +725,28 @@ impl<'a> Ctx<'a, '_> {
                 ShadeMode::Flat => true,
             };
         if d.lean && d.mode == ShadeMode::Gouraud {
-            let get = |i: usize| {
-                let s = poly.vertex_front.get(i).copied().unwrap_or_default();
-                [s.diffuse.into(), s.rest.into()]
-            };
-            d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+            if let Some(base) = &poly.on_demand {
+                if vertex_ids.is_empty() {
+                    *vertex_ids = vec![u32::MAX; VERTEX_CACHE_SIZE];
+                    *vertex_splits = vec![[Vec3A::ZERO; 2]; VERTEX_CACHE_SIZE];
+                }
+                let mut get = |i: usize| {
+                    let slot = i & (VERTEX_CACHE_SIZE - 1);
+                    if vertex_ids[slot] != i as u32 {
+                        let s = self.vertex_split(base, i, false);
+                        vertex_ids[slot] = i as u32;
+                        vertex_splits[slot] = [s.diffuse.into(), s.rest.into()];
+                    }
+                    vertex_splits[slot]
+                };
+                d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+            } else {
+                let get = |i: usize| {
+                    let s = poly.vertex_front.get(i).copied().unwrap_or_default();
+                    [s.diffuse.into(), s.rest.into()]
+                };
+                d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+            }
         }
         d
     }
@@ -755,10 +802,7 @@ impl<'a> Ctx<'a, '_> {
             mode,
             material,
             material_id,
-            textured: material.texture.is_some()
-                || material.bump.is_some()
-                || material.normal_map.is_some()
-                || material.emission_texture.is_some(),
+            textured: needs_footprint(material),
             e1,
             e2: p[2] - p[0],
             s,
@@ -838,6 +882,17 @@ struct PolyShading {
     /// Gouraud triangles whose corners could not use shared vertex values
     /// (a vertex shared by faces of different materials).
     corners: HashMap<u32, [Split; 3]>,
+    /// When every Gouraud sample is a [`lean_sample`] of one untextured
+    /// material lit by `point_lighting` ([`on_demand_gouraud`]): that
+    /// material, and the tables above stay empty. The shading pass then
+    /// illuminates each vertex when a triangle using it is first fetched
+    /// ([`TriCache`]), the same [`Ctx::vertex_split`] as
+    /// [`uniform_vertex_shading`] gives it; this skips finding the
+    /// visible vertices (a pass over every sample) and writing, then
+    /// gathering back, a table of every vertex's illumination. A vertex
+    /// is only illuminated again where the cache lost it (another shading
+    /// thread, or a slot taken by another vertex).
+    on_demand: Option<SurfaceMaterial>,
 }
 
 /// One tile's visibility: the nearest opaque triangle of each sample, the
@@ -1266,25 +1321,26 @@ pub fn render_prepared_into(
     progress.begin("shade", vis.len() as u64);
     let film = Mutex::new(film);
     let kept: Mutex<Vec<(TileRect, Vec<Vec3>)>> = Mutex::new(Vec::new());
-    let finished = vis.par_iter().all(|tv| {
-        if progress.cancelled() {
-            return false;
-        }
-        let (pixels, samples) = shade_tile(&ctx, &poly, tv, &offsets, tent);
-        film.lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .write_tile(&pixels);
-        if tent {
-            kept.lock()
+    // One triangle cache per shading job, kept from tile to tile.
+    let finished = vis
+        .par_iter()
+        .try_for_each_init(TriCache::new, |cache, tv| {
+            if progress.cancelled() {
+                return Err(CoreError::Cancelled);
+            }
+            let (pixels, samples) = shade_tile(&ctx, &poly, tv, &offsets, tent, cache);
+            film.lock()
                 .unwrap_or_else(PoisonError::into_inner)
-                .push((pixels.rect, samples));
-        }
-        progress.advance(1);
-        true
-    });
-    if !finished {
-        return Err(CoreError::Cancelled);
-    }
+                .write_tile(&pixels);
+            if tent {
+                kept.lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push((pixels.rect, samples));
+            }
+            progress.advance(1);
+            Ok(())
+        });
+    finished?;
     let film = film.into_inner().unwrap_or_else(PoisonError::into_inner);
     let kept = kept.into_inner().unwrap_or_else(PoisonError::into_inner);
     if tent {
@@ -1471,6 +1527,26 @@ fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
     (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
 }
 
+/// With [`uniform_gouraud`]'s material, true when every sample of a
+/// Gouraud triangle takes [`lean_sample`] (see [`Ctx::fetch_tri`]): a lean
+/// frame, and the material untextured, one-sided and opaque (no fragment
+/// is shaded by `shade_sample`), so its vertices are only ever needed on
+/// the front side and can be illuminated on demand
+/// ([`PolyShading::on_demand`]).
+fn on_demand_gouraud(ctx: &Ctx<'_, '_>) -> bool {
+    let ps = ctx.ps;
+    let Some(t) = (0..ps.triangles.len() as u32).find(|&t| ctx.mode(t) == ShadeMode::Gouraud)
+    else {
+        return false;
+    };
+    let id = ps.tri_material[t as usize];
+    let m = ps.material(id);
+    ctx.lean_frame
+        && !needs_footprint(m)
+        && !m.two_sided
+        && !matches!(ctx.class.get(id.index()), Some(Class::Blend(_)))
+}
+
 /// Step 4 when [`uniform_gouraud`] gives the base material: the vertices of
 /// the visible Gouraud triangles, marked straight from the tiles' samples
 /// (once per run of samples on one triangle, every mark a store of `true`
@@ -1557,6 +1633,12 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         return out;
     }
     if let Some(base) = uniform_gouraud(ctx) {
+        if on_demand_gouraud(ctx) {
+            return PolyShading {
+                on_demand: Some(*base),
+                ..PolyShading::default()
+            };
+        }
         return uniform_vertex_shading(ctx, vis, base);
     }
     // Visible triangles, marked in parallel (every mark stores `true`, so
@@ -1659,12 +1741,13 @@ struct SampleResult {
 /// Step 5 for one tile: the box-filtered pixels and, with `keep_samples`,
 /// the colour of every sample of the window (indexed like `tv.ids`; empty
 /// otherwise) for the tent filter.
-fn shade_tile(
-    ctx: &Ctx<'_, '_>,
+fn shade_tile<'a>(
+    ctx: &Ctx<'a, '_>,
     poly: &PolyShading,
     tv: &TileVis,
     offsets: &[[i32; 2]],
     keep_samples: bool,
+    cache: &mut TriCache<'a>,
 ) -> (TilePixels, Vec<Vec3>) {
     let rect = tv.rect;
     let mut out = TilePixels::new(rect);
@@ -1684,8 +1767,6 @@ fn shade_tile(
         .environment
         .as_ref()
         .is_some_and(|e| e.as_background);
-    // The triangle of the previous sample: neighbours mostly share one.
-    let mut cache = TriCache::new();
     let win = tv.window;
     // The row- and column-only parts of the sample directions (Rays::dir),
     // per window column (or row) and sample.
@@ -1725,7 +1806,7 @@ fn shade_tile(
                     continue;
                 }
                 let dir = Rays::dir_from(column, row);
-                let td = ctx.tri_data(id, &mut cache, poly);
+                let td = ctx.tri_data(id, cache, poly);
                 let r = if td.lean {
                     lean_sample(ctx, td, dir)
                 } else {
@@ -1765,7 +1846,7 @@ fn shade_tile(
                         specular: Vec3::ZERO,
                     }
                 } else {
-                    let td = ctx.tri_data(id, &mut cache, poly);
+                    let td = ctx.tri_data(id, cache, poly);
                     if td.lean {
                         lean_sample(ctx, td, dir)
                     } else {
@@ -1780,7 +1861,7 @@ fn shade_tile(
                     let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
                     let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
                         == Some(&Class::Blend(TransparencyMode::Interpolated));
-                    let td = ctx.tri_data(t, &mut cache, poly);
+                    let td = ctx.tri_data(t, cache, poly);
                     let front =
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);
