@@ -180,19 +180,15 @@ impl Viewport {
 /// `x.round() as i32` (ties away from zero, saturating, NaN to 0), without
 /// the libm call `f32::round` becomes on baseline x86-64: below 2^22 the
 /// truncation and the fraction `x - trunc(x)` are exact, so the result is
-/// the same integer.
+/// the same integer. The fraction's two tests are added as integers rather
+/// than branched on: which way a snapped coordinate rounds is a coin toss,
+/// and the vertex pass rounds two per vertex.
 #[inline]
 pub(crate) fn round_to_i32(x: f32) -> i32 {
     if x.abs() < 4_194_304.0 {
         let t = x as i32;
         let f = x - t as f32;
-        if f >= 0.5 {
-            t + 1
-        } else if f <= -0.5 {
-            t - 1
-        } else {
-            t
-        }
+        t + i32::from(f >= 0.5) - i32::from(f <= -0.5)
     } else {
         x.round() as i32
     }
