@@ -52,7 +52,9 @@
 //! colour).
 
 use crate::clip::outcode;
-use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize_window, sample_offsets};
+use crate::raster::{
+    DepthKey, RasterTri, Rect, Viewport, rasterize_window, rasterize_window_masked, sample_offsets,
+};
 use crate::shadow::{ShadowVolumes, Shadows, VolumeCounting};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
@@ -1205,13 +1207,20 @@ pub fn render_prepared_into(
                         class_of(rt.id)
                     };
                     match class {
-                        Class::Opaque => rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
-                            let i = index(x, y, s);
-                            if k > key[i] {
-                                key[i] = k;
-                                ids[i] = rt.id;
-                            }
-                        }),
+                        // The depth test as selects, not a branch (see
+                        // rasterize_window_masked).
+                        Class::Opaque => rasterize_window_masked(
+                            rt,
+                            r,
+                            win,
+                            &offsets,
+                            |x, y, s, k, covered| {
+                                let i = index(x, y, s);
+                                let nearer = covered & (k > key[i]);
+                                key[i] = if nearer { k } else { key[i] };
+                                ids[i] = if nearer { rt.id } else { ids[i] };
+                            },
+                        ),
                         Class::ScreenDoor(kt) => {
                             rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
                                 let i = index(x, y, s);
