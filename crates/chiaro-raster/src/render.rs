@@ -773,11 +773,9 @@ impl<'a> Ctx<'a, '_> {
         let [i0, i1, i2] = self.ps.triangles[t as usize];
         let idx = [i0 as usize, i1 as usize, i2 as usize];
         let pos = &self.ps.positions;
-        let p3 = [pos[idx[0]], pos[idx[1]], pos[idx[2]]];
+        let p: [Vec3A; 3] = [pos[idx[0]].into(), pos[idx[1]].into(), pos[idx[2]].into()];
         // PreparedScene::face_normal(t), from the positions at hand.
-        let ng =
-            chiaro_core::geometry::normals::face_normal(p3[0], p3[1], p3[2]).unwrap_or(Vec3::Z);
-        let p = [p3[0].into(), p3[1].into(), p3[2].into()];
+        let ng = exact::face_normal(p[0], p[1], p[2]).unwrap_or(Vec3A::Z);
         let of =
             |a: &[Vec3]| -> [Vec3A; 3] { [a[idx[0]].into(), a[idx[1]].into(), a[idx[2]].into()] };
         let e1 = p[1] - p[0];
@@ -790,7 +788,7 @@ impl<'a> Ctx<'a, '_> {
             t,
             idx,
             p,
-            ng: ng.into(),
+            ng,
             n: if all || mode != ShadeMode::Flat {
                 of(&self.ps.normals)
             } else {
