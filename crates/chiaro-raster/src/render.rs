@@ -1076,10 +1076,12 @@ pub fn render_prepared_into(
             .par_chunks(chunk)
             .enumerate()
             .map(|(ci, tris)| {
-                let mut out = Vec::with_capacity(tris.len());
+                // The screen triangles of one source triangle.
+                let mut out = Vec::new();
                 let mut scratch = Vec::new();
                 let mut bins = binner.empty();
                 for (k, tri) in tris.iter().enumerate() {
+                    out.clear();
                     let t = (ci * chunk + k) as u32;
                     let cull = cull_material
                         .get(ps.tri_material[t as usize].index())
@@ -1087,7 +1089,6 @@ pub fn render_prepared_into(
                         .unwrap_or(settings.cull_backfaces);
                     let vp = if cull { &vp_cull } else { &vp_all };
                     let v = tri.map(|i| &verts[i as usize]);
-                    let first = out.len();
                     if v[0].inside && v[1].inside && v[2].inside {
                         vp.emit(
                             [v[0].xy, v[1].xy, v[2].xy],
@@ -1103,11 +1104,11 @@ pub fn render_prepared_into(
                             tri.map(|i| clip_from_world * ps.positions[i as usize].extend(1.0));
                         vp.setup(clip, t, &mut scratch, &mut out);
                     }
-                    for (j, rt) in out.iter().enumerate().skip(first) {
-                        binner.bin(rt, j as u32, &mut bins);
+                    for rt in &out {
+                        binner.bin(rt, &mut bins);
                     }
                 }
-                Bins { tris: out, bins }
+                Bins { bins }
             })
             .collect()
     };
@@ -1135,14 +1136,14 @@ pub fn render_prepared_into(
         for (li, tris) in vols.per_light.iter().enumerate() {
             for tri in tris {
                 let c = tri.map(|p| clip_from_world * p);
-                let first = out.len();
+                out.clear();
                 vp_all.setup_homogeneous(c, tri.map(|p| p.w), li as u32, &mut scratch, &mut out);
-                for (j, rt) in out.iter().enumerate().skip(first) {
-                    binner.bin(rt, j as u32, &mut bins);
+                for rt in &out {
+                    binner.bin(rt, &mut bins);
                 }
             }
         }
-        Bins { tris: out, bins }
+        Bins { bins }
     });
     let counting = options.volume_counting;
     progress.advance(1);
@@ -1196,8 +1197,7 @@ pub fn render_prepared_into(
             // Opaque and screen-door surfaces: the z-buffer.
             let mut blend: Vec<&RasterTri> = Vec::new();
             for c in &chunks {
-                for &j in &c.bins[ti] {
-                    let rt = &c.tris[j as usize];
+                for rt in &c.bins[ti] {
                     // (No per-triangle material lookup when all are opaque.)
                     let class = if all_opaque {
                         Class::Opaque
@@ -1207,18 +1207,14 @@ pub fn render_prepared_into(
                     match class {
                         // The depth test as selects, not a branch (see
                         // rasterize_window_masked).
-                        Class::Opaque => rasterize_window_masked(
-                            rt,
-                            r,
-                            win,
-                            &offsets,
-                            |x, y, s, k, covered| {
+                        Class::Opaque => {
+                            rasterize_window_masked(rt, r, win, &offsets, |x, y, s, k, covered| {
                                 let i = index(x, y, s);
                                 let nearer = covered & (k > key[i]);
                                 key[i] = if nearer { k } else { key[i] };
                                 ids[i] = if nearer { rt.id } else { ids[i] };
-                            },
-                        ),
+                            })
+                        }
                         Class::ScreenDoor(kt) => {
                             rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
                                 let i = index(x, y, s);
@@ -1431,14 +1427,14 @@ struct Binner {
 }
 
 impl Binner {
-    fn empty(&self) -> Vec<Vec<u32>> {
+    fn empty(&self) -> Vec<Vec<RasterTri>> {
         vec![Vec::new(); self.ntiles]
     }
 
-    /// Appends `j` to the bin of every tile whose part of the crop window
-    /// the bounding box of `rt` meets.
+    /// Appends a copy of `rt` to the bin of every tile whose part of the
+    /// crop window the bounding box of `rt` meets.
     #[inline]
-    fn bin(&self, rt: &RasterTri, j: u32, bins: &mut [Vec<u32>]) {
+    fn bin(&self, rt: &RasterTri, bins: &mut [Vec<RasterTri>]) {
         let b = rt.pixel_bounds();
         let c = self.crop;
         if b[2] < c.x0 as i32 || b[3] < c.y0 as i32 || b[0] >= c.x1 as i32 || b[1] >= c.y1 as i32 {
@@ -1450,16 +1446,21 @@ impl Binner {
         let ty1 = (b[3].min(c.y1 as i32 - 1) as u32) / TILE_SIZE;
         for ty in ty0..=ty1 {
             for tx in tx0..=tx1 {
-                bins[(ty * self.tiles_x + tx) as usize].push(j);
+                bins[(ty * self.tiles_x + tx) as usize].push(*rt);
             }
         }
     }
 }
 
-/// Triangles binned to tiles: `bins[tile]` indexes `tris`.
+/// Triangles binned to tiles: `bins[tile]` holds, in setup order, a copy
+/// of every triangle that meets the tile. Copies rather than indices into
+/// one array of the chunk's triangles: the visibility pass then reads each
+/// tile's triangles as one contiguous run, where through indices it
+/// gathered every few triangles of an array of them all (set up long before
+/// and no longer in cache), a cache miss per triangle. Most triangles of a
+/// large mesh meet one tile, so the copies cost little more memory.
 struct Bins {
-    tris: Vec<RasterTri>,
-    bins: Vec<Vec<u32>>,
+    bins: Vec<Vec<RasterTri>>,
 }
 
 /// Relative tolerance of the shadow-volume depth comparison: a volume face
@@ -1485,8 +1486,7 @@ fn count_volumes(
     let points = n + tv.frags.len();
     let mut counts = vec![0i32; points * nl];
     let tw = tv.rect.width as usize;
-    for &j in &vb.bins[ti] {
-        let rt = &vb.tris[j as usize];
+    for rt in &vb.bins[ti] {
         let li = rt.id as usize;
         rasterize_window(rt, r, tv.window, offsets, |x, y, s, k| {
             let i = (((y - r.y0) as usize) * tw + (x - r.x0) as usize) * spp + s;
