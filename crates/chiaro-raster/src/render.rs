@@ -10,7 +10,10 @@
 //!    (early z: nothing is shaded here).
 //! 4. *Vertex illumination* for Gouraud triangles that are visible
 //!    somewhere, once per vertex. (Flat polygons are illuminated once per
-//!    tile that shows them, when shading first meets them.)
+//!    tile that shows them, when shading first meets them; so are the
+//!    vertices of Gouraud triangles, instead of in this pass, when one
+//!    untextured opaque material under point lights is all they use: see
+//!    `PolyShading::on_demand`.)
 //! 5. *Shading* (parallel over tiles): each visible sample is shaded once
 //!    (deferred shading), the samples of a pixel are averaged (box filter)
 //!    or, with `RenderSettings::filter = Tent`, resolved afterwards by the
