@@ -906,8 +906,6 @@ struct TileVis {
     window: Rect,
     /// Nearest opaque (or screen-door) triangle per sample.
     ids: Vec<u32>,
-    /// Its closeness key (`1 / w`), `NEG_INFINITY` on the background.
-    keys: Vec<f32>,
     /// Transparent fragments of sample `i`: `frags[start[i]..start[i + 1]]`,
     /// nearest first (empty `start` when there are none).
     start: Vec<u32>,
@@ -1177,9 +1175,12 @@ pub fn render_prepared_into(
     }
     progress.begin("raster", active.len() as u64);
     let spp_us = spp as usize;
+    // The depth buffer is only read while its tile is rasterized (and its
+    // shadow volumes counted): one per job, reused from tile to tile, stays
+    // in cache instead of a fresh one per tile being written out to memory.
     let vis: Vec<Option<TileVis>> = active
         .par_iter()
-        .map(|&(ti, rect, win)| {
+        .map_init(Vec::new, |key: &mut Vec<f32>, &(ti, rect, win)| {
             if progress.cancelled() {
                 return None;
             }
@@ -1191,7 +1192,8 @@ pub fn render_prepared_into(
                 y1: rect.y + rect.height,
             };
             let n = (rect.width * rect.height) as usize * spp_us;
-            let mut key = vec![f32::NEG_INFINITY; n];
+            key.clear();
+            key.resize(n, f32::NEG_INFINITY);
             let mut ids = vec![NONE; n];
             let tw = rect.width as usize;
             let index = |x: u32, y: u32, s: usize| {
@@ -1259,13 +1261,12 @@ pub fn render_prepared_into(
                 rect,
                 window: win,
                 ids,
-                keys: key,
                 start,
                 frags,
                 counts: Vec::new(),
             };
             if let Some(vb) = &vol_bins {
-                count_volumes(&mut tv, vb, ti, r, &offsets, nl, counting);
+                count_volumes(&mut tv, key, vb, ti, r, &offsets, nl, counting);
             }
             progress.advance(1);
             Some(tv)
@@ -1474,9 +1475,13 @@ const VOLUME_EPS: f32 = 2e-5;
 /// Counts, per point of the tile (opaque samples and transparent
 /// fragments) and per light, the shadow-volume faces between the eye and
 /// the point (z-pass) or between the point and infinity (z-fail); a point
-/// is in shadow where its count is not zero.
+/// is in shadow where its count is not zero. `keys` is the tile's depth
+/// buffer (the closeness key of each sample's nearest opaque surface,
+/// `NEG_INFINITY` on the background), indexed like `tv.ids`.
+#[allow(clippy::too_many_arguments)]
 fn count_volumes(
     tv: &mut TileVis,
+    keys: &[f32],
     vb: &Bins,
     ti: usize,
     r: Rect,
@@ -1508,7 +1513,7 @@ fn count_volumes(
                     };
                 counts[p * nl + li] += d;
             };
-            bump(i, tv.keys[i]);
+            bump(i, keys[i]);
             for f in tv.frag_range(i) {
                 bump(n + f, tv.frags[f].1);
             }

@@ -810,7 +810,6 @@ fn uniform_vertex_shading_lights_the_vertices_of_the_samples_triangles() {
                 x1: ids.len() as u32,
                 y1: 1,
             },
-            keys: vec![1.0; ids.len()],
             ids,
             start: Vec::new(),
             frags,
