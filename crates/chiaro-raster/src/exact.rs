@@ -6,7 +6,7 @@
 //! `normalize` divides by the length where `Vec3`'s multiplies by its
 //! reciprocal, so those are written here.
 
-use glam::{Vec3A, Vec3Swizzles};
+use glam::{BVec3A, Vec3A, Vec3Swizzles};
 
 /// `Vec3::cross`: `(a.y b.z - b.y a.z, a.z b.x - b.z a.x, a.x b.y - b.x a.y)`.
 #[inline]
@@ -37,6 +37,27 @@ pub(crate) fn try_normalize(v: Vec3A) -> Option<Vec3A> {
 #[inline]
 pub(crate) fn normalize_or_zero(v: Vec3A) -> Vec3A {
     try_normalize(v).unwrap_or(Vec3A::ZERO)
+}
+
+/// `chiaro_core::geometry::normals::face_normal`: the cross product of the
+/// two edges at the vertex opposite the longest edge, normalised; `None`
+/// for a degenerate triangle. The three candidate products are all computed
+/// and one is selected, without a branch: which edge of a mesh triangle is
+/// the longest is unpredictable, and the shading pass takes the normal of
+/// every triangle it fetches.
+#[inline]
+pub(crate) fn face_normal(a: Vec3A, b: Vec3A, c: Vec3A) -> Option<Vec3A> {
+    let (e0, e1, e2) = (b - a, c - b, a - c);
+    let (l0, l1, l2) = (e0.dot(e0), e1.dot(e1), e2.dot(e2));
+    let first = BVec3A::splat(l0 >= l1 && l0 >= l2);
+    let second = BVec3A::splat(l1 >= l2);
+    let n = Vec3A::select(
+        first,
+        cross(e1, e2),
+        Vec3A::select(second, cross(e2, e0), cross(e0, e1)),
+    );
+    let len = n.length();
+    (len > 0.0 && len.is_finite() && len > 1e-12 * (l0 + l1 + l2)).then(|| n / len)
 }
 
 #[cfg(test)]
@@ -82,6 +103,11 @@ mod tests {
             assert_eq!(
                 bits(normalize_or_zero(aa).into()),
                 bits(a.normalize_or_zero())
+            );
+            let c = Vec3::new(next(), next(), next());
+            assert_eq!(
+                face_normal(aa, ba, c.into()).map(|n| bits(n.into())),
+                chiaro_core::geometry::normals::face_normal(a, b, c).map(bits)
             );
         }
     }

@@ -180,19 +180,15 @@ impl Viewport {
 /// `x.round() as i32` (ties away from zero, saturating, NaN to 0), without
 /// the libm call `f32::round` becomes on baseline x86-64: below 2^22 the
 /// truncation and the fraction `x - trunc(x)` are exact, so the result is
-/// the same integer.
+/// the same integer. The fraction's two tests are added as integers rather
+/// than branched on: which way a snapped coordinate rounds is a coin toss,
+/// and the vertex pass rounds two per vertex.
 #[inline]
 pub(crate) fn round_to_i32(x: f32) -> i32 {
     if x.abs() < 4_194_304.0 {
         let t = x as i32;
         let f = x - t as f32;
-        if f >= 0.5 {
-            t + 1
-        } else if f <= -0.5 {
-            t - 1
-        } else {
-            t
-        }
+        t + i32::from(f >= 0.5) - i32::from(f <= -0.5)
     } else {
         x.round() as i32
     }
@@ -275,6 +271,28 @@ pub fn rasterize_window<F: FnMut(u32, u32, usize, f32)>(
     samples: &[[i32; 2]],
     mut frag: F,
 ) {
+    rasterize_window_masked(t, rect, window, samples, |x, y, s, key, covered| {
+        if covered {
+            frag(x, y, s, key);
+        }
+    });
+}
+
+/// [`rasterize_window`], calling `frag(x, y, sample, key, covered)` for
+/// every sample of the triangle's bounding box in `rect` and `window`,
+/// `covered` telling whether the triangle covers it (the key is only
+/// meaningful where it does). For a z-buffer that folds `covered` into its
+/// depth test without a branch: the triangles of a large mesh are a few
+/// pixels wide, and which samples of their bounding boxes they cover is
+/// too irregular for a branch predictor.
+#[inline]
+pub fn rasterize_window_masked<F: FnMut(u32, u32, usize, f32, bool)>(
+    t: &RasterTri,
+    rect: Rect,
+    window: Rect,
+    samples: &[[i32; 2]],
+    mut frag: F,
+) {
     let b = t.pixel_bounds();
     let x0 = b[0].max(rect.x0 as i32);
     let y0 = b[1].max(rect.y0 as i32);
@@ -344,10 +362,8 @@ pub fn rasterize_window<F: FnMut(u32, u32, usize, f32)>(
             let ky_row = (key_s + dkdy * (i64::from(y - y0) * step) as f64) as f32;
             let mut x = wx0;
             while x < wx1 {
-                if (e[0] | e[1] | e[2]) >= 0 {
-                    let key = ky_row + kx * (x - x0) as f32;
-                    frag(x as u32, y as u32, s, key);
-                }
+                let key = ky_row + kx * (x - x0) as f32;
+                frag(x as u32, y as u32, s, key, (e[0] | e[1] | e[2]) >= 0);
                 e[0] += ea[0] * step;
                 e[1] += ea[1] * step;
                 e[2] += ea[2] * step;

@@ -10,7 +10,10 @@
 //!    (early z: nothing is shaded here).
 //! 4. *Vertex illumination* for Gouraud triangles that are visible
 //!    somewhere, once per vertex. (Flat polygons are illuminated once per
-//!    tile that shows them, when shading first meets them.)
+//!    tile that shows them, when shading first meets them; so are the
+//!    vertices of Gouraud triangles, instead of in this pass, when one
+//!    untextured opaque material under point lights is all they use: see
+//!    `PolyShading::on_demand`.)
 //! 5. *Shading* (parallel over tiles): each visible sample is shaded once
 //!    (deferred shading), the samples of a pixel are averaged (box filter)
 //!    or, with `RenderSettings::filter = Tent`, resolved afterwards by the
@@ -52,7 +55,9 @@
 //! colour).
 
 use crate::clip::outcode;
-use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize_window, sample_offsets};
+use crate::raster::{
+    DepthKey, RasterTri, Rect, Viewport, rasterize_window, rasterize_window_masked, sample_offsets,
+};
 use crate::shadow::{ShadowVolumes, Shadows, VolumeCounting};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
@@ -618,16 +623,38 @@ impl TriData<'_> {
     }
 }
 
+/// True when `m` has a texture, bump, normal or emission map (which need
+/// the uv footprint): [`TriData::textured`].
+fn needs_footprint(m: &Material) -> bool {
+    m.texture.is_some()
+        || m.bump.is_some()
+        || m.normal_map.is_some()
+        || m.emission_texture.is_some()
+}
+
 /// Number of entries of [`TriCache`] (a power of two).
 const TRI_CACHE_SIZE: usize = 256;
 
-/// A direct-mapped cache of [`TriData`] keyed by triangle id, for one tile:
-/// a triangle covers a few pixels on a few rows, and neighbouring triangles
-/// have neighbouring ids, so most lookups hit.
+/// Number of entries of the vertex illumination cache of [`TriCache`] (a
+/// power of two): a few tiles' worth of vertices.
+const VERTEX_CACHE_SIZE: usize = 4096;
+
+/// A direct-mapped cache of [`TriData`] keyed by triangle id: a triangle
+/// covers a few pixels on a few rows, and neighbouring triangles have
+/// neighbouring ids, so most lookups hit. What it holds depends only on the
+/// triangle, so one cache serves every tile a shading thread takes.
+///
+/// With [`PolyShading::on_demand`] it also caches the illumination of the
+/// vertices the fetched Gouraud triangles use, keyed by vertex index.
 struct TriCache<'a> {
     /// Index into `data` of each slot's entry (`u32::MAX`: empty).
     slots: [u32; TRI_CACHE_SIZE],
     data: Vec<TriData<'a>>,
+    /// The vertex of each vertex slot (`u32::MAX`: empty; allocated on
+    /// first use).
+    vertex_ids: Vec<u32>,
+    /// Its [`Ctx::vertex_split`], `[diffuse, rest]` as in [`TriData::corners`].
+    vertex_splits: Vec<[Vec3A; 2]>,
 }
 
 impl TriCache<'_> {
@@ -635,6 +662,8 @@ impl TriCache<'_> {
         Self {
             slots: [u32::MAX; TRI_CACHE_SIZE],
             data: Vec::with_capacity(TRI_CACHE_SIZE),
+            vertex_ids: Vec::new(),
+            vertex_splits: Vec::new(),
         }
     }
 }
@@ -678,7 +707,13 @@ impl<'a> Ctx<'a, '_> {
             cache.data.push(self.tri_geometry(t, false));
             cache.data.len() - 1
         };
-        let d = &mut cache.data[k];
+        let TriCache {
+            data,
+            vertex_ids,
+            vertex_splits,
+            ..
+        } = cache;
+        let d = &mut data[k];
         if d.mode == ShadeMode::Flat {
             d.flat = self.flat_split(d);
         }
@@ -695,11 +730,28 @@ impl<'a> Ctx<'a, '_> {
                 ShadeMode::Flat => true,
             };
         if d.lean && d.mode == ShadeMode::Gouraud {
-            let get = |i: usize| {
-                let s = poly.vertex_front.get(i).copied().unwrap_or_default();
-                [s.diffuse.into(), s.rest.into()]
-            };
-            d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+            if let Some(base) = &poly.on_demand {
+                if vertex_ids.is_empty() {
+                    *vertex_ids = vec![u32::MAX; VERTEX_CACHE_SIZE];
+                    *vertex_splits = vec![[Vec3A::ZERO; 2]; VERTEX_CACHE_SIZE];
+                }
+                let mut get = |i: usize| {
+                    let slot = i & (VERTEX_CACHE_SIZE - 1);
+                    if vertex_ids[slot] != i as u32 {
+                        let s = self.vertex_split(base, i, false);
+                        vertex_ids[slot] = i as u32;
+                        vertex_splits[slot] = [s.diffuse.into(), s.rest.into()];
+                    }
+                    vertex_splits[slot]
+                };
+                d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+            } else {
+                let get = |i: usize| {
+                    let s = poly.vertex_front.get(i).copied().unwrap_or_default();
+                    [s.diffuse.into(), s.rest.into()]
+                };
+                d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+            }
         }
         d
     }
@@ -724,11 +776,9 @@ impl<'a> Ctx<'a, '_> {
         let [i0, i1, i2] = self.ps.triangles[t as usize];
         let idx = [i0 as usize, i1 as usize, i2 as usize];
         let pos = &self.ps.positions;
-        let p3 = [pos[idx[0]], pos[idx[1]], pos[idx[2]]];
+        let p: [Vec3A; 3] = [pos[idx[0]].into(), pos[idx[1]].into(), pos[idx[2]].into()];
         // PreparedScene::face_normal(t), from the positions at hand.
-        let ng =
-            chiaro_core::geometry::normals::face_normal(p3[0], p3[1], p3[2]).unwrap_or(Vec3::Z);
-        let p = [p3[0].into(), p3[1].into(), p3[2].into()];
+        let ng = exact::face_normal(p[0], p[1], p[2]).unwrap_or(Vec3A::Z);
         let of =
             |a: &[Vec3]| -> [Vec3A; 3] { [a[idx[0]].into(), a[idx[1]].into(), a[idx[2]].into()] };
         let e1 = p[1] - p[0];
@@ -741,7 +791,7 @@ impl<'a> Ctx<'a, '_> {
             t,
             idx,
             p,
-            ng: ng.into(),
+            ng,
             n: if all || mode != ShadeMode::Flat {
                 of(&self.ps.normals)
             } else {
@@ -755,10 +805,7 @@ impl<'a> Ctx<'a, '_> {
             mode,
             material,
             material_id,
-            textured: material.texture.is_some()
-                || material.bump.is_some()
-                || material.normal_map.is_some()
-                || material.emission_texture.is_some(),
+            textured: needs_footprint(material),
             e1,
             e2: p[2] - p[0],
             s,
@@ -838,6 +885,17 @@ struct PolyShading {
     /// Gouraud triangles whose corners could not use shared vertex values
     /// (a vertex shared by faces of different materials).
     corners: HashMap<u32, [Split; 3]>,
+    /// When every Gouraud sample is a [`lean_sample`] of one untextured
+    /// material lit by `point_lighting` ([`on_demand_gouraud`]): that
+    /// material, and the tables above stay empty. The shading pass then
+    /// illuminates each vertex when a triangle using it is first fetched
+    /// ([`TriCache`]), the same [`Ctx::vertex_split`] as
+    /// [`uniform_vertex_shading`] gives it; this skips finding the
+    /// visible vertices (a pass over every sample) and writing, then
+    /// gathering back, a table of every vertex's illumination. A vertex
+    /// is only illuminated again where the cache lost it (another shading
+    /// thread, or a slot taken by another vertex).
+    on_demand: Option<SurfaceMaterial>,
 }
 
 /// One tile's visibility: the nearest opaque triangle of each sample, the
@@ -848,8 +906,6 @@ struct TileVis {
     window: Rect,
     /// Nearest opaque (or screen-door) triangle per sample.
     ids: Vec<u32>,
-    /// Its closeness key (`1 / w`), `NEG_INFINITY` on the background.
-    keys: Vec<f32>,
     /// Transparent fragments of sample `i`: `frags[start[i]..start[i + 1]]`,
     /// nearest first (empty `start` when there are none).
     start: Vec<u32>,
@@ -1021,10 +1077,12 @@ pub fn render_prepared_into(
             .par_chunks(chunk)
             .enumerate()
             .map(|(ci, tris)| {
-                let mut out = Vec::with_capacity(tris.len());
+                // The screen triangles of one source triangle.
+                let mut out = Vec::new();
                 let mut scratch = Vec::new();
                 let mut bins = binner.empty();
                 for (k, tri) in tris.iter().enumerate() {
+                    out.clear();
                     let t = (ci * chunk + k) as u32;
                     let cull = cull_material
                         .get(ps.tri_material[t as usize].index())
@@ -1032,7 +1090,6 @@ pub fn render_prepared_into(
                         .unwrap_or(settings.cull_backfaces);
                     let vp = if cull { &vp_cull } else { &vp_all };
                     let v = tri.map(|i| &verts[i as usize]);
-                    let first = out.len();
                     if v[0].inside && v[1].inside && v[2].inside {
                         vp.emit(
                             [v[0].xy, v[1].xy, v[2].xy],
@@ -1048,11 +1105,11 @@ pub fn render_prepared_into(
                             tri.map(|i| clip_from_world * ps.positions[i as usize].extend(1.0));
                         vp.setup(clip, t, &mut scratch, &mut out);
                     }
-                    for (j, rt) in out.iter().enumerate().skip(first) {
-                        binner.bin(rt, j as u32, &mut bins);
+                    for rt in &out {
+                        binner.bin(rt, &mut bins);
                     }
                 }
-                Bins { tris: out, bins }
+                Bins { bins }
             })
             .collect()
     };
@@ -1080,14 +1137,14 @@ pub fn render_prepared_into(
         for (li, tris) in vols.per_light.iter().enumerate() {
             for tri in tris {
                 let c = tri.map(|p| clip_from_world * p);
-                let first = out.len();
+                out.clear();
                 vp_all.setup_homogeneous(c, tri.map(|p| p.w), li as u32, &mut scratch, &mut out);
-                for (j, rt) in out.iter().enumerate().skip(first) {
-                    binner.bin(rt, j as u32, &mut bins);
+                for rt in &out {
+                    binner.bin(rt, &mut bins);
                 }
             }
         }
-        Bins { tris: out, bins }
+        Bins { bins }
     });
     let counting = options.volume_counting;
     progress.advance(1);
@@ -1118,9 +1175,12 @@ pub fn render_prepared_into(
     }
     progress.begin("raster", active.len() as u64);
     let spp_us = spp as usize;
+    // The depth buffer is only read while its tile is rasterized (and its
+    // shadow volumes counted): one per job, reused from tile to tile, stays
+    // in cache instead of a fresh one per tile being written out to memory.
     let vis: Vec<Option<TileVis>> = active
         .par_iter()
-        .map(|&(ti, rect, win)| {
+        .map_init(Vec::new, |key: &mut Vec<f32>, &(ti, rect, win)| {
             if progress.cancelled() {
                 return None;
             }
@@ -1132,7 +1192,8 @@ pub fn render_prepared_into(
                 y1: rect.y + rect.height,
             };
             let n = (rect.width * rect.height) as usize * spp_us;
-            let mut key = vec![f32::NEG_INFINITY; n];
+            key.clear();
+            key.resize(n, f32::NEG_INFINITY);
             let mut ids = vec![NONE; n];
             let tw = rect.width as usize;
             let index = |x: u32, y: u32, s: usize| {
@@ -1141,8 +1202,7 @@ pub fn render_prepared_into(
             // Opaque and screen-door surfaces: the z-buffer.
             let mut blend: Vec<&RasterTri> = Vec::new();
             for c in &chunks {
-                for &j in &c.bins[ti] {
-                    let rt = &c.tris[j as usize];
+                for rt in &c.bins[ti] {
                     // (No per-triangle material lookup when all are opaque.)
                     let class = if all_opaque {
                         Class::Opaque
@@ -1150,13 +1210,16 @@ pub fn render_prepared_into(
                         class_of(rt.id)
                     };
                     match class {
-                        Class::Opaque => rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
-                            let i = index(x, y, s);
-                            if k > key[i] {
-                                key[i] = k;
-                                ids[i] = rt.id;
-                            }
-                        }),
+                        // The depth test as selects, not a branch (see
+                        // rasterize_window_masked).
+                        Class::Opaque => {
+                            rasterize_window_masked(rt, r, win, &offsets, |x, y, s, k, covered| {
+                                let i = index(x, y, s);
+                                let nearer = covered & (k > key[i]);
+                                key[i] = if nearer { k } else { key[i] };
+                                ids[i] = if nearer { rt.id } else { ids[i] };
+                            })
+                        }
                         Class::ScreenDoor(kt) => {
                             rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
                                 let i = index(x, y, s);
@@ -1198,13 +1261,12 @@ pub fn render_prepared_into(
                 rect,
                 window: win,
                 ids,
-                keys: key,
                 start,
                 frags,
                 counts: Vec::new(),
             };
             if let Some(vb) = &vol_bins {
-                count_volumes(&mut tv, vb, ti, r, &offsets, nl, counting);
+                count_volumes(&mut tv, key, vb, ti, r, &offsets, nl, counting);
             }
             progress.advance(1);
             Some(tv)
@@ -1266,25 +1328,26 @@ pub fn render_prepared_into(
     progress.begin("shade", vis.len() as u64);
     let film = Mutex::new(film);
     let kept: Mutex<Vec<(TileRect, Vec<Vec3>)>> = Mutex::new(Vec::new());
-    let finished = vis.par_iter().all(|tv| {
-        if progress.cancelled() {
-            return false;
-        }
-        let (pixels, samples) = shade_tile(&ctx, &poly, tv, &offsets, tent);
-        film.lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .write_tile(&pixels);
-        if tent {
-            kept.lock()
+    // One triangle cache per shading job, kept from tile to tile.
+    let finished = vis
+        .par_iter()
+        .try_for_each_init(TriCache::new, |cache, tv| {
+            if progress.cancelled() {
+                return Err(CoreError::Cancelled);
+            }
+            let (pixels, samples) = shade_tile(&ctx, &poly, tv, &offsets, tent, cache);
+            film.lock()
                 .unwrap_or_else(PoisonError::into_inner)
-                .push((pixels.rect, samples));
-        }
-        progress.advance(1);
-        true
-    });
-    if !finished {
-        return Err(CoreError::Cancelled);
-    }
+                .write_tile(&pixels);
+            if tent {
+                kept.lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push((pixels.rect, samples));
+            }
+            progress.advance(1);
+            Ok(())
+        });
+    finished?;
     let film = film.into_inner().unwrap_or_else(PoisonError::into_inner);
     let kept = kept.into_inner().unwrap_or_else(PoisonError::into_inner);
     if tent {
@@ -1368,14 +1431,14 @@ struct Binner {
 }
 
 impl Binner {
-    fn empty(&self) -> Vec<Vec<u32>> {
+    fn empty(&self) -> Vec<Vec<RasterTri>> {
         vec![Vec::new(); self.ntiles]
     }
 
-    /// Appends `j` to the bin of every tile whose part of the crop window
-    /// the bounding box of `rt` meets.
+    /// Appends a copy of `rt` to the bin of every tile whose part of the
+    /// crop window the bounding box of `rt` meets.
     #[inline]
-    fn bin(&self, rt: &RasterTri, j: u32, bins: &mut [Vec<u32>]) {
+    fn bin(&self, rt: &RasterTri, bins: &mut [Vec<RasterTri>]) {
         let b = rt.pixel_bounds();
         let c = self.crop;
         if b[2] < c.x0 as i32 || b[3] < c.y0 as i32 || b[0] >= c.x1 as i32 || b[1] >= c.y1 as i32 {
@@ -1387,16 +1450,21 @@ impl Binner {
         let ty1 = (b[3].min(c.y1 as i32 - 1) as u32) / TILE_SIZE;
         for ty in ty0..=ty1 {
             for tx in tx0..=tx1 {
-                bins[(ty * self.tiles_x + tx) as usize].push(j);
+                bins[(ty * self.tiles_x + tx) as usize].push(*rt);
             }
         }
     }
 }
 
-/// Triangles binned to tiles: `bins[tile]` indexes `tris`.
+/// Triangles binned to tiles: `bins[tile]` holds, in setup order, a copy
+/// of every triangle that meets the tile. Copies rather than indices into
+/// one array of the chunk's triangles: the visibility pass then reads each
+/// tile's triangles as one contiguous run, where through indices it
+/// gathered every few triangles of an array of them all (set up long before
+/// and no longer in cache), a cache miss per triangle. Most triangles of a
+/// large mesh meet one tile, so the copies cost little more memory.
 struct Bins {
-    tris: Vec<RasterTri>,
-    bins: Vec<Vec<u32>>,
+    bins: Vec<Vec<RasterTri>>,
 }
 
 /// Relative tolerance of the shadow-volume depth comparison: a volume face
@@ -1407,9 +1475,13 @@ const VOLUME_EPS: f32 = 2e-5;
 /// Counts, per point of the tile (opaque samples and transparent
 /// fragments) and per light, the shadow-volume faces between the eye and
 /// the point (z-pass) or between the point and infinity (z-fail); a point
-/// is in shadow where its count is not zero.
+/// is in shadow where its count is not zero. `keys` is the tile's depth
+/// buffer (the closeness key of each sample's nearest opaque surface,
+/// `NEG_INFINITY` on the background), indexed like `tv.ids`.
+#[allow(clippy::too_many_arguments)]
 fn count_volumes(
     tv: &mut TileVis,
+    keys: &[f32],
     vb: &Bins,
     ti: usize,
     r: Rect,
@@ -1422,8 +1494,7 @@ fn count_volumes(
     let points = n + tv.frags.len();
     let mut counts = vec![0i32; points * nl];
     let tw = tv.rect.width as usize;
-    for &j in &vb.bins[ti] {
-        let rt = &vb.tris[j as usize];
+    for rt in &vb.bins[ti] {
         let li = rt.id as usize;
         rasterize_window(rt, r, tv.window, offsets, |x, y, s, k| {
             let i = (((y - r.y0) as usize) * tw + (x - r.x0) as usize) * spp + s;
@@ -1442,7 +1513,7 @@ fn count_volumes(
                     };
                 counts[p * nl + li] += d;
             };
-            bump(i, tv.keys[i]);
+            bump(i, keys[i]);
             for f in tv.frag_range(i) {
                 bump(n + f, tv.frags[f].1);
             }
@@ -1469,6 +1540,26 @@ fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
             .all(|(t, &mt)| mt == m || !is_gouraud(t));
     let base = ctx.bases.get(m.index())?;
     (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
+}
+
+/// With [`uniform_gouraud`]'s material, true when every sample of a
+/// Gouraud triangle takes [`lean_sample`] (see [`Ctx::fetch_tri`]): a lean
+/// frame, and the material untextured, one-sided and opaque (no fragment
+/// is shaded by `shade_sample`), so its vertices are only ever needed on
+/// the front side and can be illuminated on demand
+/// ([`PolyShading::on_demand`]).
+fn on_demand_gouraud(ctx: &Ctx<'_, '_>) -> bool {
+    let ps = ctx.ps;
+    let Some(t) = (0..ps.triangles.len() as u32).find(|&t| ctx.mode(t) == ShadeMode::Gouraud)
+    else {
+        return false;
+    };
+    let id = ps.tri_material[t as usize];
+    let m = ps.material(id);
+    ctx.lean_frame
+        && !needs_footprint(m)
+        && !m.two_sided
+        && !matches!(ctx.class.get(id.index()), Some(Class::Blend(_)))
 }
 
 /// Step 4 when [`uniform_gouraud`] gives the base material: the vertices of
@@ -1557,6 +1648,12 @@ fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         return out;
     }
     if let Some(base) = uniform_gouraud(ctx) {
+        if on_demand_gouraud(ctx) {
+            return PolyShading {
+                on_demand: Some(*base),
+                ..PolyShading::default()
+            };
+        }
         return uniform_vertex_shading(ctx, vis, base);
     }
     // Visible triangles, marked in parallel (every mark stores `true`, so
@@ -1659,12 +1756,13 @@ struct SampleResult {
 /// Step 5 for one tile: the box-filtered pixels and, with `keep_samples`,
 /// the colour of every sample of the window (indexed like `tv.ids`; empty
 /// otherwise) for the tent filter.
-fn shade_tile(
-    ctx: &Ctx<'_, '_>,
+fn shade_tile<'a>(
+    ctx: &Ctx<'a, '_>,
     poly: &PolyShading,
     tv: &TileVis,
     offsets: &[[i32; 2]],
     keep_samples: bool,
+    cache: &mut TriCache<'a>,
 ) -> (TilePixels, Vec<Vec3>) {
     let rect = tv.rect;
     let mut out = TilePixels::new(rect);
@@ -1684,8 +1782,6 @@ fn shade_tile(
         .environment
         .as_ref()
         .is_some_and(|e| e.as_background);
-    // The triangle of the previous sample: neighbours mostly share one.
-    let mut cache = TriCache::new();
     let win = tv.window;
     // The row- and column-only parts of the sample directions (Rays::dir),
     // per window column (or row) and sample.
@@ -1725,7 +1821,7 @@ fn shade_tile(
                     continue;
                 }
                 let dir = Rays::dir_from(column, row);
-                let td = ctx.tri_data(id, &mut cache, poly);
+                let td = ctx.tri_data(id, cache, poly);
                 let r = if td.lean {
                     lean_sample(ctx, td, dir)
                 } else {
@@ -1765,7 +1861,7 @@ fn shade_tile(
                         specular: Vec3::ZERO,
                     }
                 } else {
-                    let td = ctx.tri_data(id, &mut cache, poly);
+                    let td = ctx.tri_data(id, cache, poly);
                     if td.lean {
                         lean_sample(ctx, td, dir)
                     } else {
@@ -1780,7 +1876,7 @@ fn shade_tile(
                     let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
                     let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
                         == Some(&Class::Blend(TransparencyMode::Interpolated));
-                    let td = ctx.tri_data(t, &mut cache, poly);
+                    let td = ctx.tri_data(t, cache, poly);
                     let front =
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);

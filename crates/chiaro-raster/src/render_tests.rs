@@ -810,7 +810,6 @@ fn uniform_vertex_shading_lights_the_vertices_of_the_samples_triangles() {
                 x1: ids.len() as u32,
                 y1: 1,
             },
-            keys: vec![1.0; ids.len()],
             ids,
             start: Vec::new(),
             frags,
@@ -943,4 +942,43 @@ fn tent_filter_widens_edges_keeps_interiors_and_crops_exactly() {
             }
         }
     }
+}
+
+/// With one untextured, one-sided Gouraud material and point lights, the
+/// shading pass illuminates the vertices itself (`PolyShading::on_demand`):
+/// every fetched triangle's corners are `vertex_split` of its vertices,
+/// what `uniform_vertex_shading` would have tabulated for them, also after
+/// the vertex cache has evicted and refilled its slots.
+#[test]
+fn on_demand_corners_are_the_vertex_illumination() {
+    let mut s = test_scene();
+    s.lights.truncate(3);
+    let one = s.objects[0].material;
+    for o in &mut s.objects {
+        o.material = one;
+    }
+    let ps = tessellated(&s);
+    let st = settings(Technique::Gouraud, 40, 30);
+    let mut ctx = test_ctx(&ps, &st, ShadeMode::Gouraud, true);
+    ctx.one_material = Some(ps.tri_material[0]);
+    assert!(on_demand_gouraud(&ctx));
+    let base = *uniform_gouraud(&ctx).expect("one Gouraud material");
+    let poly = PolyShading {
+        on_demand: Some(base),
+        ..PolyShading::default()
+    };
+    let mut cache = TriCache::new();
+    let nt = ps.triangles.len() as u32;
+    let mut checked = 0;
+    for k in 0..4000u32 {
+        let t = (k * 7919) % nt;
+        let td = *ctx.tri_data(t, &mut cache, &poly);
+        assert!(td.lean);
+        for (corner, &v) in td.corners.iter().zip(&td.idx) {
+            let want = ctx.vertex_split(&base, v, false);
+            assert_eq!(*corner, [want.diffuse.into(), want.rest.into()], "t {t}");
+            checked += usize::from(want.diffuse != Vec3::ZERO);
+        }
+    }
+    assert!(checked > 1000, "{checked}");
 }
