@@ -5,8 +5,14 @@
 //! ```text
 //! cargo run --release -p chiaro-ray --example path_bench -- SCENE.toml OUT_PREFIX \
 //!     [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]
-//!     [--max-leaf N] [--traversal-cost C]
+//!     [--width W] [--height H] [--max-leaf N] [--traversal-cost C]
 //! ```
+//!
+//! `--width`/`--height` replace the scene's image size (the camera's
+//! vertical field of view is kept): a small image at a realistic sample
+//! count is how to profile the per-sample work under callgrind, where the
+//! per-pixel set-up (the sampler's key hashing) is amortised as in a real
+//! render.
 //!
 //! The accelerator is [`SceneBvh`] with [`BvhOptions::default`], as the
 //! facade builds it for a scene without shared meshes; `--max-leaf` and
@@ -47,6 +53,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Some(d) = arg("--max-depth") {
         settings.path.max_depth = d.parse()?;
+    }
+    if let Some(w) = arg("--width") {
+        settings.width = w.parse()?;
+    }
+    if let Some(h) = arg("--height") {
+        settings.height = h.parse()?;
     }
     if let Some(s) = arg("--seed") {
         settings.seed = s.parse()?;

@@ -179,7 +179,9 @@ impl BvhNode {
     }
 }
 
-/// Per-ray constants of the slab test.
+/// Per-ray constants of the slab test. [`SceneBvh`] builds it once per
+/// ray and derives the triangle test's [`WatertightRay`] from the same
+/// reciprocal direction ([`WatertightRay::with_inverse`]).
 struct RayPre {
     /// Origin and inverse direction, each component splat over four lanes.
     org: [Vec4; 3],
@@ -188,12 +190,17 @@ struct RayPre {
     /// lower corner for a positive direction component).
     near_row: [usize; 3],
     far_row: [usize; 3],
+    /// `1 / ray.dir`, per component (one vector division).
+    recip: Vec3,
 }
 
 impl RayPre {
     #[inline(always)]
     fn new(ray: &Ray) -> Self {
-        let inv = [1.0 / ray.dir.x, 1.0 / ray.dir.y, 1.0 / ray.dir.z];
+        // `Vec3A` divides all three components in one instruction; each
+        // lane is the same IEEE division as `1.0 / ray.dir.x` etc.
+        let recip = Vec3::from(Vec3A::from(ray.dir).recip());
+        let inv = recip.to_array();
         let neg = inv.map(|v| v.is_sign_negative() as usize);
         let o = ray.origin.to_array();
         Self {
@@ -201,6 +208,7 @@ impl RayPre {
             inv: inv.map(Vec4::splat),
             near_row: [3 * neg[0], 1 + 3 * neg[1], 2 + 3 * neg[2]],
             far_row: [3 - 3 * neg[0], 4 - 3 * neg[1], 5 - 3 * neg[2]],
+            recip,
         }
     }
 }
@@ -605,13 +613,24 @@ impl Bvh {
     pub fn traverse_closest_leaves(
         &self,
         ray: &Ray,
+        test: impl FnMut(usize, usize, f32) -> Option<f32>,
+    ) -> f32 {
+        self.traverse_closest_pre(ray, &RayPre::new(ray), test)
+    }
+
+    /// [`Bvh::traverse_closest_leaves`] with the ray's slab constants
+    /// already computed (`pre` is `RayPre::new(ray)`).
+    #[inline(always)]
+    fn traverse_closest_pre(
+        &self,
+        ray: &Ray,
+        pre: &RayPre,
         mut test: impl FnMut(usize, usize, f32) -> Option<f32>,
     ) -> f32 {
         let mut t_max = ray.t_max;
         if self.nodes.is_empty() {
             return t_max;
         }
-        let pre = RayPre::new(ray);
         // One look-up of the (possibly mapped) node array per ray.
         let nodes: &[BvhNode] = &self.nodes;
         let t_min = ray.t_min;
@@ -620,7 +639,7 @@ impl Bvh {
         loop {
             if count == 0 {
                 let n = &nodes[child as usize];
-                let (near, mask) = n.intersect(&pre, t_min, t_max);
+                let (near, mask) = n.intersect(pre, t_min, t_max);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
                     let rest = mask & (mask - 1);
@@ -701,15 +720,22 @@ impl Bvh {
     /// [`Bvh::traverse_any`] a leaf at a time: `test(first, count)` gets
     /// the slots `first..first + count` of a leaf the ray crosses.
     #[inline]
-    pub fn traverse_any_leaves(
+    pub fn traverse_any_leaves(&self, ray: &Ray, test: impl FnMut(usize, usize) -> bool) -> bool {
+        self.traverse_any_pre(ray, &RayPre::new(ray), test)
+    }
+
+    /// [`Bvh::traverse_any_leaves`] with the ray's slab constants already
+    /// computed (`pre` is `RayPre::new(ray)`).
+    #[inline(always)]
+    fn traverse_any_pre(
         &self,
         ray: &Ray,
+        pre: &RayPre,
         mut test: impl FnMut(usize, usize) -> bool,
     ) -> bool {
         if self.nodes.is_empty() {
             return false;
         }
-        let pre = RayPre::new(ray);
         // One look-up of the (possibly mapped) node array per ray.
         let nodes: &[BvhNode] = &self.nodes;
         let (t_min, t_max) = (ray.t_min, ray.t_max);
@@ -718,7 +744,7 @@ impl Bvh {
         loop {
             if count == 0 {
                 let n = &nodes[child as usize];
-                let (_, mut mask) = n.intersect(&pre, t_min, t_max);
+                let (_, mut mask) = n.intersect(pre, t_min, t_max);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -1659,9 +1685,10 @@ impl SceneBvh {
     /// if it did. Shadow rays use it to filter non-casting objects and to
     /// attenuate light through transparent surfaces.
     pub fn visit_hits(&self, ray: &Ray, mut visit: impl FnMut(&Hit) -> bool) -> bool {
-        let wr = WatertightRay::new(ray);
+        let pre = RayPre::new(ray);
+        let wr = WatertightRay::with_inverse(ray, pre.recip);
         let blocks: &[TriBlock] = &self.blocks;
-        self.bvh.traverse_any_leaves(ray, |first, count| {
+        self.bvh.traverse_any_pre(ray, &pre, |first, count| {
             let end = first + count;
             for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
                 let lanes = block_lanes(b, first, end);
@@ -1702,11 +1729,12 @@ impl SceneBvh {
 
 impl Accelerator for SceneBvh {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        let mut wr = WatertightRay::new(ray);
+        let pre = RayPre::new(ray);
+        let mut wr = WatertightRay::with_inverse(ray, pre.recip);
         let mut best = None;
         let blocks: &[TriBlock] = &self.blocks;
         self.bvh
-            .traverse_closest_leaves(ray, |first, count, t_max| {
+            .traverse_closest_pre(ray, &pre, |first, count, t_max| {
                 let end = first + count;
                 wr.t_max = t_max;
                 let mut found = None;
@@ -1758,9 +1786,10 @@ impl Accelerator for SceneBvh {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        let wr = WatertightRay::new(ray);
+        let pre = RayPre::new(ray);
+        let wr = WatertightRay::with_inverse(ray, pre.recip);
         let blocks: &[TriBlock] = &self.blocks;
-        self.bvh.traverse_any_leaves(ray, |first, count| {
+        self.bvh.traverse_any_pre(ray, &pre, |first, count| {
             let end = first + count;
             for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
                 let lanes = block_lanes(b, first, end);

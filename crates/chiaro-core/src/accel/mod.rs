@@ -78,15 +78,28 @@ impl WatertightRay {
     /// Precomputes the shear of `ray` (any non-zero direction).
     #[inline]
     pub fn new(ray: &Ray) -> Self {
-        let d = ray.dir;
+        Self::with_inverse(ray, ray.dir.recip())
+    }
+
+    /// [`WatertightRay::new`] given `inv = ray.dir.recip()`, which the
+    /// BVH's slab test computes anyway: the shear's `1 / d[kz]` is then
+    /// read from it (the same division, so the same bits) rather than
+    /// divided again. The permutation is taken from small tables and the
+    /// components are indexed as arrays, so set-up is branch-free apart
+    /// from the swap (a ray's set-up is a large part of its cost in a small
+    /// scene, where it meets only a node or two).
+    #[inline(always)]
+    pub fn with_inverse(ray: &Ray, inv: glam::Vec3) -> Self {
+        /// The axis after each axis, cyclically.
+        const NEXT: [usize; 3] = [1, 2, 0];
+        let d = ray.dir.to_array();
         // Permute so that z is the largest direction component.
-        let kz = d.abs().max_position();
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
+        let kz = ray.dir.abs().max_position();
+        let (mut kx, mut ky) = (NEXT[kz], NEXT[NEXT[kz]]);
         if d[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let sz = 1.0 / d[kz];
+        let sz = inv.to_array()[kz];
         Self {
             origin: ray.origin,
             t_min: ray.t_min,
