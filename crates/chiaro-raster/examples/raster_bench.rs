@@ -27,6 +27,7 @@ use chiaro_core::scene::{
     AaMode, Attenuation, Camera, Geometry, Light, Material, Object, RenderSettings, Scene,
     ShadeMode, ShadowMethod, Technique, Transform, TransparencyMode,
 };
+use chiaro_testkit::bench::{WordHash, median};
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -76,11 +77,6 @@ fn cpu_ms() -> f64 {
             Some(ticks * 10.0)
         })
         .unwrap_or(f64::NAN)
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 fn scene() -> Scene {
@@ -471,13 +467,14 @@ fn main() {
             film.depth.iter().filter(|d| d.is_finite()).count() as f64 / film.depth.len() as f64;
         // FNV-1a over the bits of every colour, depth and normal: equal
         // checksums mean bit-identical pictures.
-        let mut hash = 0xcbf2_9ce4_8422_2325u64;
+        let mut hash = WordHash::default();
         for i in 0..film.depth.len() {
             let (c, n) = (film.color[i], film.normal[i]);
             for v in [c.x, c.y, c.z, film.depth[i], n.x, n.y, n.z] {
-                hash = (hash ^ u64::from(v.to_bits())).wrapping_mul(0x100_0000_01b3);
+                hash.eat_f32(v);
             }
         }
+        let hash = hash.0;
         let split: Vec<String> = phases
             .iter_mut()
             .map(|(stage, v)| format!("{stage} {:.1}", median(v)))

@@ -18,7 +18,7 @@ use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
-use chiaro_testkit::bench::{bvh_rays, cpu_seconds, flag_value, median};
+use chiaro_testkit::bench::{WordHash, bvh_rays, cpu_seconds, flag_value, median};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::io::Write;
@@ -139,14 +139,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // FNV-1a over every node's lanes and the slot order: equal
         // fingerprints mean a build change left the tree as it was.
         let b = bvh.bvh();
-        let mut h = 0xcbf2_9ce4_8422_2325u64;
-        let mut eat = |x: u32| h = (h ^ u64::from(x)).wrapping_mul(0x100_0000_01b3);
+        let mut h = WordHash::default();
         for n in b.nodes() {
-            n.bounds.iter().flatten().for_each(|v| eat(v.to_bits()));
-            n.child.iter().chain(&n.count).for_each(|&v| eat(v));
+            n.bounds.iter().flatten().for_each(|&v| h.eat_f32(v));
+            n.child.iter().chain(&n.count).for_each(|&v| h.eat(v));
         }
-        b.prim_order().iter().for_each(|&v| eat(v));
-        println!("tree fingerprint {h:016x}");
+        b.prim_order().iter().for_each(|&v| h.eat(v));
+        println!("tree fingerprint {:016x}", h.0);
     }
     if args.iter().any(|a| a == "--build-only") {
         return Ok(());

@@ -1,4 +1,5 @@
-//! What the benchmark examples share: process CPU time, medians, and the
+//! What the benchmark examples share: process CPU time, medians, a
+//! checksum of results, and the
 //! ray workload of the BVH benchmarks (the camera of
 //! `shared/peers/embree_rays.py` and uniformly random rays).
 
@@ -62,4 +63,28 @@ pub fn flag_value(args: &[String], name: &str) -> Option<String> {
         .position(|a| a == name)
         .and_then(|i| args.get(i + 1))
         .cloned()
+}
+
+/// FNV-1a (64-bit) over 32-bit words: the checksum the benchmarks print so
+/// that equal checksums show a change left a picture or a tree bit for bit
+/// as it was.
+#[derive(Debug, Clone, Copy)]
+pub struct WordHash(pub u64);
+
+impl Default for WordHash {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl WordHash {
+    /// Mixes in one word.
+    pub fn eat(&mut self, word: u32) {
+        self.0 = (self.0 ^ u64::from(word)).wrapping_mul(0x100_0000_01b3);
+    }
+
+    /// Mixes in the bits of one float.
+    pub fn eat_f32(&mut self, v: f32) {
+        self.eat(v.to_bits());
+    }
 }

@@ -1448,19 +1448,17 @@ fn fill_node(
         runs.push((mine, Item { start: 0, ..c }));
     }
     if item.len >= opts.parallel_threshold {
-        let subs: Vec<Tree> = runs
+        // Each subtree with the reserved node for its root.
+        let subs: Vec<(usize, Tree)> = runs
             .into_par_iter()
-            .map(|(mine, c)| {
+            .enumerate()
+            .map(|(m, (mine, c))| {
                 let mut sub = Tree::new(c.len);
                 fill_node(mine, c, 0, opts, &mut new_bins(), &mut sub);
-                sub
+                (first + m, sub)
             })
             .collect();
-        out.subs.extend(
-            subs.into_iter()
-                .enumerate()
-                .map(|(m, sub)| (first + m, sub)),
-        );
+        out.subs.extend(subs);
     } else {
         for (m, (mine, c)) in runs.into_iter().enumerate() {
             fill_node(mine, c, first + m, opts, scratch, out);
