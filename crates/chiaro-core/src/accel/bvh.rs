@@ -9,7 +9,8 @@
 //! axis, the split with the least SAH cost `C_trav + (A_l N_l + A_r N_r) / A`
 //! is taken (or a leaf when that is cheaper and the node holds at most
 //! `max_leaf` primitives), and the references are partitioned in place by a
-//! branch-free partition that also gathers each side's centroid bounds, so
+//! branch-free block partition (Edelkamp and Weiss 2016) that also gathers
+//! each side's centroid bounds, so
 //! the final reference order is the leaf order and primitives can be stored
 //! in it for locality. Each level costs O(n), the tree has O(log n) levels:
 //! O(n log n).
@@ -28,9 +29,10 @@
 //!
 //! Layout: 256-byte [`BvhNode`]s (four cache lines, loaded independently)
 //! holding the child boxes in structure-of-arrays form,
-//! `bounds[row][lane]`, so one node test is two rounds of 4-lane
-//! `glam::Vec4` operations (no intrinsics: the workspace forbids
-//! `unsafe`). The SAH prices a leaf in blocks of [`BLOCK`] = 4 primitives
+//! `bounds[row][lane]`, so one node test is one round of 8-lane AVX
+//! operations on x86-64 with AVX (through `safe_arch`'s safe wrappers; the
+//! workspace forbids `unsafe`) and two rounds of 4-lane `glam::Vec4`
+//! elsewhere, the two bit-identical. The SAH prices a leaf in blocks of [`BLOCK`] = 4 primitives
 //! (as Embree's builder does) and every leaf starts at a slot that is a
 //! multiple of four, so in a [`SceneBvh`] a leaf of up to four triangles is
 //! one 160-byte SoA block, tested four at a time with the same arithmetic
@@ -41,7 +43,9 @@
 //! per-ray choice of near and far planes by direction sign (Williams et al.
 //! 2005), visits hit children nearest first for closest hits and skips
 //! popped ones that lie beyond the current hit, and stops at the first hit
-//! for occlusion queries. Box exits are widened by `1 + 2 gamma(3)`
+//! for occlusion queries; the nodes and triangle blocks of children pushed
+//! on the stack are prefetched, so that a ray's cache misses overlap. Box
+//! exits are widened by `1 + 2 gamma(3)`
 //! (pbrt-v4 section 6.8.2) so that rounding never culls a primitive the
 //! exact test would hit.
 
@@ -502,13 +506,18 @@ const EMPTY_BIN: Bin = Bin {
 
 /// The bins of one node, axis-major; a node with `bins` bins uses the first
 /// `bins` of each row. Fixed rows of [`MAX_BINS`] let the binning loop
-/// index by a masked bin number with no bounds check.
-type Bins = [[Bin; MAX_BINS]; 3];
+/// index by a masked bin number with no bounds check. Rows 0-2 hold the
+/// result; rows 3-5 are a second set that [`bin_refs`] fills with every
+/// other reference of a large node and then adds into the first.
+type Bins = [[Bin; MAX_BINS]; 6];
 
-/// A fresh set of bins, on the heap (9 KiB).
+/// A fresh set of bins, on the heap (18 KiB).
 fn new_bins() -> Box<Bins> {
-    Box::new([[EMPTY_BIN; MAX_BINS]; 3])
+    Box::new([[EMPTY_BIN; MAX_BINS]; 6])
 }
+
+/// Nodes from this many references bin into two sets ([`Bins`]).
+const TWO_SETS: usize = 512;
 
 /// Bounds of the two sides of a binned split: bins `0..=bin` of `axis`
 /// and the rest. Exact unions, so they equal what [`ref_bounds`] would
@@ -908,30 +917,53 @@ fn ref_bounds(refs: &[PrimRef], parallel: bool) -> (Aabb, Aabb) {
 fn bin_refs(refs: &[PrimRef], cb: &Aabb, scale: Vec3, bins: usize, parallel: bool, out: &mut Bins) {
     let (lo, scale) = (Vec3A::from(cb.min), Vec3A::from(scale));
     let last = Vec3A::splat((bins - 1) as f32);
-    let one = |refs: &[PrimRef], out: &mut Bins| {
-        for r in refs {
-            let (mn, mx) = (r.min(), r.max());
-            // Three axes at once: `floor(clamp((c - lo) * scale, 0,
-            // bins - 1))` (the partition's `Plane` compares the same
-            // product).
-            let c = (mn + mx) * 0.5;
-            let k = ((c - lo) * scale).max(Vec3A::ZERO).min(last).floor();
-            // Small non-negative integers as floats: adding 2^23 puts the
-            // integer in the low mantissa bits (a vector op, no casts).
-            let k = (k + Vec3A::splat(8_388_608.0)).to_array();
-            for (axis, k) in k.into_iter().enumerate() {
-                // `k < bins <= MAX_BINS`: the mask only spares the bounds check.
-                let b = &mut out[axis][(k.to_bits() & 0x7f_ffff) as usize & (MAX_BINS - 1)];
-                b.min = b.min.min(mn);
-                b.max = b.max.max(mx);
-                b.count += 1;
-            }
+    let add = |r: &PrimRef, rows: &mut [[Bin; MAX_BINS]]| {
+        let (mn, mx) = (r.min(), r.max());
+        // Three axes at once: `floor(clamp((c - lo) * scale, 0, bins -
+        // 1))` (the partition's `Plane` compares the same product).
+        let c = (mn + mx) * 0.5;
+        let k = ((c - lo) * scale).max(Vec3A::ZERO).min(last);
+        for (row, k) in rows.iter_mut().zip(bin_numbers(k)) {
+            // `k < bins <= MAX_BINS`: the mask only spares the bounds check.
+            let b = &mut row[k & (MAX_BINS - 1)];
+            b.min = b.min.min(mn);
+            b.max = b.max.max(mx);
+            b.count += 1;
         }
     };
-    for row in out.iter_mut() {
-        row[..bins].fill(EMPTY_BIN);
-    }
+    let one = |refs: &[PrimRef], out: &mut Bins| {
+        let (first, second) = out.split_at_mut(3);
+        for row in first.iter_mut() {
+            row[..bins].fill(EMPTY_BIN);
+        }
+        if refs.len() < TWO_SETS {
+            for r in refs {
+                add(r, first);
+            }
+            return;
+        }
+        // Neighbouring references mostly fall in the same bins, so with
+        // one set each update waits for the previous one's store; two
+        // sets, taking every other reference, halve that chain.
+        for row in second.iter_mut() {
+            row[..bins].fill(EMPTY_BIN);
+        }
+        let mut pairs = refs.chunks_exact(2);
+        for p in &mut pairs {
+            add(&p[0], first);
+            add(&p[1], second);
+        }
+        for r in pairs.remainder() {
+            add(r, first);
+        }
+        for (orow, prow) in first.iter_mut().zip(second.iter()) {
+            merge_bins(&mut orow[..bins], &prow[..bins]);
+        }
+    };
     if parallel {
+        for row in out[..3].iter_mut() {
+            row[..bins].fill(EMPTY_BIN);
+        }
         let parts: Vec<Box<Bins>> = refs
             .par_chunks(16 * 1024)
             .map(|chunk| {
@@ -941,12 +973,30 @@ fn bin_refs(refs: &[PrimRef], cb: &Aabb, scale: Vec3, bins: usize, parallel: boo
             })
             .collect();
         for part in parts {
-            for (orow, prow) in out.iter_mut().zip(part.iter()) {
+            for (orow, prow) in out.iter_mut().zip(part.iter()).take(3) {
                 merge_bins(&mut orow[..bins], &prow[..bins]);
             }
         }
     } else {
         one(refs, out);
+    }
+}
+
+/// `floor(k)` per axis for the small non-negative `k` of [`bin_refs`].
+#[inline(always)]
+fn bin_numbers(k: Vec3A) -> [usize; 3] {
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    {
+        // One truncating conversion of all lanes (exact floor for k >= 0).
+        let i: [i32; 4] = safe_arch::truncate_m128_to_m128i(safe_arch::m128(k.into())).into();
+        [i[0] as usize, i[1] as usize, i[2] as usize]
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    {
+        // Small non-negative integers as floats: adding 2^23 puts the
+        // integer in the low mantissa bits.
+        let k = (k.floor() + Vec3A::splat(8_388_608.0)).to_array();
+        k.map(|k| (k.to_bits() & 0x7f_ffff) as usize)
     }
 }
 
@@ -1003,7 +1053,7 @@ fn choose_split(
         Vec3::ZERO,
     );
     bin_refs(refs, cb, scale, bins, parallel, scratch);
-    let binned = scratch.iter().map(|row| &row[..bins]);
+    let binned = scratch[..3].iter().map(|row| &row[..bins]);
     // Sweep each axis: SAH cost of splitting after bin i (Wald 2007, eq. 1).
     let mut best = (f32::INFINITY, 0usize, 0usize);
     let mut right_area = [0.0f32; MAX_BINS];
@@ -1152,17 +1202,15 @@ struct Plane {
 /// Moves the references whose centroid lies left of `plane` on `AXIS` to
 /// the front; returns how many and the centroid bounds of both sides.
 ///
-/// Branch-free Lomuto partition: `[0, i)` goes left, `[i, k)` right. Every
-/// reference is swapped with the first right one whichever side it takes
-/// (a right one swaps with a right one), so the loop has no data-dependent
-/// branch to mispredict: on shuffled centroids a branching partition
-/// mispredicts about half of its tests. The side test is one vector
-/// compare whose mask also selects which side's bounds grow. Large inputs
-/// (`parallel`) split in halves that partition in parallel; the left
-/// half's right part and the right half's left part then trade places by
-/// swapping the shorter run with the far end of the longer. The halves are
-/// fixed by the length, so the result does not depend on the number of
-/// threads.
+/// [`partition_blocks`] does the bulk and [`partition_lomuto`] the last
+/// hundred or so references; neither has a data-dependent branch. The
+/// side test is one vector compare whose mask also selects which side's
+/// bounds grow (a reference classified twice grows the same side twice,
+/// which changes nothing). Large inputs (`parallel`) split in halves that
+/// partition in parallel; the left half's right part and the right half's
+/// left part then trade places by swapping the shorter run with the far
+/// end of the longer. The halves are fixed by the length, so the result
+/// does not depend on the number of threads.
 fn partition_by<const AXIS: usize>(
     refs: &mut [PrimRef],
     plane: &Plane,
@@ -1183,30 +1231,110 @@ fn partition_by<const AXIS: usize>(
         x[la..la + swap].swap_with_slice(&mut y[lb - swap..lb]);
         return (la + lb, [al.union(bl), ar.union(br)]);
     }
-    let (mut l, mut r) = (
+    let mut sides = [
         [Vec3A::INFINITY, Vec3A::NEG_INFINITY],
         [Vec3A::INFINITY, Vec3A::NEG_INFINITY],
-    );
-    let mut i = 0usize;
-    for k in 0..n {
-        let at_k = refs[k];
-        let c = at_k.centroid();
+    ];
+    // The side of one reference (true: left), growing that side's bounds.
+    let mut classify = |r: &PrimRef| {
+        let c = r.centroid();
         let m = ((Vec3A::splat(c[AXIS]) - plane.lo) * plane.scale).cmplt(plane.limit);
-        let left = m.bitmask() & 1;
-        (l, r) = grow_sides(m, c, l, r);
+        let [l, r] = sides;
+        let (l, r) = grow_sides(m, c, l, r);
+        sides = [l, r];
+        m.bitmask() & 1 == 1
+    };
+    let (lo, hi) = partition_blocks(refs, &mut classify);
+    let i = lo + partition_lomuto(&mut refs[lo..hi], &mut classify);
+    let aabb = |b: [Vec3A; 2]| Aabb {
+        min: b[0].into(),
+        max: b[1].into(),
+    };
+    (i, [aabb(sides[0]), aabb(sides[1])])
+}
+
+/// Block size of [`partition_blocks`].
+const PART_BLOCK: usize = 64;
+
+/// The block partition of Edelkamp and Weiss (2016, "BlockQuicksort:
+/// Avoiding Branch Mispredictions in Quicksort", section 3.1): a block of
+/// [`PART_BLOCK`] references at each end of the unsorted middle is
+/// classified with no data-dependent branch, noting the offsets of the
+/// ones on the wrong side, and then as many of those as both blocks have
+/// are swapped pairwise. No load reads a reference that a store of the
+/// last few iterations wrote, so nothing waits on the store buffer (the
+/// single-cursor partition in [`partition_lomuto`] reads back its own
+/// stores every iteration). `left(r)` says whether `r` belongs on the left
+/// and is called once for each reference outside the returned middle
+/// `lo..hi`: everything before `lo` belongs left, everything from `hi` on
+/// right, and the middle (fewer than `2 * PART_BLOCK` references, some of
+/// them already classified) is left for the caller.
+fn partition_blocks(
+    refs: &mut [PrimRef],
+    left: &mut impl FnMut(&PrimRef) -> bool,
+) -> (usize, usize) {
+    const B: usize = PART_BLOCK;
+    let (mut lo, mut hi) = (0usize, refs.len());
+    // Offsets of the misplaced references of the current left block (from
+    // `lo`) and right block (back from `hi`), pending from `start_*`.
+    let (mut off_l, mut off_r) = ([0u8; B], [0u8; B]);
+    let (mut num_l, mut start_l, mut num_r, mut start_r) = (0usize, 0usize, 0usize, 0usize);
+    while hi - lo >= 2 * B {
+        if num_l == 0 {
+            start_l = 0;
+            for (j, r) in refs[lo..lo + B].iter().enumerate() {
+                off_l[num_l] = j as u8;
+                num_l += !left(r) as usize;
+            }
+        }
+        if num_r == 0 {
+            start_r = 0;
+            for (j, r) in refs[hi - B..hi].iter().rev().enumerate() {
+                off_r[num_r] = j as u8;
+                num_r += left(r) as usize;
+            }
+        }
+        let m = num_l.min(num_r);
+        for (&a, &b) in off_l[start_l..start_l + m]
+            .iter()
+            .zip(&off_r[start_r..start_r + m])
+        {
+            let (a, b) = (lo + a as usize, hi - 1 - b as usize);
+            let (x, y) = (refs[a], refs[b]);
+            refs[a] = y;
+            refs[b] = x;
+        }
+        (num_l, num_r) = (num_l - m, num_r - m);
+        (start_l, start_r) = (start_l + m, start_r + m);
+        if num_l == 0 {
+            lo += B;
+        }
+        if num_r == 0 {
+            hi -= B;
+        }
+    }
+    (lo, hi)
+}
+
+/// Branch-free Lomuto partition of `refs` by `left`: `[0, i)` goes left,
+/// `[i, k)` right. Every reference is swapped with the first right one
+/// whichever side it takes (a right one swaps with a right one), so the
+/// loop has no data-dependent branch to mispredict: on shuffled centroids
+/// a branching partition mispredicts about half of its tests. Returns `i`.
+fn partition_lomuto(refs: &mut [PrimRef], left: &mut impl FnMut(&PrimRef) -> bool) -> usize {
+    let mut i = 0usize;
+    for k in 0..refs.len() {
+        let at_k = refs[k];
+        let go_left = left(&at_k);
         // The swap with both references in registers (`slice::swap` goes
         // through a stack temporary); `i <= k`, and for `i == k` both
         // stores write the same reference.
         let at_i = refs[i];
         refs[i] = at_k;
         refs[k] = at_i;
-        i += left as usize;
+        i += go_left as usize;
     }
-    let aabb = |b: [Vec3A; 2]| Aabb {
-        min: b[0].into(),
-        max: b[1].into(),
-    };
-    (i, [aabb(l), aabb(r)])
+    i
 }
 
 /// The centroid bounds `[min, max]` of the left and right sides after `c`
@@ -2207,6 +2335,70 @@ mod tests {
         }
         assert_eq!(l, [Vec3A::new(1.0, -2.0, -1.0), Vec3A::new(2.0, 0.0, 3.0)]);
         assert_eq!(r, [Vec3A::new(-4.0, -3.0, 0.5), Vec3A::new(7.0, 5.0, 2.0)]);
+    }
+
+    /// `partition_by` (block partition plus Lomuto tail) puts exactly the
+    /// references left of the plane first, keeps the same multiset, and
+    /// returns each side's exact centroid bounds, for sizes around the
+    /// block size, all-left and all-right inputs, and sorted and shuffled
+    /// orders.
+    #[test]
+    fn partition_is_exact_at_every_size() {
+        let mut rng = pixel_rng(5, 0, 0, 0);
+        let sizes = [1, 2, 63, 64, 65, 127, 128, 129, 191, 256, 300, 1000, 4099];
+        for (case, &n) in sizes.iter().cycle().take(3 * sizes.len()).enumerate() {
+            let mut refs: Vec<PrimRef> = (0..n)
+                .map(|i| {
+                    let p = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+                    let p = if case % 3 == 1 {
+                        p * 0.1 + Vec3::X * (i as f32 / n as f32)
+                    } else {
+                        p
+                    };
+                    let b = Aabb {
+                        min: p,
+                        max: p + Vec3::splat(0.01),
+                    };
+                    PrimRef::new(&b, i as u32)
+                })
+                .collect();
+            // Limits below, inside and above the centroids' range.
+            let limit = [0.5, -1.0, 2.0][case / sizes.len()];
+            let plane = Plane {
+                lo: Vec3A::ZERO,
+                scale: Vec3A::ONE,
+                limit: Vec3A::splat(limit),
+            };
+            let goes_left = |r: &PrimRef| r.centroid().x < limit;
+            let mut want: Vec<u32> = refs.iter().map(|r| r.index()).collect();
+            let bounds_of = |rs: &[PrimRef]| {
+                rs.iter().fold(Aabb::EMPTY, |b, r| {
+                    b.union(Aabb::from_points([Vec3::from(r.centroid())]))
+                })
+            };
+            let (want_l, want_r): (Vec<PrimRef>, Vec<PrimRef>) =
+                refs.iter().partition(|r| goes_left(r));
+            let (i, [l, r]) = partition_by::<0>(&mut refs, &plane, false);
+            assert_eq!(i, want_l.len(), "n {n} case {case}");
+            assert!(refs[..i].iter().all(goes_left), "n {n} case {case}");
+            assert!(!refs[i..].iter().any(goes_left), "n {n} case {case}");
+            let mut got: Vec<u32> = refs.iter().map(|r| r.index()).collect();
+            got.sort_unstable();
+            want.sort_unstable();
+            assert_eq!(got, want, "n {n} case {case}: not a permutation");
+            for (side, (got, want)) in [(l, &want_l), (r, &want_r)].into_iter().enumerate() {
+                let want = bounds_of(want);
+                if want.is_empty() {
+                    assert!(got.is_empty(), "n {n} case {case} side {side}");
+                } else {
+                    assert_eq!(
+                        (got.min, got.max),
+                        (want.min, want.max),
+                        "n {n} case {case} side {side}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
