@@ -91,9 +91,12 @@ pub fn render_with(
     let frame = cam.frame();
     let tan_half = (cam.fov_y_degrees.to_radians() * 0.5).tan();
     let aspect = w as f32 / h as f32;
+    // (Multiplications by 2 / w and 2 / h, exact for power-of-two sizes and
+    // within an ulp otherwise.)
+    let (two_over_w, two_over_h) = (2.0 / w as f32, 2.0 / h as f32);
     let camera_dir = |x: f32, y: f32| {
-        let ndc_x = (2.0 * x / w as f32 - 1.0) * tan_half * aspect;
-        let ndc_y = (1.0 - 2.0 * y / h as f32) * tan_half;
+        let ndc_x = (x * two_over_w - 1.0) * tan_half * aspect;
+        let ndc_y = (1.0 - y * two_over_h) * tan_half;
         (frame.forward + ndc_x * frame.right + ndc_y * frame.up).normalize()
     };
     let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
@@ -232,6 +235,9 @@ struct Lobes {
     single: Option<f32>,
     /// True when the specular lobe contributes (`has_specular`).
     specular: bool,
+    /// `kd / p_diffuse`: the throughput weight of a diffuse sample of a
+    /// material without specular lobe.
+    lambert_weight: Vec3,
 }
 
 impl Lobes {
@@ -263,6 +269,7 @@ impl Lobes {
             p_glossy,
             single,
             specular: m.has_specular(),
+            lambert_weight: m.kd / p_diffuse,
         }
     }
 }
@@ -455,22 +462,22 @@ impl<'a, 's> PathTracer<'a, 's> {
     /// triangle (`None`: evaluate it with textures through
     /// `PreparedScene::surface` and `surface_material`).
     #[inline]
-    fn plain_surface(&self, hit: &Hit) -> Option<(Vertex, &MaterialInfo)> {
-        let t = hit.prim as usize;
+    fn plain_surface(&self, prim: u32, u: f32, v: f32) -> Option<(Vertex, &MaterialInfo)> {
+        let t = prim as usize;
         let info = self.tris.get(t).filter(|info| info.plain)?;
         let [i0, i1, i2] = self.prepared.triangles[t].map(|i| i as usize);
         let pos = &self.prepared.positions;
-        let w = 1.0 - hit.u - hit.v;
+        let w = 1.0 - u - v;
         // As `PreparedScene::triangle_surface` interpolates it.
         let ns = info.flat_ns.unwrap_or_else(|| {
             let nrm = &self.prepared.normals;
-            let ns = (nrm[i0] * w + nrm[i1] * hit.u + nrm[i2] * hit.v)
+            let ns = (nrm[i0] * w + nrm[i1] * u + nrm[i2] * v)
                 .try_normalize()
                 .unwrap_or(info.ng);
             if ns.dot(info.ng) < 0.0 { info.ng } else { ns }
         });
         let v = Vertex {
-            p: pos[i0] * w + pos[i1] * hit.u + pos[i2] * hit.v,
+            p: pos[i0] * w + pos[i1] * u + pos[i2] * v,
             ng: info.ng,
             ns,
         };
@@ -498,9 +505,14 @@ impl<'a, 's> PathTracer<'a, 's> {
                 l += beta * self.escaped(&ray, depth == 0 || prev_pdf == 0.0);
                 break;
             };
-            let (v, info) = match self.plain_surface(&hit) {
+            // The hit is used field by field: a copy of the whole struct
+            // would load 16 bytes that `intersect` stored in pieces, which
+            // stalls store-to-load forwarding.
+            let Hit { t, prim, u, v: hv } = hit;
+            let (v, info) = match self.plain_surface(prim, u, hv) {
                 Some(plain) => plain,
                 None => {
+                    let hit = Hit { t, prim, u, v: hv };
                     let surf = self.prepared.surface(&ray, &hit);
                     let mat = self.prepared.material(surf.material);
                     owned = MaterialInfo::new(self.prepared.surface_material(&surf), mat);
@@ -516,7 +528,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             // and sampled directions are unit vectors (up to rounding).
             let wo = -ray.dir;
             if depth == 0 {
-                first = Some((hit.t * ray.dir.length(), v.ns));
+                first = Some((t * ray.dir.length(), v.ns));
             }
             let m = &info.surface;
             let cos_o = v.ng.dot(wo);
@@ -525,13 +537,15 @@ impl<'a, 's> PathTracer<'a, 's> {
                 let w = if prev_pdf == 0.0 {
                     1.0
                 } else {
-                    self.emitter_mis_weight(hit.prim, prev_p, &v, wo, prev_pdf)
+                    self.emitter_mis_weight(prim, prev_p, &v, wo, prev_pdf)
                 };
                 l += beta * m.emission * w;
             }
             // Shading frame on the side of the viewer.
             let front = cos_o >= 0.0;
-            let (n, ng) = if front { (v.ns, v.ng) } else { (-v.ns, -v.ng) };
+            // (A multiplication by the side's sign: the same values, no branch.)
+            let side = if front { 1.0 } else { -1.0 };
+            let (n, ng) = (v.ns * side, v.ng * side);
             let last = depth + 1 >= self.max_depth;
             // Next-event estimation.
             l += beta * self.direct(v.p, info, n, ng, wo, !last, rng, rays);
@@ -639,7 +653,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         if dist2 <= 0.0 {
             return None;
         }
-        let wi = d / dist2.sqrt();
+        let wi = d * (1.0 / dist2.sqrt());
         let mut cos_l = -tl.n.dot(wi);
         if tl.two_sided {
             cos_l = cos_l.abs();
@@ -817,7 +831,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 let p_d = lobes.p_diffuse;
                 return Some(ScatterSample {
                     wi,
-                    weight: m.kd / p_d,
+                    weight: lobes.lambert_weight,
                     pdf: p_d * cosine_hemisphere_pdf(n.dot(wi)),
                     delta: false,
                 });
