@@ -150,17 +150,22 @@ pub fn uniform_hemisphere_pdf() -> f32 {
 }
 
 /// Uniform barycentrics `(b0, b1)` on a triangle (b2 = 1 - b0 - b1),
-/// Heitz 2019's low-distortion map.
+/// Heitz 2019's low-distortion map: the smaller coordinate is halved and
+/// the other reduced by that half (`x < y`: `(x / 2, y - x / 2)`, else
+/// `(x - y / 2, y / 2)`).
+///
+/// Branch-free, as [`sample_concentric_disk`] and for the same reason (the
+/// comparison is a coin flip): each lane picks the half or the reduced
+/// coordinate by its own comparison, through SIMD blends. At `x == y` both
+/// lanes take the reduced value, `x - x / 2 = x / 2` exactly.
+#[inline]
 pub fn sample_uniform_triangle(u: Vec2) -> Vec2 {
-    let (b0, b1);
-    if u.x < u.y {
-        b0 = u.x / 2.0;
-        b1 = u.y - b0;
-    } else {
-        b1 = u.y / 2.0;
-        b0 = u.x - b1;
-    }
-    Vec2::new(b0, b1)
+    let x_smaller = Vec4::splat(u.x).cmplt(Vec4::splat(u.y));
+    let half = Vec4::select(x_smaller, Vec4::splat(u.x), Vec4::splat(u.y)) * 0.5;
+    let xy = Vec4::new(u.x, u.y, 0.0, 0.0);
+    let smaller = xy.cmplt(Vec4::new(u.y, u.x, 0.0, 0.0));
+    let b = Vec4::select(smaller, half, xy - half);
+    Vec2::new(b.x, b.y)
 }
 
 /// Direction about +z distributed as the Phong lobe `(cos)^n`:
@@ -259,6 +264,30 @@ mod tests {
             assert!((a - b).abs().max_element() < 4e-7, "{u}: {a} vs {b}");
         }
         assert_eq!(sample_concentric_disk(Vec2::splat(0.5)), Vec2::ZERO);
+    }
+
+    #[test]
+    fn uniform_triangle_matches_heitz_map() {
+        // The branching form of Heitz 2019's map, bit for bit (ties included).
+        let reference = |u: Vec2| {
+            if u.x < u.y {
+                let b0 = u.x / 2.0;
+                Vec2::new(b0, u.y - b0)
+            } else {
+                let b1 = u.y / 2.0;
+                Vec2::new(u.x - b1, b1)
+            }
+        };
+        let mut r = pixel_rng(3, 0, 0, 0);
+        let ties = [
+            Vec2::ZERO,
+            Vec2::splat(0.5),
+            Vec2::splat(0.75),
+            Vec2::new(0.0, 0.5),
+        ];
+        for u in (0..10_000).map(|_| uniform2(&mut r)).chain(ties) {
+            assert_eq!(sample_uniform_triangle(u), reference(u), "{u}");
+        }
     }
 
     #[test]
