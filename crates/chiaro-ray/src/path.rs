@@ -30,7 +30,7 @@ use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::error::{CoreError, Result};
 use chiaro_core::film::{Film, TilePixels, render_tiles_in};
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
-use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
+use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{
     SobolSampler, cosine_hemisphere_pdf, phong_lobe_pdf, power_heuristic, sample_cosine_hemisphere,
@@ -42,8 +42,8 @@ use chiaro_core::shading::microfacet;
 use chiaro_core::shading::{
     SurfaceMaterial, fresnel_dielectric, reflect, refract, sample_light, sanitize,
 };
-use glam::{Vec2, Vec3, Vec4};
-use std::f32::consts::PI;
+use glam::{Vec2, Vec3};
+use std::f32::consts::{FRAC_1_PI, PI};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Tile side in pixels.
@@ -91,9 +91,12 @@ pub fn render_with(
     let frame = cam.frame();
     let tan_half = (cam.fov_y_degrees.to_radians() * 0.5).tan();
     let aspect = w as f32 / h as f32;
+    // (Multiplications by 2 / w and 2 / h, exact for power-of-two sizes and
+    // within an ulp otherwise.)
+    let (two_over_w, two_over_h) = (2.0 / w as f32, 2.0 / h as f32);
     let camera_dir = |x: f32, y: f32| {
-        let ndc_x = (2.0 * x / w as f32 - 1.0) * tan_half * aspect;
-        let ndc_y = (1.0 - 2.0 * y / h as f32) * tan_half;
+        let ndc_x = (x * two_over_w - 1.0) * tan_half * aspect;
+        let ndc_y = (1.0 - y * two_over_h) * tan_half;
         (frame.forward + ndc_x * frame.right + ndc_y * frame.up).normalize()
     };
     let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
@@ -141,6 +144,8 @@ struct PathTracer<'a, 's> {
     lights: Vec<&'a Light>,
     /// Cumulative selection probabilities of `lights`.
     light_cdf: Vec<f32>,
+    /// Selection probability of each light (`light_cdf[i] - light_cdf[i - 1]`).
+    light_pick: Vec<f32>,
     /// Sampling data of each light in `lights` that is an emissive triangle
     /// (`None` for the others, sampled through `sample_light`).
     tri_lights: Vec<Option<TriLight>>,
@@ -153,6 +158,11 @@ struct PathTracer<'a, 's> {
     max_depth: u32,
     rr_depth: u32,
 }
+
+/// Largest difference in any coordinate between the unit vertex normals of
+/// a triangle whose shading normal is taken as constant (16 float ulps at
+/// 1: far below any intended smoothing, far above rounding).
+const FLAT_NORMAL_TOLERANCE: f32 = 1e-6;
 
 /// `PathTracer::triangle_light` entry of a triangle that is not a light.
 const NO_LIGHT: u32 = u32::MAX;
@@ -176,20 +186,103 @@ struct TriLight {
 #[derive(Clone, Copy)]
 struct TriInfo {
     ng: Vec3,
-    /// The shading normal when the three vertex normals are equal.
+    /// The shading normal when the three vertex normals are equal (within
+    /// `FLAT_NORMAL_TOLERANCE`).
     flat_ns: Option<Vec3>,
     plain: bool,
 }
 
-/// A material's untextured parameters and derived constants.
+/// A material's parameters and the constants derived from them: per
+/// material for the untextured case, per hit point otherwise.
 struct MaterialInfo {
     surface: SurfaceMaterial,
-    /// Lobe selection weights of the untextured material.
-    weights: [f32; 4],
+    lobes: Lobes,
     fresnel: bool,
     two_sided: bool,
+    /// True when the emission is positive in some channel.
+    emissive: bool,
     /// True when textures change the parameters per point.
     textured: bool,
+}
+
+impl MaterialInfo {
+    fn new(surface: SurfaceMaterial, m: &chiaro_core::scene::Material) -> Self {
+        Self {
+            lobes: Lobes::new(&surface, m.fresnel),
+            emissive: surface.emission.max_element() > 0.0,
+            surface,
+            fresnel: m.fresnel,
+            two_sided: m.two_sided,
+            textured: m.texture.is_some() || m.emission_texture.is_some(),
+        }
+    }
+}
+
+/// How [`PathTracer::sample_scatter`] chooses a lobe, fixed by the material.
+#[derive(Clone, Copy)]
+struct Lobes {
+    /// Selection weights: diffuse, glossy, mirror, transmission. A Fresnel
+    /// dielectric's reflection is part of its transmission lobe.
+    weights: [f32; 4],
+    /// Their sum.
+    total: f32,
+    /// `wd / total` and `ws / total`: the non-delta mixture's lobe
+    /// probabilities (0 when `total` is not positive).
+    p_diffuse: f32,
+    p_glossy: f32,
+    /// The lobe choice's value when only one lobe can be chosen (the middle
+    /// of its interval of `[0, total)`): its number is then skipped.
+    single: Option<f32>,
+    /// True when the specular lobe contributes (`has_specular`).
+    specular: bool,
+    /// `kd / p_diffuse`: the throughput weight of a diffuse sample of a
+    /// material without specular lobe.
+    lambert_weight: Vec3,
+}
+
+impl Lobes {
+    fn new(m: &SurfaceMaterial, fresnel: bool) -> Self {
+        let t = luminance(m.kt);
+        let r = if fresnel && t > 0.0 {
+            0.0
+        } else {
+            luminance(m.kr)
+        };
+        let weights = [luminance(m.kd), luminance(m.ks), r, t];
+        let [wd, ws, wr, wt] = weights;
+        let total = wd + ws + wr + wt;
+        // (With `total > 0`, a lone non-zero weight is the positive one.)
+        let single = weights.iter().filter(|&&w| w != 0.0).count() == 1;
+        let single = match weights.iter().position(|&w| w > 0.0) {
+            Some(k) if single => Some(weights[..k].iter().sum::<f32>() + 0.5 * weights[k]),
+            _ => None,
+        };
+        let (p_diffuse, p_glossy) = if total > 0.0 {
+            (wd / total, ws / total)
+        } else {
+            (0.0, 0.0)
+        };
+        Self {
+            weights,
+            total,
+            p_diffuse,
+            p_glossy,
+            single,
+            specular: m.has_specular(),
+            lambert_weight: m.kd / p_diffuse,
+        }
+    }
+}
+
+/// The geometry of a path vertex.
+#[derive(Clone, Copy)]
+struct Vertex {
+    /// Position, world space.
+    p: Vec3,
+    /// Unit geometric normal (front side).
+    ng: Vec3,
+    /// Unit shading normal (front side).
+    ns: Vec3,
 }
 
 /// One sampled scattering direction.
@@ -235,7 +328,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             .collect();
         let total: f32 = power.iter().sum();
         let mut acc = 0.0;
-        let light_cdf = power
+        let light_cdf: Vec<f32> = power
             .iter()
             .map(|&p| {
                 acc += if total > 0.0 {
@@ -244,6 +337,12 @@ impl<'a, 's> PathTracer<'a, 's> {
                     1.0 / lights.len() as f32
                 };
                 acc
+            })
+            .collect();
+        let light_pick = (0..light_cdf.len())
+            .map(|i| {
+                let prev = if i == 0 { 0.0 } else { light_cdf[i - 1] };
+                light_cdf[i] - prev
             })
             .collect();
         let tri_lights = lights
@@ -298,16 +397,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             .scene
             .materials
             .iter()
-            .map(|m| {
-                let surface = SurfaceMaterial::from_material(m);
-                MaterialInfo {
-                    weights: Self::lobe_weights(&surface, m.fresnel),
-                    surface,
-                    fresnel: m.fresnel,
-                    two_sided: m.two_sided,
-                    textured: m.texture.is_some() || m.emission_texture.is_some(),
-                }
-            })
+            .map(|m| MaterialInfo::new(SurfaceMaterial::from_material(m), m))
             .collect();
         let tris = prepared
             .triangles
@@ -317,7 +407,12 @@ impl<'a, 's> PathTracer<'a, 's> {
                 let [i0, i1, i2] = tri.map(|i| i as usize);
                 let ng = prepared.face_normal(t as u32);
                 let n0 = prepared.normals[i0];
-                let same_normals = n0 == prepared.normals[i1] && n0 == prepared.normals[i2];
+                // Vertex normals equal within `FLAT_NORMAL_TOLERANCE` (a faceted
+                // quad's two triangles' face normals, averaged onto shared
+                // vertices, differ in their last bit): the interpolated normal
+                // is then `n0` within the tolerance everywhere on the triangle.
+                let close = |n: Vec3| (n - n0).abs().max_element() <= FLAT_NORMAL_TOLERANCE;
+                let same_normals = close(prepared.normals[i1]) && close(prepared.normals[i2]);
                 // What `triangle_surface` computes for equal vertex normals.
                 let flat_ns = same_normals.then(|| {
                     let ns = n0.try_normalize().unwrap_or(ng);
@@ -341,6 +436,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             accel,
             lights,
             light_cdf,
+            light_pick,
             tri_lights,
             triangle_light,
             tris,
@@ -351,8 +447,7 @@ impl<'a, 's> PathTracer<'a, 's> {
     }
 
     fn light_pick_pdf(&self, i: usize) -> f32 {
-        let prev = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
-        self.light_cdf[i] - prev
+        self.light_pick[i]
     }
 
     fn pick_light(&self, u: f32) -> Option<usize> {
@@ -363,39 +458,31 @@ impl<'a, 's> PathTracer<'a, 's> {
         Some(i.min(self.lights.len() - 1))
     }
 
-    /// The surface at `hit` and, for plain triangles, the cached material
-    /// (`None`: evaluate it with textures through `surface_material`).
-    fn surface(&self, ray: &Ray, hit: &Hit) -> (SurfaceHit, Option<&MaterialInfo>) {
-        if let Some(info) = self.tris.get(hit.prim as usize)
-            && info.plain
-        {
-            let t = hit.prim as usize;
-            let [i0, i1, i2] = self.prepared.triangles[t].map(|i| i as usize);
-            let pos = &self.prepared.positions;
-            let w = 1.0 - hit.u - hit.v;
-            let material = self.prepared.tri_material[t];
-            // As `PreparedScene::triangle_surface` interpolates it.
-            let ns = info.flat_ns.unwrap_or_else(|| {
-                let nrm = &self.prepared.normals;
-                let ns = (nrm[i0] * w + nrm[i1] * hit.u + nrm[i2] * hit.v)
-                    .try_normalize()
-                    .unwrap_or(info.ng);
-                if ns.dot(info.ng) < 0.0 { info.ng } else { ns }
-            });
-            let surf = SurfaceHit {
-                p: pos[i0] * w + pos[i1] * hit.u + pos[i2] * hit.v,
-                ng: info.ng,
-                ns,
-                uv: Vec2::ZERO,
-                p_object: Vec3::ZERO,
-                tangent: Vec4::ZERO,
-                color: Vec3::ONE,
-                material,
-                object: self.prepared.tri_object[t],
-            };
-            return (surf, self.materials.get(material.index()));
-        }
-        (self.prepared.surface(ray, hit), None)
+    /// The vertex at `hit` and its cached material when `hit` is on a plain
+    /// triangle (`None`: evaluate it with textures through
+    /// `PreparedScene::surface` and `surface_material`).
+    #[inline]
+    fn plain_surface(&self, prim: u32, u: f32, v: f32) -> Option<(Vertex, &MaterialInfo)> {
+        let t = prim as usize;
+        let info = self.tris.get(t).filter(|info| info.plain)?;
+        let [i0, i1, i2] = self.prepared.triangles[t].map(|i| i as usize);
+        let pos = &self.prepared.positions;
+        let w = 1.0 - u - v;
+        // As `PreparedScene::triangle_surface` interpolates it.
+        let ns = info.flat_ns.unwrap_or_else(|| {
+            let nrm = &self.prepared.normals;
+            let ns = (nrm[i0] * w + nrm[i1] * u + nrm[i2] * v)
+                .try_normalize()
+                .unwrap_or(info.ng);
+            if ns.dot(info.ng) < 0.0 { info.ng } else { ns }
+        });
+        let v = Vertex {
+            p: pos[i0] * w + pos[i1] * u + pos[i2] * v,
+            ng: info.ng,
+            ns,
+        };
+        let material = self.materials.get(self.prepared.tri_material[t].index())?;
+        Some((v, material))
     }
 
     /// Radiance along `ray`, and the first hit's distance and normal.
@@ -418,48 +505,55 @@ impl<'a, 's> PathTracer<'a, 's> {
                 l += beta * self.escaped(&ray, depth == 0 || prev_pdf == 0.0);
                 break;
             };
-            let (surf, cached) = self.surface(&ray, &hit);
-            let wo = -ray.dir.normalize();
-            if depth == 0 {
-                first = Some((hit.t * ray.dir.length(), surf.ns));
-            }
-            let (m, weights, fresnel, two_sided) = match cached {
-                Some(info) => (&info.surface, info.weights, info.fresnel, info.two_sided),
+            // The hit is used field by field: a copy of the whole struct
+            // would load 16 bytes that `intersect` stored in pieces, which
+            // stalls store-to-load forwarding.
+            let Hit { t, prim, u, v: hv } = hit;
+            let (v, info) = match self.plain_surface(prim, u, hv) {
+                Some(plain) => plain,
                 None => {
-                    owned = self.prepared.surface_material(&surf);
+                    let hit = Hit { t, prim, u, v: hv };
+                    let surf = self.prepared.surface(&ray, &hit);
                     let mat = self.prepared.material(surf.material);
-                    (
-                        &owned,
-                        Self::lobe_weights(&owned, mat.fresnel),
-                        mat.fresnel,
-                        mat.two_sided,
-                    )
+                    owned = MaterialInfo::new(self.prepared.surface_material(&surf), mat);
+                    let v = Vertex {
+                        p: surf.p,
+                        ng: surf.ng,
+                        ns: surf.ns,
+                    };
+                    (v, &owned)
                 }
             };
+            // Every ray's direction is unit: the camera's are normalised,
+            // and sampled directions are unit vectors (up to rounding).
+            let wo = -ray.dir;
+            if depth == 0 {
+                first = Some((t * ray.dir.length(), v.ns));
+            }
+            let m = &info.surface;
+            let cos_o = v.ng.dot(wo);
             // Emission seen along the path (one-sided unless two-sided).
-            if m.emission.max_element() > 0.0 && (two_sided || surf.ng.dot(wo) > 0.0) {
+            if info.emissive && (info.two_sided || cos_o > 0.0) {
                 let w = if prev_pdf == 0.0 {
                     1.0
                 } else {
-                    self.emitter_mis_weight(hit.prim, prev_p, &surf, wo, prev_pdf)
+                    self.emitter_mis_weight(prim, prev_p, &v, wo, prev_pdf)
                 };
                 l += beta * m.emission * w;
             }
             // Shading frame on the side of the viewer.
-            let front = surf.ng.dot(wo) >= 0.0;
-            let (n, ng) = if front {
-                (surf.ns, surf.ng)
-            } else {
-                (-surf.ns, -surf.ng)
-            };
+            let front = cos_o >= 0.0;
+            // (A multiplication by the side's sign: the same values, no branch.)
+            let side = if front { 1.0 } else { -1.0 };
+            let (n, ng) = (v.ns * side, v.ng * side);
             let last = depth + 1 >= self.max_depth;
             // Next-event estimation.
-            l += beta * self.direct(surf.p, m, &weights, n, ng, wo, !last, rng, rays);
+            l += beta * self.direct(v.p, info, n, ng, wo, !last, rng, rays);
             if last {
                 break;
             }
             // Continue the path.
-            let Some(s) = Self::sample_scatter(m, &weights, fresnel, n, ng, wo, front, rng) else {
+            let Some(s) = Self::sample_scatter(info, n, ng, wo, front, rng) else {
                 break;
             };
             beta *= s.weight;
@@ -467,8 +561,8 @@ impl<'a, 's> PathTracer<'a, 's> {
                 break;
             }
             prev_pdf = if s.delta { 0.0 } else { s.pdf };
-            prev_p = surf.p;
-            ray = Ray::new(offset_ray_origin(surf.p, surf.ng, s.wi), s.wi);
+            prev_p = v.p;
+            ray = Ray::new(offset_ray_origin(v.p, v.ng, s.wi), s.wi);
             // Russian roulette.
             if depth + 1 >= self.rr_depth {
                 let q = beta.max_element().min(0.95);
@@ -500,7 +594,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         &self,
         prim: u32,
         from: Vec3,
-        surf: &SurfaceHit,
+        surf: &Vertex,
         wo: Vec3,
         bsdf_pdf: f32,
     ) -> f32 {
@@ -559,7 +653,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         if dist2 <= 0.0 {
             return None;
         }
-        let wi = d / dist2.sqrt();
+        let wi = d * (1.0 / dist2.sqrt());
         let mut cos_l = -tl.n.dot(wi);
         if tl.two_sided {
             cos_l = cos_l.abs();
@@ -574,11 +668,11 @@ impl<'a, 's> PathTracer<'a, 's> {
     /// its visibility by a shadow ray; MIS-weighted against BSDF sampling
     /// when the path continues (`mis`).
     #[allow(clippy::too_many_arguments)]
+    #[inline]
     fn direct(
         &self,
         p: Vec3,
-        m: &SurfaceMaterial,
-        weights: &[f32; 4],
+        info: &MaterialInfo,
         n: Vec3,
         ng: Vec3,
         wo: Vec3,
@@ -610,7 +704,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             if ng.dot(wi) <= 0.0 {
                 return Vec3::ZERO;
             }
-            let f_cos = eval_brdf_cos(m, n, wo, wi);
+            let f_cos = Self::brdf_cos(info, n, wo, wi);
             if f_cos == Vec3::ZERO {
                 return Vec3::ZERO;
             }
@@ -622,18 +716,21 @@ impl<'a, 's> PathTracer<'a, 's> {
                 return Vec3::ZERO;
             }
             let light_pdf = light_pdf * pick;
-            let w = if mis {
-                power_heuristic(light_pdf, Self::scatter_pdf(m, weights, n, wo, wi))
+            // The power heuristic's weight over the light's pdf, in one
+            // division: (l^2 / (l^2 + b^2)) / l = l / (l^2 + b^2).
+            let w_over_pdf = if mis {
+                let bsdf_pdf = Self::scatter_pdf(info, n, wo, wi);
+                light_pdf / (light_pdf * light_pdf + bsdf_pdf * bsdf_pdf)
             } else {
-                1.0
+                1.0 / light_pdf
             };
-            return f_cos * tl.le * (w / light_pdf);
+            return f_cos * tl.le * w_over_pdf;
         }
         let light = self.lights[li];
         let Some(s) = sample_light(light, p, u) else {
             return Vec3::ZERO;
         };
-        let f_cos = eval_brdf_cos(m, n, wo, s.wi);
+        let f_cos = Self::brdf_cos(info, n, wo, s.wi);
         if f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
             return Vec3::ZERO;
         }
@@ -652,71 +749,70 @@ impl<'a, 's> PathTracer<'a, 's> {
             && !s.is_delta
             && let Some(light_pdf) = Self::light_solid_angle_pdf(light, p, s.point)
         {
-            let bsdf_pdf = Self::scatter_pdf(m, weights, n, wo, s.wi);
+            let bsdf_pdf = Self::scatter_pdf(info, n, wo, s.wi);
             w = power_heuristic(light_pdf * pick, bsdf_pdf);
         }
         PI * f_cos * s.intensity * (w / pick)
     }
 
-    /// Lobe selection weights: diffuse, glossy, mirror, transmission. A
-    /// Fresnel dielectric's reflection is part of its transmission lobe.
-    fn lobe_weights(m: &SurfaceMaterial, fresnel: bool) -> [f32; 4] {
-        let t = luminance(m.kt);
-        let r = if fresnel && t > 0.0 {
-            0.0
-        } else {
-            luminance(m.kr)
-        };
-        [luminance(m.kd), luminance(m.ks), r, t]
+    /// `f(wo, wi) cos_theta_i` of the material ([`eval_brdf_cos`]), its
+    /// Lambert term alone (the same expression) when it has no specular lobe.
+    #[inline]
+    fn brdf_cos(info: &MaterialInfo, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
+        let m = &info.surface;
+        if info.lobes.specular {
+            return eval_brdf_cos(m, n, wo, wi);
+        }
+        let cos_i = n.dot(wi);
+        if cos_i <= 0.0 {
+            return Vec3::ZERO;
+        }
+        m.kd * (FRAC_1_PI * cos_i)
     }
 
     /// Solid-angle pdf with which [`Self::sample_scatter`] picks `wi` through
-    /// its non-delta lobes (for MIS), given the lobe `weights` it uses.
-    fn scatter_pdf(m: &SurfaceMaterial, weights: &[f32; 4], n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
-        let [wd, ws, wr, wt] = *weights;
-        let total = wd + ws + wr + wt;
-        if total <= 0.0 {
+    /// its non-delta lobes (for MIS).
+    #[inline]
+    fn scatter_pdf(info: &MaterialInfo, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+        let lobes = &info.lobes;
+        if lobes.total <= 0.0 {
             return 0.0;
         }
         let cos_i = n.dot(wi);
         if cos_i <= 0.0 {
             return 0.0;
         }
-        let mut pdf = wd / total * cosine_hemisphere_pdf(cos_i);
-        if ws > 0.0 {
-            pdf += ws / total * glossy_pdf(m, n, wo, wi);
+        let mut pdf = lobes.p_diffuse * cosine_hemisphere_pdf(cos_i);
+        if lobes.weights[1] > 0.0 {
+            pdf += lobes.p_glossy * glossy_pdf(&info.surface, n, wo, wi);
         }
         pdf
     }
 
     /// Samples the next direction.
-    #[allow(clippy::too_many_arguments)]
+    #[inline]
     fn sample_scatter(
-        m: &SurfaceMaterial,
-        weights: &[f32; 4],
-        fresnel: bool,
+        info: &MaterialInfo,
         n: Vec3,
         ng: Vec3,
         wo: Vec3,
         front: bool,
         rng: &mut SobolSampler,
     ) -> Option<ScatterSample> {
-        let [wd, ws, wr, wt] = *weights;
-        let total = wd + ws + wr + wt;
+        let (m, lobes, fresnel) = (&info.surface, &info.lobes, info.fresnel);
+        let [wd, ws, wr, wt] = lobes.weights;
+        let total = lobes.total;
         if total <= 0.0 {
             return None;
         }
         // The lobe choice's number, unless only one lobe can be chosen (then
         // its pair is skipped, which leaves every later number unchanged).
-        // (`total > 0`, so a lone non-zero weight is the positive one.)
-        let single = weights.iter().filter(|&&w| w != 0.0).count() == 1;
-        let pick = match weights.iter().position(|&w| w > 0.0) {
-            Some(k) if single => {
+        let pick = match lobes.single {
+            Some(pick) => {
                 rng.skip(1);
-                // The middle of the one lobe's interval of `[0, total)`.
-                weights[..k].iter().sum::<f32>() + 0.5 * weights[k]
+                pick
             }
-            _ => rng.next_1d() * total,
+            None => rng.next_1d() * total,
         };
         let u = rng.next_2d();
         if pick < wd + ws {
@@ -730,17 +826,17 @@ impl<'a, 's> PathTracer<'a, 's> {
             if n.dot(wi) <= 0.0 || ng.dot(wi) <= 0.0 {
                 return None;
             }
-            if !m.has_specular() {
+            if !lobes.specular {
                 // Lambert alone: f cos / pdf = (kd cos / pi) / (p_d cos / pi).
-                let p_d = wd / total;
+                let p_d = lobes.p_diffuse;
                 return Some(ScatterSample {
                     wi,
-                    weight: m.kd / p_d,
+                    weight: lobes.lambert_weight,
                     pdf: p_d * cosine_hemisphere_pdf(n.dot(wi)),
                     delta: false,
                 });
             }
-            let pdf = Self::scatter_pdf(m, weights, n, wo, wi);
+            let pdf = Self::scatter_pdf(info, n, wo, wi);
             if pdf <= 0.0 {
                 return None;
             }

@@ -155,7 +155,13 @@ impl SobolSampler {
         // Owen scrambling of Sobol's first dimension (the bit reversal of
         // i): reverse(LK(reverse(reverse(i)))) = reverse(LK(i)).
         let x = laine_karras(i, key.x);
-        let y = laine_karras(sobol_second_reversed(i), key.y);
+        // Below 256 samples the index has one byte: one table look-up.
+        let second = if self.mask <= 0xff {
+            SECOND_BY_BYTE[0][(i & 0xff) as usize]
+        } else {
+            sobol_second_reversed(i)
+        };
+        let y = laine_karras(second, key.y);
         // Both reversals in one: reversing `x << 32 | y` puts reverse(x) in
         // the low half and reverse(y) in the high half.
         let r = ((u64::from(x) << 32) | u64::from(y)).reverse_bits();
