@@ -43,7 +43,7 @@ use chiaro_core::shading::{
     SurfaceMaterial, fresnel_dielectric, reflect, refract, sample_light, sanitize,
 };
 use glam::{Vec2, Vec3};
-use std::f32::consts::{FRAC_1_PI, PI};
+use std::f32::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Tile side in pixels.
@@ -704,7 +704,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             if ng.dot(wi) <= 0.0 {
                 return Vec3::ZERO;
             }
-            let f_cos = Self::brdf_cos(info, n, wo, wi);
+            let f_cos = eval_brdf_cos(&info.surface, n, wo, wi);
             if f_cos == Vec3::ZERO {
                 return Vec3::ZERO;
             }
@@ -730,7 +730,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         let Some(s) = sample_light(light, p, u) else {
             return Vec3::ZERO;
         };
-        let f_cos = Self::brdf_cos(info, n, wo, s.wi);
+        let f_cos = eval_brdf_cos(&info.surface, n, wo, s.wi);
         if f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
             return Vec3::ZERO;
         }
@@ -753,21 +753,6 @@ impl<'a, 's> PathTracer<'a, 's> {
             w = power_heuristic(light_pdf * pick, bsdf_pdf);
         }
         PI * f_cos * s.intensity * (w / pick)
-    }
-
-    /// `f(wo, wi) cos_theta_i` of the material ([`eval_brdf_cos`]), its
-    /// Lambert term alone (the same expression) when it has no specular lobe.
-    #[inline]
-    fn brdf_cos(info: &MaterialInfo, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
-        let m = &info.surface;
-        if info.lobes.specular {
-            return eval_brdf_cos(m, n, wo, wi);
-        }
-        let cos_i = n.dot(wi);
-        if cos_i <= 0.0 {
-            return Vec3::ZERO;
-        }
-        m.kd * (FRAC_1_PI * cos_i)
     }
 
     /// Solid-angle pdf with which [`Self::sample_scatter`] picks `wi` through

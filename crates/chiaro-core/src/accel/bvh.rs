@@ -1942,6 +1942,45 @@ impl SceneBvh {
     /// if it did. Shadow rays use it to filter non-casting objects and to
     /// attenuate light through transparent surfaces.
     pub fn visit_hits(&self, ray: &Ray, mut visit: impl FnMut(&Hit) -> bool) -> bool {
+        self.any_block(ray, |blk, r, spheres| {
+            for i in 0..BLOCK {
+                let prim = blk.prim[i];
+                if r.mask >> i & 1 == 1 {
+                    let h = Hit {
+                        t: r.t[i],
+                        prim,
+                        u: r.u[i],
+                        v: r.v[i],
+                    };
+                    if visit(&h) {
+                        return true;
+                    }
+                } else if spheres >> i & 1 == 1 {
+                    let (c, rad) = self.sphere(prim);
+                    let hit = sphere_roots(ray, c, rad).into_iter().flatten().any(|t| {
+                        visit(&Hit {
+                            t,
+                            prim,
+                            u: 0.0,
+                            v: 0.0,
+                        })
+                    });
+                    if hit {
+                        return true;
+                    }
+                }
+            }
+            false
+        })
+    }
+
+    /// Any-hit traversal a triangle block at a time: for each block of each
+    /// leaf the ray crosses, `f(block, triangle hits, sphere lanes)` gets the
+    /// block, its triangle lanes' watertight test and the mask of its lanes
+    /// that are spheres (untested), until `f` returns true. Returns true if
+    /// it did. [`SceneBvh::visit_hits`] and shadow rays share it.
+    #[inline(always)]
+    fn any_block(&self, ray: &Ray, mut f: impl FnMut(&TriBlock, Lanes, u32) -> bool) -> bool {
         let pre = RayPre::new(ray);
         let wr = WatertightRay::with_inverse(ray, pre.recip);
         let blocks: &[TriBlock] = &self.blocks;
@@ -1954,33 +1993,8 @@ impl SceneBvh {
                 for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
                     let lanes = block_lanes(b, first, end);
                     let spheres = self.sphere_lanes[b] as u32 & lanes;
-                    let r = blk.intersect(&wr, lanes & !spheres);
-                    for i in 0..BLOCK {
-                        let prim = blk.prim[i];
-                        if r.mask >> i & 1 == 1 {
-                            let h = Hit {
-                                t: r.t[i],
-                                prim,
-                                u: r.u[i],
-                                v: r.v[i],
-                            };
-                            if visit(&h) {
-                                return true;
-                            }
-                        } else if spheres >> i & 1 == 1 {
-                            let (c, rad) = self.sphere(prim);
-                            let hit = sphere_roots(ray, c, rad).into_iter().flatten().any(|t| {
-                                visit(&Hit {
-                                    t,
-                                    prim,
-                                    u: 0.0,
-                                    v: 0.0,
-                                })
-                            });
-                            if hit {
-                                return true;
-                            }
-                        }
+                    if f(blk, blk.intersect(&wr, lanes & !spheres), spheres) {
+                        return true;
                     }
                 }
                 false
@@ -2052,33 +2066,20 @@ impl Accelerator for SceneBvh {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        let pre = RayPre::new(ray);
-        let wr = WatertightRay::with_inverse(ray, pre.recip);
-        let blocks: &[TriBlock] = &self.blocks;
-        self.bvh.traverse_any_pre(
-            ray,
-            &pre,
-            |first| prefetch_block(blocks, first),
-            |first, count| {
-                let end = first + count;
-                for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
-                    let lanes = block_lanes(b, first, end);
-                    let mut spheres = self.sphere_lanes[b] as u32 & lanes;
-                    if blk.intersect(&wr, lanes & !spheres).mask != 0 {
-                        return true;
-                    }
-                    while spheres != 0 {
-                        let i = spheres.trailing_zeros() as usize;
-                        spheres &= spheres - 1;
-                        let (c, rad) = self.sphere(blk.prim[i]);
-                        if intersect_sphere(ray, c, rad).is_some() {
-                            return true;
-                        }
-                    }
+        self.any_block(ray, |blk, r, mut spheres| {
+            if r.mask != 0 {
+                return true;
+            }
+            while spheres != 0 {
+                let i = spheres.trailing_zeros() as usize;
+                spheres &= spheres - 1;
+                let (c, rad) = self.sphere(blk.prim[i]);
+                if intersect_sphere(ray, c, rad).is_some() {
+                    return true;
                 }
-                false
-            },
-        )
+            }
+            false
+        })
     }
 }
 
