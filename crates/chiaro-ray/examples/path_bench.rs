@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release -p chiaro-ray --example path_bench -- SCENE.toml OUT_PREFIX \
 //!     [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]
-//!     [--width W] [--height H] [--max-leaf N] [--traversal-cost C]
+//!     [--width W] [--height H] [--max-leaf N] [--traversal-cost C] [--scalar]
 //! ```
 //!
 //! `--width`/`--height` replace the scene's image size (the camera's
@@ -73,6 +73,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let accel = |p: &PreparedScene<'_>| -> Box<dyn Accelerator> {
         Box::new(SceneBvh::with_options(p, &bvh_options))
     };
+    // `--scalar`: one path at a time (the lock-step kernel's oracle).
+    let kernel = if args.iter().any(|a| a == "--scalar") {
+        path::Kernel::Scalar
+    } else {
+        path::Kernel::Auto
+    };
     let repeats: usize = arg("--repeats").map_or(Ok(1), |s| s.parse())?;
     let threads: usize = arg("--threads").map_or(Ok(0), |s| s.parse())?;
     let pool = rayon::ThreadPoolBuilder::new()
@@ -95,8 +101,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut last = None;
     for i in 0..repeats.max(1) {
         let (t0, cpu0) = (Instant::now(), cpu_seconds());
-        let (film, stats) =
-            pool.install(|| path::render_with(&scene, &settings, &NoProgress, &accel))?;
+        let (film, stats) = pool
+            .install(|| path::render_with_kernel(&scene, &settings, &NoProgress, &accel, kernel))?;
         let secs = t0.elapsed().as_secs_f64();
         let cpu = cpu_seconds().zip(cpu0).map_or(f64::NAN, |(b, a)| b - a);
         println!(

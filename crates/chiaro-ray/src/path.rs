@@ -46,6 +46,10 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+mod lanes;
+
+use chiaro_core::sampling::sobol::LANES;
+
 /// Tile side in pixels.
 const TILE: u32 = 16;
 
@@ -66,6 +70,28 @@ pub fn render_with(
     progress: &dyn Progress,
     make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
 ) -> Result<(Film, PathStats)> {
+    render_with_kernel(scene, settings, progress, make_accel, Kernel::Auto)
+}
+
+/// Which loop traces the paths. Both compute the same image, bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kernel {
+    /// The lock-step kernel where it applies (see `path/lanes.rs`), the
+    /// scalar loop elsewhere.
+    Auto,
+    /// One path at a time.
+    Scalar,
+}
+
+/// [`render_with`] with the path loop chosen: for tests and benchmarks
+/// that compare the two.
+pub fn render_with_kernel(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
+    kernel: Kernel,
+) -> Result<(Film, PathStats)> {
     if settings.path.max_depth == 0 {
         return Err(CoreError::BadSetting {
             key: "path.max_depth".into(),
@@ -82,6 +108,7 @@ pub fn render_with(
     );
     let accel = make_accel(&prepared);
     let tracer = PathTracer::new(&prepared, accel.as_ref(), settings);
+    let lanes = kernel == Kernel::Auto && tracer.lanes_apply();
     progress.advance(1);
     let rays = AtomicU64::new(0);
     let (w, h) = (settings.width, settings.height);
@@ -108,19 +135,37 @@ pub fn render_with(
                 let (px, py) = (rect.x + tx, rect.y + ty);
                 let mut sum = Vec3::ZERO;
                 rng.set_pixel(px, py);
-                for s in 0..spp {
-                    rng.set_sample(s);
-                    let j = rng.next_2d();
-                    let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
-                    let (l, first) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
-                    sum += sanitize(l);
-                    if s == 0
-                        && let Some((t, n)) = first
-                    {
-                        let i = (ty * rect.width + tx) as usize;
-                        tile.depth[i] = t;
-                        tile.normal[i] = n;
+                let mut first_hit = None;
+                if lanes {
+                    let camera =
+                        |j: Vec2| Ray::new(cam.eye, camera_dir(px as f32 + j.x, py as f32 + j.y));
+                    for first in (0..spp).step_by(LANES) {
+                        let n = ((spp - first) as usize).min(LANES);
+                        let (ls, fh) =
+                            tracer.radiance_lanes(first, n, &camera, &mut rng, &mut count);
+                        for l in &ls[..n] {
+                            sum += sanitize(*l);
+                        }
+                        if first == 0 {
+                            first_hit = fh;
+                        }
                     }
+                } else {
+                    for s in 0..spp {
+                        rng.set_sample(s);
+                        let j = rng.next_2d();
+                        let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
+                        let (l, fh) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
+                        sum += sanitize(l);
+                        if s == 0 {
+                            first_hit = fh;
+                        }
+                    }
+                }
+                if let Some((t, n)) = first_hit {
+                    let i = (ty * rect.width + tx) as usize;
+                    tile.depth[i] = t;
+                    tile.normal[i] = n;
                 }
                 tile.color[(ty * rect.width + tx) as usize] = sum / spp as f32;
             }
@@ -203,12 +248,18 @@ struct MaterialInfo {
     emissive: bool,
     /// True when textures change the parameters per point.
     textured: bool,
+    /// True when the only lobe is Lambert's (no glossy, mirror or
+    /// transmission lobe): the vertices that [`lanes`] shades.
+    lambert: bool,
 }
 
 impl MaterialInfo {
     fn new(surface: SurfaceMaterial, m: &chiaro_core::scene::Material) -> Self {
+        let lobes = Lobes::new(&surface, m.fresnel);
+        let [wd, ws, wr, wt] = lobes.weights;
         Self {
-            lobes: Lobes::new(&surface, m.fresnel),
+            lambert: wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular,
+            lobes,
             emissive: surface.emission.max_element() > 0.0,
             surface,
             fresnel: m.fresnel,
@@ -283,6 +334,37 @@ struct Vertex {
     ng: Vec3,
     /// Unit shading normal (front side).
     ns: Vec3,
+}
+
+/// A path between two bounces: what the scalar loop carries from one
+/// vertex to the next.
+#[derive(Clone, Copy)]
+struct PathState {
+    /// The ray to trace next.
+    ray: Ray,
+    /// Its segment number (0 = the camera ray).
+    depth: u32,
+    /// Throughput.
+    beta: Vec3,
+    /// Radiance gathered so far.
+    l: Vec3,
+    /// MIS state of the previous bounce: its pdf (0 = delta or camera).
+    prev_pdf: f32,
+    /// The previous vertex (the camera for a camera ray).
+    prev_p: Vec3,
+}
+
+impl PathState {
+    fn camera(ray: Ray) -> Self {
+        Self {
+            ray,
+            depth: 0,
+            beta: Vec3::ONE,
+            l: Vec3::ZERO,
+            prev_pdf: 0.0,
+            prev_p: ray.origin,
+        }
+    }
 }
 
 /// One sampled scattering direction.
@@ -485,23 +567,47 @@ impl<'a, 's> PathTracer<'a, 's> {
         Some((v, material))
     }
 
-    /// Radiance along `ray`, and the first hit's distance and normal.
+    /// Radiance along camera ray `ray`, and the first hit's distance and normal.
     fn radiance(
         &self,
-        mut ray: Ray,
+        ray: Ray,
         rng: &mut SobolSampler,
         rays: &mut u64,
     ) -> (Vec3, Option<(f32, Vec3)>) {
-        let mut l = Vec3::ZERO;
-        let mut beta = Vec3::ONE;
+        self.radiance_from(PathState::camera(ray), None, rng, rays)
+    }
+
+    /// The rest of the path from `state` (whose ray is about to be traced,
+    /// or has been: `traced` is then its hit, already counted in `rays`):
+    /// its radiance estimate (`state.l` included), and the first hit's
+    /// distance and normal when `state.depth` is 0. `rng` must be at the
+    /// pair the scalar loop would have reached.
+    fn radiance_from(
+        &self,
+        state: PathState,
+        mut traced: Option<Hit>,
+        rng: &mut SobolSampler,
+        rays: &mut u64,
+    ) -> (Vec3, Option<(f32, Vec3)>) {
+        let PathState {
+            mut ray,
+            depth: start,
+            mut beta,
+            mut l,
+            mut prev_pdf,
+            mut prev_p,
+        } = state;
         let mut first = None;
-        // MIS state of the previous bounce: its pdf (0 = delta or camera).
-        let mut prev_pdf = 0.0f32;
-        let mut prev_p = ray.origin;
         let mut owned;
-        for depth in 0..self.max_depth {
-            *rays += 1;
-            let Some(hit) = self.accel.intersect(&ray) else {
+        for depth in start..self.max_depth {
+            let hit = match traced.take() {
+                Some(hit) => Some(hit),
+                None => {
+                    *rays += 1;
+                    self.accel.intersect(&ray)
+                }
+            };
+            let Some(hit) = hit else {
                 l += beta * self.escaped(&ray, depth == 0 || prev_pdf == 0.0);
                 break;
             };
@@ -1171,6 +1277,126 @@ mod tests {
         for c in &film.color {
             assert!((c.x - expect).abs() < 0.01 * expect, "{c} vs {expect}");
         }
+    }
+
+    /// Mitsuba's Cornell box as shipped (`scenes/mitsuba-cbox.toml`), at
+    /// `size` x `size` pixels.
+    fn mitsuba_cbox(size: u32) -> Scene {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../scenes/mitsuba-cbox.toml"
+        );
+        let mut s = chiaro_io::load_scene(std::path::Path::new(path))
+            .expect("the shipped scene loads")
+            .scene;
+        s.render.width = size;
+        s.render.height = size;
+        s
+    }
+
+    /// Renders `scene` with both loops and asserts the films and ray
+    /// counts are equal bit for bit, after checking that the lock-step
+    /// kernel does run on it (else the test would compare a loop with itself).
+    fn assert_kernels_agree(scene: &Scene, what: &str) {
+        let settings = &scene.render;
+        let prepared = PreparedScene::new(
+            scene,
+            PrepareOptions {
+                analytic_spheres: true,
+                ..PrepareOptions::default()
+            },
+        );
+        let accel = bvh(&prepared);
+        assert!(
+            PathTracer::new(&prepared, accel.as_ref(), settings).lanes_apply(),
+            "{what}: the lock-step kernel does not apply"
+        );
+        let render =
+            |k| render_with_kernel(scene, settings, &NoProgress, &bvh, k).expect("renders");
+        let (a, ra) = render(Kernel::Scalar);
+        let (b, rb) = render(Kernel::Auto);
+        assert_eq!(ra, rb, "{what}: ray counts");
+        let bits = |v: &[Vec3]| {
+            v.iter()
+                .flat_map(|c| c.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert!(bits(&a.color) == bits(&b.color), "{what}: colours differ");
+        assert!(bits(&a.normal) == bits(&b.normal), "{what}: normals differ");
+        let depth = |f: &Film| f.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+        assert!(depth(&a) == depth(&b), "{what}: depths differ");
+        assert!(
+            a.color.iter().any(|c| c.max_element() > 0.0),
+            "{what}: black image"
+        );
+    }
+
+    #[test]
+    fn lock_step_kernel_equals_the_scalar_loop_on_a_diffuse_box() {
+        // Sample counts below, at and between multiples of the lane count;
+        // depths that end at the first vertex and before Russian roulette.
+        for (spp, max_depth, rr_depth) in [(8, 7, 5), (5, 7, 5), (13, 3, 1), (3, 1, 5)] {
+            let mut s = mitsuba_cbox(12);
+            s.render.samples = spp;
+            s.render.path.max_depth = max_depth;
+            s.render.path.rr_depth = rr_depth;
+            assert_kernels_agree(&s, &format!("spp {spp} depth {max_depth} rr {rr_depth}"));
+        }
+    }
+
+    #[test]
+    fn lock_step_kernel_hands_other_surfaces_to_the_scalar_loop() {
+        let mut s = mitsuba_cbox(12);
+        s.render.samples = 11;
+        // A glossy wall, a mirror wall, and a glass sphere (analytic): lanes
+        // meeting them finish in the scalar loop.
+        let id = |s: &Scene, n: &str| s.material_by_name(n).expect("a shipped material").index();
+        let red = id(&s, "red");
+        s.materials[red].specular = Vec3::splat(0.4);
+        s.materials[red].shininess = 20.0;
+        let green = id(&s, "green");
+        s.materials[green].reflect = Vec3::splat(0.6);
+        let glass = s.add_material(Material {
+            transmit: Vec3::splat(0.9),
+            ior: 1.5,
+            fresnel: true,
+            ..Material::diffuse("glass", Vec3::ZERO)
+        });
+        s.objects.push(Object {
+            geometry: Geometry::Sphere { radius: 0.25 },
+            material: glass,
+            transform: chiaro_core::scene::Transform {
+                translate: Vec3::new(-0.3, -0.2, 0.4),
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        assert_kernels_agree(&s, "mixed materials");
+    }
+
+    #[test]
+    fn lock_step_kernel_with_one_light() {
+        // One emissive triangle: the light choice's pair is skipped.
+        let mut s = mitsuba_cbox(12);
+        s.render.samples = 9;
+        let mesh = s.add_mesh(chiaro_core::scene::Mesh {
+            name: "one-triangle light".into(),
+            positions: vec![
+                Vec3::new(-0.3, 0.98, -0.3),
+                Vec3::new(0.3, 0.98, -0.3),
+                Vec3::new(0.0, 0.98, 0.3),
+            ],
+            indices: vec![[0, 1, 2]],
+            ..Default::default()
+        });
+        let light = s
+            .objects
+            .iter_mut()
+            .find(|o| o.name == "light")
+            .expect("the light");
+        light.geometry = Geometry::Mesh(mesh);
+        light.transform = Default::default();
+        assert_kernels_agree(&s, "one light");
     }
 
     #[test]

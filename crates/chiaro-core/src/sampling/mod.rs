@@ -116,6 +116,32 @@ pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
 }
 
 /// Pdf (per solid angle) of [`sample_cosine_hemisphere`]: `cos_theta / pi`.
+/// [`sample_cosine_hemisphere`] on plain `f32`s with plain selects: the
+/// same numbers, bit for bit, in a form that a loop over lanes
+/// vectorises (the lock-step path tracer draws eight at once).
+#[inline(always)]
+pub fn sample_cosine_hemisphere_xyz(ux: f32, uy: f32) -> [f32; 3] {
+    let (ox, oy) = (2.0 * ux - 1.0, 2.0 * uy - 1.0);
+    let x_wedge = ox.abs() > oy.abs();
+    let (r, a) = if x_wedge { (ox, oy) } else { (oy, ox) };
+    let ratio = if r == 0.0 { 0.0 } else { a / r };
+    let (s, c) = sin_cos_quarter(FRAC_PI_4 * ratio);
+    let (rc, rs) = (r * c, r * s);
+    let (dx, dy) = if x_wedge { (rc, rs) } else { (rs, rc) };
+    [dx, dy, (1.0 - r * r).max(0.0).sqrt()]
+}
+
+/// [`sample_uniform_triangle`] on plain `f32`s, as
+/// [`sample_cosine_hemisphere_xyz`] is to its vector form.
+#[inline(always)]
+pub fn sample_uniform_triangle_xy(ux: f32, uy: f32) -> [f32; 2] {
+    let half = if ux < uy { ux } else { uy } * 0.5;
+    [
+        if ux < uy { half } else { ux - half },
+        if uy < ux { half } else { uy - half },
+    ]
+}
+
 #[inline]
 pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
     cos_theta.max(0.0) * FRAC_1_PI
@@ -228,6 +254,21 @@ mod tests {
             assert!((sample_uniform_sphere(u).length() - 1.0).abs() < 1e-5);
             let b = sample_uniform_triangle(u);
             assert!(b.x >= 0.0 && b.y >= 0.0 && b.x + b.y <= 1.0 + 1e-6);
+        }
+    }
+
+    #[test]
+    fn plain_float_warps_equal_the_vector_ones() {
+        let mut r = pixel_rng(4, 0, 0, 0);
+        let edges = [0.0, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON];
+        let grid = edges
+            .iter()
+            .flat_map(|&x| edges.iter().map(move |&y| Vec2::new(x, y)));
+        for u in (0..100_000).map(|_| uniform2(&mut r)).chain(grid) {
+            let h = sample_cosine_hemisphere(u);
+            assert_eq!(sample_cosine_hemisphere_xyz(u.x, u.y), h.to_array(), "{u}");
+            let b = sample_uniform_triangle(u);
+            assert_eq!(sample_uniform_triangle_xy(u.x, u.y), b.to_array(), "{u}");
         }
     }
 

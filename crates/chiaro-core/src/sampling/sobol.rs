@@ -108,10 +108,7 @@ impl SobolSampler {
     fn next_keys(&mut self) -> PairKeys {
         let d = self.dim;
         self.dim += 1;
-        match self.keys.get(d as usize) {
-            Some(&k) => k,
-            None => self.hash_keys(d),
-        }
+        self.keys_at(d)
     }
 
     /// Hashes the keys of every pair up to `dim` not yet known (pairs that
@@ -137,15 +134,10 @@ impl SobolSampler {
         // fraction: reverse(LK(reverse(index))), each bit flipped depending
         // on the bits above it (Burley 2020, listing 3); the first reversal
         // is done once per sample.
-        let z = laine_karras(self.index_reversed, keys.shuffle);
-        // Only the low m bits of reverse(z) are kept: for m <= 8 they are
-        // the top byte of z reversed, one table look-up.
-        let shuffled = if self.mask <= 0xff {
-            u32::from(REVERSED_BYTE[(z >> 24) as usize])
-        } else {
-            z.reverse_bits()
-        };
-        (shuffled & self.mask, keys)
+        (
+            shuffled_index(self.index_reversed, keys.shuffle, self.mask),
+            keys,
+        )
     }
 
     /// The next pair of numbers in `[0, 1)^2` (one fresh dimension pair).
@@ -184,6 +176,93 @@ impl SobolSampler {
     pub fn skip(&mut self, pairs: u32) {
         self.dim += pairs;
     }
+
+    /// Pairs drawn (or skipped) so far in the current sample.
+    #[inline]
+    pub fn dim(&self) -> u32 {
+        self.dim
+    }
+
+    /// The bit-reversed indices of samples `first..first + LANES` of the
+    /// current pixel, for [`Self::lanes_2d`] and [`Self::lanes_1d`].
+    #[inline]
+    pub fn lane_indices(first: u32) -> [u32; LANES] {
+        std::array::from_fn(|i| first.wrapping_add(i as u32).reverse_bits())
+    }
+
+    /// Pair `dim` of [`LANES`] samples of the current pixel at once, lane
+    /// `i` for the sample whose reversed index is `rev[i]`: exactly what
+    /// `set_sample(index); skip(dim); next_2d()` draws for it. The lanes
+    /// share the pair's keys, so a pixel's samples traced in lock-step
+    /// draw their numbers in one vectorised loop. Leaves the scalar state
+    /// (the current sample and its pair count) alone.
+    #[inline]
+    pub fn lanes_2d(&mut self, dim: u32, rev: &[u32; LANES]) -> [[f32; LANES]; 2] {
+        let keys = self.keys_at(dim);
+        let index = lane_indices_shuffled(rev, keys.shuffle, self.mask);
+        // The second dimension bit by bit (a table look-up per lane would
+        // not vectorise): the XOR of the direction numbers of the set bits,
+        // over the bits an index below `mask + 1` can have.
+        let bits = 32 - self.mask.leading_zeros();
+        let mut second = [0u32; LANES];
+        for (j, &v) in SECOND_DIRECTIONS.iter().enumerate().take(bits as usize) {
+            for (s, &i) in second.iter_mut().zip(&index) {
+                *s ^= 0u32.wrapping_sub((i >> j) & 1) & v;
+            }
+        }
+        let mut out = [[0.0; LANES]; 2];
+        for i in 0..LANES {
+            out[0][i] = to_unit(laine_karras(index[i], keys.x).reverse_bits());
+            out[1][i] = to_unit(laine_karras(second[i], keys.y).reverse_bits());
+        }
+        out
+    }
+
+    /// The first number of pair `dim` for [`LANES`] samples at once (as
+    /// [`Self::lanes_2d`]): what `next_1d` draws for each.
+    #[inline]
+    pub fn lanes_1d(&mut self, dim: u32, rev: &[u32; LANES]) -> [f32; LANES] {
+        let keys = self.keys_at(dim);
+        let index = lane_indices_shuffled(rev, keys.shuffle, self.mask);
+        index.map(|i| to_unit(laine_karras(i, keys.x).reverse_bits()))
+    }
+
+    /// The keys of pair `dim` (hashed on first use).
+    #[inline]
+    fn keys_at(&mut self, dim: u32) -> PairKeys {
+        match self.keys.get(dim as usize) {
+            Some(&k) => k,
+            None => self.hash_keys(dim),
+        }
+    }
+}
+
+/// Samples drawn together by [`SobolSampler::lanes_2d`].
+pub const LANES: usize = 8;
+
+/// [`shuffled_index`] per lane, with the full reversal (which vectorises;
+/// the byte table gives the same low bits).
+#[inline(always)]
+fn lane_indices_shuffled(rev: &[u32; LANES], shuffle: u32, mask: u32) -> [u32; LANES] {
+    rev.map(|r| laine_karras(r, shuffle).reverse_bits() & mask)
+}
+
+/// The direction numbers of the second Sobol dimension, bit-reversed.
+static SECOND_DIRECTIONS: [u32; 32] = second_directions();
+
+/// The shuffled sample index of [`SobolSampler::next_pair`]: the sample's
+/// reversed index `rev` scrambled with `shuffle`, reduced by `mask`.
+#[inline(always)]
+fn shuffled_index(rev: u32, shuffle: u32, mask: u32) -> u32 {
+    let z = laine_karras(rev, shuffle);
+    // Only the low m bits of reverse(z) are kept: for m <= 8 they are
+    // the top byte of z reversed, one table look-up.
+    let shuffled = if mask <= 0xff {
+        u32::from(REVERSED_BYTE[(z >> 24) as usize])
+    } else {
+        z.reverse_bits()
+    };
+    shuffled & mask
 }
 
 /// The top 24 bits of `x` as a number in `[0, 1)` (exact, never 1).
@@ -304,6 +383,29 @@ mod tests {
                         want,
                         "count {count} index {index} dim {dim}"
                     );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_draw_what_each_sample_draws() {
+        // Sample counts on both sides of the one-byte shortcuts.
+        for count in [5, 64, 300] {
+            let mut lanes = SobolSampler::new(9, 4, 7, 0, count);
+            lanes.set_pixel(4, 7);
+            for first in [0, 8, count - 3] {
+                let rev = SobolSampler::lane_indices(first);
+                for dim in [0, 1, 5, 17] {
+                    let two = lanes.lanes_2d(dim, &rev);
+                    let one = lanes.lanes_1d(dim, &rev);
+                    for i in 0..LANES {
+                        let mut s = SobolSampler::new(9, 4, 7, first + i as u32, count);
+                        s.skip(dim);
+                        let mut t = s.clone();
+                        assert_eq!(s.next_2d(), glam::Vec2::new(two[0][i], two[1][i]));
+                        assert_eq!(t.next_1d(), one[i]);
+                    }
                 }
             }
         }

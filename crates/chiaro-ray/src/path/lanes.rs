@@ -1,0 +1,419 @@
+//! The path tracer's lock-step kernel: [`LANES`] samples of one pixel
+//! traced together, bounce by bounce, so that the shading and sampling
+//! arithmetic of their Lambertian vertices runs as one vectorised loop per
+//! step instead of once per path.
+//!
+//! It computes exactly what [`PathTracer::radiance`] computes for each
+//! sample, bit for bit: every lane does the scalar loop's operations in
+//! the scalar loop's order (Rust never fuses or reorders float operations,
+//! so a loop over lanes gives each lane the scalar result), and draws its
+//! numbers from the same Sobol pairs ([`SobolSampler::lanes_2d`]). A lane
+//! whose vertex the kernel does not shade (a material with a glossy,
+//! mirror or transmission lobe, a textured or vertex-coloured triangle, a
+//! sphere) leaves the batch there and finishes in the scalar loop from the
+//! same state and the same pair ([`PathTracer::radiance_from`]).
+//!
+//! Rays are still traced one at a time; what runs lane-parallel is the
+//! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
+//! cosine sampling, Russian roulette. The kernel runs when every light
+//! next-event estimation samples is an emissive triangle (the scalar loop
+//! samples the others through `sample_light`).
+
+// A lane loop indexes a dozen arrays by the lane number: that is the
+// form LLVM vectorises, and clearer than a dozen zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
+use super::{PathState, PathTracer};
+use chiaro_core::accel::Hit;
+use chiaro_core::geometry::{Ray, offset_ray_origin};
+use chiaro_core::sampling::sobol::LANES;
+use chiaro_core::sampling::{
+    SobolSampler, sample_cosine_hemisphere_xyz, sample_uniform_triangle_xy,
+};
+use glam::{Vec2, Vec3};
+use std::f32::consts::FRAC_1_PI;
+
+/// One `f32` per lane.
+type F = [f32; LANES];
+
+/// A vector per lane, as three component arrays.
+#[derive(Clone, Copy, Default)]
+struct V3 {
+    x: F,
+    y: F,
+    z: F,
+}
+
+impl V3 {
+    #[inline(always)]
+    fn get(&self, i: usize) -> Vec3 {
+        Vec3::new(self.x[i], self.y[i], self.z[i])
+    }
+
+    #[inline(always)]
+    fn set(&mut self, i: usize, v: Vec3) {
+        (self.x[i], self.y[i], self.z[i]) = (v.x, v.y, v.z);
+    }
+
+    /// Lane `i` as an array.
+    #[inline(always)]
+    fn at(&self, i: usize) -> [f32; 3] {
+        [self.x[i], self.y[i], self.z[i]]
+    }
+
+    #[inline(always)]
+    fn put(&mut self, i: usize, v: [f32; 3]) {
+        (self.x[i], self.y[i], self.z[i]) = (v[0], v[1], v[2]);
+    }
+
+    #[inline(always)]
+    fn splat(v: Vec3) -> Self {
+        Self {
+            x: [v.x; LANES],
+            y: [v.y; LANES],
+            z: [v.z; LANES],
+        }
+    }
+}
+
+/// The dot product as `glam::Vec3::dot` evaluates it.
+#[inline(always)]
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    (a[0] * b[0]) + (a[1] * b[1]) + (a[2] * b[2])
+}
+
+/// `glam::Vec3::max_element`, operation for operation.
+#[inline(always)]
+fn max_element(v: [f32; 3]) -> f32 {
+    let max = |a: f32, b: f32| if a > b { a } else { b };
+    max(v[0], max(v[1], v[2]))
+}
+
+/// False when `x <= 0`; true for a NaN, as the scalar loop's early
+/// returns (`if x <= 0.0 { return ... }`) let a NaN through.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+#[inline(always)]
+fn passes(x: f32) -> bool {
+    !(x <= 0.0)
+}
+
+/// `chiaro_core::sampling::cosine_hemisphere_pdf`.
+#[inline(always)]
+fn cosine_pdf(cos: f32) -> f32 {
+    cos.max(0.0) * FRAC_1_PI
+}
+
+/// The per-lane data of the light sample of [`PathTracer::direct`]'s
+/// emissive-triangle case, gathered for the vectorised part.
+#[derive(Default)]
+struct LightLanes {
+    a: V3,
+    b: V3,
+    c: V3,
+    n: V3,
+    le: V3,
+    area: F,
+    pick: F,
+    two_sided: [bool; LANES],
+}
+
+impl PathTracer<'_, '_> {
+    /// True when [`Self::radiance_lanes`] may replace [`Self::radiance`]:
+    /// there are lights, and all are emissive triangles.
+    pub(super) fn lanes_apply(&self) -> bool {
+        !self.lights.is_empty() && self.tri_lights.iter().all(Option::is_some)
+    }
+
+    /// Radiance of samples `first..first + count` (`count <= LANES`) of
+    /// the pixel `rng` is set to, each as [`Self::radiance`] computes it
+    /// from the camera ray `camera(jitter)`; and the first hit of sample
+    /// `first` (distance and normal), as `radiance` reports it. `rng` is
+    /// left at an unspecified sample.
+    pub(super) fn radiance_lanes(
+        &self,
+        first: u32,
+        count: usize,
+        camera: &impl Fn(Vec2) -> Ray,
+        rng: &mut SobolSampler,
+        rays: &mut u64,
+    ) -> ([Vec3; LANES], Option<(f32, Vec3)>) {
+        let rev = SobolSampler::lane_indices(first);
+        let mut out = [Vec3::ZERO; LANES];
+        let mut first_hit = None;
+        let mut alive: [bool; LANES] = std::array::from_fn(|i| i < count);
+        // Path state, per lane.
+        let (mut org, mut dir) = (V3::default(), V3::default());
+        let mut beta = V3::splat(Vec3::ONE);
+        let mut l = V3::default();
+        let mut prev_pdf: F = [0.0; LANES];
+        let mut prev_p = V3::default();
+        // Pairs drawn so far (the same for every live lane).
+        let mut dim = 0u32;
+        let jitter = rng.lanes_2d(dim, &rev);
+        dim += 1;
+        for i in 0..LANES {
+            let ray = camera(Vec2::new(jitter[0][i], jitter[1][i]));
+            org.set(i, ray.origin);
+            dir.set(i, ray.dir);
+            prev_p.set(i, ray.origin);
+        }
+        // The vertex of each lane shaded here: position, geometric normal,
+        // both normals on the viewer's side, Lambert's constants.
+        let mut vx = Vertices::default();
+        for depth in 0..self.max_depth {
+            // Trace; sort the lanes into escaped, handed to the scalar
+            // loop, and shaded here (whose emission is added now).
+            let mut shade = [false; LANES];
+            for i in 0..LANES {
+                if !alive[i] {
+                    continue;
+                }
+                *rays += 1;
+                let ray = Ray::new(org.get(i), dir.get(i));
+                let Some(hit) = self.accel.intersect(&ray) else {
+                    let seen = self.escaped(&ray, depth == 0 || prev_pdf[i] == 0.0);
+                    out[i] = l.get(i) + beta.get(i) * seen;
+                    alive[i] = false;
+                    continue;
+                };
+                let Hit { t, prim, u, v: hv } = hit;
+                let Some((v, m)) = self.plain_surface(prim, u, hv).filter(|(_, m)| m.lambert)
+                else {
+                    // The scalar loop from this vertex, at this pair.
+                    let state = PathState {
+                        ray,
+                        depth,
+                        beta: beta.get(i),
+                        l: l.get(i),
+                        prev_pdf: prev_pdf[i],
+                        prev_p: prev_p.get(i),
+                    };
+                    rng.set_sample(first + i as u32);
+                    rng.skip(dim);
+                    let (li, fh) = self.radiance_from(state, Some(hit), rng, rays);
+                    out[i] = li;
+                    if depth == 0 && i == 0 {
+                        first_hit = fh;
+                    }
+                    alive[i] = false;
+                    continue;
+                };
+                if depth == 0 && i == 0 {
+                    first_hit = Some((t * ray.dir.length(), v.ns));
+                }
+                let wo = -ray.dir;
+                let cos_o = v.ng.dot(wo);
+                if m.emissive && (m.two_sided || cos_o > 0.0) {
+                    let w = if prev_pdf[i] == 0.0 {
+                        1.0
+                    } else {
+                        self.emitter_mis_weight(prim, prev_p.get(i), &v, wo, prev_pdf[i])
+                    };
+                    l.set(i, l.get(i) + beta.get(i) * m.surface.emission * w);
+                }
+                let side = if cos_o >= 0.0 { 1.0 } else { -1.0 };
+                vx.p.set(i, v.p);
+                vx.ng.set(i, v.ng);
+                vx.n.set(i, v.ns * side);
+                vx.ngs.set(i, v.ng * side);
+                vx.kd.set(i, m.surface.kd);
+                vx.weight.set(i, m.lobes.lambert_weight);
+                vx.p_diffuse[i] = m.lobes.p_diffuse;
+                shade[i] = true;
+            }
+            if !shade.iter().any(|&s| s) {
+                break;
+            }
+            let last = depth + 1 >= self.max_depth;
+            self.direct_lanes(&vx, &shade, !last, &mut l, &beta, dim, &rev, rng, rays);
+            dim += 2;
+            if last {
+                for i in 0..LANES {
+                    if shade[i] {
+                        out[i] = l.get(i);
+                    }
+                }
+                break;
+            }
+            // Continue the path: Lambert's lobe alone (its choice's pair
+            // skipped), cosine-distributed, in `Frame::from_normal(n)`.
+            let u = rng.lanes_2d(dim + 1, &rev);
+            dim += 2;
+            let mut q: F = [0.0; LANES];
+            let mut ended = [false; LANES];
+            for i in 0..LANES {
+                let n = vx.n.at(i);
+                let [lx, ly, lz] = sample_cosine_hemisphere_xyz(u[0][i], u[1][i]);
+                let sign = 1.0f32.copysign(n[2]);
+                let a = -1.0 / (sign + n[2]);
+                let b = n[0] * n[1] * a;
+                let fs = [1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]];
+                let ft = [b, sign + n[1] * n[1] * a, -n[1]];
+                let wi: [f32; 3] = std::array::from_fn(|k| fs[k] * lx + ft[k] * ly + n[k] * lz);
+                let cos_i = dot(n, wi);
+                let ok = passes(cos_i) & passes(dot(vx.ngs.at(i), wi));
+                let (bt, w) = (beta.at(i), vx.weight.at(i));
+                let b: [f32; 3] = std::array::from_fn(|k| bt[k] * w[k]);
+                let live =
+                    shade[i] && ok && b.iter().all(|c| c.is_finite()) && passes(max_element(b));
+                ended[i] = shade[i] && !live;
+                shade[i] = live;
+                beta.put(i, b);
+                prev_pdf[i] = vx.p_diffuse[i] * cosine_pdf(cos_i);
+                // `offset_ray_origin(p, ng, wi)`.
+                let (p, g) = (vx.p.at(i), vx.ng.at(i));
+                let m = max_element([p[0].abs(), p[1].abs(), p[2].abs()]);
+                let eps = m.max(1.0) * 2e-5;
+                let up = dot(g, wi) >= 0.0;
+                let o: [f32; 3] =
+                    std::array::from_fn(|k| p[k] + if up { g[k] * eps } else { -g[k] * eps });
+                prev_p.put(i, p);
+                org.put(i, o);
+                dir.put(i, wi);
+                q[i] = max_element(b).min(0.95);
+            }
+            for i in 0..LANES {
+                if ended[i] {
+                    out[i] = l.get(i);
+                }
+            }
+            // Russian roulette.
+            if depth + 1 >= self.rr_depth {
+                let r = rng.lanes_1d(dim, &rev);
+                dim += 1;
+                for i in 0..LANES {
+                    if shade[i] && r[i] >= q[i] {
+                        out[i] = l.get(i);
+                        shade[i] = false;
+                    }
+                    let bt = beta.at(i);
+                    beta.put(i, bt.map(|c| c / q[i]));
+                }
+            }
+            alive = shade;
+        }
+        (out, first_hit)
+    }
+
+    /// [`PathTracer::direct`] for the lanes in `shade` (emissive-triangle
+    /// lights only), its contribution `beta * L` added to `l`; draws pairs
+    /// `dim` (the light choice, skipped for one light) and `dim + 1`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn direct_lanes(
+        &self,
+        vx: &Vertices,
+        shade: &[bool; LANES],
+        mis: bool,
+        l: &mut V3,
+        beta: &V3,
+        dim: u32,
+        rev: &[u32; LANES],
+        rng: &mut SobolSampler,
+        rays: &mut u64,
+    ) {
+        let u_pick = if self.lights.len() > 1 {
+            rng.lanes_1d(dim, rev)
+        } else {
+            [0.0; LANES]
+        };
+        let u = rng.lanes_2d(dim + 1, rev);
+        // Gather the chosen lights.
+        let mut lt = LightLanes::default();
+        let mut ok = *shade;
+        for i in 0..LANES {
+            if !ok[i] {
+                continue;
+            }
+            let tl = self
+                .pick_light(u_pick[i])
+                .and_then(|li| Some((li, self.tri_lights[li].as_ref()?)));
+            let Some((li, tl)) = tl else {
+                ok[i] = false;
+                continue;
+            };
+            lt.a.set(i, tl.a);
+            lt.b.set(i, tl.b);
+            lt.c.set(i, tl.c);
+            lt.n.set(i, tl.n);
+            lt.le.set(i, tl.le);
+            lt.area[i] = tl.area;
+            lt.two_sided[i] = tl.two_sided;
+            lt.pick[i] = self.light_pick_pdf(li);
+        }
+        // The light sample (`sample_tri_light`), the Lambert term
+        // (`eval_brdf_cos`) and the MIS weight, lane-parallel.
+        let mut wi_l = V3::default();
+        let mut q_l = V3::default();
+        let mut f_l = V3::default();
+        let mut light_pdf: F = [0.0; LANES];
+        let mut cos_i: F = [0.0; LANES];
+        for i in 0..LANES {
+            let [bx, by] = sample_uniform_triangle_xy(u[0][i], u[1][i]);
+            let (a, b, c) = (lt.a.at(i), lt.b.at(i), lt.c.at(i));
+            let q: [f32; 3] =
+                std::array::from_fn(|k| a[k] * bx + b[k] * by + c[k] * (1.0 - bx - by));
+            let p = vx.p.at(i);
+            let d: [f32; 3] = std::array::from_fn(|k| q[k] - p[k]);
+            let dist2 = dot(d, d);
+            let s = 1.0 / dist2.sqrt();
+            let wi = d.map(|x| x * s);
+            let cl = -dot(lt.n.at(i), wi);
+            let cos_l = if lt.two_sided[i] { cl.abs() } else { cl };
+            light_pdf[i] = dist2 / (cos_l * lt.area[i]) * lt.pick[i];
+            let c_i = dot(vx.n.at(i), wi);
+            cos_i[i] = c_i;
+            let kd = vx.kd.at(i);
+            let f_cos = kd.map(|k| k * (FRAC_1_PI * c_i));
+            // (`&` rather than `&&`: no branches in the lane loop.)
+            ok[i] = ok[i]
+                & (lt.pick[i] > 0.0)
+                & passes(dist2)
+                & passes(cos_l)
+                & passes(dot(vx.ngs.at(i), wi))
+                & passes(c_i)
+                & ((f_cos[0] != 0.0) | (f_cos[1] != 0.0) | (f_cos[2] != 0.0));
+            let le = lt.le.at(i);
+            wi_l.put(i, wi);
+            q_l.put(i, q);
+            f_l.put(i, std::array::from_fn(|k| f_cos[k] * le[k]));
+        }
+        // The power heuristic's weight over the light's pdf (as `direct`).
+        let w_l: F = if mis {
+            std::array::from_fn(|i| {
+                let (lp, bsdf_pdf) = (light_pdf[i], vx.p_diffuse[i] * cosine_pdf(cos_i[i]));
+                lp / (lp * lp + bsdf_pdf * bsdf_pdf)
+            })
+        } else {
+            light_pdf.map(|lp| 1.0 / lp)
+        };
+        // Shadow rays, one at a time.
+        for i in 0..LANES {
+            if !ok[i] {
+                continue;
+            }
+            *rays += 1;
+            let (p, wi) = (vx.p.get(i), wi_l.get(i));
+            let shadow = Ray::segment(offset_ray_origin(p, vx.ngs.get(i), wi), q_l.get(i));
+            if !self.accel.occluded(&shadow) {
+                l.set(i, l.get(i) + beta.get(i) * (f_l.get(i) * w_l[i]));
+            }
+        }
+    }
+}
+
+/// The lanes' current vertices, as [`PathTracer::radiance_lanes`] shades
+/// them.
+#[derive(Default)]
+struct Vertices {
+    p: V3,
+    /// Geometric normal (front side).
+    ng: V3,
+    /// Shading and geometric normal on the viewer's side.
+    n: V3,
+    ngs: V3,
+    kd: V3,
+    /// `Lobes::lambert_weight` and `Lobes::p_diffuse`.
+    weight: V3,
+    p_diffuse: F,
+}
