@@ -543,7 +543,7 @@ impl<'a, 's> PathTracer<'a, 's> {
     /// The vertex at `hit` and its cached material when `hit` is on a plain
     /// triangle (`None`: evaluate it with textures through
     /// `PreparedScene::surface` and `surface_material`).
-    #[inline]
+    #[inline(always)]
     fn plain_surface(&self, prim: u32, u: f32, v: f32) -> Option<(Vertex, &MaterialInfo)> {
         let t = prim as usize;
         let info = self.tris.get(t).filter(|info| info.plain)?;

@@ -224,7 +224,11 @@ impl SobolSampler {
     pub fn lanes_1d(&mut self, dim: u32, rev: &[u32; LANES]) -> [f32; LANES] {
         let keys = self.keys_at(dim);
         let index = lane_indices_shuffled(rev, keys.shuffle, self.mask);
-        index.map(|i| to_unit(laine_karras(i, keys.x).reverse_bits()))
+        let mut out = [0.0; LANES];
+        for (o, &i) in out.iter_mut().zip(&index) {
+            *o = to_unit(laine_karras(i, keys.x).reverse_bits());
+        }
+        out
     }
 
     /// The keys of pair `dim` (hashed on first use).
@@ -244,7 +248,11 @@ pub const LANES: usize = 8;
 /// the byte table gives the same low bits).
 #[inline(always)]
 fn lane_indices_shuffled(rev: &[u32; LANES], shuffle: u32, mask: u32) -> [u32; LANES] {
-    rev.map(|r| laine_karras(r, shuffle).reverse_bits() & mask)
+    let mut out = [0u32; LANES];
+    for (o, &r) in out.iter_mut().zip(rev) {
+        *o = laine_karras(r, shuffle).reverse_bits() & mask;
+    }
+    out
 }
 
 /// The direction numbers of the second Sobol dimension, bit-reversed.
