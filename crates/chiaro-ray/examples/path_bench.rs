@@ -77,7 +77,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let kernel = if args.iter().any(|a| a == "--scalar") {
         path::Kernel::Scalar
     } else {
-        path::Kernel::Auto
+        path::Kernel::Lanes
     };
     let repeats: usize = arg("--repeats").map_or(Ok(1), |s| s.parse())?;
     let threads: usize = arg("--threads").map_or(Ok(0), |s| s.parse())?;

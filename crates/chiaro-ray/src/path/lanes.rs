@@ -15,9 +15,10 @@
 //!
 //! Rays are still traced one at a time; what runs lane-parallel is the
 //! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
-//! cosine sampling, Russian roulette. The kernel runs when every light
-//! next-event estimation samples is an emissive triangle (the scalar loop
-//! samples the others through `sample_light`).
+//! cosine sampling, Russian roulette. Emissive-triangle lights are sampled
+//! lane-parallel; a lane that picks another light (point, spot,
+//! directional, an area light's quad, disk or sphere) gets it from the
+//! scalar loop's own code ([`PathTracer::direct_from`]).
 
 // A lane loop indexes a dozen arrays by the lane number: that is the
 // form LLVM vectorises, and clearer than a dozen zipped iterators.
@@ -118,12 +119,6 @@ struct LightLanes {
 }
 
 impl PathTracer<'_, '_> {
-    /// True when [`Self::radiance_lanes`] may replace [`Self::radiance`]:
-    /// there are lights, and all are emissive triangles.
-    pub(super) fn lanes_apply(&self) -> bool {
-        !self.lights.is_empty() && self.tri_lights.iter().all(Option::is_some)
-    }
-
     /// Radiance of samples `first..first + count` (`count <= LANES`) of
     /// the pixel `rng` is set to, each as [`Self::radiance`] computes it
     /// from the camera ray `camera(jitter)`; and the first hit of sample
@@ -160,6 +155,7 @@ impl PathTracer<'_, '_> {
         // The vertex of each lane shaded here: position, geometric normal,
         // both normals on the viewer's side, Lambert's constants.
         let mut vx = Vertices::default();
+        let mut info = [None; LANES];
         for depth in 0..self.max_depth {
             // Trace; sort the lanes into escaped, handed to the scalar
             // loop, and shaded here (whose emission is added now).
@@ -219,13 +215,16 @@ impl PathTracer<'_, '_> {
                 vx.kd.set(i, m.surface.kd);
                 vx.weight.set(i, m.lobes.lambert_weight);
                 vx.p_diffuse[i] = m.lobes.p_diffuse;
+                info[i] = Some(m);
                 shade[i] = true;
             }
             if !shade.iter().any(|&s| s) {
                 break;
             }
             let last = depth + 1 >= self.max_depth;
-            self.direct_lanes(&vx, &shade, !last, &mut l, &beta, dim, &rev, rng, rays);
+            self.direct_lanes(
+                &vx, &info, &shade, &dir, !last, &mut l, &beta, dim, &rev, rng, rays,
+            );
             dim += 2;
             if last {
                 for i in 0..LANES {
@@ -303,7 +302,9 @@ impl PathTracer<'_, '_> {
     fn direct_lanes(
         &self,
         vx: &Vertices,
+        info: &[Option<&super::MaterialInfo>; LANES],
         shade: &[bool; LANES],
+        dir: &V3,
         mis: bool,
         l: &mut V3,
         beta: &V3,
@@ -325,13 +326,21 @@ impl PathTracer<'_, '_> {
             if !ok[i] {
                 continue;
             }
-            let tl = self
-                .pick_light(u_pick[i])
-                .and_then(|li| Some((li, self.tri_lights[li].as_ref()?)));
-            let Some((li, tl)) = tl else {
-                ok[i] = false;
+            ok[i] = false;
+            let Some(li) = self.pick_light(u_pick[i]) else {
                 continue;
             };
+            let Some(tl) = &self.tri_lights[li] else {
+                // Not an emissive triangle: the scalar loop's code.
+                if let Some(m) = info[i] {
+                    let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
+                    let u = Vec2::new(u[0][i], u[1][i]);
+                    let c = self.direct_from(li, vx.p.get(i), m, n, ng, wo, mis, u, rays);
+                    l.set(i, l.get(i) + beta.get(i) * c);
+                }
+                continue;
+            };
+            ok[i] = true;
             lt.a.set(i, tl.a);
             lt.b.set(i, tl.b);
             lt.c.set(i, tl.c);
