@@ -18,6 +18,11 @@
 //!   Owen-scrambled Sobol dimension pair, so they stratify every decision
 //!   jointly; each draw is still uniform, so the estimator stays unbiased.
 //!
+//! - Paths are traced eight samples of a pixel at a time by the lock-step
+//!   kernel in `path/lanes.rs` (vectorised where the vertices are
+//!   Lambertian, bit-identical to the scalar loop kept here as
+//!   [`Kernel::Scalar`]).
+//!
 //! Conventions: ambient lights are ignored (indirect light is computed);
 //! `Scene::background` is what camera rays (and chains of mirror/glass
 //! bounces) see where nothing is hit, but it does not light the scene;
