@@ -254,7 +254,8 @@ struct MaterialInfo {
     /// True when textures change the parameters per point.
     textured: bool,
     /// True when the only lobe is Lambert's (no glossy, mirror or
-    /// transmission lobe): the vertices that [`lanes`] shades.
+    /// transmission lobe), chosen with probability 1 and weighted by `kd`:
+    /// the vertices that [`lanes`] shades.
     lambert: bool,
 }
 
@@ -262,8 +263,11 @@ impl MaterialInfo {
     fn new(surface: SurfaceMaterial, m: &chiaro_core::scene::Material) -> Self {
         let lobes = Lobes::new(&surface, m.fresnel);
         let [wd, ws, wr, wt] = lobes.weights;
+        // (The lone lobe's probability is wd / wd = 1 and its weight kd / 1
+        // = kd exactly; the kernel relies on both.)
+        let lambert = wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular;
         Self {
-            lambert: wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular,
+            lambert: lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd,
             lobes,
             emissive: surface.emission.max_element() > 0.0,
             surface,
@@ -556,13 +560,18 @@ impl<'a, 's> PathTracer<'a, 's> {
         let pos = &self.prepared.positions;
         let w = 1.0 - u - v;
         // As `PreparedScene::triangle_surface` interpolates it.
-        let ns = info.flat_ns.unwrap_or_else(|| {
-            let nrm = &self.prepared.normals;
-            let ns = (nrm[i0] * w + nrm[i1] * u + nrm[i2] * v)
-                .try_normalize()
-                .unwrap_or(info.ng);
-            if ns.dot(info.ng) < 0.0 { info.ng } else { ns }
-        });
+        // (A `match`, not `unwrap_or_else`: the closure's captures were
+        // stored for every hit, flat or not.)
+        let ns = match info.flat_ns {
+            Some(ns) => ns,
+            None => {
+                let nrm = &self.prepared.normals;
+                let ns = (nrm[i0] * w + nrm[i1] * u + nrm[i2] * v)
+                    .try_normalize()
+                    .unwrap_or(info.ng);
+                if ns.dot(info.ng) < 0.0 { info.ng } else { ns }
+            }
+        };
         let v = Vertex {
             p: pos[i0] * w + pos[i1] * u + pos[i2] * v,
             ng: info.ng,

@@ -205,9 +205,11 @@ impl SobolSampler {
         // over the bits an index below `mask + 1` can have.
         let bits = 32 - self.mask.leading_zeros();
         let mut second = [0u32; LANES];
-        for (j, &v) in SECOND_DIRECTIONS.iter().enumerate().take(bits as usize) {
-            for (s, &i) in second.iter_mut().zip(&index) {
-                *s ^= 0u32.wrapping_sub((i >> j) & 1) & v;
+        let mut rest = index;
+        for &v in SECOND_DIRECTIONS.iter().take(bits as usize) {
+            for (s, r) in second.iter_mut().zip(&mut rest) {
+                *s ^= 0u32.wrapping_sub(*r & 1) & v;
+                *r >>= 1;
             }
         }
         let mut out = [[0.0; LANES]; 2];

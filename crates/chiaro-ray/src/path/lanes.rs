@@ -156,6 +156,7 @@ impl PathTracer<'_, '_> {
         // both normals on the viewer's side, Lambert's constants.
         let mut vx = Vertices::default();
         let mut info = [None; LANES];
+        let mut lights = LightLanes::default();
         for depth in 0..self.max_depth {
             // Trace; sort the lanes into escaped, handed to the scalar
             // loop, and shaded here (whose emission is added now).
@@ -213,8 +214,6 @@ impl PathTracer<'_, '_> {
                 vx.n.set(i, v.ns * side);
                 vx.ngs.set(i, v.ng * side);
                 vx.kd.set(i, m.surface.kd);
-                vx.weight.set(i, m.lobes.lambert_weight);
-                vx.p_diffuse[i] = m.lobes.p_diffuse;
                 info[i] = Some(m);
                 shade[i] = true;
             }
@@ -223,7 +222,18 @@ impl PathTracer<'_, '_> {
             }
             let last = depth + 1 >= self.max_depth;
             self.direct_lanes(
-                &vx, &info, &shade, &dir, !last, &mut l, &beta, dim, &rev, rng, rays,
+                &vx,
+                &info,
+                &shade,
+                &dir,
+                !last,
+                &mut lights,
+                &mut l,
+                &beta,
+                dim,
+                &rev,
+                rng,
+                rays,
             );
             dim += 2;
             if last {
@@ -251,14 +261,16 @@ impl PathTracer<'_, '_> {
                 let wi: [f32; 3] = std::array::from_fn(|k| fs[k] * lx + ft[k] * ly + n[k] * lz);
                 let cos_i = dot(n, wi);
                 let ok = passes(cos_i) & passes(dot(vx.ngs.at(i), wi));
-                let (bt, w) = (beta.at(i), vx.weight.at(i));
+                // (`Lobes::lambert_weight` is kd for these materials.)
+                let (bt, w) = (beta.at(i), vx.kd.at(i));
                 let b: [f32; 3] = std::array::from_fn(|k| bt[k] * w[k]);
                 let live =
                     shade[i] && ok && b.iter().all(|c| c.is_finite()) && passes(max_element(b));
                 ended[i] = shade[i] && !live;
                 shade[i] = live;
                 beta.put(i, b);
-                prev_pdf[i] = vx.p_diffuse[i] * cosine_pdf(cos_i);
+                // (`p_diffuse` is 1: the pdf is the cosine's.)
+                prev_pdf[i] = cosine_pdf(cos_i);
                 // `offset_ray_origin(p, ng, wi)`.
                 let (p, g) = (vx.p.at(i), vx.ng.at(i));
                 let m = max_element([p[0].abs(), p[1].abs(), p[2].abs()]);
@@ -306,6 +318,7 @@ impl PathTracer<'_, '_> {
         shade: &[bool; LANES],
         dir: &V3,
         mis: bool,
+        lt: &mut LightLanes,
         l: &mut V3,
         beta: &V3,
         dim: u32,
@@ -319,8 +332,8 @@ impl PathTracer<'_, '_> {
             [0.0; LANES]
         };
         let u = rng.lanes_2d(dim + 1, rev);
-        // Gather the chosen lights.
-        let mut lt = LightLanes::default();
+        // Gather the chosen lights (lanes not gathered keep stale values,
+        // computed on and then masked off).
         let mut ok = *shade;
         for i in 0..LANES {
             if !ok[i] {
@@ -390,7 +403,7 @@ impl PathTracer<'_, '_> {
         // The power heuristic's weight over the light's pdf (as `direct`).
         let w_l: F = if mis {
             std::array::from_fn(|i| {
-                let (lp, bsdf_pdf) = (light_pdf[i], vx.p_diffuse[i] * cosine_pdf(cos_i[i]));
+                let (lp, bsdf_pdf) = (light_pdf[i], cosine_pdf(cos_i[i]));
                 lp / (lp * lp + bsdf_pdf * bsdf_pdf)
             })
         } else {
@@ -422,7 +435,4 @@ struct Vertices {
     n: V3,
     ngs: V3,
     kd: V3,
-    /// `Lobes::lambert_weight` and `Lobes::p_diffuse`.
-    weight: V3,
-    p_diffuse: F,
 }
