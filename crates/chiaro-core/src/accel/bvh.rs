@@ -1936,6 +1936,16 @@ impl SceneBvh {
         self.spheres[(prim - self.triangle_count) as usize]
     }
 
+    /// `intersect_sphere` of `ray` (with `t_max`) and sphere `prim`, out of
+    /// line: the traversal loops stay free of the sphere test's per-ray
+    /// constants, which triangle scenes never use.
+    #[cold]
+    #[inline(never)]
+    fn sphere_hit(&self, ray: &Ray, prim: u32, t_max: f32) -> Option<f32> {
+        let (c, rad) = self.sphere(prim);
+        intersect_sphere(&Ray { t_max, ..*ray }, c, rad)
+    }
+
     /// Calls `visit(hit)` for every intersection with `t` in
     /// `(ray.t_min, ray.t_max)`, in no particular order (a sphere crossed
     /// twice reports both roots), until `visit` returns true. Returns true
@@ -2030,16 +2040,8 @@ impl Accelerator for SceneBvh {
                         let hit = if r.mask >> i & 1 == 1 {
                             (r.t[i] < wr.t_max).then_some((r.t[i], r.u[i], r.v[i]))
                         } else if spheres >> i & 1 == 1 {
-                            let (c, rad) = self.sphere(blk.prim[i]);
-                            intersect_sphere(
-                                &Ray {
-                                    t_max: wr.t_max,
-                                    ..*ray
-                                },
-                                c,
-                                rad,
-                            )
-                            .map(|t| (t, 0.0, 0.0))
+                            self.sphere_hit(ray, blk.prim[i], wr.t_max)
+                                .map(|t| (t, 0.0, 0.0))
                         } else {
                             None
                         };
@@ -2073,8 +2075,7 @@ impl Accelerator for SceneBvh {
             while spheres != 0 {
                 let i = spheres.trailing_zeros() as usize;
                 spheres &= spheres - 1;
-                let (c, rad) = self.sphere(blk.prim[i]);
-                if intersect_sphere(ray, c, rad).is_some() {
+                if self.sphere_hit(ray, blk.prim[i], ray.t_max).is_some() {
                     return true;
                 }
             }
