@@ -314,3 +314,31 @@ impl RadiositySolution {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod round_trip_tests {
+    use super::SolveStats;
+
+    /// Solutions are compared byte for byte after a save/load round trip
+    /// (the Python module's `to_bytes`/`from_bytes`, Ray's object store):
+    /// every float must read back exactly. `seconds` is a measured time,
+    /// any f64; serde_json parses floats exactly only with its
+    /// `float_roundtrip` feature (its default parser may be one ulp off).
+    #[test]
+    fn stats_floats_read_back_exactly() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        for _ in 0..20_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let stats = SolveStats {
+                seconds: (x >> 11) as f64 / (1u64 << 53) as f64 * 10.0,
+                unshot: f32::from_bits(0x3000_0000 | (x as u32 & 0x0fff_ffff)),
+                ..SolveStats::default()
+            };
+            let text = serde_json::to_string(&stats).expect("serialises");
+            let back: SolveStats = serde_json::from_str(&text).expect("parses");
+            assert_eq!(back, stats, "{text}");
+        }
+    }
+}
