@@ -354,7 +354,16 @@ impl Stack {
         if self.len < STACK_FIRST {
             self.first[self.len] = e;
             self.len += 1;
-        } else if self.len < STACK_FIRST + STACK_MORE {
+        } else {
+            self.push_more(e);
+        }
+    }
+
+    /// [`Stack::push`] past the first part (out of line: the traversal
+    /// loop keeps only the common case).
+    #[inline(never)]
+    fn push_more(&mut self, e: Entry) {
+        if self.len < STACK_FIRST + STACK_MORE {
             let more = self.more.get_or_insert([Entry::default(); STACK_MORE]);
             more[self.len - STACK_FIRST] = e;
             self.len += 1;
@@ -365,17 +374,25 @@ impl Stack {
 
     #[inline(always)]
     fn pop(&mut self) -> Option<Entry> {
-        if let Some(e) = self.spill.pop() {
-            Some(e)
-        } else if self.len > STACK_FIRST {
-            self.len -= 1;
-            self.more.as_ref().map(|m| m[self.len - STACK_FIRST])
+        // (The spill holds entries only when both fixed parts are full.)
+        if self.len > STACK_FIRST {
+            self.pop_more()
         } else if self.len > 0 {
             self.len -= 1;
             Some(self.first[self.len])
         } else {
             None
         }
+    }
+
+    /// [`Stack::pop`] past the first part.
+    #[inline(never)]
+    fn pop_more(&mut self) -> Option<Entry> {
+        if let Some(e) = self.spill.pop() {
+            return Some(e);
+        }
+        self.len -= 1;
+        self.more.as_ref().map(|m| m[self.len - STACK_FIRST])
     }
 }
 
