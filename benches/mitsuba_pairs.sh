@@ -1,0 +1,33 @@
+#!/bin/bash
+# chiaro's path tracer against Mitsuba 3's llvm_ad_rgb on Mitsuba's Cornell
+# box (as benches/mitsuba_cbox.sh, box pixel filter, 64 spp, 2 threads), in
+# alternating back-to-back pairs: this machine's speed drifts by 10-20 %
+# over tens of seconds (both renderers' CPU time per sample moves), so a
+# ratio of two medians taken a minute apart is noisier than the median of
+# per-pair ratios. Each side renders twice per pair in its own process and
+# keeps the faster render (the first of a process may pay one-off costs).
+# usage: benches/mitsuba_pairs.sh [PAIRS=9] [SPP=64]
+# needs what benches/mitsuba_cbox.sh needs ($MITSUBA_VENV, libllvm19).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+pairs=${1:-9}
+spp=${2:-64}
+venv=${MITSUBA_VENV:-/tmp/mvenv}
+export DRJIT_LIBLLVM_PATH=${DRJIT_LIBLLVM_PATH:-/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1}
+profile=${CHIARO_PROFILE:-release}
+cargo build --profile "$profile" -q -p chiaro-ray --example path_bench
+bench=target/$profile/examples/path_bench
+out=target/mitsuba-bench
+mkdir -p "$out"
+fastest() { grep -o 'render\[[0-9]*\]=[0-9.]*' "$1" | cut -d= -f2 | sort -n | head -1; }
+echo "pair  mitsuba_s  chiaro_s  ratio (chiaro samples/s over Mitsuba's)"
+for i in $(seq "$pairs"); do
+    "$venv/bin/python" benches/mitsuba_cbox.py render llvm_ad_rgb "$spp" box "$i" "$out/pair_mi.npy" 2 > "$out/pair_mi.log"
+    "$bench" scenes/mitsuba-cbox.toml "$out/pair_chiaro" --spp "$spp" --repeats 2 --seed "$i" > "$out/pair_chiaro.log"
+    m=$(fastest "$out/pair_mi.log")
+    c=$(fastest "$out/pair_chiaro.log")
+    awk -v i="$i" -v m="$m" -v c="$c" 'BEGIN { printf "%4d  %9.3f  %8.3f  %.3f\n", i, m, c, m / c }'
+done | tee "$out/pairs.log"
+awk '{ print $4 }' "$out/pairs.log" | sort -n | awk '{ r[NR] = $1 } END {
+    printf "median ratio %.3f over %d pairs (range %.3f-%.3f)\n", r[int((NR + 1) / 2)], NR, r[1], r[NR]
+}'
