@@ -115,7 +115,6 @@ pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
     Vec3::new(d.x, d.y, z)
 }
 
-/// Pdf (per solid angle) of [`sample_cosine_hemisphere`]: `cos_theta / pi`.
 /// [`sample_cosine_hemisphere`] on plain `f32`s with plain selects: the
 /// same numbers, bit for bit, in a form that a loop over lanes
 /// vectorises (the lock-step path tracer draws eight at once).
@@ -142,6 +141,7 @@ pub fn sample_uniform_triangle_xy(ux: f32, uy: f32) -> [f32; 2] {
     ]
 }
 
+/// Pdf (per solid angle) of [`sample_cosine_hemisphere`]: `cos_theta / pi`.
 #[inline]
 pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
     cos_theta.max(0.0) * FRAC_1_PI

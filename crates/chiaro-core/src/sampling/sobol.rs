@@ -177,12 +177,6 @@ impl SobolSampler {
         self.dim += pairs;
     }
 
-    /// Pairs drawn (or skipped) so far in the current sample.
-    #[inline]
-    pub fn dim(&self) -> u32 {
-        self.dim
-    }
-
     /// The bit-reversed indices of samples `first..first + LANES` of the
     /// current pixel, for [`Self::lanes_2d`] and [`Self::lanes_1d`].
     #[inline]

@@ -26,10 +26,10 @@
 
 use super::{PathState, PathTracer};
 use chiaro_core::accel::Hit;
-use chiaro_core::geometry::{Ray, offset_ray_origin};
+use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::sampling::sobol::LANES;
 use chiaro_core::sampling::{
-    SobolSampler, sample_cosine_hemisphere_xyz, sample_uniform_triangle_xy,
+    SobolSampler, cosine_hemisphere_pdf, sample_cosine_hemisphere_xyz, sample_uniform_triangle_xy,
 };
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -96,12 +96,6 @@ fn max_element(v: [f32; 3]) -> f32 {
 #[inline(always)]
 fn passes(x: f32) -> bool {
     !(x <= 0.0)
-}
-
-/// `chiaro_core::sampling::cosine_hemisphere_pdf`.
-#[inline(always)]
-fn cosine_pdf(cos: f32) -> f32 {
-    cos.max(0.0) * FRAC_1_PI
 }
 
 /// The per-lane data of the light sample of [`PathTracer::direct`]'s
@@ -252,13 +246,10 @@ impl PathTracer<'_, '_> {
             let mut ended = [false; LANES];
             for i in 0..LANES {
                 let n = vx.n.at(i);
-                let [lx, ly, lz] = sample_cosine_hemisphere_xyz(u[0][i], u[1][i]);
-                let sign = 1.0f32.copysign(n[2]);
-                let a = -1.0 / (sign + n[2]);
-                let b = n[0] * n[1] * a;
-                let fs = [1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]];
-                let ft = [b, sign + n[1] * n[1] * a, -n[1]];
-                let wi: [f32; 3] = std::array::from_fn(|k| fs[k] * lx + ft[k] * ly + n[k] * lz);
+                let local = Vec3::from_array(sample_cosine_hemisphere_xyz(u[0][i], u[1][i]));
+                let wi = Frame::from_normal(Vec3::from_array(n))
+                    .to_world(local)
+                    .to_array();
                 let cos_i = dot(n, wi);
                 let ok = passes(cos_i) & passes(dot(vx.ngs.at(i), wi));
                 // (`Lobes::lambert_weight` is kd for these materials.)
@@ -270,16 +261,10 @@ impl PathTracer<'_, '_> {
                 shade[i] = live;
                 beta.put(i, b);
                 // (`p_diffuse` is 1: the pdf is the cosine's.)
-                prev_pdf[i] = cosine_pdf(cos_i);
-                // `offset_ray_origin(p, ng, wi)`.
-                let (p, g) = (vx.p.at(i), vx.ng.at(i));
-                let m = max_element([p[0].abs(), p[1].abs(), p[2].abs()]);
-                let eps = m.max(1.0) * 2e-5;
-                let up = dot(g, wi) >= 0.0;
-                let o: [f32; 3] =
-                    std::array::from_fn(|k| p[k] + if up { g[k] * eps } else { -g[k] * eps });
-                prev_p.put(i, p);
-                org.put(i, o);
+                prev_pdf[i] = cosine_hemisphere_pdf(cos_i);
+                let p = vx.p.get(i);
+                prev_p.set(i, p);
+                org.set(i, offset_ray_origin(p, vx.ng.get(i), Vec3::from_array(wi)));
                 dir.put(i, wi);
                 q[i] = max_element(b).min(0.95);
             }
@@ -306,9 +291,10 @@ impl PathTracer<'_, '_> {
         (out, first_hit)
     }
 
-    /// [`PathTracer::direct`] for the lanes in `shade` (emissive-triangle
-    /// lights only), its contribution `beta * L` added to `l`; draws pairs
-    /// `dim` (the light choice, skipped for one light) and `dim + 1`.
+    /// [`PathTracer::direct`] for the lanes in `shade`, its contribution
+    /// `beta * L` added to `l`: emissive-triangle lights lane-parallel, the
+    /// others through [`PathTracer::direct_from`]. Draws pairs `dim` (the
+    /// light choice, skipped for one light) and `dim + 1`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn direct_lanes(
@@ -385,6 +371,10 @@ impl PathTracer<'_, '_> {
             light_pdf[i] = dist2 / (cos_l * lt.area[i]) * lt.pick[i];
             let c_i = dot(vx.n.at(i), wi);
             cos_i[i] = c_i;
+            // `eval_brdf_cos` for these materials (no specular lobe), its
+            // expression spelled per component: calling it here keeps the
+            // loop from vectorising (+20 % instructions on Mitsuba's box);
+            // the kernel-vs-scalar tests hold the two to the same bits.
             let kd = vx.kd.at(i);
             let f_cos = kd.map(|k| k * (FRAC_1_PI * c_i));
             // (`&` rather than `&&`: no branches in the lane loop.)
@@ -403,7 +393,7 @@ impl PathTracer<'_, '_> {
         // The power heuristic's weight over the light's pdf (as `direct`).
         let w_l: F = if mis {
             std::array::from_fn(|i| {
-                let (lp, bsdf_pdf) = (light_pdf[i], cosine_pdf(cos_i[i]));
+                let (lp, bsdf_pdf) = (light_pdf[i], cosine_hemisphere_pdf(cos_i[i]));
                 lp / (lp * lp + bsdf_pdf * bsdf_pdf)
             })
         } else {
