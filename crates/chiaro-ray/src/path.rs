@@ -1469,6 +1469,39 @@ mod tests {
     }
 
     #[test]
+    fn lanes_pick_the_lights_the_scalar_pick_does() {
+        // Counting CDF entries (up to 16 lights) and the binary search
+        // (more) against `pick_light`, at and beside every CDF entry.
+        for k in [1usize, 2, 3, 16, 17, 40] {
+            let mut s = mitsuba_cbox(4);
+            for j in 0..k {
+                s.lights.push(Light::Point {
+                    position: Vec3::new(0.0, 0.5, 0.0),
+                    color: Vec3::ONE,
+                    intensity: 1.0 + (j % 5) as f32,
+                    attenuation: Attenuation::InverseSquare,
+                });
+            }
+            let prepared = PreparedScene::new(&s, PrepareOptions::default());
+            let accel = SceneBvh::new(&prepared);
+            let tracer = PathTracer::new(&prepared, &accel, &s.render);
+            let mut us = vec![0.0, 0.5, 0.999_999_94, 1.0];
+            for &c in &tracer.light_cdf {
+                us.extend([c.next_down(), c, c.next_up()]);
+            }
+            for chunk in us.chunks(LANES) {
+                let mut u = [0.0; LANES];
+                u[..chunk.len()].copy_from_slice(chunk);
+                let lanes = tracer.pick_lights(&u).expect("lights");
+                for i in 0..LANES {
+                    let want = tracer.pick_light(u[i]).expect("lights") as u32;
+                    assert_eq!(lanes[i], want, "{k} lights, u = {}", u[i]);
+                }
+            }
+        }
+    }
+
+    #[test]
     fn glass_sphere_of_ior_one_is_invisible() {
         // A non-absorbing dielectric with ior 1 refracts straight through:
         // the image equals the image without it (up to ray offsets).

@@ -285,6 +285,31 @@ impl PathTracer<'_, '_> {
         (out, first_hit)
     }
 
+    /// [`PathTracer::pick_light`] of each lane's `u` (`None` without
+    /// lights): for a few lights the count of CDF entries at or below `u`,
+    /// lane-parallel and without branches (the same index: the CDF is
+    /// sorted, so the entries at or below `u` are the prefix that
+    /// `partition_point` finds); for many, the binary search per lane.
+    #[inline(always)]
+    pub(super) fn pick_lights(&self, u: &F) -> Option<[u32; LANES]> {
+        /// Lights up to which counting beats the search.
+        const FEW: usize = 16;
+        let (cdf, n) = (&self.light_cdf, self.lights.len());
+        if n == 0 {
+            return None;
+        }
+        if n > FEW || cdf.len() != n {
+            return Some(u.map(|u| self.pick_light(u).unwrap_or(0) as u32));
+        }
+        let mut count = [0u32; LANES];
+        for &c in cdf.iter() {
+            for i in 0..LANES {
+                count[i] += (c <= u[i]) as u32;
+            }
+        }
+        Some(count.map(|k| k.min(n as u32 - 1)))
+    }
+
     /// [`PathTracer::direct`] for the lanes in `shade`, its contribution
     /// `beta * L` added to `l`: emissive-triangle lights lane-parallel, the
     /// others through [`PathTracer::direct_from`]. Draws pairs `dim` (the
@@ -315,10 +340,11 @@ impl PathTracer<'_, '_> {
         // Gather the chosen lights (lanes not gathered keep stale values,
         // computed on and then masked off).
         let mut ok = [false; LANES];
+        let Some(picked) = self.pick_lights(&u_pick) else {
+            return;
+        };
         for i in set_lanes(shade) {
-            let Some(li) = self.pick_light(u_pick[i]) else {
-                continue;
-            };
+            let li = picked[i] as usize;
             let Some(tl) = &self.tri_lights[li] else {
                 // Not an emissive triangle: the scalar loop's code.
                 if let Some(m) = info[i] {
@@ -343,6 +369,7 @@ impl PathTracer<'_, '_> {
         // (`eval_brdf_cos`) and the MIS weight, lane-parallel.
         let mut wi_l = V3::default();
         let mut q_l = V3::default();
+        let mut o_l = V3::default();
         let mut f_l = V3::default();
         let mut light_pdf: F = [0.0; LANES];
         let mut cos_i: F = [0.0; LANES];
@@ -378,6 +405,9 @@ impl PathTracer<'_, '_> {
             let le = lt.le.at(i);
             wi_l.put(i, wi);
             q_l.put(i, q);
+            // The shadow ray's origin, off the surface towards the light.
+            let o = offset_ray_origin(Vec3::from_array(p), vx.ngs.get(i), Vec3::from_array(wi));
+            o_l.set(i, o);
             f_l.put(i, std::array::from_fn(|k| f_cos[k] * le[k]));
         }
         // The power heuristic's weight over the light's pdf (as `direct`).
@@ -392,8 +422,7 @@ impl PathTracer<'_, '_> {
         // Shadow rays, one at a time.
         for i in set_lanes(&ok) {
             *rays += 1;
-            let (p, wi) = (vx.p.get(i), wi_l.get(i));
-            let shadow = Ray::segment(offset_ray_origin(p, vx.ngs.get(i), wi), q_l.get(i));
+            let shadow = Ray::segment(o_l.get(i), q_l.get(i));
             if !self.accel.occluded(&shadow) {
                 l.set(i, l.get(i) + beta.get(i) * (f_l.get(i) * w_l[i]));
             }
