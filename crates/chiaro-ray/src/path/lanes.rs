@@ -189,27 +189,35 @@ impl PathTracer<'_, '_> {
                 if depth == 0 && i == 0 {
                     first_hit = Some((t * ray.dir.length(), v.ns));
                 }
-                let wo = -ray.dir;
-                let cos_o = v.ng.dot(wo);
-                if m.emissive && (m.two_sided || cos_o > 0.0) {
-                    let w = if prev_pdf[i] == 0.0 {
-                        1.0
-                    } else {
-                        self.emitter_mis_weight(prim, prev_p.get(i), &v, wo, prev_pdf[i])
-                    };
-                    l.set(i, l.get(i) + beta.get(i) * m.surface.emission * w);
+                if m.emissive {
+                    let wo = -ray.dir;
+                    if m.two_sided || v.ng.dot(wo) > 0.0 {
+                        let w = if prev_pdf[i] == 0.0 {
+                            1.0
+                        } else {
+                            self.emitter_mis_weight(prim, prev_p.get(i), &v, wo, prev_pdf[i])
+                        };
+                        l.set(i, l.get(i) + beta.get(i) * m.surface.emission * w);
+                    }
                 }
-                let side = if cos_o >= 0.0 { 1.0 } else { -1.0 };
                 vx.p.set(i, v.p);
                 vx.ng.set(i, v.ng);
-                vx.n.set(i, v.ns * side);
-                vx.ngs.set(i, v.ng * side);
+                vx.n.set(i, v.ns);
                 vx.kd.set(i, m.surface.kd);
                 info[i] = Some(m);
                 shade[i] = true;
             }
             if !shade.iter().any(|&s| s) {
                 break;
+            }
+            // Both normals onto the viewer's side, lane-parallel (lanes not
+            // shaded compute on stale values, masked off later).
+            for i in 0..LANES {
+                let (ng, d) = (vx.ng.at(i), dir.at(i));
+                let cos_o = dot(ng, d.map(|x| -x));
+                let side = if cos_o >= 0.0 { 1.0 } else { -1.0 };
+                vx.n.put(i, vx.n.at(i).map(|x| x * side));
+                vx.ngs.put(i, ng.map(|x| x * side));
             }
             let last = depth + 1 >= self.max_depth;
             self.direct_lanes(
@@ -453,7 +461,8 @@ struct Vertices {
     p: V3,
     /// Geometric normal (front side).
     ng: V3,
-    /// Shading and geometric normal on the viewer's side.
+    /// Shading and geometric normal on the viewer's side (`n` holds the
+    /// shading normal as interpolated until the sides are chosen).
     n: V3,
     ngs: V3,
     kd: V3,
