@@ -375,9 +375,8 @@ impl PathTracer<'_, '_> {
         }
         // The light sample (`sample_tri_light`), the Lambert term
         // (`eval_brdf_cos`) and the MIS weight, lane-parallel.
-        let mut wi_l = V3::default();
-        let mut q_l = V3::default();
         let mut o_l = V3::default();
+        let mut d_l = V3::default();
         let mut f_l = V3::default();
         let mut light_pdf: F = [0.0; LANES];
         let mut cos_i: F = [0.0; LANES];
@@ -411,11 +410,10 @@ impl PathTracer<'_, '_> {
                 & passes(c_i)
                 & ((f_cos[0] != 0.0) | (f_cos[1] != 0.0) | (f_cos[2] != 0.0));
             let le = lt.le.at(i);
-            wi_l.put(i, wi);
-            q_l.put(i, q);
             // The shadow ray's origin, off the surface towards the light.
             let o = offset_ray_origin(Vec3::from_array(p), vx.ngs.get(i), Vec3::from_array(wi));
             o_l.set(i, o);
+            d_l.set(i, Vec3::from_array(q) - o);
             f_l.put(i, std::array::from_fn(|k| f_cos[k] * le[k]));
         }
         // The power heuristic's weight over the light's pdf (as `direct`).
@@ -428,12 +426,22 @@ impl PathTracer<'_, '_> {
             light_pdf.map(|lp| 1.0 / lp)
         };
         // Shadow rays, one at a time.
+        let mut lit = [false; LANES];
         for i in set_lanes(&ok) {
             *rays += 1;
-            let shadow = Ray::segment(o_l.get(i), q_l.get(i));
-            if !self.accel.occluded(&shadow) {
-                l.set(i, l.get(i) + beta.get(i) * (f_l.get(i) * w_l[i]));
-            }
+            // `Ray::segment(o, q)`, its `q - o` computed above.
+            let o = o_l.get(i);
+            let shadow = Ray {
+                dir: d_l.get(i),
+                ..Ray::segment(o, o)
+            };
+            lit[i] = !self.accel.occluded(&shadow);
+        }
+        // The unoccluded lanes' `beta * f * w`, lane-parallel.
+        for i in 0..LANES {
+            let (li, bt, f) = (l.at(i), beta.at(i), f_l.at(i));
+            let sum: [f32; 3] = std::array::from_fn(|k| li[k] + bt[k] * (f[k] * w_l[i]));
+            l.put(i, if lit[i] { sum } else { li });
         }
     }
 }
