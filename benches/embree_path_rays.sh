@@ -15,7 +15,12 @@
 # consecutive rays (flagged incoherent; the renderer traces a pixel's
 # samples together, so consecutive rays are one pixel's). The two alternate
 # PAIRS times. Needs libembree-dev and g++ (apt-get, as root, the first
-# time).
+# time). With $MITSUBA_VENV set (a venv with the `mitsuba` wheel), the same
+# program is also built against the wheel's own libembree3.so (Embree
+# 3.13.4, its API in namespace `mitsuba`, reached through a copy of the
+# Debian headers with that namespace switched on): the build that Mitsuba's
+# llvm variant calls. Its lines print the header's version string; the
+# library is the wheel's.
 set -euo pipefail
 SPP=${1:-16}
 REPS=${2:-5}
@@ -118,11 +123,31 @@ CPP
 if ! [ -x "$OUT/embree_path_rays" ] || [ "$OUT/embree_path_rays.cpp" -nt "$OUT/embree_path_rays" ]; then
     g++ -O2 -o "$OUT/embree_path_rays" "$OUT/embree_path_rays.cpp" -lembree3
 fi
+MI_EMBREE=
+if [ -n "${MITSUBA_VENV:-}" ]; then
+    MI_DIR=$(ls -d "$MITSUBA_VENV"/lib/python3*/site-packages/mitsuba | head -1)
+    if [ -f "$MI_DIR/libembree3.so" ]; then
+        mkdir -p "$OUT/mi-include/embree3"
+        cp /usr/include/embree3/*.h "$OUT/mi-include/embree3/"
+        sed -i -e 's|/\* #undef EMBREE_API_NAMESPACE \*/|#define EMBREE_API_NAMESPACE|' \
+            -e 's|define RTC_NAMESPACE $|define RTC_NAMESPACE mitsuba|' \
+            -e 's|namespace  {|namespace mitsuba {|' \
+            -e 's|using namespace ;|using namespace mitsuba;|' "$OUT/mi-include/embree3/rtcore_config.h"
+        sed 's|#include <embree3/rtcore.h>|#include <embree3/rtcore.h>\nRTC_NAMESPACE_USE|' \
+            "$OUT/embree_path_rays.cpp" > "$OUT/embree_path_rays_mitsuba.cpp"
+        g++ -O2 -I"$OUT/mi-include" -o "$OUT/embree_path_rays_mitsuba" "$OUT/embree_path_rays_mitsuba.cpp" \
+            "$MI_DIR/libembree3.so" -Wl,-rpath,"$MI_DIR"
+        MI_EMBREE="$OUT/embree_path_rays_mitsuba"
+    fi
+fi
 (cd "$ROOT" && cargo build --release -q -p chiaro-ray --example path_rays)
 for pair in $(seq "$PAIRS"); do
     echo "== pair $pair, load: $(cut -d' ' -f1-3 /proc/loadavg)"
     DUMP=()
     [ "$pair" = 1 ] && DUMP=(--dump "$OUT")
     (cd "$ROOT" && target/release/examples/path_rays "$SCENE" --spp "$SPP" --reps "$REPS" "${DUMP[@]}") | grep -v '^rep '
-    "$OUT/embree_path_rays" "$OUT" "$REPS" | grep -v '^rep '
+    "$OUT/embree_path_rays" "$OUT" "$REPS" | grep -v '^rep ' | sed 's/^embree/Debian embree/'
+    if [ -n "$MI_EMBREE" ]; then
+        "$MI_EMBREE" "$OUT" "$REPS" | grep -v '^rep ' | sed 's/^embree [0-9.]*/the mitsuba wheel'"'"'s embree 3.13.4/'
+    fi
 done
