@@ -151,6 +151,7 @@ impl PathTracer<'_, '_> {
         let mut vx = Vertices::default();
         let mut info = [None; LANES];
         let mut lights = LightLanes::default();
+        let mut u_next = [[0.0; LANES]; 2];
         for depth in 0..self.max_depth {
             // Trace; sort the lanes into escaped, handed to the scalar
             // loop, and shaded here (whose emission is added now).
@@ -210,6 +211,15 @@ impl PathTracer<'_, '_> {
             if !shade.iter().any(|&s| s) {
                 break;
             }
+            // The light choice's and the light sample's pairs first:
+            // independent work while the hit loop's single-lane stores
+            // drain before the lane loop below reads them as vectors.
+            let u_pick = if self.lights.len() > 1 {
+                rng.lanes_1d(dim, &rev)
+            } else {
+                [0.0; LANES]
+            };
+            let u_light = rng.lanes_2d(dim + 1, &rev);
             // Both normals onto the viewer's side, lane-parallel (lanes not
             // shaded compute on stale values, masked off later).
             for i in 0..LANES {
@@ -229,10 +239,11 @@ impl PathTracer<'_, '_> {
                 &mut lights,
                 &mut l,
                 &beta,
-                dim,
                 &rev,
                 rng,
                 rays,
+                (u_pick, u_light),
+                (!last).then_some((dim + 3, &mut u_next)),
             );
             dim += 2;
             if last {
@@ -243,7 +254,8 @@ impl PathTracer<'_, '_> {
             }
             // Continue the path: Lambert's lobe alone (its choice's pair
             // skipped), cosine-distributed, in `Frame::from_normal(n)`.
-            let u = rng.lanes_2d(dim + 1, &rev);
+            // (Pair `dim + 1`, drawn inside `direct_lanes`.)
+            let u = u_next;
             dim += 2;
             let mut q: F = [0.0; LANES];
             let mut ended = [false; LANES];
@@ -320,8 +332,12 @@ impl PathTracer<'_, '_> {
 
     /// [`PathTracer::direct`] for the lanes in `shade`, its contribution
     /// `beta * L` added to `l`: emissive-triangle lights lane-parallel, the
-    /// others through [`PathTracer::direct_from`]. Draws pairs `dim` (the
-    /// light choice, skipped for one light) and `dim + 1`.
+    /// others through [`PathTracer::direct_from`]. `u_pick` and `u` are
+    /// the numbers of the light choice (pair `dim`, not drawn for one
+    /// light) and of the light sample (pair `dim + 1`); `next`, when set,
+    /// is a pair to draw into its array between the light gather and the
+    /// light sample (the path's next direction's, whose drawing hides the
+    /// gather's store latency).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn direct_lanes(
@@ -334,17 +350,12 @@ impl PathTracer<'_, '_> {
         lt: &mut LightLanes,
         l: &mut V3,
         beta: &V3,
-        dim: u32,
         rev: &[u32; LANES],
         rng: &mut SobolSampler,
         rays: &mut u64,
+        (u_pick, u): (F, [[f32; LANES]; 2]),
+        next: Option<(u32, &mut [[f32; LANES]; 2])>,
     ) {
-        let u_pick = if self.lights.len() > 1 {
-            rng.lanes_1d(dim, rev)
-        } else {
-            [0.0; LANES]
-        };
-        let u = rng.lanes_2d(dim + 1, rev);
         // Gather the chosen lights (lanes not gathered keep stale values,
         // computed on and then masked off).
         let mut ok = [false; LANES];
@@ -372,6 +383,12 @@ impl PathTracer<'_, '_> {
             lt.area[i] = tl.area;
             lt.two_sided[i] = tl.two_sided;
             lt.pick[i] = self.light_pick_pdf(li);
+        }
+        // The path's next pair, drawn here: independent work while the
+        // gather's stores drain (the lane loop below reads them as whole
+        // vectors, which cannot be forwarded from single-lane stores).
+        if let Some((d, u_next)) = next {
+            *u_next = rng.lanes_2d(d, rev);
         }
         // The light sample (`sample_tri_light`), the Lambert term
         // (`eval_brdf_cos`) and the MIS weight, lane-parallel.
