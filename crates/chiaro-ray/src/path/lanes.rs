@@ -443,7 +443,9 @@ impl PathTracer<'_, '_> {
             light_pdf.map(|lp| 1.0 / lp)
         };
         // Shadow rays, one at a time.
-        let mut lit = [false; LANES];
+        // (A bit mask, not a `[bool; LANES]`: the lane loop below would read
+        // eight one-byte stores as one load, which cannot be forwarded.)
+        let mut lit = 0u32;
         for i in set_lanes(&ok) {
             *rays += 1;
             // `Ray::segment(o, q)`, its `q - o` computed above.
@@ -452,13 +454,13 @@ impl PathTracer<'_, '_> {
                 dir: d_l.get(i),
                 ..Ray::segment(o, o)
             };
-            lit[i] = !self.accel.occluded(&shadow);
+            lit |= u32::from(!self.accel.occluded(&shadow)) << i;
         }
         // The unoccluded lanes' `beta * f * w`, lane-parallel.
         for i in 0..LANES {
             let (li, bt, f) = (l.at(i), beta.at(i), f_l.at(i));
             let sum: [f32; 3] = std::array::from_fn(|k| li[k] + bt[k] * (f[k] * w_l[i]));
-            l.put(i, if lit[i] { sum } else { li });
+            l.put(i, if lit >> i & 1 == 1 { sum } else { li });
         }
     }
 }
