@@ -49,6 +49,12 @@ static std::vector<char> load(const std::string& p) {
 }
 static double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 static double med(std::vector<double> v) { std::sort(v.begin(), v.end()); return v[v.size() / 2]; }
+// Lane k of a 16-ray packet from the recorded ray r (origin, direction, tnear, tfar).
+template <class Ray16> static void set_lane(Ray16& ray, int k, const float* r) {
+  ray.org_x[k] = r[0]; ray.org_y[k] = r[1]; ray.org_z[k] = r[2];
+  ray.dir_x[k] = r[3]; ray.dir_y[k] = r[4]; ray.dir_z[k] = r[5];
+  ray.tnear[k] = r[6]; ray.tfar[k] = r[7]; ray.mask[k] = -1; ray.flags[k] = 0; ray.time[k] = 0;
+}
 int main(int argc, char** argv) {
   std::string dir = argc > 1 ? argv[1] : ".";
   int reps = argc > 2 ? atoi(argv[2]) : 5;
@@ -88,10 +94,7 @@ int main(int argc, char** argv) {
       RTCIntersectContext ctx; rtcInitIntersectContext(&ctx); ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
       alignas(64) RTCRayHit16 rh; alignas(64) int valid[16];
       for (int k = 0; k < 16; k++) {
-        const float* r = c + 8 * (p + k); valid[k] = -1;
-        rh.ray.org_x[k] = r[0]; rh.ray.org_y[k] = r[1]; rh.ray.org_z[k] = r[2];
-        rh.ray.dir_x[k] = r[3]; rh.ray.dir_y[k] = r[4]; rh.ray.dir_z[k] = r[5];
-        rh.ray.tnear[k] = r[6]; rh.ray.tfar[k] = r[7]; rh.ray.mask[k] = -1; rh.ray.flags[k] = 0; rh.ray.time[k] = 0;
+        valid[k] = -1; set_lane(rh.ray, k, c + 8 * (p + k));
         rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID; rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
       }
       rtcIntersect16(valid, scene, &ctx, &rh);
@@ -102,10 +105,7 @@ int main(int argc, char** argv) {
       RTCIntersectContext ctx; rtcInitIntersectContext(&ctx); ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
       alignas(64) RTCRay16 ray; alignas(64) int valid[16];
       for (int k = 0; k < 16; k++) {
-        const float* r = s + 8 * (p + k); valid[k] = -1;
-        ray.org_x[k] = r[0]; ray.org_y[k] = r[1]; ray.org_z[k] = r[2];
-        ray.dir_x[k] = r[3]; ray.dir_y[k] = r[4]; ray.dir_z[k] = r[5];
-        ray.tnear[k] = r[6]; ray.tfar[k] = r[7]; ray.mask[k] = -1; ray.flags[k] = 0; ray.time[k] = 0;
+        valid[k] = -1; set_lane(ray, k, s + 8 * (p + k));
       }
       rtcOccluded16(valid, scene, &ctx, &ray);
       for (int k = 0; k < 16; k++) occ16 += ray.tfar[k] < 0;

@@ -1469,6 +1469,35 @@ mod tests {
     }
 
     #[test]
+    fn lock_step_kernel_with_only_an_environment() {
+        // No lights at all (the box's emitter made plain white, the front
+        // open): the environment lights the box through BSDF sampling, and
+        // the kernel still draws each bounce's pairs.
+        let mut s = mitsuba_cbox(12);
+        s.render.samples = 8;
+        let light = s.material_by_name("light").expect("the light").index();
+        s.materials[light].emission = Vec3::ZERO;
+        let env = s.add_texture(chiaro_core::scene::Texture::Image(
+            chiaro_core::scene::ImageTexture {
+                source: "env".into(),
+                width: 8,
+                height: 4,
+                texels: (0..32)
+                    .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
+                    .collect(),
+                wrap: chiaro_core::scene::WrapMode::Repeat,
+            },
+        ));
+        s.environment = Some(chiaro_core::scene::Environment {
+            texture: env,
+            intensity: 2.0,
+            rotate_y_degrees: 0.0,
+            as_background: true,
+        });
+        assert_kernels_agree(&s, "environment only");
+    }
+
+    #[test]
     fn lanes_pick_the_lights_the_scalar_pick_does() {
         // Counting CDF entries (up to 16 lights) and the binary search
         // (more) against `pick_light`, at and beside every CDF entry.

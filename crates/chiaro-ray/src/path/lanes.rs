@@ -359,11 +359,11 @@ impl PathTracer<'_, '_> {
         // Gather the chosen lights (lanes not gathered keep stale values,
         // computed on and then masked off).
         let mut ok = [false; LANES];
-        let Some(picked) = self.pick_lights(&u_pick) else {
-            return;
-        };
+        let picked = self.pick_lights(&u_pick);
         for i in set_lanes(shade) {
-            let li = picked[i] as usize;
+            let Some(li) = picked.map(|p| p[i] as usize) else {
+                break;
+            };
             let Some(tl) = &self.tri_lights[li] else {
                 // Not an emissive triangle: the scalar loop's code.
                 if let Some(m) = info[i] {
@@ -389,6 +389,10 @@ impl PathTracer<'_, '_> {
         // vectors, which cannot be forwarded from single-lane stores).
         if let Some((d, u_next)) = next {
             *u_next = rng.lanes_2d(d, rev);
+        }
+        if picked.is_none() {
+            // No lights: nothing to sample (the pair above is still drawn).
+            return;
         }
         // The light sample (`sample_tri_light`), the Lambert term
         // (`eval_brdf_cos`) and the MIS weight, lane-parallel.
