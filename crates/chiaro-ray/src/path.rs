@@ -199,6 +199,11 @@ struct PathTracer<'a, 's> {
     /// Sampling data of each light in `lights` that is an emissive triangle
     /// (`None` for the others, sampled through `sample_light`).
     tri_lights: Vec<Option<TriLight>>,
+    /// `tri_lights` without the `Option`s when every light is an emissive
+    /// triangle and there are at most `lanes::SELECT_LIGHTS` of them (the
+    /// lock-step kernel then gathers each lane's light by selects over
+    /// this list); empty otherwise.
+    select_lights: Vec<TriLight>,
     /// Light index (in `lights`) of each triangle, `NO_LIGHT` when it does not emit.
     triangle_light: Vec<u32>,
     /// Per-triangle geometry cached for the common untextured case.
@@ -436,7 +441,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 light_cdf[i] - prev
             })
             .collect();
-        let tri_lights = lights
+        let tri_lights: Vec<Option<TriLight>> = lights
             .iter()
             .map(|l| match l {
                 Light::Area {
@@ -522,6 +527,16 @@ impl<'a, 's> PathTracer<'a, 's> {
                 }
             })
             .collect();
+        let select_lights = if tri_lights.len() <= lanes::SELECT_LIGHTS {
+            tri_lights.iter().map_while(|t| *t).collect::<Vec<_>>()
+        } else {
+            Vec::new()
+        };
+        let select_lights = if select_lights.len() == tri_lights.len() {
+            select_lights
+        } else {
+            Vec::new()
+        };
         Self {
             prepared,
             accel,
@@ -529,6 +544,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             light_cdf,
             light_pick,
             tri_lights,
+            select_lights,
             triangle_light,
             tris,
             materials,
@@ -1466,6 +1482,56 @@ mod tests {
         light.geometry = Geometry::Mesh(mesh);
         light.transform = Default::default();
         assert_kernels_agree(&s, "one light");
+    }
+
+    #[test]
+    fn lock_step_kernel_with_several_triangle_lights() {
+        // The emitter as 3, 4 (gathered by selects over the lights, up to
+        // `lanes::SELECT_LIGHTS`), 5 and 9 triangles (gathered lane by
+        // lane) of unequal areas, so the picks differ between lights.
+        for n in [3u32, 4, 5, 9] {
+            let mut s = mitsuba_cbox(12);
+            s.render.samples = 9;
+            let mut positions = Vec::new();
+            let mut indices = Vec::new();
+            for k in 0..n {
+                let (x, w) = (-0.6 + 0.13 * k as f32, 0.05 + 0.02 * k as f32);
+                let base = positions.len() as u32;
+                positions.extend([
+                    Vec3::new(x, 0.98, -0.3),
+                    Vec3::new(x + w, 0.98, -0.3),
+                    Vec3::new(x, 0.98, 0.3),
+                ]);
+                indices.push([base, base + 2, base + 1]);
+            }
+            let mesh = s.add_mesh(chiaro_core::scene::Mesh {
+                name: "triangle lights".into(),
+                positions,
+                indices,
+                ..Default::default()
+            });
+            let light = s
+                .objects
+                .iter_mut()
+                .find(|o| o.name == "light")
+                .expect("the light");
+            light.geometry = Geometry::Mesh(mesh);
+            light.transform = Default::default();
+            let prepared = PreparedScene::new(&s, PrepareOptions::default());
+            let accel = bvh(&prepared);
+            let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render);
+            assert_eq!(tracer.lights.len(), n as usize, "{n} lights");
+            assert_eq!(
+                tracer.select_lights.len(),
+                if n as usize <= lanes::SELECT_LIGHTS {
+                    n as usize
+                } else {
+                    0
+                },
+                "{n} lights: the select list"
+            );
+            assert_kernels_agree(&s, &format!("{n} triangle lights"));
+        }
     }
 
     #[test]

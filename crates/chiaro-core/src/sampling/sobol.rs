@@ -197,15 +197,13 @@ impl SobolSampler {
         // The second dimension bit by bit (a table look-up per lane would
         // not vectorise): the XOR of the direction numbers of the set bits,
         // over the bits an index below `mask + 1` can have.
-        let bits = 32 - self.mask.leading_zeros();
-        let mut second = [0u32; LANES];
-        let mut rest = index;
-        for &v in SECOND_DIRECTIONS.iter().take(bits as usize) {
-            for (s, r) in second.iter_mut().zip(&mut rest) {
-                *s ^= 0u32.wrapping_sub(*r & 1) & v;
-                *r >>= 1;
-            }
-        }
+        // (A count of bits fixed at compile time, rounded up to a byte:
+        // the loop is then unrolled, and the bits past the mask are zero.)
+        let second = match 32 - self.mask.leading_zeros() {
+            0..=8 => second_lanes::<8>(index),
+            9..=16 => second_lanes::<16>(index),
+            _ => second_lanes::<32>(index),
+        };
         let mut out = [[0.0; LANES]; 2];
         for i in 0..LANES {
             out[0][i] = to_unit(laine_karras(index[i], keys.x).reverse_bits());
@@ -235,6 +233,21 @@ impl SobolSampler {
             None => self.hash_keys(dim),
         }
     }
+}
+
+/// The second Sobol dimension (bit-reversed) of each lane's `index`, whose
+/// bits from `BITS` up are zero: the XOR of the direction numbers of the
+/// set bits.
+#[inline(always)]
+fn second_lanes<const BITS: usize>(mut index: [u32; LANES]) -> [u32; LANES] {
+    let mut second = [0u32; LANES];
+    for &v in &SECOND_DIRECTIONS[..BITS] {
+        for (s, r) in second.iter_mut().zip(&mut index) {
+            *s ^= 0u32.wrapping_sub(*r & 1) & v;
+            *r >>= 1;
+        }
+    }
+    second
 }
 
 /// Samples drawn together by [`SobolSampler::lanes_2d`].
@@ -394,11 +407,12 @@ mod tests {
 
     #[test]
     fn lanes_draw_what_each_sample_draws() {
-        // Sample counts on both sides of the one-byte shortcuts.
-        for count in [5, 64, 300] {
+        // Sample counts on both sides of the one-byte shortcuts, and of the
+        // 8-, 16- and 32-bit unrolled second dimensions.
+        for count in [1, 5, 64, 256, 257, 300, 65_536, 70_000] {
             let mut lanes = SobolSampler::new(9, 4, 7, 0, count);
             lanes.set_pixel(4, 7);
-            for first in [0, 8, count - 3] {
+            for first in [0, 8, count.saturating_sub(3), count / 2 + 1] {
                 let rev = SobolSampler::lane_indices(first);
                 for dim in [0, 1, 5, 17] {
                     let two = lanes.lanes_2d(dim, &rev);

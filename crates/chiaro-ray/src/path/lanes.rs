@@ -37,6 +37,21 @@ use std::f32::consts::FRAC_1_PI;
 /// One `f32` per lane.
 type F = [f32; LANES];
 
+/// Lights up to which, when all are emissive triangles, the kernel gathers
+/// each lane's light by a select per light over all lanes (vector blends)
+/// rather than by storing the picked light's fields lane by lane (single
+/// lane stores that the light sample then reads back as vectors, a
+/// store-forwarding stall per field).
+pub(super) const SELECT_LIGHTS: usize = 4;
+
+/// `dst[i] = v` in the lanes where `m` is set.
+#[inline(always)]
+fn select<T: Copy>(dst: &mut [T; LANES], m: &[bool; LANES], v: T) {
+    for i in 0..LANES {
+        dst[i] = if m[i] { v } else { dst[i] };
+    }
+}
+
 /// A vector per lane, as three component arrays.
 #[derive(Clone, Copy, Default)]
 struct V3 {
@@ -65,6 +80,14 @@ impl V3 {
     #[inline(always)]
     fn put(&mut self, i: usize, v: [f32; 3]) {
         (self.x[i], self.y[i], self.z[i]) = (v[0], v[1], v[2]);
+    }
+
+    /// `v` in the lanes where `m` is set.
+    #[inline(always)]
+    fn select(&mut self, m: &[bool; LANES], v: Vec3) {
+        select(&mut self.x, m, v.x);
+        select(&mut self.y, m, v.y);
+        select(&mut self.z, m, v.z);
     }
 
     #[inline(always)]
@@ -360,7 +383,33 @@ impl PathTracer<'_, '_> {
         // computed on and then masked off).
         let mut ok = [false; LANES];
         let picked = self.pick_lights(&u_pick);
-        for i in set_lanes(shade) {
+        if let Some(p) = picked.filter(|_| !self.select_lights.is_empty()) {
+            // Every light an emissive triangle: select, light by light.
+            ok = *shade;
+            let (first, rest) = self.select_lights.split_first().expect("lights");
+            *lt = LightLanes {
+                a: V3::splat(first.a),
+                b: V3::splat(first.b),
+                c: V3::splat(first.c),
+                n: V3::splat(first.n),
+                le: V3::splat(first.le),
+                area: [first.area; LANES],
+                pick: [self.light_pick_pdf(0); LANES],
+                two_sided: [first.two_sided; LANES],
+            };
+            for (j, tl) in rest.iter().enumerate().map(|(j, tl)| (j + 1, tl)) {
+                let m: [bool; LANES] = std::array::from_fn(|i| p[i] == j as u32);
+                lt.a.select(&m, tl.a);
+                lt.b.select(&m, tl.b);
+                lt.c.select(&m, tl.c);
+                lt.n.select(&m, tl.n);
+                lt.le.select(&m, tl.le);
+                select(&mut lt.area, &m, tl.area);
+                select(&mut lt.two_sided, &m, tl.two_sided);
+                select(&mut lt.pick, &m, self.light_pick_pdf(j));
+            }
+        }
+        for i in set_lanes(shade).filter(|_| self.select_lights.is_empty()) {
             let Some(li) = picked.map(|p| p[i] as usize) else {
                 break;
             };
@@ -475,7 +524,12 @@ impl PathTracer<'_, '_> {
 /// kernel's mispredicted branches, cachegrind's branch simulation).
 #[inline(always)]
 fn set_lanes(m: &[bool; LANES]) -> impl Iterator<Item = usize> + use<> {
-    let mut bits = (0..LANES).fold(0u32, |b, i| b | (m[i] as u32) << i);
+    // The eight bytes (each 0 or 1) as one word; the multiply gathers
+    // byte `i`'s bit into bit `56 + i` (no two partial products overlap
+    // or carry), a load, a multiply and a shift.
+    const _: () = assert!(LANES == 8);
+    let bytes = u64::from_le_bytes(m.map(u8::from));
+    let mut bits = (bytes.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32;
     std::iter::from_fn(move || {
         (bits != 0).then(|| {
             let i = bits.trailing_zeros() as usize;
