@@ -194,16 +194,9 @@ impl SobolSampler {
     pub fn lanes_2d(&mut self, dim: u32, rev: &[u32; LANES]) -> [[f32; LANES]; 2] {
         let keys = self.keys_at(dim);
         let index = lane_indices_shuffled(rev, keys.shuffle, self.mask);
-        // The second dimension bit by bit (a table look-up per lane would
-        // not vectorise): the XOR of the direction numbers of the set bits,
-        // over the bits an index below `mask + 1` can have.
-        // (A count of bits fixed at compile time, rounded up to a byte:
-        // the loop is then unrolled, and the bits past the mask are zero.)
-        let second = match 32 - self.mask.leading_zeros() {
-            0..=8 => second_lanes::<8>(index),
-            9..=16 => second_lanes::<16>(index),
-            _ => second_lanes::<32>(index),
-        };
+        // The second dimension by word operations (a table look-up per
+        // lane would not vectorise).
+        let second = index.map(second_by_taylor_shift);
         let mut out = [[0.0; LANES]; 2];
         for i in 0..LANES {
             out[0][i] = to_unit(laine_karras(index[i], keys.x).reverse_bits());
@@ -235,19 +228,21 @@ impl SobolSampler {
     }
 }
 
-/// The second Sobol dimension (bit-reversed) of each lane's `index`, whose
-/// bits from `BITS` up are zero: the XOR of the direction numbers of the
-/// set bits.
+/// [`sobol_second_reversed`] in fifteen word operations and no table
+/// (which a lane loop can vectorise). The direction numbers are the powers
+/// `(1 + t)^k` over GF(2), bit `i` holding the coefficient of `t^i`, so
+/// the result is the index read as a polynomial `X(t)` and evaluated at
+/// `1 + t`. Splitting a block of `2h` coefficients as `A + t^h B`, with
+/// both halves already shifted, `X(1 + t) = A' + (1 + t^h) B'` (`h` a power
+/// of two): the high half stays and is added into the low half.
 #[inline(always)]
-fn second_lanes<const BITS: usize>(mut index: [u32; LANES]) -> [u32; LANES] {
-    let mut second = [0u32; LANES];
-    for &v in &SECOND_DIRECTIONS[..BITS] {
-        for (s, r) in second.iter_mut().zip(&mut index) {
-            *s ^= 0u32.wrapping_sub(*r & 1) & v;
-            *r >>= 1;
-        }
-    }
-    second
+fn second_by_taylor_shift(mut x: u32) -> u32 {
+    x ^= (x >> 1) & 0x5555_5555;
+    x ^= (x >> 2) & 0x3333_3333;
+    x ^= (x >> 4) & 0x0f0f_0f0f;
+    x ^= (x >> 8) & 0x00ff_00ff;
+    x ^= x >> 16;
+    x
 }
 
 /// Samples drawn together by [`SobolSampler::lanes_2d`].
@@ -263,9 +258,6 @@ fn lane_indices_shuffled(rev: &[u32; LANES], shuffle: u32, mask: u32) -> [u32; L
     }
     out
 }
-
-/// The direction numbers of the second Sobol dimension, bit-reversed.
-static SECOND_DIRECTIONS: [u32; 32] = second_directions();
 
 /// The shuffled sample index of [`SobolSampler::next_pair`]: the sample's
 /// reversed index `rev` scrambled with `shuffle`, reduced by `mask`.
@@ -382,6 +374,23 @@ mod tests {
             v ^= v << 1;
         }
         r
+    }
+
+    #[test]
+    fn taylor_shift_is_the_second_dimension() {
+        // Every index below 2^20, then a spread of larger ones.
+        let mut x = 0x9e37_79b9u32;
+        let large = (0..100_000).map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x
+        });
+        for i in (0..1u32 << 20).chain(large).chain([u32::MAX, 1 << 31]) {
+            let want = second_by_bits(i);
+            assert_eq!(second_by_taylor_shift(i), want, "index {i:#x}");
+            assert_eq!(sobol_second_reversed(i), want, "index {i:#x}");
+        }
     }
 
     #[test]
