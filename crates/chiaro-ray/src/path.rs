@@ -1464,14 +1464,25 @@ mod tests {
         // One emissive triangle: the light choice's pair is skipped.
         let mut s = mitsuba_cbox(12);
         s.render.samples = 9;
-        let mesh = s.add_mesh(chiaro_core::scene::Mesh {
-            name: "one-triangle light".into(),
-            positions: vec![
+        replace_emitter(
+            &mut s,
+            vec![
                 Vec3::new(-0.3, 0.98, -0.3),
                 Vec3::new(0.3, 0.98, -0.3),
                 Vec3::new(0.0, 0.98, 0.3),
             ],
-            indices: vec![[0, 1, 2]],
+            vec![[0, 1, 2]],
+        );
+        assert_kernels_agree(&s, "one light");
+    }
+
+    /// Mitsuba's box with its emitter (the object `light`) replaced by the
+    /// triangles `indices` of `positions`, in world space.
+    fn replace_emitter(s: &mut Scene, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) {
+        let mesh = s.add_mesh(chiaro_core::scene::Mesh {
+            name: "emitter triangles".into(),
+            positions,
+            indices,
             ..Default::default()
         });
         let light = s
@@ -1481,7 +1492,6 @@ mod tests {
             .expect("the light");
         light.geometry = Geometry::Mesh(mesh);
         light.transform = Default::default();
-        assert_kernels_agree(&s, "one light");
     }
 
     #[test]
@@ -1502,21 +1512,10 @@ mod tests {
                     Vec3::new(x + w, 0.98, -0.3),
                     Vec3::new(x, 0.98, 0.3),
                 ]);
-                indices.push([base, base + 2, base + 1]);
+                // (Counter-clockwise seen from below: facing down.)
+                indices.push([base, base + 1, base + 2]);
             }
-            let mesh = s.add_mesh(chiaro_core::scene::Mesh {
-                name: "triangle lights".into(),
-                positions,
-                indices,
-                ..Default::default()
-            });
-            let light = s
-                .objects
-                .iter_mut()
-                .find(|o| o.name == "light")
-                .expect("the light");
-            light.geometry = Geometry::Mesh(mesh);
-            light.transform = Default::default();
+            replace_emitter(&mut s, positions, indices);
             let prepared = PreparedScene::new(&s, PrepareOptions::default());
             let accel = bvh(&prepared);
             let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render);
