@@ -528,12 +528,9 @@ impl<'a, 's> PathTracer<'a, 's> {
             })
             .collect();
         let select_lights = if tri_lights.len() <= lanes::SELECT_LIGHTS {
-            tri_lights.iter().map_while(|t| *t).collect::<Vec<_>>()
-        } else {
-            Vec::new()
-        };
-        let select_lights = if select_lights.len() == tri_lights.len() {
-            select_lights
+            // (`None` if any light is not a triangle.)
+            let all: Option<Vec<TriLight>> = tri_lights.iter().copied().collect();
+            all.unwrap_or_default()
         } else {
             Vec::new()
         };

@@ -234,7 +234,8 @@ impl SobolSampler {
 /// the result is the index read as a polynomial `X(t)` and evaluated at
 /// `1 + t`. Splitting a block of `2h` coefficients as `A + t^h B`, with
 /// both halves already shifted, `X(1 + t) = A' + (1 + t^h) B'` (`h` a power
-/// of two): the high half stays and is added into the low half.
+/// of two): the high half stays and is added into the low half. (The
+/// scalar draws keep the table: one look-up below 256 samples.)
 #[inline(always)]
 fn second_by_taylor_shift(mut x: u32) -> u32 {
     x ^= (x >> 1) & 0x5555_5555;
@@ -416,8 +417,8 @@ mod tests {
 
     #[test]
     fn lanes_draw_what_each_sample_draws() {
-        // Sample counts on both sides of the one-byte shortcuts, and of the
-        // 8-, 16- and 32-bit unrolled second dimensions.
+        // Sample counts on both sides of the one-byte shortcuts, and indices
+        // of one, two and three bytes.
         for count in [1, 5, 64, 256, 257, 300, 65_536, 70_000] {
             let mut lanes = SobolSampler::new(9, 4, 7, 0, count);
             lanes.set_pixel(4, 7);

@@ -24,7 +24,7 @@
 // form LLVM vectorises, and clearer than a dozen zipped iterators.
 #![allow(clippy::needless_range_loop)]
 
-use super::{PathState, PathTracer};
+use super::{PathState, PathTracer, TriLight};
 use chiaro_core::accel::Hit;
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::sampling::sobol::LANES;
@@ -133,6 +133,49 @@ struct LightLanes {
     area: F,
     pick: F,
     two_sided: [bool; LANES],
+}
+
+impl LightLanes {
+    /// `tl` (chosen with probability `pick`) in every lane.
+    #[inline(always)]
+    fn splat(tl: &TriLight, pick: f32) -> Self {
+        Self {
+            a: V3::splat(tl.a),
+            b: V3::splat(tl.b),
+            c: V3::splat(tl.c),
+            n: V3::splat(tl.n),
+            le: V3::splat(tl.le),
+            area: [tl.area; LANES],
+            pick: [pick; LANES],
+            two_sided: [tl.two_sided; LANES],
+        }
+    }
+
+    /// `tl` in the lanes where `m` is set.
+    #[inline(always)]
+    fn select(&mut self, m: &[bool; LANES], tl: &TriLight, pick: f32) {
+        self.a.select(m, tl.a);
+        self.b.select(m, tl.b);
+        self.c.select(m, tl.c);
+        self.n.select(m, tl.n);
+        self.le.select(m, tl.le);
+        select(&mut self.area, m, tl.area);
+        select(&mut self.pick, m, pick);
+        select(&mut self.two_sided, m, tl.two_sided);
+    }
+
+    /// `tl` in lane `i`.
+    #[inline(always)]
+    fn set(&mut self, i: usize, tl: &TriLight, pick: f32) {
+        self.a.set(i, tl.a);
+        self.b.set(i, tl.b);
+        self.c.set(i, tl.c);
+        self.n.set(i, tl.n);
+        self.le.set(i, tl.le);
+        self.area[i] = tl.area;
+        self.pick[i] = pick;
+        self.two_sided[i] = tl.two_sided;
+    }
 }
 
 impl PathTracer<'_, '_> {
@@ -384,54 +427,34 @@ impl PathTracer<'_, '_> {
         let mut ok = [false; LANES];
         let picked = self.pick_lights(&u_pick);
         if let Some(p) = picked.filter(|_| !self.select_lights.is_empty()) {
-            // Every light an emissive triangle: select, light by light.
+            // Every light an emissive triangle: light 0 everywhere, then
+            // each other light selected into the lanes that picked it.
             ok = *shade;
+            let pick = |j: usize| self.light_pick_pdf(j);
             let (first, rest) = self.select_lights.split_first().expect("lights");
-            *lt = LightLanes {
-                a: V3::splat(first.a),
-                b: V3::splat(first.b),
-                c: V3::splat(first.c),
-                n: V3::splat(first.n),
-                le: V3::splat(first.le),
-                area: [first.area; LANES],
-                pick: [self.light_pick_pdf(0); LANES],
-                two_sided: [first.two_sided; LANES],
-            };
+            *lt = LightLanes::splat(first, pick(0));
             for (j, tl) in rest.iter().enumerate().map(|(j, tl)| (j + 1, tl)) {
                 let m: [bool; LANES] = std::array::from_fn(|i| p[i] == j as u32);
-                lt.a.select(&m, tl.a);
-                lt.b.select(&m, tl.b);
-                lt.c.select(&m, tl.c);
-                lt.n.select(&m, tl.n);
-                lt.le.select(&m, tl.le);
-                select(&mut lt.area, &m, tl.area);
-                select(&mut lt.two_sided, &m, tl.two_sided);
-                select(&mut lt.pick, &m, self.light_pick_pdf(j));
+                lt.select(&m, tl, pick(j));
             }
-        }
-        for i in set_lanes(shade).filter(|_| self.select_lights.is_empty()) {
-            let Some(li) = picked.map(|p| p[i] as usize) else {
-                break;
-            };
-            let Some(tl) = &self.tri_lights[li] else {
-                // Not an emissive triangle: the scalar loop's code.
-                if let Some(m) = info[i] {
-                    let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
-                    let u = Vec2::new(u[0][i], u[1][i]);
-                    let c = self.direct_from(li, vx.p.get(i), m, n, ng, wo, mis, u, rays);
-                    l.set(i, l.get(i) + beta.get(i) * c);
-                }
-                continue;
-            };
-            ok[i] = true;
-            lt.a.set(i, tl.a);
-            lt.b.set(i, tl.b);
-            lt.c.set(i, tl.c);
-            lt.n.set(i, tl.n);
-            lt.le.set(i, tl.le);
-            lt.area[i] = tl.area;
-            lt.two_sided[i] = tl.two_sided;
-            lt.pick[i] = self.light_pick_pdf(li);
+        } else {
+            for i in set_lanes(shade) {
+                let Some(li) = picked.map(|p| p[i] as usize) else {
+                    break;
+                };
+                let Some(tl) = &self.tri_lights[li] else {
+                    // Not an emissive triangle: the scalar loop's code.
+                    if let Some(m) = info[i] {
+                        let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
+                        let u = Vec2::new(u[0][i], u[1][i]);
+                        let c = self.direct_from(li, vx.p.get(i), m, n, ng, wo, mis, u, rays);
+                        l.set(i, l.get(i) + beta.get(i) * c);
+                    }
+                    continue;
+                };
+                ok[i] = true;
+                lt.set(i, tl, self.light_pick_pdf(li));
+            }
         }
         // The path's next pair, drawn here: independent work while the
         // gather's stores drain (the lane loop below reads them as whole
