@@ -8,6 +8,9 @@
 # keeps the faster render (the first of a process may pay one-off costs).
 # usage: benches/mitsuba_pairs.sh [PAIRS=9] [SPP=64]
 # needs what benches/mitsuba_cbox.sh needs ($MITSUBA_VENV, libllvm19).
+# CHIARO_TARGET_RUSTFLAGS, when set, builds chiaro with those flags for the
+# target only (e.g. "-C target-cpu=x86-64-v4 -C target-feature=-prefer-256-bit"
+# for the AVX-512 kernel; BENCHMARKS.md, session 14) into target/bench-flags.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 pairs=${1:-9}
@@ -15,8 +18,17 @@ spp=${2:-64}
 venv=${MITSUBA_VENV:-/tmp/mvenv}
 export DRJIT_LIBLLVM_PATH=${DRJIT_LIBLLVM_PATH:-/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1}
 profile=${CHIARO_PROFILE:-release}
-cargo build --profile "$profile" -q -p chiaro-ray --example path_bench
-bench=target/$profile/examples/path_bench
+if [ -n "${CHIARO_TARGET_RUSTFLAGS:-}" ]; then
+    # --target keeps build scripts native (they would not run otherwise
+    # where the flags name features the build machine lacks).
+    triple=$(rustc -vV | sed -n 's/^host: //p')
+    RUSTFLAGS="$CHIARO_TARGET_RUSTFLAGS" CARGO_TARGET_DIR=target/bench-flags \
+        cargo build --profile "$profile" -q -p chiaro-ray --example path_bench --target "$triple"
+    bench=target/bench-flags/$triple/$profile/examples/path_bench
+else
+    cargo build --profile "$profile" -q -p chiaro-ray --example path_bench
+    bench=target/$profile/examples/path_bench
+fi
 out=target/mitsuba-bench
 mkdir -p "$out"
 fastest() { grep -o 'render\[[0-9]*\]=[0-9.]*' "$1" | cut -d= -f2 | sort -n | head -1; }

@@ -18,7 +18,7 @@
 //!   Owen-scrambled Sobol dimension pair, so they stratify every decision
 //!   jointly; each draw is still uniform, so the estimator stays unbiased.
 //!
-//! - Paths are traced eight samples of a pixel at a time by the lock-step
+//! - Paths are traced sixteen samples of a pixel at a time by the lock-step
 //!   kernel in `path/lanes.rs` (vectorised where the vertices are
 //!   Lambertian, bit-identical to the scalar loop kept here as
 //!   [`Kernel::Scalar`]).
@@ -81,8 +81,8 @@ pub fn render_with(
 /// Which loop traces the paths. Both compute the same image, bit for bit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kernel {
-    /// The lock-step kernel (`path/lanes.rs`): a pixel's samples eight at
-    /// a time, vectorised where their vertices are Lambertian.
+    /// The lock-step kernel (`path/lanes.rs`): a pixel's samples sixteen
+    /// at a time, vectorised where their vertices are Lambertian.
     Lanes,
     /// One path at a time.
     Scalar,
@@ -1369,7 +1369,8 @@ mod tests {
     fn lock_step_kernel_equals_the_scalar_loop_on_a_diffuse_box() {
         // Sample counts below, at and between multiples of the lane count;
         // depths that end at the first vertex and before Russian roulette.
-        for (spp, max_depth, rr_depth) in [(8, 7, 5), (5, 7, 5), (13, 3, 1), (3, 1, 5)] {
+        let lanes = LANES as u32;
+        for (spp, max_depth, rr_depth) in [(lanes, 7, 5), (5, 7, 5), (lanes + 5, 3, 1), (3, 1, 5)] {
             let mut s = mitsuba_cbox(12);
             s.render.samples = spp;
             s.render.path.max_depth = max_depth;

@@ -246,8 +246,13 @@ fn second_by_taylor_shift(mut x: u32) -> u32 {
     x
 }
 
-/// Samples drawn together by [`SobolSampler::lanes_2d`].
-pub const LANES: usize = 8;
+/// Samples drawn together by [`SobolSampler::lanes_2d`], and so the path
+/// tracer's lock-step batch. Sixteen: an AVX-512 build runs each lane loop
+/// as one 512-bit instruction; on AVX2 the loops are two 256-bit halves,
+/// which took 1.3 % fewer instructions than eight lanes on Mitsuba's box
+/// (the per-batch set-up is shared by twice the samples) at the same time
+/// (BENCHMARKS.md, session 14).
+pub const LANES: usize = 16;
 
 /// [`shuffled_index`] per lane, with the full reversal (which vectorises;
 /// the byte table gives the same low bits).
@@ -422,7 +427,7 @@ mod tests {
         for count in [1, 5, 64, 256, 257, 300, 65_536, 70_000] {
             let mut lanes = SobolSampler::new(9, 4, 7, 0, count);
             lanes.set_pixel(4, 7);
-            for first in [0, 8, count.saturating_sub(3), count / 2 + 1] {
+            for first in [0, LANES as u32, count.saturating_sub(3), count / 2 + 1] {
                 let rev = SobolSampler::lane_indices(first);
                 for dim in [0, 1, 5, 17] {
                     let two = lanes.lanes_2d(dim, &rev);

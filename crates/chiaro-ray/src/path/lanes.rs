@@ -520,7 +520,7 @@ impl PathTracer<'_, '_> {
         };
         // Shadow rays, one at a time.
         // (A bit mask, not a `[bool; LANES]`: the lane loop below would read
-        // eight one-byte stores as one load, which cannot be forwarded.)
+        // one-byte stores as one load, which cannot be forwarded.)
         let mut lit = 0u32;
         for i in set_lanes(&ok) {
             *rays += 1;
@@ -547,12 +547,15 @@ impl PathTracer<'_, '_> {
 /// kernel's mispredicted branches, cachegrind's branch simulation).
 #[inline(always)]
 fn set_lanes(m: &[bool; LANES]) -> impl Iterator<Item = usize> + use<> {
-    // The eight bytes (each 0 or 1) as one word; the multiply gathers
+    // Each eight bytes (each 0 or 1) as one word; the multiply gathers
     // byte `i`'s bit into bit `56 + i` (no two partial products overlap
-    // or carry), a load, a multiply and a shift.
-    const _: () = assert!(LANES == 8);
-    let bytes = u64::from_le_bytes(m.map(u8::from));
-    let mut bits = (bytes.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32;
+    // or carry): a load, a multiply and a shift per eight lanes.
+    const _: () = assert!(LANES.is_multiple_of(8) && LANES <= 32);
+    let mut bits = 0u32;
+    for (k, eight) in m.chunks_exact(8).enumerate() {
+        let bytes = u64::from_le_bytes(std::array::from_fn(|j| u8::from(eight[j])));
+        bits |= ((bytes.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32) << (8 * k);
+    }
     std::iter::from_fn(move || {
         (bits != 0).then(|| {
             let i = bits.trailing_zeros() as usize;
