@@ -520,7 +520,8 @@ impl PathTracer<'_, '_> {
         };
         // Shadow rays, one at a time.
         // (A bit mask, not a `[bool; LANES]`: the lane loop below would read
-        // one-byte stores as one load, which cannot be forwarded.)
+        // several one-byte stores as one wider load, which cannot be
+        // forwarded.)
         let mut lit = 0u32;
         for i in set_lanes(&ok) {
             *rays += 1;
