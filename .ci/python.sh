@@ -1,14 +1,13 @@
 #!/usr/bin/env bash
 # CI for the Python module (crates/chiaro-py) and distributed rendering on Ray.
-# Called by .ci/run after the Rust tests, which leave the CLI binary
-# (target/debug/chiaro) and the test-profile build of the workspace behind.
+# Called by .ci/run after the Rust tests (`cargo test --release --workspace`),
+# whose release artefacts the wheel build reuses.
 #
 # Creates a virtual environment under target/, installs pinned maturin,
-# numpy, pytest and ray from PyPI, builds the module into it with the test
-# dev profile raised to the test profile's opt-level 2 (so it can reuse the
-# artifacts of `cargo test --workspace`; `--profile test` would build a test
-# harness, not a loadable library),
-# and runs pytest. Fails on any test failure and when no test ran (exit 5).
+# numpy, pytest and ray from PyPI, builds the abi3 wheel with maturin
+# (release profile, the workspace's x86-64-v3 target), installs that wheel
+# file with pip, and runs pytest. Fails on any test failure and when no test
+# ran (exit 5).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -23,11 +22,12 @@ fi
 "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
   "maturin==1.16.0" "numpy==2.4.6" "pytest==9.2.0" "ray==2.60.0"
 
-echo "== python: build the chiaro module (maturin develop)"
-(
-  export VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH"
-  CARGO_PROFILE_DEV_OPT_LEVEL=2 maturin develop -m crates/chiaro-py/Cargo.toml
-)
+echo "== python: build the abi3 wheel (maturin build --release) and pip install it"
+WHEELS="$PWD/target/python-ci-wheels"
+rm -rf "$WHEELS"
+"$VENV/bin/maturin" build --release -m crates/chiaro-py/Cargo.toml -o "$WHEELS"
+ls "$WHEELS"
+"$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$WHEELS"/chiaro-*-abi3-*.whl
 
 echo "== python: pytest"
 export RAY_USAGE_STATS_ENABLED=0

@@ -69,8 +69,8 @@ pub enum ToneMapArg {
 /// Options shared by every command that renders.
 #[derive(Debug, Args, Clone)]
 pub struct RenderOptions {
-    /// Technique: preview, flat, gouraud, phong, whitted, radiosity, hybrid, path
-    /// (only those built in are accepted; see `chiaro render --help`).
+    /// Technique: preview, flat, gouraud, phong, whitted, radiosity, hybrid or
+    /// path, in any case (default: the scene's `[render] technique`).
     #[arg(short, long)]
     pub technique: Option<String>,
     /// Image width in pixels.

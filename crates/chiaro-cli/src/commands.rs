@@ -2,8 +2,8 @@
 
 use crate::cli::{CompareArgs, PaletteArg, RenderArgs, RenderOptions, ToneMapArg};
 use anyhow::{Context, Result, anyhow};
-use chiaro::io::output::{OutputOptions, PaletteMode};
-use chiaro::scene::{Geometry, Light, Scene, Texture, ToneMap};
+use chiaro::io::output::{ImageFormat, OutputOptions, PaletteMode};
+use chiaro::scene::{Geometry, Scene, Texture, ToneMap};
 use chiaro::{RenderSettings, Technique};
 use std::path::Path;
 
@@ -16,24 +16,40 @@ fn load(path: &Path) -> Result<Scene> {
     Ok(loaded.scene)
 }
 
+/// A technique named on the command line (any case), or an error with a
+/// "did you mean" and the list.
+fn parse_technique(flag: &str, name: &str) -> Result<Technique> {
+    Technique::from_name(name).ok_or_else(|| {
+        let names = Technique::ALL.map(Technique::name);
+        anyhow!(
+            "{flag}: unknown technique `{name}`{} (available: {})",
+            chiaro::io::plain::suggestion(name, names),
+            chiaro::technique_list()
+        )
+    })
+}
+
+/// `value` when it is at least 1, else an error naming the flag.
+fn positive(flag: &str, value: Option<u32>) -> Result<Option<u32>> {
+    match value {
+        Some(0) => Err(anyhow!("{flag} must be at least 1, got 0")),
+        v => Ok(v),
+    }
+}
+
 /// The scene's settings with the command-line options applied.
 pub fn settings_from(scene: &Scene, opts: &RenderOptions) -> Result<RenderSettings> {
     let mut s = scene.render.clone();
     if let Some(t) = &opts.technique {
-        s.technique = Technique::from_name(t).ok_or_else(|| {
-            anyhow!(
-                "unknown technique `{t}` (available: {})",
-                chiaro::technique_list()
-            )
-        })?;
+        s.technique = parse_technique("--technique", t)?;
     }
-    if let Some(w) = opts.width {
+    if let Some(w) = positive("--width", opts.width)? {
         s.width = w;
     }
-    if let Some(h) = opts.height {
+    if let Some(h) = positive("--height", opts.height)? {
         s.height = h;
     }
-    if let Some(n) = opts.samples {
+    if let Some(n) = positive("--samples", opts.samples)? {
         s.samples = n;
     }
     if let Some(seed) = opts.seed {
@@ -49,8 +65,61 @@ pub fn settings_from(scene: &Scene, opts: &RenderOptions) -> Result<RenderSettin
     Ok(s)
 }
 
+/// Checks an output file before anything is rendered: its extension names a
+/// format chiaro writes, and its directory exists.
+fn check_output(path: &Path) -> Result<ImageFormat> {
+    let format = ImageFormat::from_path(path)?;
+    check_output_dir(path)?;
+    Ok(format)
+}
+
+/// An error unless `path`'s directory exists.
+fn check_output_dir(path: &Path) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        anyhow::bail!(
+            "{}: cannot write here: the directory {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// The render options that only apply to some output formats: an error for
+/// the ones that cannot be honoured, a warning for the ones that are ignored.
+fn check_output_options(args: &RenderArgs, format: ImageFormat) -> Result<()> {
+    let name = args.output.display();
+    if format != ImageFormat::Png {
+        if args.palette.is_some() {
+            anyhow::bail!("{name}: --palette writes an indexed PNG; use a .png file");
+        }
+        if args.png16 {
+            anyhow::bail!("{name}: --png16 needs a .png file");
+        }
+    }
+    if matches!(format, ImageFormat::Exr | ImageFormat::Hdr) {
+        for (given, flag) in [
+            (args.tonemap.is_some(), "--tonemap"),
+            (args.exposure.is_some(), "--exposure"),
+        ] {
+            if given {
+                eprintln!(
+                    "warning: {flag} does not apply to {name}: EXR and HDR files keep the linear radiance"
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// `chiaro render`.
 pub fn render(args: RenderArgs) -> Result<()> {
+    let format = check_output(&args.output)?;
+    check_output_options(&args, format)?;
     let scene = load(&args.scene)?;
     let mut settings = settings_from(&scene, &args.opts)?;
     if let Some(t) = args.tonemap {
@@ -135,6 +204,68 @@ fn band_colors(scene: &Scene) -> Vec<chiaro::Vec3> {
     scene.materials.iter().map(|m| m.diffuse).collect()
 }
 
+/// A number as a person writes it: at most four decimals, no trailing zeros
+/// (`1.9000001` is `1.9`).
+fn num(x: f32) -> String {
+    let t = format!("{x:.4}");
+    let t = t.trim_end_matches('0').trim_end_matches('.');
+    if t == "-0" { "0".into() } else { t.into() }
+}
+
+/// A point as `[x, y, z]` with [`num`]'s numbers.
+fn point(p: chiaro::Vec3) -> String {
+    format!("[{}, {}, {}]", num(p.x), num(p.y), num(p.z))
+}
+
+/// The word the scene file uses for a setting's value (`ray` for
+/// `ShadowMode::Ray`).
+fn word<T: serde::Serialize + std::fmt::Debug>(v: &T) -> String {
+    match serde_json::to_value(v) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => format!("{v:?}").to_lowercase(),
+    }
+}
+
+/// The scene's lights in the scene file's words, emissive meshes included
+/// (they light every technique, as area lights).
+fn light_list(s: &Scene) -> Vec<String> {
+    let mut lights: Vec<String> = s.lights.iter().map(|l| l.kind().to_string()).collect();
+    for o in &s.objects {
+        let Geometry::Mesh(id) = o.geometry else {
+            if s.materials
+                .get(o.material.index())
+                .is_some_and(|m| m.is_emissive())
+            {
+                lights.push(format!("emissive sphere `{}`", o.name));
+            }
+            continue;
+        };
+        let Some(mesh) = s.meshes.get(id.index()) else {
+            continue;
+        };
+        let emits = |m: chiaro::scene::MaterialId| {
+            s.materials.get(m.index()).is_some_and(|m| m.is_emissive())
+        };
+        let count = if mesh.face_materials.is_empty() {
+            if emits(o.material) {
+                mesh.indices.len()
+            } else {
+                0
+            }
+        } else {
+            mesh.face_materials.iter().filter(|&&m| emits(m)).count()
+        };
+        if count > 0 {
+            let plural = if count == 1 { "" } else { "s" };
+            lights.push(format!(
+                "emissive mesh `{}` ({count} triangle{plural})",
+                o.name
+            ));
+        }
+    }
+    lights
+}
+
 /// `chiaro info`.
 pub fn info(path: &Path) -> Result<()> {
     let loaded = chiaro::io::load_scene(path)?;
@@ -161,7 +292,7 @@ pub fn info(path: &Path) -> Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    let lights: Vec<&str> = s.lights.iter().map(Light::kind).collect();
+    let lights = light_list(s);
     println!("lights     {}: {}", lights.len(), lights.join(", "));
     let images = s
         .textures
@@ -173,19 +304,25 @@ pub fn info(path: &Path) -> Result<()> {
         s.textures.len(),
         s.textures.len() - images
     );
-    println!("bounds     {} .. {}", prepared.min, prepared.max);
+    println!(
+        "bounds     {} .. {}",
+        point(prepared.min),
+        point(prepared.max)
+    );
     let r = &s.render;
     println!(
-        "render     {} {}x{} {} spp, shadows {:?}",
+        "render     technique = {}, {}x{}, samples = {}, shadows = {}",
         r.technique.name(),
         r.width,
         r.height,
         r.samples,
-        r.shadows
+        word(&r.shadows)
     );
     println!(
-        "camera     eye {} look_at {} fov {}",
-        s.camera.eye, s.camera.look_at, s.camera.fov_y_degrees
+        "camera     eye = {}, look_at = {}, fov = {}",
+        point(s.camera.eye),
+        point(s.camera.look_at),
+        num(s.camera.fov_y_degrees)
     );
     for w in &loaded.warnings {
         println!("warning    {w}");
@@ -210,16 +347,13 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         .iter()
         .map(|t| t.trim())
         .filter(|t| !t.is_empty())
-        .map(|t| {
-            Technique::from_name(t).ok_or_else(|| {
-                anyhow!(
-                    "unknown technique `{t}` (available: {})",
-                    chiaro::technique_list()
-                )
-            })
-        })
+        .map(|t| parse_technique("--techniques", t))
         .collect::<Result<Vec<_>>>()?;
     let reference = chiaro::compare::ReferenceSpec::parse(&args.reference)?;
+    check_output(&args.output)?;
+    if let Some(report) = &args.report {
+        check_output_dir(report)?;
+    }
     let scene = load(&args.scene)?;
     let settings = settings_from(&scene, &args.opts)?;
     if let Some(n) = args.opts.threads {

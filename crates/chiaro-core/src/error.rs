@@ -8,8 +8,13 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum CoreError {
     /// A `key=value` override named no known setting.
-    #[error("unknown setting `{key}` (known: {known})")]
-    UnknownSetting { key: String, known: String },
+    #[error("unknown setting `{key}`{hint} (known: {known})")]
+    UnknownSetting {
+        key: String,
+        /// A "did you mean" for a near miss, or empty.
+        hint: String,
+        known: String,
+    },
     /// A setting was given a value of the wrong kind.
     #[error("setting `{key}`: {message}")]
     BadSetting { key: String, message: String },

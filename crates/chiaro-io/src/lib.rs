@@ -24,6 +24,7 @@ pub mod gltf_import;
 pub mod images;
 pub mod obj;
 pub mod output;
+pub mod plain;
 pub mod scene_toml;
 
 pub use error::{IoError, Result};

@@ -245,6 +245,20 @@ fn span_of<T>(v: &Opt<T>) -> Option<Range<usize>> {
     v.as_ref().map(Sp::span)
 }
 
+/// The key whose value starts at byte `at` of `text` (`width` in
+/// `width = "256"` or `{ c1 = "x" }`), for messages about the value.
+fn key_before(text: &str, at: usize) -> Option<&str> {
+    let before = text.get(..at)?;
+    let start = before.rfind(['\n', '{', ',']).map_or(0, |i| i + 1);
+    let (key, value) = before[start..].rsplit_once('=')?;
+    if !value.trim().is_empty() {
+        return None;
+    }
+    let key = key.trim().trim_matches(['"', '\'']);
+    let key = key.rsplit('.').next().unwrap_or(key).trim();
+    (!key.is_empty()).then_some(key)
+}
+
 impl Ctx<'_> {
     fn at(&self, span: Range<usize>, message: impl Into<String>) -> IoError {
         let (line, column) = line_col(self.text, span.start);
@@ -258,7 +272,8 @@ impl Ctx<'_> {
 
     fn toml_err(&self, e: &toml::de::Error) -> IoError {
         let span = e.span().unwrap_or(0..0);
-        self.at(span, e.message().trim().to_string())
+        let key = key_before(self.text, span.start);
+        self.at(span, crate::plain::plain_serde_message(e.message(), key))
     }
 
     /// Rejects the first present field that is not in `allowed`.

@@ -295,7 +295,10 @@ pub(crate) fn solve(
         roots: Vec::new(),
         eps: 0.0,
     };
-    progress.begin("radiosity hierarchical", max_iter as u64);
+    // The work is the solve after the first linking and after each of up
+    // to `REFINEMENTS` link refinements.
+    const REFINEMENTS: u64 = 6;
+    progress.begin("radiosity hierarchical", REFINEMENTS + 1);
     for (si, s) in mesh.sources.iter().enumerate() {
         let r = t.make_node(si as u32, s.p, 0);
         t.roots.push(r);
@@ -331,13 +334,18 @@ pub(crate) fn solve(
     }
     t.evaluate_links();
     t.iterate(tolerance, max_iter, p0, &mut stats, progress)?;
-    for _ in 0..6 {
+    progress.advance(1);
+    let mut rounds = 1;
+    for _ in 0..REFINEMENTS {
         if !t.refine_existing() {
             break;
         }
         t.evaluate_links();
         t.iterate(tolerance, max_iter, p0, &mut stats, progress)?;
+        progress.advance(1);
+        rounds += 1;
     }
+    progress.advance(REFINEMENTS + 1 - rounds);
     stats.nodes = t.el.len();
     stats.leaves = t.children.iter().filter(|c| c.is_none()).count();
     stats.links = t.links.iter().map(Vec::len).sum();

@@ -12,7 +12,7 @@
 use crate::formfactor::FormFactor;
 use crate::mesh::Element;
 use chiaro_core::error::CoreError;
-use chiaro_core::progress::Progress;
+use chiaro_core::progress::{Convergence, Progress};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -158,7 +158,7 @@ fn iterate(
         Sweep::Jacobi => "jacobi",
         Sweep::GaussSeidel => "gauss-seidel",
     };
-    progress.begin(&format!("radiosity {name}"), max_iter as u64);
+    let mut bar = Convergence::begin(progress, &format!("radiosity {name}"), tol);
     // Row j of the system: E_j + rho_j sum_i F_ji L_i.
     let gather = |j: usize, l: &[Vec3]| {
         let row = &m[j * n..(j + 1) * n];
@@ -188,7 +188,7 @@ fn iterate(
         };
         out.unshot = change / p0;
         out.iterations = it;
-        progress.advance(1);
+        bar.update(progress, out.unshot);
         progress.message(&format!(
             "{name}: iteration {it}, residual {:.3e}",
             out.unshot
@@ -197,6 +197,7 @@ fn iterate(
             break;
         }
     }
+    bar.finish(progress);
     out.l = l;
     Ok(out)
 }
@@ -229,7 +230,7 @@ pub(crate) fn progressive(
         return Ok(out);
     }
     let mut col = vec![0.0f32; n];
-    progress.begin("radiosity progressive", max_iter as u64);
+    let mut bar = Convergence::begin(progress, "radiosity progressive", tol);
     out.unshot = 1.0;
     for it in 1..=max_iter {
         if progress.cancelled() {
@@ -261,7 +262,7 @@ pub(crate) fn progressive(
                 *uj += d;
             });
         out.iterations = it;
-        progress.advance(1);
+        bar.update(progress, out.unshot);
         if it % 64 == 0 {
             progress.message(&format!(
                 "progressive: shot {it}, unshot energy {:.3e}",
@@ -269,6 +270,7 @@ pub(crate) fn progressive(
             ));
         }
     }
+    bar.finish(progress);
     // Ambient correction (Cohen et al. 1988, section 4).
     let area: f32 = elements.iter().map(|e| e.area).sum();
     if area > 0.0 {

@@ -15,7 +15,21 @@
 //! - `psnr`: `10 log10(1 / MSE)` dB, i.e. linear values with a peak of 1.0
 //!   (white of an unexposed, clamped image); infinite (JSON `null`) for an
 //!   image identical to the reference;
-//! - `mean_relative_error`: `mean(|a - r| / (r + 0.01))`, dimensionless.
+//! - `mean_relative_error`: `mean(|a - r| / (r + 0.01))`, dimensionless;
+//! - `relative_mse`: `mean((a - r)^2 / (r^2 + 0.01))`, the relMSE of
+//!   rendering papers: every pixel's error relative to its brightness.
+//!
+//! and on the **displayed** images (clamped to `[0, 1]`, sRGB-encoded, as
+//! an 8-bit PNG shows them), where emitters brighter than white cannot
+//! dominate:
+//! - `display_psnr`: PSNR of the displayed values, peak 1 (dB);
+//! - `flip`: the mean of ꟻLIP (Andersson et al. 2020, NVIDIA's perceptual
+//!   difference, LDR version, 67 pixels per degree), 0 = identical, 1 =
+//!   maximal; its per-pixel map is drawn on the contact sheet.
+//!
+//! Rank techniques by `relative_mse` or `flip`: linear RMSE and PSNR are
+//! dominated by the few pixels where the reference is brightest (the
+//! emitter's edge in a Cornell box).
 //!
 //! ```no_run
 //! use chiaro::compare::{compare, ReferenceSpec};
@@ -30,11 +44,11 @@
 //! ```
 
 use crate::{Error, Result, available_techniques, render_with_stats};
+use chiaro_core::Vec3;
 use chiaro_core::error::CoreError;
-use chiaro_core::film::Film;
-use chiaro_core::film::metrics;
+use chiaro_core::film::{Film, metrics, tonemap};
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::{RenderSettings, Scene, Technique};
+use chiaro_core::scene::{RenderSettings, Scene, Technique, ToneMap};
 use chiaro_io::output::{OutputOptions, read_image_as_film, write_atomically, write_film};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -149,6 +163,14 @@ pub struct Entry {
     pub psnr: f64,
     /// Mean relative error against the reference (dimensionless).
     pub mean_relative_error: f64,
+    /// Relative MSE against the reference (dimensionless).
+    pub relative_mse: f64,
+    /// PSNR of the displayed images in dB; infinite when they are identical.
+    pub display_psnr: f64,
+    /// Mean ꟻLIP error of the displayed images, in `[0, 1]`.
+    pub flip: f64,
+    /// The ꟻLIP error per pixel in the magma colour map (linear RGB).
+    pub flip_map: Film,
 }
 
 /// What happened with the reference cache.
@@ -186,6 +208,12 @@ pub struct TechniqueReport {
     pub psnr: Option<f64>,
     /// Mean relative error (dimensionless).
     pub mean_relative_error: f64,
+    /// Relative MSE (dimensionless).
+    pub relative_mse: f64,
+    /// PSNR of the displayed (clamped, sRGB) images in dB, `null` when identical.
+    pub display_psnr: Option<f64>,
+    /// Mean ꟻLIP error of the displayed images, 0 (identical) to 1.
+    pub flip: f64,
     /// Render time in seconds.
     pub seconds: f64,
     /// Samples per pixel it was rendered with.
@@ -248,6 +276,9 @@ impl Comparison {
                     rmse: e.rmse,
                     psnr: e.psnr.is_finite().then_some(e.psnr),
                     mean_relative_error: e.mean_relative_error,
+                    relative_mse: e.relative_mse,
+                    display_psnr: e.display_psnr.is_finite().then_some(e.display_psnr),
+                    flip: e.flip,
                     seconds: e.seconds,
                     samples: e.settings.samples,
                 })
@@ -265,15 +296,18 @@ impl Comparison {
     /// A Markdown table: one row per technique, then the reference.
     pub fn to_markdown(&self) -> String {
         let mut s = String::from(
-            "| technique | spp | seconds | RMSE | PSNR (dB) | mean rel. error |\n\
-             |---|---:|---:|---:|---:|---:|\n",
+            "| technique | spp | seconds | relMSE | FLIP | PSNR display (dB) | RMSE | PSNR (dB) | mean rel. error |\n\
+             |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for e in &self.entries {
             s += &format!(
-                "| {} | {} | {:.3} | {:.5} | {} | {:.4} |\n",
+                "| {} | {} | {:.3} | {:.5} | {:.4} | {} | {:.5} | {} | {:.4} |\n",
                 e.technique.name(),
                 e.settings.samples,
                 e.seconds,
+                e.relative_mse,
+                e.flip,
+                format_psnr(e.display_psnr),
                 e.rmse,
                 format_psnr(e.psnr),
                 e.mean_relative_error
@@ -281,7 +315,7 @@ impl Comparison {
         }
         let r = &self.reference;
         s += &format!(
-            "| {} (reference{}) | {} | {:.3} | - | - | - |\n",
+            "| {} (reference{}) | {} | {:.3} | - | - | - | - | - | - |\n",
             r.technique.name(),
             if matches!(self.cache, CacheStatus::Hit(_)) {
                 ", cached"
@@ -397,6 +431,60 @@ impl Progress for Labelled<'_> {
     }
 }
 
+/// ꟻLIP between the displayed images of `test` and `reference` (clamped,
+/// sRGB 8-bit, as [`metrics::display_channel`] shows them): the mean error
+/// in `[0, 1]` and the per-pixel error in the magma colour map, as linear
+/// RGB.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn flip(test: &Film, reference: &Film) -> Result<(f64, Film)> {
+    let map = flip_image(test, reference)?;
+    let (w, h) = (reference.width, reference.height);
+    let mean = f64::from(nv_flip::FlipPool::from_image(&map).mean());
+    let colours = map.apply_color_lut(&nv_flip::magma_lut()).to_vec();
+    let to_linear = tonemap::srgb8_to_linear_table();
+    let mut film = Film::new(w, h);
+    for (px, c) in film.color.iter_mut().zip(colours.chunks_exact(3)) {
+        *px = Vec3::new(
+            to_linear[c[0] as usize],
+            to_linear[c[1] as usize],
+            to_linear[c[2] as usize],
+        );
+    }
+    Ok((if mean.is_finite() { mean } else { 1.0 }, film))
+}
+
+/// The ꟻLIP error of every pixel (row by row, in `[0, 1]`) between the
+/// displayed images of `test` and `reference`, as [`flip`] computes it.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn flip_errors(test: &Film, reference: &Film) -> Result<Vec<f32>> {
+    Ok(flip_image(test, reference)?.to_vec())
+}
+
+fn flip_image(test: &Film, reference: &Film) -> Result<nv_flip::FlipImageFloat> {
+    if test.width != reference.width || test.height != reference.height {
+        return Err(Error::Core(CoreError::Unsupported(format!(
+            "cannot compare images of different sizes: {}x{} and {}x{}",
+            test.width, test.height, reference.width, reference.height
+        ))));
+    }
+    let (w, h) = (reference.width, reference.height);
+    let rgb8 = |f: &Film| -> Vec<u8> {
+        tonemap::to_srgb8(f, ToneMap::Clamp, 0.0)
+            .into_iter()
+            .flatten()
+            .collect()
+    };
+    Ok(nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(reference)),
+        nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(test)),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    ))
+}
+
 /// Measures `film` against `reference`.
 fn measure(
     technique: Technique,
@@ -405,11 +493,16 @@ fn measure(
     seconds: f64,
     reference: &Film,
 ) -> Result<Entry> {
+    let (flip_mean, flip_map) = flip(&film, reference)?;
     Ok(Entry {
         technique,
         rmse: metrics::rmse(&film, reference)?,
         psnr: metrics::psnr(&film, reference, 1.0)?,
         mean_relative_error: metrics::mean_relative_error(&film, reference)?,
+        relative_mse: metrics::relative_mse(&film, reference)?,
+        display_psnr: metrics::display_psnr(&film, reference)?,
+        flip: flip_mean,
+        flip_map,
         settings,
         film,
         seconds,

@@ -67,6 +67,7 @@ pub fn apply_override(
     if !known.iter().any(|k| k == key) && !known.iter().any(|k| k.starts_with(&format!("{key}."))) {
         return Err(CoreError::UnknownSetting {
             key: key.into(),
+            hint: chiaro_io::plain::suggestion(key, known.iter().map(String::as_str)),
             known: known.join(", "),
         });
     }
@@ -91,9 +92,15 @@ pub fn apply_override(
     }
     let leaf = parts[parts.len() - 1];
     table.insert(leaf.to_string(), parse_value(value));
-    let parsed: RenderSettings = toml::Value::Table(root)
-        .try_into()
-        .map_err(|e: toml::de::Error| bad(format!("cannot use `{value}`: {}", e.message())))?;
+    let parsed: RenderSettings =
+        toml::Value::Table(root)
+            .try_into()
+            .map_err(|e: toml::de::Error| {
+                bad(format!(
+                    "cannot use `{value}`: {}",
+                    chiaro_io::plain::plain_serde_message(e.message(), Some(leaf))
+                ))
+            })?;
     *settings = parsed;
     Ok(())
 }

@@ -15,7 +15,7 @@ use crate::compare::{CacheStatus, Comparison, Entry, format_psnr};
 use chiaro_core::Vec3;
 use chiaro_core::film::Film;
 use chiaro_core::film::metrics::{ErrorKind, difference_image, viridis};
-use chiaro_core::film::tonemap::tonemap_color;
+use chiaro_core::film::tonemap::{self, tonemap_color};
 use chiaro_core::scene::ToneMap;
 use chiaro_io::output::{OutputOptions, write_film};
 use std::path::Path;
@@ -34,7 +34,7 @@ pub const PAD: u32 = 4;
 /// Characters per label line (labels are cut to this width).
 pub const LABEL_CHARS: u32 = 18;
 /// Lines in a row's label strip.
-pub const LABEL_LINES: u32 = 6;
+pub const LABEL_LINES: u32 = 9;
 /// Lines of header text.
 pub const HEADER_LINES: u32 = 2;
 
@@ -398,13 +398,14 @@ pub fn text_scale(height: u32) -> u32 {
 }
 
 /// The size in pixels `(width, height)` of the sheet for `rows` images of
-/// `width` x `height`: a header, then per row the image, the error image
-/// and the label strip, separated and surrounded by [`PAD`].
+/// `width` x `height`: a header, then per row the image, the absolute error
+/// image, the ꟻLIP error image and the label strip, separated and
+/// surrounded by [`PAD`].
 pub fn sheet_size(width: u32, height: u32, rows: u32) -> (u32, u32) {
     let s = text_scale(height);
     let label_w = LABEL_CHARS * ADVANCE_X * s;
     let row_h = height.max(LABEL_LINES * LINE_HEIGHT * s);
-    let content_w = 2 * width + label_w + 2 * PAD;
+    let content_w = 3 * width + label_w + 3 * PAD;
     let header_w = header_chars() * ADVANCE_X * s;
     let w = content_w.max(header_w) + 2 * PAD;
     let h = PAD + header_height(s) + rows * (row_h + PAD);
@@ -477,7 +478,7 @@ pub fn contact_sheet(comparison: &Comparison, title: &str) -> Result<Sheet> {
     let line = LINE_HEIGHT * s;
     let chars = (sw - 2 * PAD) / (ADVANCE_X * s);
     draw_text(&mut film, PAD, PAD, &cut(title, chars), TEXT, s);
-    let caption = format!("error |a-ref| 0 .. {error_scale:.3}");
+    let caption = format!("|a-ref| 0 .. {error_scale:.3}; FLIP 0 .. 1");
     draw_text(
         &mut film,
         PAD,
@@ -486,11 +487,39 @@ pub fn contact_sheet(comparison: &Comparison, title: &str) -> Result<Sheet> {
         DIM_TEXT,
         s,
     );
+    // Colour bars over the error columns: viridis for |a - ref|, magma for FLIP.
     let bar_y = PAD + HEADER_LINES * line;
-    let bar_w = 2 * w + PAD;
-    for x in 0..bar_w {
-        let c = viridis(x as f32 / (bar_w - 1).max(1) as f32);
-        fill(&mut film, PAD + x, bar_y, 1, colour_bar_height(s), c);
+    for x in 0..w {
+        let c = viridis(x as f32 / (w - 1).max(1) as f32);
+        fill(
+            &mut film,
+            2 * PAD + w + x,
+            bar_y,
+            1,
+            colour_bar_height(s),
+            c,
+        );
+    }
+    let magma = nv_flip::magma_lut().to_vec();
+    let to_linear = tonemap::srgb8_to_linear_table();
+    let entries = (magma.len() / 3).max(1);
+    for x in 0..w {
+        let k = (x as usize * (entries - 1) / (w - 1).max(1) as usize).min(entries - 1);
+        let c = magma.get(3 * k..3 * k + 3).map_or(Vec3::ZERO, |c| {
+            Vec3::new(
+                to_linear[c[0] as usize],
+                to_linear[c[1] as usize],
+                to_linear[c[2] as usize],
+            )
+        });
+        fill(
+            &mut film,
+            3 * PAD + 2 * w + x,
+            bar_y,
+            1,
+            colour_bar_height(s),
+            c,
+        );
     }
 
     // One row per image.
@@ -507,7 +536,8 @@ pub fn contact_sheet(comparison: &Comparison, title: &str) -> Result<Sheet> {
             Some(error_scale),
         )?;
         blit(&mut film, &err.film, 2 * PAD + w, y, |c| c);
-        let lx = 3 * PAD + 2 * w;
+        blit(&mut film, &e.flip_map, 3 * PAD + 2 * w, y, |c| c);
+        let lx = 4 * PAD + 3 * w;
         let name = if i == 0 {
             let cached = if matches!(comparison.cache, CacheStatus::Hit(_)) {
                 " cached"
@@ -522,9 +552,12 @@ pub fn contact_sheet(comparison: &Comparison, title: &str) -> Result<Sheet> {
             (name, TEXT),
             (format!("{} spp", e.settings.samples), DIM_TEXT),
             (format!("{:.3} s", e.seconds), TEXT),
-            (format!("RMSE {:.5}", e.rmse), TEXT),
-            (format!("PSNR {} dB", format_psnr(e.psnr)), TEXT),
-            (format!("MRE  {:.4}", e.mean_relative_error), TEXT),
+            (format!("relMSE {:.5}", e.relative_mse), TEXT),
+            (format!("FLIP {:.4}", e.flip), TEXT),
+            (format!("PSNRd {} dB", format_psnr(e.display_psnr)), TEXT),
+            (format!("RMSE {:.5}", e.rmse), DIM_TEXT),
+            (format!("PSNR {} dB", format_psnr(e.psnr)), DIM_TEXT),
+            (format!("MRE  {:.4}", e.mean_relative_error), DIM_TEXT),
         ];
         for (k, (text, color)) in lines.iter().enumerate() {
             draw_text(

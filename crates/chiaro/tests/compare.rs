@@ -234,3 +234,93 @@ fn unavailable_techniques_and_bad_settings_fail() {
         .to_string();
     assert!(msg.contains("image size"), "{msg}");
 }
+
+/// The share of a per-pixel error sum that falls on `mask`ed pixels.
+fn share(errors: &[f64], mask: &[bool]) -> f64 {
+    let total: f64 = errors.iter().sum();
+    let masked: f64 = errors
+        .iter()
+        .zip(mask)
+        .filter(|(_, m)| **m)
+        .map(|(e, _)| e)
+        .sum();
+    if total > 0.0 { masked / total } else { 0.0 }
+}
+
+#[test]
+fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominating() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/cornell-box.toml");
+    let scene = chiaro::io::load_scene(path.as_ref()).expect("loads").scene;
+    let mut base = scene.render.clone();
+    base.width = 48;
+    base.height = 48;
+    base.samples = 4;
+    let reference = ReferenceSpec {
+        technique: Technique::Path,
+        samples: 256,
+    };
+    let c = compare(
+        &scene,
+        &base,
+        &[Technique::Phong, Technique::Radiosity],
+        &reference,
+        None,
+        &NoProgress,
+    )
+    .expect("compares");
+    let (phong, radiosity) = (&c.entries[0], &c.entries[1]);
+    // Radiosity is visibly the closest; the measures meant for ranking say so.
+    assert!(
+        radiosity.relative_mse < 0.5 * phong.relative_mse,
+        "{} {}",
+        radiosity.relative_mse,
+        phong.relative_mse
+    );
+    assert!(
+        radiosity.flip < 0.5 * phong.flip,
+        "{} {}",
+        radiosity.flip,
+        phong.flip
+    );
+    assert!(radiosity.display_psnr > phong.display_psnr + 3.0);
+    // The emitter: pixels where the reference is brighter than white.
+    let r = &c.reference.film;
+    let mask: Vec<bool> = r.color.iter().map(|c| c.max_element() > 1.0).collect();
+    let emitter = mask.iter().filter(|&&m| m).count();
+    assert!(emitter > 0 && emitter < mask.len() / 10, "{emitter}");
+    let per_pixel = |f: &dyn Fn(f32, f32) -> f64, film: &chiaro::Film| -> Vec<f64> {
+        film.color
+            .iter()
+            .zip(&r.color)
+            .map(|(a, b)| (0..3).map(|k| f(a[k], b[k])).sum())
+            .collect()
+    };
+    let sq = |a: f32, b: f32| f64::from(a - b).powi(2);
+    let rel = |a: f32, b: f32| f64::from(a - b).powi(2) / (f64::from(b).powi(2) + 0.01);
+    let disp = |a: f32, b: f32| {
+        use chiaro::film::metrics::display_channel;
+        f64::from(display_channel(a) - display_channel(b)).powi(2)
+    };
+    for e in [phong, radiosity] {
+        let flip: Vec<f64> = chiaro::compare::flip_errors(&e.film, r)
+            .expect("flip")
+            .into_iter()
+            .map(f64::from)
+            .collect();
+        let shares = [
+            share(&per_pixel(&sq, &e.film), &mask),
+            share(&per_pixel(&rel, &e.film), &mask),
+            share(&per_pixel(&disp, &e.film), &mask),
+            share(&flip, &mask),
+        ];
+        println!(
+            "{}: emitter pixels {emitter}/{}; share of MSE {:.3}, relMSE {:.3}, display MSE {:.3}, FLIP {:.3}",
+            e.technique.name(),
+            mask.len(),
+            shares[0],
+            shares[1],
+            shares[2],
+            shares[3]
+        );
+    }
+}

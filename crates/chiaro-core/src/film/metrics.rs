@@ -1,9 +1,13 @@
 //! Image metrics for comparing techniques: RMSE, PSNR, mean relative error,
-//! and a false-colour difference image.
+//! relative MSE, the MSE and PSNR of the displayed images, and a
+//! false-colour difference image.
 //!
-//! All metrics work on the films' **linear** colours (before exposure and
-//! tone mapping), over every channel of every pixel; `a` is the image under
-//! test and `b` the reference. Films must have the same size.
+//! The metrics work over every channel of every pixel; `a` is the image
+//! under test and `b` the reference, of the same size. RMSE, PSNR, the mean
+//! relative error and relative MSE read the films' **linear** colours
+//! (before exposure and tone mapping); `display_mse` and `display_psnr`
+//! read them as an 8-bit PNG shows them (clamped, sRGB-encoded), where an
+//! emitter far brighter than white cannot dominate.
 
 use super::Film;
 use super::tonemap::srgb_eotf;
@@ -95,6 +99,69 @@ pub fn mean_relative_error(a: &Film, b: &Film) -> Result<f64> {
         .map(|(p, q)| (p - q).abs() / (q + eps))
         .sum::<f64>()
         / n as f64)
+}
+
+/// Relative mean squared error over all channels,
+/// `mean((a - b)^2 / (b^2 + RELATIVE_EPSILON))` (Rousselle et al. 2011, the
+/// measure rendering papers report): each pixel's error relative to its own
+/// brightness, so a bright emitter's edge weighs as much as a dim wall.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn relative_mse(a: &Film, b: &Film) -> Result<f64> {
+    check_sizes(a, b)?;
+    let n = a.color.len() * 3;
+    if n == 0 {
+        return Ok(0.0);
+    }
+    let eps = f64::from(RELATIVE_EPSILON);
+    Ok(channels(a, b)
+        .map(|(p, q)| (p - q) * (p - q) / (q * q + eps))
+        .sum::<f64>()
+        / n as f64)
+}
+
+/// The displayed value of a linear channel: clamped to `[0, 1]` and
+/// sRGB-encoded, what an 8-bit PNG of the film shows (before quantising).
+#[inline]
+pub fn display_channel(x: f32) -> f32 {
+    super::tonemap::srgb_oetf(sanitize(Vec3::splat(x)).x.min(1.0))
+}
+
+/// Mean squared error of the **displayed** images ([`display_channel`]):
+/// what the eye compares on screen, where an emitter brighter than white is
+/// white in both images whatever its radiance.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn display_mse(a: &Film, b: &Film) -> Result<f64> {
+    check_sizes(a, b)?;
+    let n = a.color.len() * 3;
+    if n == 0 {
+        return Ok(0.0);
+    }
+    Ok(channels(a, b)
+        .map(|(p, q)| {
+            let d = f64::from(display_channel(p as f32)) - f64::from(display_channel(q as f32));
+            d * d
+        })
+        .sum::<f64>()
+        / n as f64)
+}
+
+/// PSNR of the displayed images ([`display_mse`]) in dB, peak 1 (white):
+/// the usual 8-bit PSNR up to quantisation. Identical displays give
+/// `f64::INFINITY`.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn display_psnr(a: &Film, b: &Film) -> Result<f64> {
+    let m = display_mse(a, b)?;
+    Ok(if m == 0.0 {
+        f64::INFINITY
+    } else {
+        -10.0 * m.log10()
+    })
 }
 
 /// Which per-pixel error the difference image shows.
@@ -257,6 +324,46 @@ mod tests {
         let z = flat(2, 2, Vec3::ZERO);
         let e = mean_relative_error(&flat(2, 2, Vec3::splat(0.001)), &z).unwrap_or(0.0);
         assert!((e - 0.1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn relative_mse_closed_form() {
+        let a = flat(2, 2, Vec3::splat(1.1));
+        let b = flat(2, 2, Vec3::splat(1.0));
+        let e = relative_mse(&a, &b).unwrap_or(0.0);
+        assert!((e - 0.01 / 1.01).abs() < 1e-6, "{e}");
+        // 10 % off counts about the same on a dim and on a bright pixel
+        // (0.02^2 / (0.04 + 0.01) and 2^2 / (400 + 0.01)).
+        let dim = relative_mse(
+            &flat(1, 1, Vec3::splat(0.22)),
+            &flat(1, 1, Vec3::splat(0.2)),
+        );
+        let bright = relative_mse(
+            &flat(1, 1, Vec3::splat(22.0)),
+            &flat(1, 1, Vec3::splat(20.0)),
+        );
+        let (dim, bright) = (dim.unwrap_or(0.0), bright.unwrap_or(0.0));
+        assert!(
+            dim > 0.008 && bright > 0.0099 && bright < 0.01,
+            "{dim} {bright}"
+        );
+    }
+
+    #[test]
+    fn display_metrics_see_what_the_screen_shows() {
+        // An emitter at 17 rendered at 15: both display as white.
+        let a = flat(2, 2, Vec3::splat(17.0));
+        let b = flat(2, 2, Vec3::splat(15.0));
+        assert!((rmse(&a, &b).unwrap_or(0.0) - 2.0).abs() < 1e-6);
+        assert_eq!(display_mse(&a, &b).ok(), Some(0.0));
+        assert_eq!(display_psnr(&a, &b).ok(), Some(f64::INFINITY));
+        // 0.5 against 0.4 linear: sRGB 0.7354 against 0.6653.
+        let d = display_mse(&flat(1, 1, Vec3::splat(0.5)), &flat(1, 1, Vec3::splat(0.4)))
+            .unwrap_or(0.0);
+        let expect = (0.735_357_f64 - 0.665_185).powi(2);
+        assert!((d - expect).abs() < 1e-5, "{d}");
+        let p = display_psnr(&flat(1, 1, Vec3::splat(0.5)), &flat(1, 1, Vec3::splat(0.4)));
+        assert!((p.unwrap_or(0.0) + 10.0 * expect.log10()).abs() < 1e-3);
     }
 
     #[test]

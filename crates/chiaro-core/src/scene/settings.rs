@@ -64,9 +64,12 @@ impl Technique {
         }
     }
 
-    /// Parses a technique name.
+    /// Parses a technique name, ignoring case and surrounding spaces.
     pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|t| t.name() == name)
+        let name = name.trim();
+        Self::ALL
+            .into_iter()
+            .find(|t| t.name().eq_ignore_ascii_case(name))
     }
 }
 

@@ -404,6 +404,9 @@ def compare(
     samples per pixel), like ``chiaro compare``. Returns the report as a
     dict: ``scene`` (``name``), ``width``, ``height``, ``psnr_convention``,
     ``reference`` and one entry per technique in ``techniques`` with
+    ``relative_mse`` and ``flip`` (the measures to rank by: errors relative
+    to each pixel's brightness, and NVIDIA's perceptual FLIP of the
+    displayed images), ``display_psnr`` (dB of the clamped sRGB images),
     ``rmse``, ``psnr`` (dB, ``None`` when identical), ``mean_relative_error``,
     ``seconds`` and ``samples``."""
     native = getattr(_chiaro, "compare", None)
