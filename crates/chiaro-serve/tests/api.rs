@@ -40,7 +40,7 @@ fn raw(addr: SocketAddr, request: &[u8]) -> String {
 fn get(addr: SocketAddr, path: &str) -> String {
     raw(
         addr,
-        format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes(),
+        format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\n\r\n").as_bytes(),
     )
 }
 
@@ -121,9 +121,13 @@ fn http_routes_and_bad_requests() {
     );
     assert!(get(addr, "/../../etc/passwd").starts_with("HTTP/1.1 404"));
     assert!(get(addr, "/scenes/cornell-box.toml").starts_with("HTTP/1.1 404"));
-    assert!(raw(addr, b"POST / HTTP/1.1\r\nContent-Length: 0\r\n\r\n").starts_with("HTTP/1.1 405"));
+    let post = format!("POST / HTTP/1.1\r\nHost: {addr}\r\nContent-Length: 0\r\n\r\n");
+    assert!(raw(addr, post.as_bytes()).starts_with("HTTP/1.1 405"));
     assert!(raw(addr, b"\x00\x01 garbage \xff\r\n\r\n").starts_with("HTTP/1.1 400"));
-    let huge = format!("GET / HTTP/1.1\r\nX: {}\r\n\r\n", "a".repeat(40_000));
+    let huge = format!(
+        "GET / HTTP/1.1\r\nHost: {addr}\r\nX: {}\r\n\r\n",
+        "a".repeat(40_000)
+    );
     assert!(raw(addr, huge.as_bytes()).starts_with("HTTP/1.1 431"));
     assert!(
         get(addr, "/ws").starts_with("HTTP/1.1 400"),
@@ -251,7 +255,10 @@ fn closing_the_tab_mid_render_cancels_it_and_the_server_goes_on() {
     }
     // A raw TCP close right after the upgrade, without a close frame.
     let mut s = TcpStream::connect(addr).expect("connect");
-    s.write_all(b"GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n").expect("write");
+    let handshake = format!(
+        "GET /ws HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    );
+    s.write_all(handshake.as_bytes()).expect("write");
     let mut buf = [0u8; 256];
     let n = s.read(&mut buf).expect("read");
     let reply = String::from_utf8_lossy(&buf[..n]);
