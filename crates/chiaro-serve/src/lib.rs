@@ -2,11 +2,14 @@
 //!
 //! [`serve`] loads the scene it is given and serves, on loopback unless a
 //! host is named, a plain HTML/JS/CSS page (embedded in the binary, no build
-//! step) that renders the scene with any technique, shows bands as they
-//! arrive over a WebSocket, orbits the camera (low resolution while moving,
-//! full resolution when still), puts two techniques side by side with the
-//! difference image and the error numbers of `chiaro compare`, and saves
-//! PNG or EXR. See [`protocol`] for the messages.
+//! step) that starts on the scene's technique and renders it with any
+//! other, shows bands as they arrive over a WebSocket, orbits the camera
+//! (drafts while it moves: half resolution, one sample per pixel and per
+//! area light; then a quick full-size pass and full quality when it stops),
+//! puts two techniques side by side with the difference image and the
+//! error numbers of `chiaro compare`, and saves PNG or EXR. `?still=1`
+//! renders one full-quality picture and then sets `data-ready` on the
+//! page's `<body>`, for screenshots. See [`protocol`] for the messages.
 //!
 //! The server reads no path from the page (only the scene given at start),
 //! refuses sizes and sample counts beyond [`Limits`], and treats a closed

@@ -3,12 +3,13 @@
 //! one before it), and the session loop that owns the WebSocket and sleeps
 //! on one channel fed by both until there is something to do.
 
-use crate::protocol::{FrameHeader, Job, Request, encode_frame, make_job};
+use crate::protocol::{FrameHeader, Job, Request, draft_settings, encode_frame, make_job};
 use crate::tev::render_in_bands;
 use crate::{ConnGuard, Phase, State};
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film};
-use chiaro::{Film, Progress, Technique};
+use chiaro::{Film, Progress, RenderSettings, Scene, Technique};
 use chiaro_core::film::metrics;
+use chiaro_radiosity::RadiositySolution;
 use serde_json::json;
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream};
@@ -163,6 +164,7 @@ impl Session<'_> {
                     height,
                     orbit,
                     progressive,
+                    refine,
                     views,
                 }) => match make_job(
                     &self.state.scene,
@@ -172,6 +174,7 @@ impl Session<'_> {
                     height,
                     orbit,
                     progressive,
+                    refine,
                     &views,
                 ) {
                     Ok(job) => {
@@ -316,6 +319,7 @@ struct Finished {
 
 fn worker(state: &State, rx: &Receiver<Command>, out: &SyncSender<Event>) {
     let mut finished = Finished::default();
+    let mut solutions = SolutionCache::default();
     while let Ok(first) = rx.recv() {
         // Only the newest render matters; saves are answered in order.
         let mut pending = vec![first];
@@ -329,7 +333,7 @@ fn worker(state: &State, rx: &Receiver<Command>, out: &SyncSender<Event>) {
         for (i, cmd) in pending.into_iter().enumerate() {
             let ok = match cmd {
                 Command::Render(job, flag) if Some(i) == last_render => {
-                    render_job(state, &job, &flag, out, &mut finished)
+                    render_job(&job, &flag, out, &mut finished, &mut solutions)
                 }
                 Command::Render(..) => true,
                 Command::Save { view, format } => save(state, &finished, view, &format, out),
@@ -383,100 +387,203 @@ impl From<chiaro::Error> for Stop {
     }
 }
 
+/// The radiosity solution last solved on this connection, keyed by what it
+/// depends on (the scene's geometry, materials and lights, and the
+/// radiosity settings; not the camera), so that orbiting a radiosity or
+/// hybrid render does not solve again.
+#[derive(Default)]
+struct SolutionCache {
+    cached: Option<((u64, String), RadiositySolution)>,
+    /// Solutions solved on this connection (reported in `done`).
+    solves: u64,
+}
+
+impl SolutionCache {
+    /// [`chiaro::render_with_stats`], reusing the cached solution for the
+    /// techniques that solve radiosity.
+    fn render(
+        &mut self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<(Film, chiaro::RenderStats), chiaro::Error> {
+        if !matches!(settings.technique, Technique::Radiosity | Technique::Hybrid) {
+            return chiaro::render_with_stats(scene, settings, progress);
+        }
+        chiaro::check_settings(settings)?;
+        let key = (
+            chiaro_radiosity::fingerprint(scene, 0.0),
+            serde_json::to_string(&settings.radiosity).unwrap_or_default(),
+        );
+        let solution = match self.cached.take() {
+            Some((k, solution)) if k == key => solution,
+            _ => {
+                let solution = chiaro_radiosity::solve(scene, settings, progress)?;
+                self.solves += 1;
+                solution
+            }
+        };
+        let start = Instant::now();
+        let result = if settings.technique == Technique::Hybrid {
+            chiaro::hybrid::render_with_solution(scene, solution.clone(), settings, progress)
+                .map(|(film, stats)| (film, stats.rays))
+        } else {
+            chiaro_radiosity::render_solution(scene, &solution, settings, progress)
+                .map(|film| (film, 0))
+        };
+        self.cached = Some((key, solution));
+        let (film, rays) = result?;
+        let stats = chiaro::RenderStats {
+            elapsed: start.elapsed(),
+            triangles: scene.triangle_count() as u64,
+            rays,
+        };
+        Ok((film, stats))
+    }
+}
+
+/// Renders one view, sending its picture (in bands when `progressive` and
+/// the technique supports it).
+fn render_view(
+    job: &Job,
+    view: usize,
+    scene: &Scene,
+    settings: &RenderSettings,
+    progressive: bool,
+    progress: &dyn Progress,
+    out: &SyncSender<Event>,
+    solutions: &mut SolutionCache,
+) -> Result<(Film, chiaro::RenderStats), Stop> {
+    let start = Instant::now();
+    let opts = png_opts(settings);
+    let mut first_band = true;
+    let mut send_band = |film: &Film, y0: u32, y1: u32| -> Result<(), Stop> {
+        let png = band_png(film, y0, y1, &opts).map_err(|m| {
+            Stop::Render(chiaro::Error::Core(
+                chiaro_core::error::CoreError::Unsupported(m),
+            ))
+        })?;
+        let header = FrameHeader {
+            kind: "tile",
+            id: job.id,
+            view,
+            x: 0,
+            y: y0,
+            w: film.width,
+            h: y1 - y0,
+            width: film.width,
+            height: film.height,
+            name: String::new(),
+        };
+        if first_band {
+            first_band = false;
+            let m = json!({"type": "first", "id": job.id, "view": view,
+                "ms": start.elapsed().as_secs_f64() * 1e3});
+            if !text(out, m) {
+                return Err(Stop::Closed);
+            }
+        }
+        send(out, Message::binary(encode_frame(&header, &png)))
+            .then_some(())
+            .ok_or(Stop::Closed)
+    };
+    let solves = matches!(settings.technique, Technique::Radiosity | Technique::Hybrid);
+    if progressive && !solves {
+        render_in_bands(scene, settings, progress, &mut send_band)
+    } else {
+        let (film, stats) = solutions.render(scene, settings, progress)?;
+        send_band(&film, 0, film.height)?;
+        Ok((film, stats))
+    }
+}
+
 /// Renders every view of `job`, sending bands, `done` messages and, for two
-/// views, the difference image and metrics. Returns false when the
-/// connection has gone.
+/// views, the difference image and metrics; with `refine`, a quick draft
+/// pass of every view first. Returns false when the connection has gone.
 fn render_job(
-    _state: &State,
     job: &Job,
     flag: &Arc<AtomicBool>,
     out: &SyncSender<Event>,
     finished: &mut Finished,
+    solutions: &mut SolutionCache,
 ) -> bool {
     let progress = JobProgress(Arc::clone(flag));
-    let mut films = Vec::new();
-    for (view, (scene, settings)) in job.scenes.iter().zip(&job.settings).enumerate() {
-        let start = Instant::now();
-        let opts = png_opts(settings);
-        let mut first_band = true;
-        let mut send_band = |film: &Film, y0: u32, y1: u32| -> Result<(), Stop> {
-            let png = band_png(film, y0, y1, &opts).map_err(|m| {
-                Stop::Render(chiaro::Error::Core(
-                    chiaro_core::error::CoreError::Unsupported(m),
-                ))
-            })?;
-            let header = FrameHeader {
-                kind: "tile",
-                id: job.id,
+    let draft: Vec<RenderSettings> = job.settings.iter().map(draft_settings).collect();
+    let passes: Vec<&[RenderSettings]> = if job.refine && draft != job.settings {
+        vec![&draft, &job.settings]
+    } else {
+        vec![&job.settings]
+    };
+    for (k, pass) in passes.iter().enumerate() {
+        let last = k + 1 == passes.len();
+        if passes.len() > 1
+            && !text(
+                out,
+                json!({"type": "pass", "id": job.id, "pass": k + 1, "of": passes.len()}),
+            )
+        {
+            return false;
+        }
+        let mut films = Vec::new();
+        for (view, (scene, settings)) in job.scenes.iter().zip(pass.iter()).enumerate() {
+            let start = Instant::now();
+            let progressive = job.progressive && last;
+            match render_view(
+                job,
                 view,
-                x: 0,
-                y: y0,
-                w: film.width,
-                h: y1 - y0,
-                width: film.width,
-                height: film.height,
-                name: String::new(),
-            };
-            if first_band {
-                first_band = false;
-                let m = json!({"type": "first", "id": job.id, "view": view,
-                    "ms": start.elapsed().as_secs_f64() * 1e3});
-                if !text(out, m) {
-                    return Err(Stop::Closed);
+                scene,
+                settings,
+                progressive,
+                &progress,
+                out,
+                solutions,
+            ) {
+                Ok((film, stats)) => {
+                    if last {
+                        let m = json!({
+                            "type": "done", "id": job.id, "view": view,
+                            "technique": settings.technique.name(),
+                            "width": settings.width, "height": settings.height,
+                            "samples": settings.samples,
+                            "light_samples": settings.light_samples,
+                            "ms": start.elapsed().as_secs_f64() * 1e3,
+                            "render_ms": stats.elapsed.as_secs_f64() * 1e3,
+                            "rays": stats.rays, "triangles": stats.triangles,
+                            "radiosity_solves": solutions.solves,
+                        });
+                        if !text(out, m) {
+                            return false;
+                        }
+                    }
+                    films.push(film);
+                }
+                Err(Stop::Closed) => return false,
+                Err(Stop::Render(chiaro::Error::Core(
+                    chiaro_core::error::CoreError::Cancelled,
+                ))) => {
+                    return true;
+                }
+                Err(Stop::Render(e)) => {
+                    return text(
+                        out,
+                        json!({"type": "error", "id": job.id, "view": view, "message": e.to_string()}),
+                    );
                 }
             }
-            send(out, Message::binary(encode_frame(&header, &png)))
-                .then_some(())
-                .ok_or(Stop::Closed)
-        };
-        let result = if job.progressive {
-            render_in_bands(scene, settings, &progress, &mut send_band)
-        } else {
-            chiaro::render_with_stats(scene, settings, &progress)
-                .map_err(Stop::from)
-                .and_then(|(film, stats)| {
-                    send_band(&film, 0, film.height)?;
-                    Ok((film, stats))
-                })
-        };
-        match result {
-            Ok((film, stats)) => {
-                let m = json!({
-                    "type": "done", "id": job.id, "view": view,
-                    "technique": settings.technique.name(),
-                    "width": settings.width, "height": settings.height,
-                    "samples": settings.samples,
-                    "ms": start.elapsed().as_secs_f64() * 1e3,
-                    "render_ms": stats.elapsed.as_secs_f64() * 1e3,
-                    "rays": stats.rays, "triangles": stats.triangles,
-                });
-                if !text(out, m) {
-                    return false;
-                }
-                films.push(film);
-            }
-            Err(Stop::Closed) => return false,
-            Err(Stop::Render(chiaro::Error::Core(chiaro_core::error::CoreError::Cancelled))) => {
+            if flag.load(Ordering::Relaxed) {
                 return true;
             }
-            Err(Stop::Render(e)) => {
-                return text(
-                    out,
-                    json!({"type": "error", "id": job.id, "view": view, "message": e.to_string()}),
-                );
+        }
+        if last {
+            for (i, film) in films.iter().enumerate() {
+                if let Some(s) = job.settings.get(i) {
+                    finished.films[i] = Some((film.clone(), s.clone()));
+                }
+            }
+            if films.len() == 2 {
+                return send_comparison(job, &films[0], &films[1], out);
             }
         }
-        if flag.load(Ordering::Relaxed) {
-            return true;
-        }
-    }
-    for (i, film) in films.iter().enumerate() {
-        if let Some(s) = job.settings.get(i) {
-            finished.films[i] = Some((film.clone(), s.clone()));
-        }
-    }
-    if films.len() == 2 {
-        return send_comparison(job, &films[0], &films[1], out);
     }
     true
 }
