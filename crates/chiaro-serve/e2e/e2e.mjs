@@ -146,6 +146,8 @@ try {
   check("drafts are drawn while dragging", drafts >= 1,
     `(${drafts} draft frames of the split view in ${dragMs} ms, ${(1000 * drafts / dragMs).toFixed(1)} fps)`);
   id = await waitDone(id);
+  const pass = await page.evaluate(() => window.chiaro.pass);
+  check("the still camera is refined in two passes", pass === 2, `(last pass ${pass})`);
   const yaw = await page.evaluate(() => window.chiaro.orbit.yaw);
   const orbited = await pixels();
   let od = 0;

@@ -13,6 +13,7 @@ const params = new URLSearchParams(location.search);
 const DRAFT_SCALE = 0.5;
 const state = {
   still: params.get("still") === "1", queued: null, connecting: false, pass: 0,
+  queue: Promise.resolve(),
   info: null, ws: null, nextId: 1, sentId: 0, inFlight: false, pending: null,
   orbit: { yaw: 0, pitch: 0, zoom: 1 }, dragging: false, lastPos: null,
   stillTimer: null, done: 0, framesMoving: 0, moveStart: 0, firstMs: null,
@@ -80,6 +81,7 @@ function send(msg) {
   // Two views also bring a metrics message (after both are done).
   state.expectedViews = msg.views.length === 2 ? 3 : 1;
   state.firstMs = null;
+  state.pass = 0;
   setStatus(`rendering ${msg.width}x${msg.height}…`, "rendering");
   state.ws.send(JSON.stringify(msg));
 }
@@ -169,9 +171,11 @@ function connect() {
     const q = state.queued; state.queued = null;
     if (q) send(q); else request(false);
   };
+  // Messages are handled strictly in order: a frame is decoded
+  // asynchronously, and the "done" after it must wait until it is drawn.
   ws.onmessage = (e) => {
-    if (typeof e.data === "string") onText(JSON.parse(e.data));
-    else onFrame(e.data);
+    const handle = typeof e.data === "string" ? () => onText(JSON.parse(e.data)) : () => onFrame(e.data);
+    state.queue = state.queue.then(handle).catch((err) => setStatus(String(err), "error"));
   };
   ws.onclose = (e) => {
     const wasOpen = state.ws === ws;
