@@ -22,7 +22,10 @@ else
 fi
 
 echo "== web: build chiaro and the serve example"
-cargo build -p chiaro-cli -p chiaro-serve --example serve
+# Release, as the tests are built: a debug radiosity solve takes minutes.
+# Two commands: `--example` would apply to both packages and skip the CLI.
+cargo build --release -p chiaro-cli
+cargo build --release -p chiaro-serve --example serve
 
 echo "== web: chromium"
 if [ ! -x /usr/bin/chromium ]; then

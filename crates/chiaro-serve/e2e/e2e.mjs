@@ -2,8 +2,8 @@
 // chromium driven by playwright-core). Usage, from the repository root:
 //   node crates/chiaro-serve/e2e/e2e.mjs [OUT_DIR]
 // Environment: CHIARO_SERVE (a command serving SCENE: default
-// target/debug/chiaro serve if it exists, else target/debug/examples/serve),
-// CHIARO_CLI (default target/debug/chiaro), CHROMIUM (default /usr/bin/chromium).
+// target/release/chiaro serve if it exists, else target/release/examples/serve),
+// CHIARO_CLI (default target/release/chiaro), CHROMIUM (default /usr/bin/chromium).
 import { spawn, spawnSync } from "node:child_process";
 import { existsSync, mkdirSync, readFileSync } from "node:fs";
 import { join, resolve } from "node:path";
@@ -13,7 +13,7 @@ const out = resolve(process.argv[2] || "/tmp/chiaro-e2e");
 mkdirSync(out, { recursive: true });
 const scene = join(root, "scenes/cornell-box.toml");
 const chromiumPath = process.env.CHROMIUM || "/usr/bin/chromium";
-const cli = process.env.CHIARO_CLI || join(root, "target/debug/chiaro");
+const cli = process.env.CHIARO_CLI || join(root, "target/release/chiaro");
 let passed = 0, failed = 0;
 
 function check(name, ok, detail) {
@@ -30,7 +30,7 @@ const { chromium } = await import("playwright-core");
 function serverCommand() {
   if (process.env.CHIARO_SERVE) return process.env.CHIARO_SERVE.split(" ");
   if (existsSync(cli) && spawnSync(cli, ["serve", "--help"]).status === 0) return [cli, "serve"];
-  return [join(root, "target/debug/examples/serve")];
+  return [join(root, "target/release/examples/serve")];
 }
 
 // Start the server on a free port (port 0) and read the URL it prints.
@@ -62,10 +62,17 @@ try {
   };
   let id = await waitDone(0);
   check("first picture arrives", true, `(${Date.now() - t0} ms from navigation)`);
+  const sceneTechnique = await page.evaluate(() => window.chiaro.info.technique);
+  const firstCap = await page.textContent("#cap-0");
+  check("starts on the scene's technique", firstCap.startsWith(sceneTechnique), `(${firstCap})`);
   const pixels = () => page.evaluate(() => {
     const c = document.getElementById("canvas-0");
     return { w: c.width, h: c.height, d: Array.from(c.getContext("2d").getImageData(0, 0, c.width, c.height).data) };
   });
+  if (sceneTechnique !== "phong") {
+    await page.selectOption("#view-a select[name=technique]", "phong");
+    id = await waitDone(id);
+  }
   const phong = await pixels();
   const mean = (p) => p.d.reduce((a, v, i) => (i % 4 === 3 ? a : a + v), 0) / (p.w * p.h * 3);
   check("phong picture is not blank", mean(phong) > 10, `(mean ${mean(phong).toFixed(1)})`);
@@ -94,8 +101,9 @@ try {
 
   // A CLI render of the same view, compared loosely with the screenshot.
   const refPath = join(out, "cli-whitted.png");
+  const samplesA = await page.inputValue("#view-a input[name=samples]");
   const r = spawnSync(cli, ["render", scene, "-t", "whitted", "--width", String(whitted.w),
-    "--height", String(whitted.h), "--samples", "1", "-o", refPath], { stdio: "inherit" });
+    "--height", String(whitted.h), "--samples", String(samplesA), "-o", refPath], { stdio: "inherit" });
   if (r.status !== 0) {
     check("CLI render for the comparison", false, `(${cli} exited ${r.status})`);
   } else {
@@ -127,9 +135,19 @@ try {
   const box = await page.locator("#canvas-0").boundingBox();
   await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
   await page.mouse.down();
-  for (let i = 1; i <= 10; i++) await page.mouse.move(box.x + box.width / 2 + i * 12, box.y + box.height / 2 + i * 3);
+  const dragStart = Date.now();
+  for (let i = 1; i <= 10; i++) {
+    await page.mouse.move(box.x + box.width / 2 + i * 12, box.y + box.height / 2 + i * 3);
+    await page.waitForTimeout(60);
+  }
+  const drafts = await page.evaluate(() => window.chiaro.framesMoving);
+  const dragMs = Date.now() - dragStart;
   await page.mouse.up();
+  check("drafts are drawn while dragging", drafts >= 1,
+    `(${drafts} draft frames of the split view in ${dragMs} ms, ${(1000 * drafts / dragMs).toFixed(1)} fps)`);
   id = await waitDone(id);
+  const pass = await page.evaluate(() => window.chiaro.pass);
+  check("the still camera is refined in two passes", pass === 2, `(last pass ${pass})`);
   const yaw = await page.evaluate(() => window.chiaro.orbit.yaw);
   const orbited = await pixels();
   let od = 0;
@@ -137,6 +155,39 @@ try {
   od /= orbited.w * orbited.h * 3;
   check("dragging orbits the camera", yaw !== 0 && od > 1.0, `(yaw ${yaw.toFixed(2)}, mean |diff| ${od.toFixed(2)})`);
   await page.screenshot({ path: join(out, "page-orbit.png") });
+
+  // A still for screenshots, at 1280x800: ?still=1 renders full quality once
+  // and sets data-ready; the split view with the difference image must fit.
+  const still = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+  await still.goto(`${url}?still=1&split=1&technique=phong`);
+  await still.waitForFunction(() => document.body.dataset.ready === "1", null, { timeout: 120000 });
+  const shot = await still.screenshot({ path: join(out, "still-split-1280x800.png") });
+  const boxes = {};
+  for (const c of ["canvas-0", "canvas-1", "canvas-diff"]) boxes[c] = await still.locator(`#${c}`).boundingBox();
+  const d = boxes["canvas-diff"];
+  check("split view fits 1280x800 with the difference image", d && d.x + d.width <= 1280 && d.y + d.height <= 800,
+    `(difference image at ${d && [d.x, d.y, d.width, d.height].map(Math.round).join(",")})`);
+  // The screenshot itself shows pictures, not the black placeholder canvas.
+  const stats = await still.evaluate(async ([b64, boxes]) => {
+    const img = await createImageBitmap(await (await fetch(`data:image/png;base64,${b64}`)).blob());
+    const c = new OffscreenCanvas(img.width, img.height), g = c.getContext("2d");
+    g.drawImage(img, 0, 0);
+    const out = {};
+    for (const [name, b] of Object.entries(boxes)) {
+      const px = g.getImageData(Math.round(b.x), Math.round(b.y), Math.round(b.width), Math.round(b.height)).data;
+      let sum = 0, sq = 0, n = 0;
+      for (let i = 0; i < px.length; i += 4) { const v = (px[i] + px[i + 1] + px[i + 2]) / 3; sum += v; sq += v * v; n++; }
+      const mean = sum / n;
+      out[name] = { mean, sd: Math.sqrt(Math.max(0, sq / n - mean * mean)) };
+    }
+    return out;
+  }, [shot.toString("base64"), boxes]);
+  for (const [name, st] of Object.entries(stats)) {
+    check(`screenshot shows ${name}`, st.mean > 5 && st.sd > 3, `(mean ${st.mean.toFixed(1)}, sd ${st.sd.toFixed(1)})`);
+  }
+  const stillStatus = await still.textContent("#status");
+  check("the still is not 'rendering'", !/rendering|refining/.test(stillStatus), `(${stillStatus})`);
+  await still.close();
 } catch (e) {
   check("browser session", false, String(e));
 } finally {

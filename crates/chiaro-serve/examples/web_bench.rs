@@ -5,6 +5,11 @@
 //! UV spheres of ~5000 triangles).
 //!
 //! `cargo run --release -p chiaro-serve --example web_bench -- [frames]`
+//!
+//! `... -- [frames] orbit`: only the Cornell box in phong while orbiting,
+//! as the page asks: frames per second of the drafts (one sample per pixel
+//! and per area light), against full-quality frames, and the time to the
+//! quick pass and to full quality of a refining render once it stops.
 
 use chiaro::Vec3;
 use chiaro::scene::{Attenuation, Camera, Geometry, Light, Material, Object, Scene, Transform};
@@ -131,6 +136,82 @@ fn bench(name: &str, scene: Scene, frames: usize) {
     }
 }
 
+/// Frames per second of orbiting frames of `views` at `w`x`h`.
+fn orbit_fps(ws: &mut Ws, w: u32, h: u32, views: &Value, frames: usize) -> f64 {
+    round_trip(
+        ws,
+        &json!({"type": "render", "id": 1, "width": w, "height": h, "views": views}),
+    );
+    let t = Instant::now();
+    for i in 0..frames {
+        let req = json!({"type": "render", "id": 10 + i, "width": w, "height": h,
+            "orbit": {"yaw": i as f32 * 0.05, "pitch": 0.0, "zoom": 1.0}, "views": views});
+        round_trip(ws, &req);
+    }
+    frames as f64 / t.elapsed().as_secs_f64()
+}
+
+/// Sends a refining request and returns (ms to the end of pass 1, ms to done).
+fn refine_times(ws: &mut Ws, w: u32, h: u32, views: &Value) -> (f64, f64) {
+    let t = Instant::now();
+    let req = json!({"type": "render", "id": 999, "width": w, "height": h,
+        "refine": true, "progressive": true, "views": views});
+    ws.send(Message::text(req.to_string())).expect("send");
+    let mut pass1 = None;
+    loop {
+        if let Message::Text(txt) = ws.read().expect("read") {
+            let v: Value = serde_json::from_str(txt.as_str()).expect("json");
+            match v["type"].as_str() {
+                Some("pass") if v["pass"] == 2 => {
+                    pass1 = Some(t.elapsed().as_secs_f64() * 1e3);
+                }
+                Some("done") => {
+                    let all = t.elapsed().as_secs_f64() * 1e3;
+                    return (pass1.unwrap_or(all), all);
+                }
+                Some("error") => panic!("{v}"),
+                _ => {}
+            }
+        }
+    }
+}
+
+fn orbit_bench(scene: Scene, frames: usize) {
+    let (w, h, spp, ls) = (
+        scene.render.width,
+        scene.render.height,
+        scene.render.samples,
+        scene.render.light_samples,
+    );
+    let opts = ServeOptions {
+        port: 0,
+        ..ServeOptions::default()
+    };
+    let server = Server::bind_scene(scene, "cornell-box", &opts).expect("bind");
+    let addr = server.local_addr().expect("addr");
+    std::thread::spawn(move || server.run());
+    let (mut ws, _) = tungstenite::connect(format!("ws://{addr}/ws")).expect("connect");
+    println!("| frames | size | samples per pixel / per area light | frames per second |");
+    println!("| --- | --- | --- | --- |");
+    let full = json!([{"technique": "phong", "samples": 1}]);
+    let fps = orbit_fps(&mut ws, w, h, &full, frames.min(5));
+    println!("| whole frames (before) | {w}x{h} | 1 / {ls} | {fps:.1} |");
+    let draft = json!([{"technique": "phong", "samples": 1, "light_samples": 1}]);
+    let fps = orbit_fps(&mut ws, w, h, &draft, frames);
+    println!("| drafts | {w}x{h} | 1 / 1 | {fps:.1} |");
+    let fps = orbit_fps(&mut ws, w / 2, h / 2, &draft, frames);
+    println!(
+        "| drafts (the page's, half size) | {}x{} | 1 / 1 | {fps:.1} |",
+        w / 2,
+        h / 2
+    );
+    let scene_quality = json!([{"technique": "phong", "samples": spp}]);
+    let (pass1, done) = refine_times(&mut ws, w, h, &scene_quality);
+    println!(
+        "\nRefining at {w}x{h} once the camera stops: quick pass (1 / 1) after {pass1:.0} ms, full quality ({spp} / {ls}) after {done:.0} ms"
+    );
+}
+
 fn main() {
     let frames = std::env::args()
         .nth(1)
@@ -138,6 +219,10 @@ fn main() {
         .unwrap_or(20);
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.toml");
     let cornell = chiaro::io::load_scene(&root).expect("cornell box").scene;
+    if std::env::args().nth(2).as_deref() == Some("orbit") {
+        orbit_bench(cornell, frames);
+        return;
+    }
     println!(
         "| scene | technique | first picture (low res) | first band / whole (full res) | interactive preview |"
     );

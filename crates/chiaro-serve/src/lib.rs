@@ -2,23 +2,47 @@
 //!
 //! [`serve`] loads the scene it is given and serves, on loopback unless a
 //! host is named, a plain HTML/JS/CSS page (embedded in the binary, no build
-//! step) that renders the scene with any technique, shows bands as they
-//! arrive over a WebSocket, orbits the camera (low resolution while moving,
-//! full resolution when still), puts two techniques side by side with the
-//! difference image and the error numbers of `chiaro compare`, and saves
-//! PNG or EXR. See [`protocol`] for the messages.
+//! step) that starts on the scene's technique and renders it with any
+//! other, shows bands as they arrive over a WebSocket, orbits the camera
+//! (drafts while it moves: half resolution, one sample per pixel and per
+//! area light; then a quick full-size pass and full quality when it stops),
+//! puts two techniques side by side with the difference image and the
+//! error numbers of `chiaro compare`, and saves PNG or EXR. `?still=1`
+//! renders one full-quality picture and then sets `data-ready` on the
+//! page's `<body>`, for screenshots. See [`protocol`] for the messages.
 //!
 //! The server reads no path from the page (only the scene given at start),
-//! refuses sizes and sample counts beyond [`Limits`], caps the number of
-//! connections, times out slow requests, and treats a closed tab or a
-//! malformed request as that connection's problem only.
+//! refuses sizes and sample counts beyond [`Limits`], and treats a closed
+//! tab or a malformed request as that connection's problem only. Its
+//! defences, each set in [`ServeOptions`]:
+//!
+//! - **A deadline per request**, not per read: the whole request head (and
+//!   the WebSocket handshake) must arrive within `head_timeout` (10 s), or
+//!   the connection gets `408` and is closed, however it trickles.
+//! - **An idle timeout for WebSockets**: a session with no message from the
+//!   page and no render running for `idle_timeout` (5 min) is closed (the
+//!   page reconnects when next used). An idle session sleeps on a channel;
+//!   it wakes only for bytes from the page or frames from its renderer.
+//! - **Connection caps**: at most `max_per_address` (32) connections from
+//!   one client address and `max_connections` (128) in all. A connection
+//!   over a cap takes the place of the oldest one that is only waiting (a
+//!   request head still arriving, or an idle WebSocket); when every one is
+//!   busy it gets `503`. So slow or idle clients can never lock out a
+//!   working one.
+//! - **`Host` and `Origin` checks**: every request's `Host` and a
+//!   WebSocket handshake's `Origin` (when sent: browsers always send it)
+//!   must name the address served (`localhost` or an IP address, with its
+//!   port); others get `403`. This stops other web sites from driving
+//!   renders through the user's browser (cross-site WebSocket hijacking)
+//!   and DNS-rebinding pages from reading the viewer.
 //!
 //! [`tev`] streams a render to a running tev viewer (pbrt-v4's
 //! `--display-server`).
 //!
 //! HTTP requests are parsed with `httparse` and WebSockets framed with
 //! `tungstenite` (the handshake's accept key from its
-//! `derive_accept_key`); each connection has its own thread.
+//! `derive_accept_key`); each connection has its own thread, and a
+//! WebSocket also a reader and a render thread.
 
 pub mod protocol;
 mod session;
@@ -27,12 +51,13 @@ pub mod tev;
 pub use protocol::Limits;
 
 use chiaro::Scene;
+use std::collections::HashMap;
 use std::io::{Read, Write};
-use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, TcpStream};
+use std::net::{IpAddr, Ipv4Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::path::Path;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Duration;
+use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 use thiserror::Error;
 
 /// The page, its script and its style, embedded at compile time.
@@ -42,6 +67,10 @@ const STYLE_CSS: &str = include_str!("../static/style.css");
 
 /// Largest HTTP request head accepted, bytes.
 const MAX_HEAD_BYTES: usize = 16 * 1024;
+
+/// How long one write to a client may block before the connection is
+/// dropped (a client that stops reading).
+const WRITE_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// What can go wrong starting the server.
 #[derive(Debug, Error)]
@@ -75,6 +104,14 @@ pub struct ServeOptions {
     pub limits: Limits,
     /// Most simultaneous connections (HTTP and WebSocket together).
     pub max_connections: usize,
+    /// Most simultaneous connections from one client IP address.
+    pub max_per_address: usize,
+    /// Time allowed for a whole request head (or WebSocket handshake) to
+    /// arrive, from the connection's acceptance.
+    pub head_timeout: Duration,
+    /// A WebSocket with no message from the page and no render running for
+    /// this long is closed.
+    pub idle_timeout: Duration,
 }
 
 impl Default for ServeOptions {
@@ -83,7 +120,10 @@ impl Default for ServeOptions {
             host: "127.0.0.1".into(),
             port: 8080,
             limits: Limits::default(),
-            max_connections: 32,
+            max_connections: 128,
+            max_per_address: 32,
+            head_timeout: Duration::from_secs(10),
+            idle_timeout: Duration::from_secs(300),
         }
     }
 }
@@ -100,14 +140,172 @@ pub fn parse_host(host: &str) -> Result<IpAddr, ServeError> {
     host.parse().map_err(|_| ServeError::BadHost(host.into()))
 }
 
+/// Whether a `Host` header value (`name[:port]`) names the address `served`:
+/// `localhost` when serving loopback or every interface, the served IP
+/// address, any loopback address when serving loopback, any IP address when
+/// serving every interface; always with the served port (80 when absent).
+/// Host names other than `localhost` are refused, which defeats DNS
+/// rebinding (a foreign name resolving to this machine).
+pub fn host_allowed(host: &str, served: SocketAddr) -> bool {
+    let host = host.trim();
+    let (name, port) = if let Some(rest) = host.strip_prefix('[') {
+        let Some((inside, after)) = rest.split_once(']') else {
+            return false;
+        };
+        let port = match after {
+            "" => None,
+            p => match p.strip_prefix(':') {
+                Some(p) => Some(p),
+                None => return false,
+            },
+        };
+        (inside, port)
+    } else {
+        match host.rsplit_once(':') {
+            Some((n, p)) => (n, Some(p)),
+            None => (host, None),
+        }
+    };
+    let port = match port {
+        None => 80,
+        Some(p) => match p.parse::<u16>() {
+            Ok(p) => p,
+            Err(_) => return false,
+        },
+    };
+    if port != served.port() {
+        return false;
+    }
+    let ip = served.ip();
+    if name.eq_ignore_ascii_case("localhost") {
+        return ip.is_loopback() || ip.is_unspecified();
+    }
+    match name.parse::<IpAddr>() {
+        Ok(asked) => {
+            asked == ip || ip.is_unspecified() || (ip.is_loopback() && asked.is_loopback())
+        }
+        Err(_) => false,
+    }
+}
+
+/// Whether a WebSocket handshake's `Origin` header (absent for clients that
+/// are not browsers) is the viewer's own page: `http://` and a host that
+/// [`host_allowed`] accepts.
+pub fn origin_allowed(origin: Option<&str>, served: SocketAddr) -> bool {
+    match origin {
+        None => true,
+        Some(o) => o
+            .trim()
+            .strip_prefix("http://")
+            .is_some_and(|h| !h.contains('/') && host_allowed(h, served)),
+    }
+}
+
+/// What a connection is doing, which decides whether a newer connection
+/// may take its place when a cap is reached.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub(crate) enum Phase {
+    /// Its request head is still arriving.
+    Head = 0,
+    /// Answering a request, or a WebSocket with a render running.
+    Busy = 1,
+    /// A WebSocket waiting for the page.
+    Idle = 2,
+}
+
+/// One open connection, as the registry sees it.
+#[derive(Debug)]
+struct Conn {
+    addr: IpAddr,
+    opened: Instant,
+    phase: Arc<AtomicU8>,
+    /// A handle on the socket, to shut it down when the connection is shed.
+    stream: TcpStream,
+}
+
 /// What every connection shares.
 #[derive(Debug)]
 pub(crate) struct State {
     pub(crate) scene: Scene,
     pub(crate) scene_name: String,
     pub(crate) limits: Limits,
-    connections: AtomicUsize,
+    served: SocketAddr,
     max_connections: usize,
+    max_per_address: usize,
+    head_timeout: Duration,
+    pub(crate) idle_timeout: Duration,
+    conns: Mutex<HashMap<u64, Conn>>,
+    next_id: AtomicU64,
+    /// Times a WebSocket session woke up (see [`ServerHandle::session_wakeups`]).
+    pub(crate) session_wakeups: AtomicU64,
+}
+
+/// A registered connection; dropping it unregisters it.
+#[derive(Debug)]
+pub(crate) struct ConnGuard {
+    state: Arc<State>,
+    id: u64,
+    phase: Arc<AtomicU8>,
+}
+
+impl ConnGuard {
+    pub(crate) fn set_phase(&self, phase: Phase) {
+        self.phase.store(phase as u8, Ordering::SeqCst);
+    }
+}
+
+impl Drop for ConnGuard {
+    fn drop(&mut self) {
+        if let Ok(mut conns) = self.state.conns.lock() {
+            conns.remove(&self.id);
+        }
+    }
+}
+
+impl State {
+    /// Registers a new connection from `addr`, shedding the oldest waiting
+    /// connection (from the same address when that address is at its cap)
+    /// if a cap is reached. `None` when every candidate is busy.
+    fn admit(self: &Arc<Self>, stream: &TcpStream, addr: IpAddr) -> Option<ConnGuard> {
+        let handle = stream.try_clone().ok()?;
+        let mut conns = self.conns.lock().ok()?;
+        let from_addr = conns.values().filter(|c| c.addr == addr).count();
+        let victim_pool: Option<bool> = if from_addr >= self.max_per_address {
+            Some(true)
+        } else if conns.len() >= self.max_connections {
+            Some(false)
+        } else {
+            None
+        };
+        if let Some(same_addr) = victim_pool {
+            let victim = conns
+                .iter()
+                .filter(|(_, c)| !same_addr || c.addr == addr)
+                .filter(|(_, c)| c.phase.load(Ordering::SeqCst) != Phase::Busy as u8)
+                .min_by_key(|(_, c)| c.opened)
+                .map(|(id, _)| *id)?;
+            if let Some(c) = conns.remove(&victim) {
+                let _ = c.stream.shutdown(Shutdown::Both);
+            }
+        }
+        let id = self.next_id.fetch_add(1, Ordering::SeqCst);
+        let phase = Arc::new(AtomicU8::new(Phase::Head as u8));
+        conns.insert(
+            id,
+            Conn {
+                addr,
+                opened: Instant::now(),
+                phase: Arc::clone(&phase),
+                stream: handle,
+            },
+        );
+        Some(ConnGuard {
+            state: Arc::clone(self),
+            id,
+            phase,
+        })
+    }
 }
 
 /// A bound server, not yet accepting.
@@ -115,6 +313,24 @@ pub(crate) struct State {
 pub struct Server {
     listener: TcpListener,
     state: Arc<State>,
+}
+
+/// Read-only counters of a running [`Server`], for monitoring and tests.
+#[derive(Debug, Clone)]
+pub struct ServerHandle(Arc<State>);
+
+impl ServerHandle {
+    /// Connections open now (HTTP and WebSocket).
+    pub fn open_connections(&self) -> usize {
+        self.0.conns.lock().map(|c| c.len()).unwrap_or(0)
+    }
+
+    /// How many times WebSocket sessions have woken up in all: once per
+    /// message from a page, frame to a page or finished render, never
+    /// while idle.
+    pub fn session_wakeups(&self) -> u64 {
+        self.0.session_wakeups.load(Ordering::SeqCst)
+    }
 }
 
 impl Server {
@@ -145,6 +361,9 @@ impl Server {
         let addr = SocketAddr::new(ip, opts.port);
         let listener =
             TcpListener::bind(addr).map_err(|source| ServeError::Bind { addr, source })?;
+        let served = listener
+            .local_addr()
+            .map_err(|source| ServeError::Bind { addr, source })?;
         let scene_name: String = name
             .chars()
             .map(|c| {
@@ -161,8 +380,14 @@ impl Server {
                 scene,
                 scene_name,
                 limits: opts.limits,
-                connections: AtomicUsize::new(0),
+                served,
                 max_connections: opts.max_connections.max(1),
+                max_per_address: opts.max_per_address.max(1),
+                head_timeout: opts.head_timeout,
+                idle_timeout: opts.idle_timeout,
+                conns: Mutex::new(HashMap::new()),
+                next_id: AtomicU64::new(0),
+                session_wakeups: AtomicU64::new(0),
             }),
         })
     }
@@ -175,28 +400,29 @@ impl Server {
         self.listener.local_addr()
     }
 
+    /// Counters of this server that stay readable while it runs.
+    pub fn handle(&self) -> ServerHandle {
+        ServerHandle(Arc::clone(&self.state))
+    }
+
     /// Accepts connections until the process ends; each is served on its
     /// own thread, so one slow or broken client never blocks another.
     pub fn run(self) {
         for stream in self.listener.incoming() {
-            let Ok(stream) = stream else { continue };
-            let state = Arc::clone(&self.state);
-            let n = state.connections.fetch_add(1, Ordering::SeqCst);
-            if n >= state.max_connections {
-                state.connections.fetch_sub(1, Ordering::SeqCst);
-                let mut s = stream;
-                let _ = respond(&mut s, 503, "text/plain", b"too many connections\n");
+            let Ok(mut stream) = stream else { continue };
+            let Ok(peer) = stream.peer_addr() else {
                 continue;
-            }
-            let spawned = std::thread::Builder::new()
+            };
+            let Some(guard) = self.state.admit(&stream, peer.ip()) else {
+                let _ = stream.set_write_timeout(Some(Duration::from_secs(1)));
+                let _ = respond(&mut stream, 503, "text/plain", b"too many connections\n");
+                continue;
+            };
+            let accepted = Instant::now();
+            let state = Arc::clone(&self.state);
+            let _ = std::thread::Builder::new()
                 .name("chiaro-serve-conn".into())
-                .spawn(move || {
-                    handle_connection(stream, &state);
-                    state.connections.fetch_sub(1, Ordering::SeqCst);
-                });
-            if spawned.is_err() {
-                self.state.connections.fetch_sub(1, Ordering::SeqCst);
-            }
+                .spawn(move || handle_connection(stream, &state, &guard, accepted));
         }
     }
 }
@@ -239,8 +465,10 @@ fn respond(
         200 => "OK",
         204 => "No Content",
         400 => "Bad Request",
+        403 => "Forbidden",
         404 => "Not Found",
         405 => "Method Not Allowed",
+        408 => "Request Timeout",
         431 => "Request Header Fields Too Large",
         503 => "Service Unavailable",
         _ => "Error",
@@ -254,17 +482,33 @@ fn respond(
     stream.flush()
 }
 
-/// Reads the request head (up to the blank line). Returns the bytes, or
-/// `None` on timeout, close, or a head over [`MAX_HEAD_BYTES`] (then a 431
-/// has been sent).
-fn read_head(stream: &mut TcpStream) -> Option<Vec<u8>> {
+/// Reads the request head (up to the blank line) by `deadline`. Returns the
+/// bytes, or `None` on close, error, a missed deadline (then a 408 has been
+/// sent) or a head over [`MAX_HEAD_BYTES`] (then a 431 has been sent).
+fn read_head(stream: &mut TcpStream, deadline: Instant) -> Option<Vec<u8>> {
     let mut buf = Vec::with_capacity(1024);
     let mut chunk = [0u8; 1024];
     loop {
-        let n = stream.read(&mut chunk).ok()?;
-        if n == 0 {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() || stream.set_read_timeout(Some(left)).is_err() {
+            let _ = respond(stream, 408, "text/plain", b"request head too slow\n");
             return None;
         }
+        let n = match stream.read(&mut chunk) {
+            Ok(0) => return None,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                let _ = respond(stream, 408, "text/plain", b"request head too slow\n");
+                return None;
+            }
+            Err(_) => return None,
+        };
         buf.extend_from_slice(&chunk[..n]);
         if buf.windows(4).any(|w| w == b"\r\n\r\n") {
             return Some(buf);
@@ -276,18 +520,39 @@ fn read_head(stream: &mut TcpStream) -> Option<Vec<u8>> {
     }
 }
 
-fn handle_connection(mut stream: TcpStream, state: &Arc<State>) {
-    let _ = stream.set_read_timeout(Some(Duration::from_secs(10)));
-    let _ = stream.set_write_timeout(Some(Duration::from_secs(30)));
-    let Some(head) = read_head(&mut stream) else {
+fn handle_connection(
+    mut stream: TcpStream,
+    state: &Arc<State>,
+    conn: &ConnGuard,
+    accepted: Instant,
+) {
+    let deadline = accepted + state.head_timeout;
+    let _ = stream.set_write_timeout(Some(WRITE_TIMEOUT));
+    let Some(head) = read_head(&mut stream, deadline) else {
         return;
     };
+    conn.set_phase(Phase::Busy);
     let mut headers = [httparse::EMPTY_HEADER; 64];
     let mut req = httparse::Request::new(&mut headers);
     let Ok(httparse::Status::Complete(_)) = req.parse(&head) else {
         let _ = respond(&mut stream, 400, "text/plain", b"malformed request\n");
         return;
     };
+    let header = |name: &str| {
+        req.headers
+            .iter()
+            .find(|h| h.name.eq_ignore_ascii_case(name))
+            .and_then(|h| std::str::from_utf8(h.value).ok())
+    };
+    if !header("host").is_some_and(|h| host_allowed(h, state.served)) {
+        let _ = respond(
+            &mut stream,
+            403,
+            "text/plain",
+            b"the Host header does not name the address this viewer serves\n",
+        );
+        return;
+    }
     let method = req.method.unwrap_or("");
     let path = req.path.unwrap_or("/");
     let path = path.split('?').next().unwrap_or("/");
@@ -295,12 +560,6 @@ fn handle_connection(mut stream: TcpStream, state: &Arc<State>) {
         let _ = respond(&mut stream, 405, "text/plain", b"only GET is served\n");
         return;
     }
-    let header = |name: &str| {
-        req.headers
-            .iter()
-            .find(|h| h.name.eq_ignore_ascii_case(name))
-            .and_then(|h| std::str::from_utf8(h.value).ok())
-    };
     match path {
         "/" | "/index.html" => {
             let _ = respond(
@@ -331,6 +590,15 @@ fn handle_connection(mut stream: TcpStream, state: &Arc<State>) {
             let _ = respond(&mut stream, 200, "application/json", body.as_bytes());
         }
         "/ws" => {
+            if !origin_allowed(header("origin"), state.served) {
+                let _ = respond(
+                    &mut stream,
+                    403,
+                    "text/plain",
+                    b"WebSocket from another site refused\n",
+                );
+                return;
+            }
             let upgrade = header("upgrade").is_some_and(|u| u.eq_ignore_ascii_case("websocket"));
             let key = header("sec-websocket-key");
             match (upgrade, key) {
@@ -339,8 +607,14 @@ fn handle_connection(mut stream: TcpStream, state: &Arc<State>) {
                     let reply = format!(
                         "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {accept}\r\n\r\n"
                     );
+                    // The handshake's reply is bound by the same deadline.
+                    let left = deadline.saturating_duration_since(Instant::now());
+                    if left.is_zero() || stream.set_write_timeout(Some(left)).is_err() {
+                        return;
+                    }
                     if stream.write_all(reply.as_bytes()).is_ok() {
-                        session::run(stream, Arc::clone(state));
+                        let _ = stream.set_write_timeout(Some(WRITE_TIMEOUT));
+                        session::run(stream, Arc::clone(state), conn);
                     }
                 }
                 _ => {

@@ -5,8 +5,9 @@
 //! ```json
 //! {"type": "render", "id": 3, "width": 256, "height": 256,
 //!  "orbit": {"yaw": 0.2, "pitch": -0.1, "zoom": 1.0}, "progressive": true,
+//!  "refine": true,
 //!  "views": [{"technique": "phong", "shadows": "ray", "transparency": "scene",
-//!             "model": "scene", "samples": 1},
+//!             "model": "scene", "samples": 1, "light_samples": 0},
 //!            {"technique": "whitted"}]}
 //! {"type": "save", "view": 0, "format": "exr"}
 //! ```
@@ -16,8 +17,14 @@
 //! first view against the second). Every field but `type` has a default;
 //! sizes and samples beyond [`Limits`] are refused with an error message,
 //! not clamped, so the page knows. The server answers with binary frames
-//! (see [`encode_frame`]) and JSON text messages (`done`, `metrics`,
-//! `error`, `busy`).
+//! (see [`encode_frame`]) and JSON text messages (`pass`, `first`, `done`,
+//! `metrics`, `error`).
+//!
+//! While the camera moves the page asks for drafts (one sample per pixel
+//! and per area light, half resolution); when it stops, for `refine`: the
+//! server first renders a quick pass at full resolution (one sample per
+//! pixel and per area light, see [`draft_settings`]), then the requested
+//! quality, announcing each with `{"type": "pass", "pass": k, "of": n}`.
 
 use chiaro::scene::{ReflectanceModel, ShadowMethod, TransparencyMode};
 use chiaro::{RenderSettings, Scene, Technique, Vec3};
@@ -81,6 +88,8 @@ pub struct View {
     pub model: String,
     /// Samples per pixel; 0 keeps the scene's.
     pub samples: u32,
+    /// Samples per area light per shading point; 0 keeps the scene's.
+    pub light_samples: u32,
 }
 
 impl Default for View {
@@ -91,6 +100,7 @@ impl Default for View {
             transparency: "scene".into(),
             model: "scene".into(),
             samples: 0,
+            light_samples: 0,
         }
     }
 }
@@ -116,6 +126,10 @@ pub enum Request {
         /// Send bands as they complete (where the technique supports crop).
         #[serde(default)]
         progressive: bool,
+        /// Render a quick draft pass first when it is cheaper than the
+        /// requested quality.
+        #[serde(default)]
+        refine: bool,
         /// One or two views.
         views: Vec<View>,
     },
@@ -140,6 +154,18 @@ pub struct Job {
     pub settings: Vec<RenderSettings>,
     /// Send bands as they complete.
     pub progressive: bool,
+    /// Render a quick draft pass first.
+    pub refine: bool,
+}
+
+/// The quick pass of a refining render: `s` with one sample per pixel and
+/// one sample per area light.
+pub fn draft_settings(s: &RenderSettings) -> RenderSettings {
+    RenderSettings {
+        samples: 1,
+        light_samples: 1,
+        ..s.clone()
+    }
 }
 
 fn parse_named<T: for<'de> Deserialize<'de>>(what: &str, name: &str) -> Result<T, String> {
@@ -208,6 +234,7 @@ pub fn make_job(
     height: u32,
     orbit: Orbit,
     progressive: bool,
+    refine: bool,
     views: &[View],
 ) -> Result<Job, String> {
     if views.is_empty() || views.len() > 2 {
@@ -257,6 +284,15 @@ pub fn make_job(
             s.samples = v.samples;
         }
         s.samples = s.samples.min(limits.max_samples).max(1);
+        if v.light_samples > limits.max_samples {
+            return Err(format!(
+                "{} light samples exceed the page limit of {}",
+                v.light_samples, limits.max_samples
+            ));
+        }
+        if v.light_samples > 0 {
+            s.light_samples = v.light_samples;
+        }
         if v.shadows != "scene" {
             s.shadows = parse_named::<ShadowMethod>("shadow method", &v.shadows)?;
         }
@@ -283,6 +319,7 @@ pub fn make_job(
         scenes,
         settings,
         progressive,
+        refine,
     })
 }
 
@@ -409,19 +446,67 @@ mod tests {
         let scene = Scene::default();
         let l = Limits::default();
         let v = [View::default()];
-        assert!(make_job(&scene, &l, 0, 100_000, 10, Orbit::default(), false, &v).is_err());
+        assert!(
+            make_job(
+                &scene,
+                &l,
+                0,
+                100_000,
+                10,
+                Orbit::default(),
+                false,
+                false,
+                &v
+            )
+            .is_err()
+        );
         let many = [View {
             samples: 1 << 20,
             ..View::default()
         }];
-        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, &many).is_err());
+        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &many).is_err());
         let bad = [View {
             technique: "nope".into(),
             ..View::default()
         }];
-        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, &bad).is_err());
-        let ok = make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, &v).expect("valid");
+        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &bad).is_err());
+        let ok =
+            make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &v).expect("valid");
         assert_eq!(ok.settings[0].width, 16);
+    }
+
+    #[test]
+    fn light_samples_override_and_draft() {
+        let scene = Scene::default();
+        let l = Limits::default();
+        let v = [View {
+            samples: 8,
+            light_samples: 3,
+            ..View::default()
+        }];
+        let j = make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, true, &v).expect("valid");
+        assert_eq!((j.settings[0].samples, j.settings[0].light_samples), (8, 3));
+        assert!(j.refine);
+        let d = draft_settings(&j.settings[0]);
+        assert_eq!((d.samples, d.light_samples, d.width), (1, 1, 16));
+        let keep = make_job(
+            &scene,
+            &l,
+            0,
+            16,
+            16,
+            Orbit::default(),
+            false,
+            false,
+            &[View::default()],
+        )
+        .expect("valid");
+        assert_eq!(keep.settings[0].light_samples, scene.render.light_samples);
+        let many = [View {
+            light_samples: l.max_samples + 1,
+            ..View::default()
+        }];
+        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &many).is_err());
     }
 
     #[test]
@@ -440,6 +525,7 @@ mod tests {
             8,
             8,
             Orbit::default(),
+            false,
             false,
             &v,
         )
@@ -461,6 +547,7 @@ mod tests {
                 8,
                 8,
                 Orbit::default(),
+                false,
                 false,
                 &bad
             )

@@ -1,19 +1,24 @@
-//! One WebSocket connection: a reader loop that also writes the frames a
-//! render worker produces, and the worker that renders the latest request
-//! (cancelling the one before it).
+//! One WebSocket connection: a reader thread that forwards the page's
+//! bytes, a render worker that renders the latest request (cancelling the
+//! one before it), and the session loop that owns the WebSocket and sleeps
+//! on one channel fed by both until there is something to do.
 
-use crate::State;
-use crate::protocol::{FrameHeader, Job, Request, encode_frame, make_job};
+use crate::protocol::{FrameHeader, Job, Request, draft_settings, encode_frame, make_job};
 use crate::tev::render_in_bands;
+use crate::{ConnGuard, Phase, State};
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film};
-use chiaro::{Film, Progress, Technique};
+use chiaro::{Film, Progress, RenderSettings, Scene, Technique};
 use chiaro_core::film::metrics;
+use chiaro_radiosity::RadiositySolution;
 use serde_json::json;
-use std::net::TcpStream;
+use std::io::{Read, Write};
+use std::net::{Shutdown, TcpStream};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, channel, sync_channel};
+use std::time::Instant;
+use tungstenite::protocol::frame::CloseFrame;
+use tungstenite::protocol::frame::coding::CloseCode;
 use tungstenite::protocol::{Role, WebSocketConfig};
 use tungstenite::{Message, WebSocket};
 
@@ -53,128 +58,257 @@ enum Command {
     Save { view: usize, format: String },
 }
 
-/// Serves one upgraded connection until it closes.
-pub(crate) fn run(stream: TcpStream, state: Arc<State>) {
-    // Short read timeouts let this one thread both read requests and write
-    // the worker's frames.
-    let _ = stream.set_read_timeout(Some(Duration::from_millis(20)));
-    let _ = stream.set_nodelay(true);
-    let config = WebSocketConfig::default()
-        .max_message_size(Some(state.limits.max_message_bytes))
-        .max_frame_size(Some(state.limits.max_message_bytes));
-    let mut ws = WebSocket::from_raw_socket(stream, Role::Server, Some(config));
-    let (cmd_tx, cmd_rx) = channel::<Command>();
-    let (out_tx, out_rx) = channel::<Message>();
-    let current: Arc<Mutex<Option<Arc<AtomicBool>>>> = Arc::new(Mutex::new(None));
-    let worker_state = Arc::clone(&state);
-    let worker = std::thread::Builder::new()
-        .name("chiaro-serve-render".into())
-        .spawn(move || worker(&worker_state, &cmd_rx, &out_tx));
-    if worker.is_err() {
-        return;
+/// What wakes the session loop.
+enum Event {
+    /// Bytes from the page.
+    Net(Vec<u8>),
+    /// The page closed the connection (or it broke).
+    NetClosed,
+    /// A message for the page from the worker.
+    Out(Message),
+    /// The worker handled this many commands.
+    Finished(usize),
+}
+
+/// The WebSocket's stream: reads come from the bytes the reader thread
+/// forwarded (`WouldBlock` when there are none yet), writes go to the
+/// socket.
+struct Duplex {
+    inbox: Vec<u8>,
+    pos: usize,
+    out: TcpStream,
+}
+
+impl Duplex {
+    fn feed(&mut self, bytes: &[u8]) {
+        self.inbox.drain(..self.pos);
+        self.pos = 0;
+        self.inbox.extend_from_slice(bytes);
     }
-    let cancel_current = |current: &Mutex<Option<Arc<AtomicBool>>>| {
-        if let Ok(mut c) = current.lock()
-            && let Some(flag) = c.take()
-        {
+}
+
+impl Read for Duplex {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let left = &self.inbox[self.pos..];
+        if left.is_empty() {
+            return Err(std::io::ErrorKind::WouldBlock.into());
+        }
+        let n = left.len().min(buf.len());
+        buf[..n].copy_from_slice(&left[..n]);
+        self.pos += n;
+        Ok(n)
+    }
+}
+
+impl Write for Duplex {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.out.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+}
+
+/// Forwards what the page sends until it closes or the session ends.
+fn reader(mut stream: TcpStream, tx: &SyncSender<Event>) {
+    let mut buf = vec![0u8; 16 * 1024];
+    loop {
+        match stream.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => {
+                if tx.send(Event::Net(buf[..n].to_vec())).is_err() {
+                    return;
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(_) => break,
+        }
+    }
+    let _ = tx.send(Event::NetClosed);
+}
+
+/// The session loop's state besides the WebSocket.
+struct Session<'a> {
+    state: &'a State,
+    conn: &'a ConnGuard,
+    commands: std::sync::mpsc::Sender<Command>,
+    /// The running render's cancel flag.
+    current: Option<Arc<AtomicBool>>,
+    /// Commands sent to the worker and not yet finished.
+    pending: usize,
+}
+
+impl Session<'_> {
+    fn cancel_current(&mut self) {
+        if let Some(flag) = self.current.take() {
             flag.store(true, Ordering::Relaxed);
         }
-    };
-    'conn: loop {
-        match ws.read() {
-            Ok(Message::Text(text)) => match Request::parse(text.as_str()) {
+    }
+
+    fn command(&mut self, c: Command) -> bool {
+        self.pending += 1;
+        self.conn.set_phase(Phase::Busy);
+        self.commands.send(c).is_ok()
+    }
+
+    /// Answers one message from the page; false when the connection must end.
+    fn on_message(&mut self, ws: &mut WebSocket<Duplex>, msg: Message) -> bool {
+        let error = |ws: &mut WebSocket<Duplex>, v: serde_json::Value| {
+            ws.send(Message::text(v.to_string())).is_ok()
+        };
+        match msg {
+            Message::Text(text) => match Request::parse(text.as_str()) {
                 Ok(Request::Render {
                     id,
                     width,
                     height,
                     orbit,
                     progressive,
+                    refine,
                     views,
                 }) => match make_job(
-                    &state.scene,
-                    &state.limits,
+                    &self.state.scene,
+                    &self.state.limits,
                     id,
                     width,
                     height,
                     orbit,
                     progressive,
+                    refine,
                     &views,
                 ) {
                     Ok(job) => {
-                        cancel_current(&current);
+                        self.cancel_current();
                         let flag = Arc::new(AtomicBool::new(false));
-                        if let Ok(mut c) = current.lock() {
-                            *c = Some(Arc::clone(&flag));
-                        }
-                        if cmd_tx.send(Command::Render(job, flag)).is_err() {
-                            break 'conn;
-                        }
+                        self.current = Some(Arc::clone(&flag));
+                        self.command(Command::Render(job, flag))
                     }
                     Err(message) => {
-                        let m = json!({"type": "error", "id": id, "message": message});
-                        if ws.send(Message::text(m.to_string())).is_err() {
-                            break 'conn;
-                        }
+                        error(ws, json!({"type": "error", "id": id, "message": message}))
                     }
                 },
-                Ok(Request::Save { view, format }) => {
-                    if cmd_tx.send(Command::Save { view, format }).is_err() {
-                        break 'conn;
-                    }
-                }
-                Err(message) => {
-                    let m = json!({"type": "error", "message": message});
-                    if ws.send(Message::text(m.to_string())).is_err() {
-                        break 'conn;
-                    }
-                }
+                Ok(Request::Save { view, format }) => self.command(Command::Save { view, format }),
+                Err(message) => error(ws, json!({"type": "error", "message": message})),
             },
-            Ok(Message::Binary(_)) => {
-                let m = json!({"type": "error", "message": "binary messages are not understood"});
-                if ws.send(Message::text(m.to_string())).is_err() {
+            Message::Binary(_) => error(
+                ws,
+                json!({"type": "error", "message": "binary messages are not understood"}),
+            ),
+            Message::Close(_) => false,
+            _ => true,
+        }
+    }
+}
+
+/// Serves one upgraded connection until it closes, breaks, or stays idle
+/// for the server's idle timeout.
+pub(crate) fn run(stream: TcpStream, state: Arc<State>, conn: &ConnGuard) {
+    let _ = stream.set_read_timeout(None);
+    let _ = stream.set_nodelay(true);
+    let (Ok(read_half), Ok(closer)) = (stream.try_clone(), stream.try_clone()) else {
+        return;
+    };
+    // Bounded, so that neither a flooding page nor a fast renderer queues
+    // more than a few messages ahead of the socket.
+    let (events, inbox) = sync_channel::<Event>(16);
+    let net_events = events.clone();
+    let spawned_reader = std::thread::Builder::new()
+        .name("chiaro-serve-read".into())
+        .spawn(move || reader(read_half, &net_events));
+    let (cmd_tx, cmd_rx) = channel::<Command>();
+    let worker_state = Arc::clone(&state);
+    let spawned_worker = std::thread::Builder::new()
+        .name("chiaro-serve-render".into())
+        .spawn(move || worker(&worker_state, &cmd_rx, &events));
+    if spawned_reader.is_err() || spawned_worker.is_err() {
+        let _ = closer.shutdown(Shutdown::Both);
+        return;
+    }
+    let config = WebSocketConfig::default()
+        .max_message_size(Some(state.limits.max_message_bytes))
+        .max_frame_size(Some(state.limits.max_message_bytes));
+    let duplex = Duplex {
+        inbox: Vec::new(),
+        pos: 0,
+        out: stream,
+    };
+    let mut ws = WebSocket::from_raw_socket(duplex, Role::Server, Some(config));
+    let mut session = Session {
+        state: &state,
+        conn,
+        commands: cmd_tx,
+        current: None,
+        pending: 0,
+    };
+    conn.set_phase(Phase::Idle);
+    let mut last_activity = Instant::now();
+    'conn: loop {
+        let event = if session.pending == 0 {
+            let deadline = last_activity + state.idle_timeout;
+            match inbox.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+                Ok(e) => e,
+                Err(RecvTimeoutError::Timeout) => {
+                    let _ = ws.close(Some(CloseFrame {
+                        code: CloseCode::Away,
+                        reason: "idle".into(),
+                    }));
+                    break 'conn;
+                }
+                Err(RecvTimeoutError::Disconnected) => break 'conn,
+            }
+        } else {
+            match inbox.recv() {
+                Ok(e) => e,
+                Err(_) => break 'conn,
+            }
+        };
+        state.session_wakeups.fetch_add(1, Ordering::Relaxed);
+        match event {
+            Event::Net(bytes) => {
+                last_activity = Instant::now();
+                ws.get_mut().feed(&bytes);
+                loop {
+                    match ws.read() {
+                        Ok(msg) => {
+                            if !session.on_message(&mut ws, msg) {
+                                break 'conn;
+                            }
+                        }
+                        Err(tungstenite::Error::Io(e))
+                            if e.kind() == std::io::ErrorKind::WouldBlock =>
+                        {
+                            break;
+                        }
+                        Err(tungstenite::Error::Capacity(e)) => {
+                            // An oversized message: tell the page, then drop
+                            // the connection (the stream position is lost).
+                            let m = json!({"type": "error", "message": format!("message too large: {e}")});
+                            let _ = ws.send(Message::text(m.to_string()));
+                            break 'conn;
+                        }
+                        Err(_) => break 'conn,
+                    }
+                }
+            }
+            Event::NetClosed => break 'conn,
+            Event::Out(msg) => {
+                if ws.send(msg).is_err() {
                     break 'conn;
                 }
             }
-            Ok(Message::Close(_)) => break 'conn,
-            Ok(_) => {}
-            Err(tungstenite::Error::Io(e))
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) => {}
-            Err(tungstenite::Error::Capacity(e)) => {
-                // An oversized message: tell the page, then drop the
-                // connection (the stream position is lost).
-                let m = json!({"type": "error", "message": format!("message too large: {e}")});
-                let _ = ws.send(Message::text(m.to_string()));
-                break 'conn;
-            }
-            Err(_) => break 'conn,
-        }
-        loop {
-            match out_rx.try_recv() {
-                Ok(msg) => {
-                    if ws.send(msg).is_err() {
-                        break 'conn;
-                    }
+            Event::Finished(n) => {
+                session.pending = session.pending.saturating_sub(n);
+                if session.pending == 0 {
+                    last_activity = Instant::now();
+                    conn.set_phase(Phase::Idle);
                 }
-                Err(TryRecvError::Empty) => break,
-                Err(TryRecvError::Disconnected) => break 'conn,
             }
-        }
-        if let Err(tungstenite::Error::Io(e)) = ws.flush()
-            && !matches!(
-                e.kind(),
-                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-            )
-        {
-            break 'conn;
         }
     }
-    cancel_current(&current);
-    drop(cmd_tx);
-    let _ = ws.close(None);
+    session.cancel_current();
+    drop(session);
     let _ = ws.flush();
+    let _ = closer.shutdown(Shutdown::Both);
 }
 
 /// The last finished render of each view, for saving.
@@ -183,21 +317,23 @@ struct Finished {
     films: [Option<(Film, chiaro::RenderSettings)>; 2],
 }
 
-fn worker(state: &State, rx: &Receiver<Command>, out: &Sender<Message>) {
+fn worker(state: &State, rx: &Receiver<Command>, out: &SyncSender<Event>) {
     let mut finished = Finished::default();
+    let mut solutions = SolutionCache::default();
     while let Ok(first) = rx.recv() {
         // Only the newest render matters; saves are answered in order.
         let mut pending = vec![first];
         while let Ok(c) = rx.try_recv() {
             pending.push(c);
         }
+        let n = pending.len();
         let last_render = pending
             .iter()
             .rposition(|c| matches!(c, Command::Render(..)));
         for (i, cmd) in pending.into_iter().enumerate() {
             let ok = match cmd {
                 Command::Render(job, flag) if Some(i) == last_render => {
-                    render_job(state, &job, &flag, out, &mut finished)
+                    render_job(&job, &flag, out, &mut finished, &mut solutions)
                 }
                 Command::Render(..) => true,
                 Command::Save { view, format } => save(state, &finished, view, &format, out),
@@ -206,11 +342,18 @@ fn worker(state: &State, rx: &Receiver<Command>, out: &Sender<Message>) {
                 return;
             }
         }
+        if out.send(Event::Finished(n)).is_err() {
+            return;
+        }
     }
 }
 
-fn text(out: &Sender<Message>, v: serde_json::Value) -> bool {
-    out.send(Message::text(v.to_string())).is_ok()
+fn send(out: &SyncSender<Event>, m: Message) -> bool {
+    out.send(Event::Out(m)).is_ok()
+}
+
+fn text(out: &SyncSender<Event>, v: serde_json::Value) -> bool {
+    send(out, Message::text(v.to_string()))
 }
 
 fn png_opts(s: &chiaro::RenderSettings) -> OutputOptions {
@@ -244,99 +387,203 @@ impl From<chiaro::Error> for Stop {
     }
 }
 
+/// The radiosity solution last solved on this connection, keyed by what it
+/// depends on (the scene's geometry, materials and lights, and the
+/// radiosity settings; not the camera), so that orbiting a radiosity or
+/// hybrid render does not solve again.
+#[derive(Default)]
+struct SolutionCache {
+    cached: Option<((u64, String), RadiositySolution)>,
+    /// Solutions solved on this connection (reported in `done`).
+    solves: u64,
+}
+
+impl SolutionCache {
+    /// [`chiaro::render_with_stats`], reusing the cached solution for the
+    /// techniques that solve radiosity.
+    fn render(
+        &mut self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<(Film, chiaro::RenderStats), chiaro::Error> {
+        if !matches!(settings.technique, Technique::Radiosity | Technique::Hybrid) {
+            return chiaro::render_with_stats(scene, settings, progress);
+        }
+        chiaro::check_settings(settings)?;
+        let key = (
+            chiaro_radiosity::fingerprint(scene, 0.0),
+            serde_json::to_string(&settings.radiosity).unwrap_or_default(),
+        );
+        let solution = match self.cached.take() {
+            Some((k, solution)) if k == key => solution,
+            _ => {
+                let solution = chiaro_radiosity::solve(scene, settings, progress)?;
+                self.solves += 1;
+                solution
+            }
+        };
+        let start = Instant::now();
+        let result = if settings.technique == Technique::Hybrid {
+            chiaro::hybrid::render_with_solution(scene, solution.clone(), settings, progress)
+                .map(|(film, stats)| (film, stats.rays))
+        } else {
+            chiaro_radiosity::render_solution(scene, &solution, settings, progress)
+                .map(|film| (film, 0))
+        };
+        self.cached = Some((key, solution));
+        let (film, rays) = result?;
+        let stats = chiaro::RenderStats {
+            elapsed: start.elapsed(),
+            triangles: scene.triangle_count() as u64,
+            rays,
+        };
+        Ok((film, stats))
+    }
+}
+
+/// Renders one view, sending its picture (in bands when `progressive` and
+/// the technique supports it).
+fn render_view(
+    job: &Job,
+    view: usize,
+    scene: &Scene,
+    settings: &RenderSettings,
+    progressive: bool,
+    progress: &dyn Progress,
+    out: &SyncSender<Event>,
+    solutions: &mut SolutionCache,
+) -> Result<(Film, chiaro::RenderStats), Stop> {
+    let start = Instant::now();
+    let opts = png_opts(settings);
+    let mut first_band = true;
+    let mut send_band = |film: &Film, y0: u32, y1: u32| -> Result<(), Stop> {
+        let png = band_png(film, y0, y1, &opts).map_err(|m| {
+            Stop::Render(chiaro::Error::Core(
+                chiaro_core::error::CoreError::Unsupported(m),
+            ))
+        })?;
+        let header = FrameHeader {
+            kind: "tile",
+            id: job.id,
+            view,
+            x: 0,
+            y: y0,
+            w: film.width,
+            h: y1 - y0,
+            width: film.width,
+            height: film.height,
+            name: String::new(),
+        };
+        if first_band {
+            first_band = false;
+            let m = json!({"type": "first", "id": job.id, "view": view,
+                "ms": start.elapsed().as_secs_f64() * 1e3});
+            if !text(out, m) {
+                return Err(Stop::Closed);
+            }
+        }
+        send(out, Message::binary(encode_frame(&header, &png)))
+            .then_some(())
+            .ok_or(Stop::Closed)
+    };
+    let solves = matches!(settings.technique, Technique::Radiosity | Technique::Hybrid);
+    if progressive && !solves {
+        render_in_bands(scene, settings, progress, &mut send_band)
+    } else {
+        let (film, stats) = solutions.render(scene, settings, progress)?;
+        send_band(&film, 0, film.height)?;
+        Ok((film, stats))
+    }
+}
+
 /// Renders every view of `job`, sending bands, `done` messages and, for two
-/// views, the difference image and metrics. Returns false when the
-/// connection has gone.
+/// views, the difference image and metrics; with `refine`, a quick draft
+/// pass of every view first. Returns false when the connection has gone.
 fn render_job(
-    _state: &State,
     job: &Job,
     flag: &Arc<AtomicBool>,
-    out: &Sender<Message>,
+    out: &SyncSender<Event>,
     finished: &mut Finished,
+    solutions: &mut SolutionCache,
 ) -> bool {
     let progress = JobProgress(Arc::clone(flag));
-    let mut films = Vec::new();
-    for (view, (scene, settings)) in job.scenes.iter().zip(&job.settings).enumerate() {
-        let start = Instant::now();
-        let opts = png_opts(settings);
-        let mut first_band = true;
-        let mut send_band = |film: &Film, y0: u32, y1: u32| -> Result<(), Stop> {
-            let png = band_png(film, y0, y1, &opts).map_err(|m| {
-                Stop::Render(chiaro::Error::Core(
-                    chiaro_core::error::CoreError::Unsupported(m),
-                ))
-            })?;
-            let header = FrameHeader {
-                kind: "tile",
-                id: job.id,
+    let draft: Vec<RenderSettings> = job.settings.iter().map(draft_settings).collect();
+    let passes: Vec<&[RenderSettings]> = if job.refine && draft != job.settings {
+        vec![&draft, &job.settings]
+    } else {
+        vec![&job.settings]
+    };
+    for (k, pass) in passes.iter().enumerate() {
+        let last = k + 1 == passes.len();
+        if passes.len() > 1
+            && !text(
+                out,
+                json!({"type": "pass", "id": job.id, "pass": k + 1, "of": passes.len()}),
+            )
+        {
+            return false;
+        }
+        let mut films = Vec::new();
+        for (view, (scene, settings)) in job.scenes.iter().zip(pass.iter()).enumerate() {
+            let start = Instant::now();
+            let progressive = job.progressive && last;
+            match render_view(
+                job,
                 view,
-                x: 0,
-                y: y0,
-                w: film.width,
-                h: y1 - y0,
-                width: film.width,
-                height: film.height,
-                name: String::new(),
-            };
-            if first_band {
-                first_band = false;
-                let m = json!({"type": "first", "id": job.id, "view": view,
-                    "ms": start.elapsed().as_secs_f64() * 1e3});
-                if !text(out, m) {
-                    return Err(Stop::Closed);
+                scene,
+                settings,
+                progressive,
+                &progress,
+                out,
+                solutions,
+            ) {
+                Ok((film, stats)) => {
+                    if last {
+                        let m = json!({
+                            "type": "done", "id": job.id, "view": view,
+                            "technique": settings.technique.name(),
+                            "width": settings.width, "height": settings.height,
+                            "samples": settings.samples,
+                            "light_samples": settings.light_samples,
+                            "ms": start.elapsed().as_secs_f64() * 1e3,
+                            "render_ms": stats.elapsed.as_secs_f64() * 1e3,
+                            "rays": stats.rays, "triangles": stats.triangles,
+                            "radiosity_solves": solutions.solves,
+                        });
+                        if !text(out, m) {
+                            return false;
+                        }
+                    }
+                    films.push(film);
+                }
+                Err(Stop::Closed) => return false,
+                Err(Stop::Render(chiaro::Error::Core(
+                    chiaro_core::error::CoreError::Cancelled,
+                ))) => {
+                    return true;
+                }
+                Err(Stop::Render(e)) => {
+                    return text(
+                        out,
+                        json!({"type": "error", "id": job.id, "view": view, "message": e.to_string()}),
+                    );
                 }
             }
-            out.send(Message::binary(encode_frame(&header, &png)))
-                .map_err(|_| Stop::Closed)
-        };
-        let result = if job.progressive {
-            render_in_bands(scene, settings, &progress, &mut send_band)
-        } else {
-            chiaro::render_with_stats(scene, settings, &progress)
-                .map_err(Stop::from)
-                .and_then(|(film, stats)| {
-                    send_band(&film, 0, film.height)?;
-                    Ok((film, stats))
-                })
-        };
-        match result {
-            Ok((film, stats)) => {
-                let m = json!({
-                    "type": "done", "id": job.id, "view": view,
-                    "technique": settings.technique.name(),
-                    "width": settings.width, "height": settings.height,
-                    "samples": settings.samples,
-                    "ms": start.elapsed().as_secs_f64() * 1e3,
-                    "render_ms": stats.elapsed.as_secs_f64() * 1e3,
-                    "rays": stats.rays, "triangles": stats.triangles,
-                });
-                if !text(out, m) {
-                    return false;
-                }
-                films.push(film);
-            }
-            Err(Stop::Closed) => return false,
-            Err(Stop::Render(chiaro::Error::Core(chiaro_core::error::CoreError::Cancelled))) => {
+            if flag.load(Ordering::Relaxed) {
                 return true;
             }
-            Err(Stop::Render(e)) => {
-                return text(
-                    out,
-                    json!({"type": "error", "id": job.id, "view": view, "message": e.to_string()}),
-                );
+        }
+        if last {
+            for (i, film) in films.iter().enumerate() {
+                if let Some(s) = job.settings.get(i) {
+                    finished.films[i] = Some((film.clone(), s.clone()));
+                }
+            }
+            if films.len() == 2 {
+                return send_comparison(job, &films[0], &films[1], out);
             }
         }
-        if flag.load(Ordering::Relaxed) {
-            return true;
-        }
-    }
-    for (i, film) in films.iter().enumerate() {
-        if let Some(s) = job.settings.get(i) {
-            finished.films[i] = Some((film.clone(), s.clone()));
-        }
-    }
-    if films.len() == 2 {
-        return send_comparison(job, &films[0], &films[1], out);
     }
     true
 }
@@ -344,7 +591,7 @@ fn render_job(
 /// Sends the difference image of `a` against the reference `b` and the
 /// numbers `chiaro compare` reports (RMSE, PSNR with peak 1, mean relative
 /// error), all on linear radiance.
-fn send_comparison(job: &Job, a: &Film, b: &Film, out: &Sender<Message>) -> bool {
+fn send_comparison(job: &Job, a: &Film, b: &Film, out: &SyncSender<Event>) -> bool {
     let (Ok(rmse), Ok(psnr), Ok(mre), Ok(diff)) = (
         metrics::rmse(a, b),
         metrics::psnr(a, b, 1.0),
@@ -374,10 +621,7 @@ fn send_comparison(job: &Job, a: &Film, b: &Film, out: &Sender<Message>) -> bool
             height: diff.film.height,
             name: String::new(),
         };
-        if out
-            .send(Message::binary(encode_frame(&header, &png)))
-            .is_err()
-        {
+        if !send(out, Message::binary(encode_frame(&header, &png))) {
             return false;
         }
     }
@@ -396,7 +640,7 @@ fn save(
     finished: &Finished,
     view: usize,
     format: &str,
-    out: &Sender<Message>,
+    out: &SyncSender<Event>,
 ) -> bool {
     let fmt = match format {
         "png" => ImageFormat::Png,
@@ -429,8 +673,7 @@ fn save(
                 height: film.height,
                 name: format!("{}-{}.{format}", state.scene_name, technique.name()),
             };
-            out.send(Message::binary(encode_frame(&header, &bytes)))
-                .is_ok()
+            send(out, Message::binary(encode_frame(&header, &bytes)))
         }
         Err(m) => text(out, json!({"type": "error", "message": m})),
     }

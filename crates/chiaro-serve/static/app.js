@@ -3,7 +3,17 @@
 "use strict";
 
 const $ = (id) => document.getElementById(id);
+// URL parameters: still=1 renders one full-quality picture (no draft pass)
+// and then sets <body data-ready="1"> for screenshots; technique=NAME picks
+// the left view's technique (default: the scene's); split=1 opens the
+// split view.
+const params = new URLSearchParams(location.search);
+// While the camera moves, frames are drafts: this fraction of the
+// resolution, one sample per pixel and one sample per area light.
+const DRAFT_SCALE = 0.5;
 const state = {
+  still: params.get("still") === "1", queued: null, connecting: false, pass: 0,
+  queue: Promise.resolve(),
   info: null, ws: null, nextId: 1, sentId: 0, inFlight: false, pending: null,
   orbit: { yaw: 0, pitch: 0, zoom: 1 }, dragging: false, lastPos: null,
   stillTimer: null, done: 0, framesMoving: 0, moveStart: 0, firstMs: null,
@@ -32,7 +42,7 @@ function viewOf(fieldset) {
   return {
     technique: f("technique").value, shadows: f("shadows").value,
     transparency: f("transparency").value, model: f("model").value,
-    samples: Math.max(1, parseInt(f("samples").value, 10) || 1),
+    samples: Math.max(1, parseInt(f("samples").value, 10) || 1), light_samples: 0,
   };
 }
 
@@ -42,20 +52,27 @@ function size(scale) {
 }
 
 // Sends a render request; while one is in flight only the newest waiting
-// request is kept (so dragging renders as fast as the server can).
+// request is kept (so dragging renders as fast as the server can). A still
+// camera gets a quick full-resolution pass first, then full quality.
 function request(moving) {
-  const [w, h] = size(moving ? 0.25 : 1);
+  const [w, h] = size(moving ? DRAFT_SCALE : 1);
   const views = [viewOf($("view-a"))];
   if (state.split) views.push(viewOf($("view-b")));
-  if (moving) for (const v of views) v.samples = 1;
+  if (moving) for (const v of views) { v.samples = 1; v.light_samples = 1; }
+  const refine = !moving && !state.still;
   const msg = { type: "render", width: w, height: h, orbit: { ...state.orbit },
-    progressive: !moving, views };
+    progressive: refine, refine, views };
   if (state.inFlight && moving) { state.pending = msg; return; }
   send(msg);
 }
 
 function send(msg) {
-  if (!state.ws || state.ws.readyState !== WebSocket.OPEN) return;
+  if (!state.ws || state.ws.readyState !== WebSocket.OPEN) {
+    // Closed (the server closes idle connections): reconnect, then send.
+    state.queued = msg;
+    connect();
+    return;
+  }
   msg.id = state.nextId++;
   state.sentId = msg.id;
   state.inFlight = true;
@@ -64,6 +81,7 @@ function send(msg) {
   // Two views also bring a metrics message (after both are done).
   state.expectedViews = msg.views.length === 2 ? 3 : 1;
   state.firstMs = null;
+  state.pass = 0;
   setStatus(`rendering ${msg.width}x${msg.height}…`, "rendering");
   state.ws.send(JSON.stringify(msg));
 }
@@ -107,6 +125,9 @@ function onText(m) {
   if (m.id !== state.sentId) return;
   if (m.type === "first" && state.firstMs === null) {
     state.firstMs = performance.now() - state.sentAt;
+  } else if (m.type === "pass") {
+    state.pass = m.pass;
+    setStatus(`refining: pass ${m.pass} of ${m.of}…`, "rendering");
   } else if (m.type === "done") {
     $(`cap-${m.view}`).textContent =
       `${m.technique} ${m.width}x${m.height}, ${m.samples} spp: ${m.render_ms.toFixed(0)} ms` +
@@ -136,18 +157,33 @@ function finish() {
     ? ` (${(1000 * state.framesMoving / (performance.now() - state.moveStart)).toFixed(1)} fps)` : "";
   setStatus(`done in ${ms.toFixed(0)} ms, first picture ${(state.firstMs ?? ms).toFixed(0)} ms${fps}`, "done");
   document.body.dataset.doneId = String(state.sentId);
+  if (state.still) document.body.dataset.ready = "1";
   if (state.pending) { const p = state.pending; state.pending = null; send(p); }
 }
 
 function connect() {
+  if (state.connecting) return;
+  state.connecting = true;
   const ws = new WebSocket(`ws://${location.host}/ws`);
   ws.binaryType = "arraybuffer";
-  ws.onopen = () => { state.ws = ws; setStatus("connected", "idle"); request(false); };
-  ws.onmessage = (e) => {
-    if (typeof e.data === "string") onText(JSON.parse(e.data));
-    else onFrame(e.data);
+  ws.onopen = () => {
+    state.ws = ws; state.connecting = false; setStatus("connected", "idle");
+    const q = state.queued; state.queued = null;
+    if (q) send(q); else request(false);
   };
-  ws.onclose = () => { state.ws = null; setStatus("disconnected; reload to reconnect", "error"); };
+  // Messages are handled strictly in order: a frame is decoded
+  // asynchronously, and the "done" after it must wait until it is drawn.
+  ws.onmessage = (e) => {
+    const handle = typeof e.data === "string" ? () => onText(JSON.parse(e.data)) : () => onFrame(e.data);
+    state.queue = state.queue.then(handle).catch((err) => setStatus(String(err), "error"));
+  };
+  ws.onclose = (e) => {
+    const wasOpen = state.ws === ws;
+    state.ws = null; state.connecting = false; state.inFlight = false;
+    if (!wasOpen) setStatus("cannot connect to the server", "error");
+    else if (e.code === 1001) setStatus("idle: disconnected; any change reconnects", "idle");
+    else setStatus("disconnected; any change reconnects", "error");
+  };
 }
 
 function updateSlider() {
@@ -166,6 +202,7 @@ function layout() {
   $("fig-diff").hidden = !state.split;
   $("fig-slider").hidden = !slider;
   $("metrics").hidden = !state.split;
+  $("views").classList.toggle("split", state.split && !slider);
   $("view-b").disabled = !state.split;
   for (const f of ["png", "exr"]) $(`save-${f}-1`).disabled = !state.split;
   if (slider) updateSlider();
@@ -205,12 +242,14 @@ async function main() {
   $("scene-name").textContent = i.scene;
   for (const fs of [$("view-a"), $("view-b")]) {
     const f = (n) => fs.querySelector(`[name=${n}]`);
-    fillSelect(f("technique"), i.techniques, fs.id === "view-a" ? (i.techniques.includes("phong") ? "phong" : i.technique) : "path");
+    const asked = params.get("technique");
+    const left = asked && i.techniques.includes(asked) ? asked : i.technique;
+    fillSelect(f("technique"), i.techniques, fs.id === "view-a" ? left : "path");
     fillSelect(f("shadows"), i.shadows, "scene");
     fillSelect(f("transparency"), i.transparency, "scene");
     fillSelect(f("model"), i.models, "scene");
     f("samples").max = i.limits.max_samples;
-    f("samples").value = fs.id === "view-a" ? 1 : Math.min(i.limits.max_samples, 16);
+    f("samples").value = fs.id === "view-a" ? i.samples : Math.min(i.limits.max_samples, 16);
     fs.addEventListener("change", () => request(false));
   }
   const res = [];
@@ -235,6 +274,7 @@ async function main() {
     c.addEventListener("pointercancel", orbitEnd);
     c.addEventListener("wheel", wheel, { passive: false });
   }
+  if (params.get("split") === "1") { $("split").checked = true; state.split = true; }
   layout();
   connect();
 }

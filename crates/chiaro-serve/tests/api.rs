@@ -40,7 +40,7 @@ fn raw(addr: SocketAddr, request: &[u8]) -> String {
 fn get(addr: SocketAddr, path: &str) -> String {
     raw(
         addr,
-        format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes(),
+        format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\n\r\n").as_bytes(),
     )
 }
 
@@ -121,9 +121,13 @@ fn http_routes_and_bad_requests() {
     );
     assert!(get(addr, "/../../etc/passwd").starts_with("HTTP/1.1 404"));
     assert!(get(addr, "/scenes/cornell-box.toml").starts_with("HTTP/1.1 404"));
-    assert!(raw(addr, b"POST / HTTP/1.1\r\nContent-Length: 0\r\n\r\n").starts_with("HTTP/1.1 405"));
+    let post = format!("POST / HTTP/1.1\r\nHost: {addr}\r\nContent-Length: 0\r\n\r\n");
+    assert!(raw(addr, post.as_bytes()).starts_with("HTTP/1.1 405"));
     assert!(raw(addr, b"\x00\x01 garbage \xff\r\n\r\n").starts_with("HTTP/1.1 400"));
-    let huge = format!("GET / HTTP/1.1\r\nX: {}\r\n\r\n", "a".repeat(40_000));
+    let huge = format!(
+        "GET / HTTP/1.1\r\nHost: {addr}\r\nX: {}\r\n\r\n",
+        "a".repeat(40_000)
+    );
     assert!(raw(addr, huge.as_bytes()).starts_with("HTTP/1.1 431"));
     assert!(
         get(addr, "/ws").starts_with("HTTP/1.1 400"),
@@ -251,7 +255,10 @@ fn closing_the_tab_mid_render_cancels_it_and_the_server_goes_on() {
     }
     // A raw TCP close right after the upgrade, without a close frame.
     let mut s = TcpStream::connect(addr).expect("connect");
-    s.write_all(b"GET /ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n").expect("write");
+    let handshake = format!(
+        "GET /ws HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    );
+    s.write_all(handshake.as_bytes()).expect("write");
     let mut buf = [0u8; 256];
     let n = s.read(&mut buf).expect("read");
     let reply = String::from_utf8_lossy(&buf[..n]);
@@ -332,6 +339,99 @@ fn split_view_sends_difference_and_metrics_and_saves() {
         json!({"type": "save", "view": 0, "format": "../../x"}),
     );
     assert!(matches!(next(&mut c), Got::Text(v) if v["type"] == "error"));
+}
+
+#[test]
+fn refine_sends_a_quick_full_size_pass_then_full_quality() {
+    let addr = start();
+    let mut c = ws(addr);
+    send(
+        &mut c,
+        json!({"type": "render", "id": 4, "width": 24, "height": 16, "refine": true,
+            "progressive": true, "views": [{"technique": "phong", "samples": 2}]}),
+    );
+    let mut passes = Vec::new();
+    let mut frames_per_pass = Vec::new();
+    let done = loop {
+        match next(&mut c) {
+            Got::Text(v) if v["type"] == "pass" => {
+                assert_eq!(v["id"], 4);
+                passes.push((v["pass"].as_u64(), v["of"].as_u64()));
+                frames_per_pass.push(0);
+            }
+            Got::Text(v) if v["type"] == "done" => break v,
+            Got::Text(v) if v["type"] == "error" => panic!("{v}"),
+            Got::Text(_) => {}
+            Got::Frame(h, png) => {
+                assert_eq!(
+                    (h["width"].as_u64(), h["height"].as_u64()),
+                    (Some(24), Some(16))
+                );
+                assert!(png.starts_with(PNG_MAGIC));
+                *frames_per_pass.last_mut().expect("a pass before frames") += 1;
+            }
+            Got::Closed => panic!("closed"),
+        }
+    };
+    assert_eq!(passes, [(Some(1), Some(2)), (Some(2), Some(2))]);
+    assert!(
+        frames_per_pass.iter().all(|&n| n >= 1),
+        "{frames_per_pass:?}"
+    );
+    assert_eq!(
+        (done["samples"].as_u64(), done["light_samples"].as_u64()),
+        (Some(2), Some(16))
+    );
+    // Already as cheap as a draft: one pass, no announcement.
+    send(
+        &mut c,
+        json!({"type": "render", "id": 5, "width": 8, "height": 8, "refine": true,
+            "views": [{"technique": "phong", "samples": 1, "light_samples": 1}]}),
+    );
+    let (done, frames) = until(&mut c, "done");
+    assert_eq!((done["id"].as_u64(), frames.len()), (Some(5), 1));
+}
+
+#[test]
+fn orbiting_a_radiosity_render_reuses_the_solution() {
+    // Coarse patches and analytic form factors keep each solve short.
+    let mut scene = chiaro::io::load_scene(&cornell()).expect("scene").scene;
+    scene.render.radiosity.patch_size = 150.0;
+    scene.render.radiosity.solver = "jacobi".into();
+    scene.render.radiosity.formfactor = "analytic".into();
+    let opts = ServeOptions {
+        port: 0,
+        ..ServeOptions::default()
+    };
+    let server = Server::bind_scene(scene, "coarse-box", &opts).expect("binds");
+    let addr = server.local_addr().expect("addr");
+    std::thread::spawn(move || server.run());
+    let mut c = ws(addr);
+    let render = |id: u64, yaw: f32, model: &str| {
+        json!({"type": "render", "id": id, "width": 16, "height": 16,
+            "orbit": {"yaw": yaw}, "views": [{"technique": "radiosity", "model": model}]})
+    };
+    send(&mut c, render(1, 0.0, "scene"));
+    let (a, fa) = until(&mut c, "done");
+    send(&mut c, render(2, 0.3, "scene"));
+    let (b, fb) = until(&mut c, "done");
+    assert_eq!(
+        (
+            a["radiosity_solves"].as_u64(),
+            b["radiosity_solves"].as_u64()
+        ),
+        (Some(1), Some(1))
+    );
+    assert_ne!(fa[0].1, fb[0].1, "the camera moved");
+    // Hybrid shares it; another illumination model changes the materials.
+    send(
+        &mut c,
+        json!({"type": "render", "id": 3, "width": 16, "height": 16,
+            "views": [{"technique": "hybrid"}]}),
+    );
+    assert_eq!(until(&mut c, "done").0["radiosity_solves"], 1);
+    send(&mut c, render(4, 0.0, "blinn"));
+    assert_eq!(until(&mut c, "done").0["radiosity_solves"], 2);
 }
 
 #[test]
