@@ -46,4 +46,7 @@ impl Progress for Bar {
     fn message(&self, text: &str) {
         self.bar.set_message(text.to_string());
     }
+    fn warning(&self, text: &str) {
+        self.bar.suspend(|| eprintln!("warning: {text}"));
+    }
 }

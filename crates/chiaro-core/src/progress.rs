@@ -12,6 +12,9 @@ pub trait Progress: Sync {
     fn advance(&self, n: u64);
     /// A free-form status line (residual, unshot energy, ...).
     fn message(&self, _text: &str) {}
+    /// Something the render did differently from what was asked (a
+    /// fallback), to be shown to the user; the render goes on.
+    fn warning(&self, _text: &str) {}
     /// Whether the caller asked the render to stop; renderers poll this
     /// between tiles or iterations and return [`crate::error::CoreError::Cancelled`].
     fn cancelled(&self) -> bool {

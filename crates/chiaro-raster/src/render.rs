@@ -412,9 +412,11 @@ impl Ctx<'_, '_> {
                     .map_or(1, |l| samples_for_light(l, self.lighting.area_samples));
                 m.visibility(li, i, count, sp.p, sp.ng, s)
             }
-            Shadows::Volume => match counts.and_then(|c| c.get(li)) {
+            Shadows::Volume(transparent) => match counts.and_then(|c| c.get(li)) {
                 Some(&c) if c != 0 => Vec3::ZERO,
-                _ => Vec3::ONE,
+                _ => transparent
+                    .as_ref()
+                    .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s)),
             },
             Shadows::Object(lights) => match lights.get(li) {
                 Some(Some(o)) => Vec3::splat(o.lit_fraction(tri, sp.p)),
@@ -993,7 +995,7 @@ pub fn render_prepared_into(
         *film = Film::new(settings.width, settings.height);
     }
     progress.begin("shadows", 1);
-    let shadows = Shadows::new(ps, settings)?;
+    let shadows = Shadows::new(ps, settings, progress)?;
     progress.advance(1);
     let scene = ps.scene;
     let (w, h) = (settings.width, settings.height);
@@ -1131,6 +1133,9 @@ pub fn render_prepared_into(
     let nl = ps.lights.len();
     let vol_bins: Option<Bins> = (settings.shadows == ShadowMethod::Volume).then(|| {
         let vols = ShadowVolumes::new(ps);
+        if let Some(w) = &vols.warning {
+            progress.warning(w);
+        }
         let mut out = Vec::new();
         let mut scratch = Vec::new();
         let mut bins = binner.empty();

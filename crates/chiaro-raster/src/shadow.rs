@@ -4,7 +4,8 @@
 //! Three methods, chosen by [`ShadowMethod`]:
 //! - **Shadow rays** ([`ShadowMethod::Ray`]): a segment from the point to the
 //!   light sample against the scene BVH; transparent surfaces multiply the
-//!   light by their transmit colour (as the Whitted tracer does).
+//!   light by their transmit colour, by the one query the Whitted tracer
+//!   also calls ([`chiaro_core::shadow`]).
 //! - **Shadow z-buffers** ([`ShadowMethod::Map`], Williams 1978, the seeds'
 //!   "two-pass z-buffer"): a depth image of the scene from each light
 //!   (orthographic for directional lights, perspective for narrow spots, a
@@ -13,51 +14,35 @@
 //!   average of several hard shadows (the "several shadow maps over the
 //!   light's area" of Heckbert and Herf 1997). See [`ShadowMaps`].
 //! - **Shadow volumes** ([`ShadowMethod::Volume`], Crow 1977): built here
-//!   ([`ShadowVolumes`]) and counted per visible sample by the renderer.
+//!   ([`ShadowVolumes`]) and counted per visible sample by the renderer;
+//!   transparent casters tint by shadow rays that see only them.
+//!
+//! Shadow maps are sized against [`SHADOW_MAP_BUDGET`] before anything is
+//! allocated; lights past it use shadow rays, and a warning says which.
 //!
 //! Objects with `casts_shadows = false` cast no shadow in any method.
 
 use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize};
 use chiaro_core::accel::bvh::SceneBvh;
-use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::{
-    AreaShape, Light, RenderSettings, ShadeMode, ShadowMapSettings, ShadowMethod,
+    AreaShape, Light, RenderSettings, SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings,
+    ShadowMethod,
 };
 use chiaro_core::shading::{LightSample, samples_for_light, stratum};
+pub(crate) use chiaro_core::shadow::Blocker;
+use chiaro_core::shadow::ShadowCasters;
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
-/// How a triangle blocks light.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) enum Blocker {
-    /// Casts no shadow (its object has `casts_shadows = false`).
-    Ignore,
-    /// Blocks all light.
-    Opaque,
-    /// Lets through this RGB fraction (the material's transmit colour).
-    Filter(Vec3),
-}
-
-/// Per-triangle blocker classes of a prepared scene.
+/// Per-triangle blocker classes of a prepared scene (the classes of the
+/// shared shadow-ray query, [`ShadowCasters`]).
 pub(crate) fn blockers(ps: &PreparedScene<'_>) -> Vec<Blocker> {
-    let casts: Vec<bool> = ps.scene.objects.iter().map(|o| o.casts_shadows).collect();
-    (0..ps.triangles.len())
-        .map(|t| {
-            let o = ps.tri_object[t] as usize;
-            if !casts.get(o).copied().unwrap_or(true) {
-                return Blocker::Ignore;
-            }
-            let m = ps.material(ps.tri_material[t]);
-            let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
-            if kt.max_element() > 0.0 {
-                Blocker::Filter(kt)
-            } else {
-                Blocker::Opaque
-            }
-        })
+    let casters = ShadowCasters::new(ps);
+    (0..ps.triangles.len() as u32)
+        .map(|t| casters.blocker(t))
         .collect()
 }
 
@@ -69,8 +54,10 @@ pub(crate) enum Shadows {
     Ray(RayShadows),
     /// Shadow z-buffers.
     Map(ShadowMaps),
-    /// Shadow volumes: the per-sample counts live in the renderer's tiles.
-    Volume,
+    /// Shadow volumes of the opaque casters: the per-sample counts live in
+    /// the renderer's tiles. Transparent casters (a count cannot carry a
+    /// colour) tint by shadow rays that see only them, when there are any.
+    Volume(Option<RayShadows>),
     /// Atherton-Weiler-Greenberg object-precision shadows: the lit fragments
     /// of every triangle, one set per light (`None` for ambient lights).
     Object(Vec<Option<crate::object_shadows::ObjectShadows>>),
@@ -208,19 +195,33 @@ impl Shadows {
     /// [`chiaro_core::error::CoreError::Unsupported`] for object-precision
     /// and scan-line shadows of lights they cannot handle (see
     /// [`crate::object_shadows`]).
+    /// Fallbacks (lights past the shadow-map budget) are reported through
+    /// `progress.warning`.
     pub(crate) fn new(
         ps: &PreparedScene<'_>,
         settings: &RenderSettings,
+        progress: &dyn chiaro_core::progress::Progress,
     ) -> Result<Self, chiaro_core::error::CoreError> {
         Ok(match settings.shadows {
             ShadowMethod::None => Shadows::None,
             ShadowMethod::Ray => Shadows::Ray(RayShadows::new(ps)),
-            ShadowMethod::Map => Shadows::Map(ShadowMaps::new(
-                ps,
-                &settings.shadow_map,
-                settings.light_samples.max(1),
-            )),
-            ShadowMethod::Volume => Shadows::Volume,
+            ShadowMethod::Map => {
+                let maps = ShadowMaps::new(
+                    ps,
+                    &settings.shadow_map,
+                    settings.light_samples.max(1),
+                    SHADOW_MAP_BUDGET,
+                );
+                progress.message(&format!(
+                    "shadow maps: {} MiB",
+                    maps.bytes.div_ceil(1 << 20)
+                ));
+                if let Some(w) = &maps.warning {
+                    progress.warning(w);
+                }
+                Shadows::Map(maps)
+            }
+            ShadowMethod::Volume => Shadows::Volume(RayShadows::transparent_only(ps)),
             ShadowMethod::Object => Shadows::Object(object_shadows_per_light(ps)?),
             ShadowMethod::Scanline => Shadows::Scanline {
                 lines: ps
@@ -248,58 +249,34 @@ impl Shadows {
 /// Shadow rays against a BVH of the scene's triangles.
 pub(crate) struct RayShadows {
     bvh: SceneBvh,
-    blockers: Vec<Blocker>,
-    all_opaque: bool,
+    casters: ShadowCasters,
 }
 
 impl RayShadows {
-    fn new(ps: &PreparedScene<'_>) -> Self {
-        let blockers = blockers(ps);
-        let all_opaque = blockers.iter().all(|b| *b == Blocker::Opaque);
+    pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
         Self {
             bvh: SceneBvh::new(ps),
-            blockers,
-            all_opaque,
+            casters: ShadowCasters::new(ps),
         }
     }
 
-    /// RGB transmittance from `p` (unit geometric normal `ng`) to the sample:
-    /// 0 behind an opaque caster, the product of the transmit colours of the
-    /// transparent surfaces crossed otherwise.
+    /// Shadow rays that see only the transparent casters (`None` when
+    /// there are none): the tint that shadow volumes cannot count.
+    fn transparent_only(ps: &PreparedScene<'_>) -> Option<Self> {
+        let casters = ShadowCasters::new(ps).transparent_only()?;
+        Some(Self {
+            bvh: SceneBvh::new(ps),
+            casters,
+        })
+    }
+
+    /// RGB transmittance from `p` (unit geometric normal `ng`) to the
+    /// sample, by the shared query of [`chiaro_core::shadow`] (the Whitted
+    /// tracer's): 0 behind an opaque caster, the product of the transmit
+    /// colours of the transparent surfaces crossed otherwise.
     pub(crate) fn visibility(&self, p: Vec3, ng: Vec3, s: &LightSample) -> Vec3 {
-        let origin = offset_ray_origin(p, ng, s.wi);
-        let ray = Ray::segment(origin, s.point);
-        if self.all_opaque {
-            return if self.bvh.occluded(&ray) {
-                Vec3::ZERO
-            } else {
-                Vec3::ONE
-            };
-        }
-        let mut tr = Vec3::ONE;
-        // Crossings already counted: a ray through an edge shared by two
-        // triangles of a surface (reported on both) must tint once.
-        let mut seen = [f32::NAN; 16];
-        let mut nseen = 0usize;
-        let blocked =
-            self.bvh
-                .visit_hits(&ray, |h: &Hit| match self.blockers.get(h.prim as usize) {
-                    Some(Blocker::Ignore) => false,
-                    Some(Blocker::Filter(kt)) => {
-                        let tol = 1e-5 * h.t.abs().max(1e-3);
-                        if seen[..nseen].iter().any(|&t| (t - h.t).abs() <= tol) {
-                            return false;
-                        }
-                        if nseen < seen.len() {
-                            seen[nseen] = h.t;
-                            nseen += 1;
-                        }
-                        tr *= *kt;
-                        tr.max_element() <= 0.0
-                    }
-                    _ => true,
-                });
-        if blocked { Vec3::ZERO } else { tr }
+        self.casters
+            .light_transmittance(&self.bvh, p, ng, s, &mut 0)
     }
 }
 
@@ -569,8 +546,50 @@ struct LightMaps {
 
 /// Shadow z-buffers of every light of a scene.
 pub(crate) struct ShadowMaps {
+    /// Per light: its maps (`None` for ambient lights and for lights past
+    /// the budget).
     lights: Vec<Option<LightMaps>>,
+    /// Per light: true when it uses shadow rays (its maps did not fit the
+    /// budget).
+    by_ray: Vec<bool>,
+    /// The shadow rays of the lights in `by_ray`, built when there is one.
+    rays: Option<RayShadows>,
     settings: ShadowMapSettings,
+    /// Bytes of the maps built (depth and transparency buffers).
+    pub(crate) bytes: u64,
+    /// Which lights fell back to shadow rays and why, when any did.
+    pub(crate) warning: Option<String>,
+}
+
+/// The most memory the shadow maps of one render may take, in bytes
+/// (estimated before anything is allocated: texels times bytes per texel).
+/// Lights whose maps do not fit in what is left use shadow rays.
+pub(crate) const SHADOW_MAP_BUDGET: u64 = 512 << 20;
+
+/// Which lights get their shadow maps within `budget` bytes: `needs[i]` is
+/// light `i`'s bytes (`None`: it has no maps). Lights are taken in order,
+/// each if it fits in what is left. Returns per light whether it falls
+/// back to shadow rays, and the bytes of the maps kept.
+pub(crate) fn plan_budget(needs: &[Option<u64>], budget: u64) -> (Vec<bool>, u64) {
+    let mut bytes = 0u64;
+    let by_ray = needs
+        .iter()
+        .map(|need| match *need {
+            Some(n) if bytes.saturating_add(n) <= budget => {
+                bytes += n;
+                false
+            }
+            Some(_) => true,
+            None => false,
+        })
+        .collect();
+    (by_ray, bytes)
+}
+
+/// Bytes per texel of a shadow-map view: the opaque depth (`f32`), and with
+/// transparent casters their depth and tint (`f32` + `Vec3`).
+fn texel_bytes(any_filter: bool) -> u64 {
+    if any_filter { 4 + 4 + 12 } else { 4 }
 }
 
 /// The most cube maps built over one area light.
@@ -641,8 +660,21 @@ impl ShadowMaps {
     /// `area_samples` is the `light_samples` setting: an area light gets a
     /// grid of up to 4 x 4 cube maps at the strata of its samples, at a
     /// quarter of `settings.resolution`.
-    fn new(ps: &PreparedScene<'_>, settings: &ShadowMapSettings, area_samples: u32) -> Self {
-        let res = settings.resolution.clamp(16, 8192);
+    ///
+    /// Before anything is allocated, the lights' maps are sized in light
+    /// order against `budget` bytes; a light whose maps do not fit in what
+    /// is left uses shadow rays instead, and [`ShadowMaps::warning`] names
+    /// those lights.
+    pub(crate) fn new(
+        ps: &PreparedScene<'_>,
+        settings: &ShadowMapSettings,
+        area_samples: u32,
+        budget: u64,
+    ) -> Self {
+        let res = settings.resolution.clamp(
+            *SHADOW_MAP_RESOLUTIONS.start(),
+            *SHADOW_MAP_RESOLUTIONS.end(),
+        );
         let centre = (ps.bounds.min + ps.bounds.max) * 0.5;
         let radius = ((ps.bounds.max - ps.bounds.min).length() * 0.5).max(1e-3);
         let radius = if radius.is_finite() { radius } else { 1.0 };
@@ -718,6 +750,41 @@ impl ShadowMaps {
             .collect();
         let blockers = blockers(ps);
         let any_filter = blockers.iter().any(|b| matches!(b, Blocker::Filter(_)));
+        // The budget, in light order.
+        let per_texel = texel_bytes(any_filter);
+        let needs: Vec<Option<u64>> = lights
+            .iter()
+            .map(|l| {
+                l.as_ref().map(|l| {
+                    l.views
+                        .iter()
+                        .map(|v| u64::from(v.res) * u64::from(v.res) * per_texel)
+                        .sum()
+                })
+            })
+            .collect();
+        let (by_ray, bytes) = plan_budget(&needs, budget);
+        let mut refused = Vec::new();
+        for (li, slot) in lights.iter_mut().enumerate() {
+            if by_ray[li] {
+                *slot = None;
+                refused.push((li, needs[li].unwrap_or(0)));
+            }
+        }
+        let warning = (!refused.is_empty()).then(|| {
+            let names: Vec<String> = refused.iter().map(|(li, _)| li.to_string()).collect();
+            let largest = refused.iter().map(|r| r.1).max().unwrap_or(0);
+            format!(
+                "shadow maps: light{} {} use{} shadow rays: their maps ({} MiB for the largest, at {res} texels per side) do not fit in the {} MiB shadow-map budget after the {} MiB of the lights before them",
+                if refused.len() > 1 { "s" } else { "" },
+                names.join(", "),
+                if refused.len() > 1 { "" } else { "s" },
+                largest.div_ceil(1 << 20),
+                budget >> 20,
+                bytes.div_ceil(1 << 20),
+            )
+        });
+        let rays = (!refused.is_empty()).then(|| RayShadows::new(ps));
         lights
             .par_iter_mut()
             .flatten()
@@ -725,7 +792,11 @@ impl ShadowMaps {
             .for_each(|v| v.render(ps, &blockers, any_filter));
         Self {
             lights,
+            by_ray,
+            rays,
             settings: *settings,
+            bytes,
+            warning,
         }
     }
 
@@ -740,6 +811,11 @@ impl ShadowMaps {
         ng: Vec3,
         s: &LightSample,
     ) -> Vec3 {
+        if self.by_ray.get(li) == Some(&true)
+            && let Some(r) = &self.rays
+        {
+            return r.visibility(p, ng, s);
+        }
         let Some(Some(maps)) = self.lights.get(li) else {
             return Vec3::ONE;
         };
@@ -781,6 +857,9 @@ pub enum VolumeCounting {
 pub(crate) struct ShadowVolumes {
     /// Per light: the volume triangles (empty for ambient lights).
     pub(crate) per_light: Vec<Vec<[Vec4; 3]>>,
+    /// Objects with opaque triangles that are not closed meshes, which get
+    /// one volume per triangle; `None` when every caster is closed.
+    pub(crate) warning: Option<String>,
 }
 
 impl ShadowVolumes {
@@ -791,11 +870,14 @@ impl ShadowVolumes {
     /// with opposite orientations is *closed*: only its silhouette edges
     /// (between a triangle facing the light and one facing away) are
     /// extruded, capped by its light-facing triangles (front cap) and those
-    /// triangles projected to infinity (back cap). Any other object is open:
-    /// every triangle is its own occluder (turned to face the light), with
-    /// its own three sides and two caps; shared sides of neighbours cancel in
-    /// the count. Transparent casters cast no volume (a count cannot carry a
-    /// colour).
+    /// triangles projected to infinity (back cap). Any other object is open
+    /// (a wall quad, a mesh with holes): as a fallback every triangle is its
+    /// own occluder (turned to face the light), with its own three sides and
+    /// two caps, so a sample behind several counts each and stays shadowed;
+    /// this costs more fill than silhouettes, and [`ShadowVolumes::warning`]
+    /// names such objects. Triangles edge-on to the light (the light in
+    /// their plane, within rounding) cast no volume. Transparent casters
+    /// cast no volume (a count cannot carry a colour).
     pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
         let blockers = blockers(ps);
         // Triangles per object, and whether each object is closed.
@@ -807,6 +889,25 @@ impl ShadowVolumes {
             }
         }
         let closed: Vec<bool> = by_object.iter().map(|tris| is_closed(ps, tris)).collect();
+        let open: Vec<String> = by_object
+            .iter()
+            .enumerate()
+            .filter(|&(o, tris)| !tris.is_empty() && !closed[o])
+            .map(|(o, _)| match ps.scene.objects.get(o) {
+                Some(obj) if !obj.name.is_empty() => format!("\"{}\"", obj.name),
+                _ => format!("objects[{o}]"),
+            })
+            .collect();
+        let warning = (!open.is_empty()).then(|| {
+            let one = open.len() == 1;
+            format!(
+                "shadow volumes: {} {} {}: each of {} triangles casts its own capped volume (the same shadow, with more fill than a silhouette volume)",
+                if one { "object" } else { "objects" },
+                open.join(", "),
+                if one { "is not a closed mesh" } else { "are not closed meshes" },
+                if one { "its" } else { "their" },
+            )
+        });
         let per_light = ps
             .lights
             .par_iter()
@@ -827,7 +928,7 @@ impl ShadowVolumes {
                 out
             })
             .collect();
-        Self { per_light }
+        Self { per_light, warning }
     }
 }
 
@@ -861,6 +962,46 @@ fn is_closed(ps: &PreparedScene<'_>, tris: &[u32]) -> bool {
         .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
 }
 
+/// Which side of a triangle a light is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Facing {
+    /// On the side of the counter-clockwise normal.
+    Towards,
+    /// On the other side.
+    Away,
+    /// In the triangle's plane, within rounding (or the triangle is
+    /// degenerate): the triangle is edge-on to the light.
+    EdgeOn,
+}
+
+/// Relative tolerance of [`facing_light`]: a light nearer the triangle's
+/// plane than this times the scene's coordinate scale is in the plane (the
+/// plane distance itself is computed with an error of a few ulps of the
+/// coordinates).
+const EDGE_ON_EPS: f32 = 1e-5;
+
+/// Which side of triangle `(a, b, c)` the light at homogeneous position
+/// `from` is on (`w = 0`: a direction towards the light).
+fn facing_light(a: Vec3, b: Vec3, c: Vec3, from: Vec4) -> Facing {
+    let Some(n) = (b - a).cross(c - a).try_normalize() else {
+        return Facing::EdgeOn;
+    };
+    let l = from.truncate();
+    let (h, tol) = if from.w == 0.0 {
+        (n.dot(l.normalize_or_zero()), EDGE_ON_EPS)
+    } else {
+        let scale = a.abs().max(l.abs()).max_element().max(1.0);
+        (n.dot(l - a), EDGE_ON_EPS * scale)
+    };
+    if h > tol {
+        Facing::Towards
+    } else if h < -tol {
+        Facing::Away
+    } else {
+        Facing::EdgeOn
+    }
+}
+
 /// Appends the shadow volume of the triangles `tris` (one object) for a light
 /// at homogeneous position `from` (`w = 0`: a direction towards the light).
 fn extrude(
@@ -879,11 +1020,7 @@ fn extrude(
             (p - l3).extend(0.0)
         }
     };
-    let faces_light = |a: Vec3, b: Vec3, c: Vec3| -> bool {
-        let n = (b - a).cross(c - a);
-        let to_light = if from.w == 0.0 { l3 } else { l3 - a };
-        n.dot(to_light) > 0.0
-    };
+    let facing = |a: Vec3, b: Vec3, c: Vec3| facing_light(a, b, c, from);
     let tri = |t: u32| ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
     let push_cap_and_back = |a: Vec3, b: Vec3, c: Vec3, out: &mut Vec<[Vec4; 3]>| {
         out.push([a.extend(1.0), b.extend(1.0), c.extend(1.0)]);
@@ -898,13 +1035,13 @@ fn extrude(
     if !closed {
         for &t in tris {
             let [a, b, c] = tri(t);
-            if (b - a).cross(c - a).length_squared() == 0.0 {
-                continue;
-            }
-            let [a, b, c] = if faces_light(a, b, c) {
-                [a, b, c]
-            } else {
-                [a, c, b]
+            // An edge-on (or degenerate) triangle blocks no light; its
+            // volume would be flat and, with the light in its plane, its
+            // sides would cover the whole plane seen from the eye.
+            let [a, b, c] = match facing(a, b, c) {
+                Facing::Towards => [a, b, c],
+                Facing::Away => [a, c, b],
+                Facing::EdgeOn => continue,
             };
             push_cap_and_back(a, b, c, out);
             side(a, b, out);
@@ -915,13 +1052,15 @@ fn extrude(
     }
     // Closed: silhouette edges between light-facing and other triangles.
     let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
-    let mut facing: HashMap<([u32; 3], [u32; 3]), bool> = HashMap::new();
+    // Edge-on triangles count as facing away, so that every triangle has
+    // one class and the front cap, back cap and sides close up.
+    let mut lit_edges: HashMap<([u32; 3], [u32; 3]), bool> = HashMap::new();
     let mut lit = Vec::new();
     for &t in tris {
         let [a, b, c] = tri(t);
-        let f = faces_light(a, b, c);
+        let f = facing(a, b, c) == Facing::Towards;
         for (p, q) in [(a, b), (b, c), (c, a)] {
-            facing.insert((key(p), key(q)), f);
+            lit_edges.insert((key(p), key(q)), f);
         }
         if f {
             lit.push([a, b, c]);
@@ -931,7 +1070,7 @@ fn extrude(
         push_cap_and_back(a, b, c, out);
         for (p, q) in [(a, b), (b, c), (c, a)] {
             // The twin edge q -> p belongs to a triangle facing away.
-            if facing.get(&(key(q), key(p))) == Some(&false) {
+            if lit_edges.get(&(key(q), key(p))) == Some(&false) {
                 side(p, q, out);
             }
         }

@@ -5,7 +5,7 @@
 use super::*;
 use chiaro_core::geometry::primitives;
 use chiaro_core::progress::NoProgress;
-use chiaro_core::scene::{Camera, Geometry, Light, Object, Transform};
+use chiaro_core::scene::{Camera, Geometry, Light, Mesh, Object, Transform};
 
 fn settings(shadows: ShadowMethod, w: u32, h: u32) -> RenderSettings {
     RenderSettings {
@@ -414,4 +414,362 @@ fn scanline_shadows_render_like_shadow_rays() {
         ray.len()
     );
     let _ = CoreError::Cancelled;
+}
+
+/// A [`Progress`] that keeps the warnings.
+#[derive(Default)]
+struct Warnings(std::sync::Mutex<Vec<String>>);
+
+impl Progress for Warnings {
+    fn begin(&self, _stage: &str, _total: u64) {}
+    fn advance(&self, _n: u64) {}
+    fn warning(&self, text: &str) {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(text.to_string());
+    }
+}
+
+/// The shipped Cornell box (its OBJ meshes: `v` and `f` lines only),
+/// without the ambient light.
+fn cornell_box() -> Scene {
+    let mut scene = Scene::default();
+    let mat = |name: &str, kd: Vec3, e: Vec3| Material {
+        emission: e,
+        ..Material::diffuse(name, kd)
+    };
+    let white = scene.add_material(mat("white", Vec3::new(0.725, 0.71, 0.68), Vec3::ZERO));
+    let red = scene.add_material(mat("red", Vec3::new(0.63, 0.065, 0.05), Vec3::ZERO));
+    let green = scene.add_material(mat("green", Vec3::new(0.14, 0.45, 0.091), Vec3::ZERO));
+    let light = scene.add_material(mat("light", Vec3::splat(0.78), Vec3::new(17.0, 12.0, 4.0)));
+    for (name, m) in [
+        ("floor", white),
+        ("ceiling", white),
+        ("back-wall", white),
+        ("left-wall", red),
+        ("right-wall", green),
+        ("light", light),
+        ("short-block", white),
+        ("tall-block", white),
+    ] {
+        let path = format!(
+            "{}/../../scenes/meshes/cornell-{name}.obj",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let text = std::fs::read_to_string(&path).expect("shipped Cornell mesh");
+        let mut mesh = Mesh::default();
+        for line in text.lines() {
+            let w: Vec<&str> = line.split_whitespace().collect();
+            match w.first() {
+                Some(&"v") => mesh.positions.push(Vec3::new(
+                    w[1].parse().expect("x"),
+                    w[2].parse().expect("y"),
+                    w[3].parse().expect("z"),
+                )),
+                Some(&"f") => {
+                    let ids: Vec<u32> = w[1..]
+                        .iter()
+                        .map(|s| {
+                            s.split('/')
+                                .next()
+                                .and_then(|i| i.parse::<u32>().ok())
+                                .expect("index")
+                                - 1
+                        })
+                        .collect();
+                    for k in 1..ids.len() - 1 {
+                        mesh.indices.push([ids[0], ids[k], ids[k + 1]]);
+                    }
+                }
+                _ => {}
+            }
+        }
+        let mesh = scene.add_mesh(mesh);
+        scene.objects.push(Object {
+            name: name.into(),
+            geometry: Geometry::Mesh(mesh),
+            material: m,
+            smooth: false,
+            ..Object::default()
+        });
+    }
+    scene.camera = Camera {
+        eye: Vec3::new(278.0, 273.0, -800.0),
+        look_at: Vec3::new(278.0, 273.0, 0.0),
+        up: Vec3::Y,
+        fov_y_degrees: 39.3077,
+        ..Camera::default()
+    };
+    scene
+}
+
+/// Area lights replaced by point lights at their centres, so that shadow
+/// rays see the hard shadow of the centre that shadow volumes cast.
+fn area_lights_at_centres(ps: &mut PreparedScene<'_>) {
+    for l in &mut ps.lights {
+        if let Light::Area { shape, .. } = l {
+            *l = Light::Point {
+                position: shape.center(),
+                color: Vec3::ONE,
+                intensity: 1e5,
+                attenuation: chiaro_core::scene::Attenuation::InverseSquare,
+            };
+        }
+    }
+}
+
+/// Per light of `ps` (each alone), the dark pixels of a `method` render.
+fn dark_per_light(
+    ps: &mut PreparedScene<'_>,
+    method: ShadowMethod,
+    w: u32,
+    h: u32,
+) -> Vec<Vec<bool>> {
+    let mut s = settings(method, w, h);
+    s.samples = 1;
+    let all = std::mem::take(&mut ps.lights);
+    let out = all
+        .iter()
+        .map(|l| {
+            ps.lights = vec![l.clone()];
+            let f = render_prepared(ps, &s, ShadeMode::Phong, &NoProgress).expect("render");
+            dark(&f)
+        })
+        .collect();
+    ps.lights = all;
+    out
+}
+
+/// Pixels whose 3x3 neighbourhood is all of one class in `mask`.
+fn interior(mask: &[bool], w: u32, h: u32) -> Vec<bool> {
+    away_from_edges(mask, w, h, 1)
+}
+
+/// Shadow volumes against shadow rays to the same point lights: per
+/// light, the dark pixels agree except on the rays' shadow silhouettes
+/// (pixels whose 3x3 neighbourhood is not all lit or all dark). Returns
+/// the number of pixels compared and shadowed.
+fn assert_volumes_match_rays(ps: &mut PreparedScene<'_>, w: u32, h: u32) -> (usize, usize) {
+    let rays = dark_per_light(ps, ShadowMethod::Ray, w, h);
+    let vols = dark_per_light(ps, ShadowMethod::Volume, w, h);
+    let (mut n, mut shadowed) = (0, 0);
+    for (li, (r, v)) in rays.iter().zip(&vols).enumerate() {
+        let keep = interior(r, w, h);
+        for i in 0..r.len() {
+            if !keep[i] {
+                continue;
+            }
+            n += 1;
+            shadowed += usize::from(r[i]);
+            assert_eq!(
+                r[i],
+                v[i],
+                "light {li}: pixel ({}, {}) dark with rays {} with volumes {}",
+                i as u32 % w,
+                i as u32 / w,
+                r[i],
+                v[i]
+            );
+        }
+    }
+    (n, shadowed)
+}
+
+#[test]
+fn cornell_box_volumes_match_rays_to_the_light_centres() {
+    // The emissive quad's two triangle lights have their centres in the
+    // quad's own plane: edge-on triangles must cast no volume (they used to
+    // shadow the whole upper half of the image).
+    let scene = cornell_box();
+    let mut ps = PreparedScene::new(&scene, PrepareOptions::default());
+    assert_eq!(ps.lights.len(), 2);
+    area_lights_at_centres(&mut ps);
+    let (n, shadowed) = assert_volumes_match_rays(&mut ps, 64, 64);
+    assert!(
+        n > 2 * 64 * 64 * 7 / 10,
+        "only {n} pixels away from silhouettes"
+    );
+    assert!(shadowed > 300, "only {shadowed} shadowed pixels");
+}
+
+/// A floor, an open shelf quad at height 1 and a closed box whose top face
+/// is at height 1, lit by a quad light whose centre lies in the plane
+/// `y = 1` of both; the box casts a shadow on the floor.
+fn light_in_a_polygon_plane() -> Scene {
+    let mut scene = Scene::default();
+    let grey = scene.add_material(Material::diffuse("grey", Vec3::splat(0.7)));
+    let floor = scene.add_mesh(primitives::plane(4.0, 4));
+    let shelf = scene.add_mesh(primitives::plane(1.0, 1));
+    let cube = scene.add_mesh(primitives::cube());
+    scene.objects.push(Object {
+        name: "floor".into(),
+        geometry: Geometry::Mesh(floor),
+        material: grey,
+        ..Object::default()
+    });
+    scene.objects.push(Object {
+        name: "shelf".into(),
+        geometry: Geometry::Mesh(shelf),
+        material: grey,
+        transform: Transform {
+            translate: Vec3::new(-2.0, 1.0, 1.0),
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
+    scene.objects.push(Object {
+        name: "box".into(),
+        geometry: Geometry::Mesh(cube),
+        material: grey,
+        smooth: false,
+        transform: Transform {
+            translate: Vec3::new(0.5, 0.5, 0.0),
+            scale: Vec3::splat(0.5),
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
+    // A 0.4 x 0.4 quad light in the plane y = 1, centre (2, 1, 0).
+    scene.lights.push(Light::Area {
+        shape: chiaro_core::scene::AreaShape::Quad {
+            corner: Vec3::new(1.8, 1.0, -0.2),
+            edge_u: Vec3::new(0.0, 0.0, 0.4),
+            edge_v: Vec3::new(0.4, 0.0, 0.0),
+        },
+        color: Vec3::ONE,
+        intensity: 20.0,
+        two_sided: true,
+    });
+    scene.camera = Camera {
+        eye: Vec3::new(0.0, 5.0, -6.0),
+        look_at: Vec3::new(0.0, 0.0, 0.5),
+        fov_y_degrees: 45.0,
+        ..Camera::default()
+    };
+    scene
+}
+
+#[test]
+fn a_light_in_the_plane_of_polygons_gets_the_shadow_rays_shadow() {
+    let scene = light_in_a_polygon_plane();
+    let mut ps = PreparedScene::new(&scene, PrepareOptions::default());
+    area_lights_at_centres(&mut ps);
+    let (n, shadowed) = assert_volumes_match_rays(&mut ps, 64, 48);
+    assert!(
+        n > 64 * 48 * 8 / 10,
+        "only {n} pixels away from silhouettes"
+    );
+    assert!(shadowed > 100, "only {shadowed} shadowed pixels");
+    // The quad light itself: volumes cast its centre's shadow, as the exact
+    // object-precision method does.
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let (w, h) = (64, 48);
+    let render = |m| {
+        dark(
+            &render_prepared(&ps, &settings(m, w, h), ShadeMode::Phong, &NoProgress)
+                .expect("render"),
+        )
+    };
+    let (obj, vol) = (render(ShadowMethod::Object), render(ShadowMethod::Volume));
+    let keep = interior(&obj, w, h);
+    let differ = (0..obj.len())
+        .filter(|&i| keep[i] && obj[i] != vol[i])
+        .count();
+    assert_eq!(
+        differ, 0,
+        "volumes and object precision differ on {differ} pixels"
+    );
+    assert!(obj.iter().filter(|&&d| d).count() > 100);
+}
+
+#[test]
+fn open_occluders_are_named_in_a_warning_and_still_shadow() {
+    // The shelf (an open quad) over the floor under a point light: it gets
+    // per-triangle volumes, a warning names it, and the shadow is right.
+    let mut scene = light_in_a_polygon_plane();
+    scene.lights = vec![Light::Point {
+        position: Vec3::new(-2.0, 3.0, 1.0),
+        color: Vec3::ONE,
+        intensity: 10.0,
+        attenuation: chiaro_core::scene::Attenuation::InverseSquare,
+    }];
+    let mut ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let (n, shadowed) = assert_volumes_match_rays(&mut ps, 64, 48);
+    assert!(n > 64 * 48 * 8 / 10 && shadowed > 100, "{n} {shadowed}");
+    let warnings = Warnings::default();
+    let s = settings(ShadowMethod::Volume, 16, 12);
+    render_prepared(&ps, &s, ShadeMode::Phong, &warnings).expect("render");
+    let w = warnings
+        .0
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(
+        w[0].contains("\"shelf\"") && w[0].contains("\"floor\""),
+        "{}",
+        w[0]
+    );
+    assert!(!w[0].contains("\"box\""), "the box is closed: {}", w[0]);
+}
+
+/// `count` point lights in a row over the shadow test scene.
+fn many_point_lights(count: usize) -> Scene {
+    let mut scene = light_only(32);
+    scene.lights = (0..count)
+        .map(|i| Light::Point {
+            position: Vec3::new(-2.0 + 4.0 * i as f32 / count as f32, 4.0, -1.0),
+            color: Vec3::ONE,
+            intensity: 10.0 / count as f32,
+            attenuation: chiaro_core::scene::Attenuation::InverseSquare,
+        })
+        .collect();
+    scene
+}
+
+#[test]
+fn shadow_maps_stay_within_their_budget() {
+    use crate::shadow::{SHADOW_MAP_BUDGET, ShadowMaps};
+    // The case, planned without allocating: 40 point lights at the
+    // default 2048 texels, a cube of 6 x 2048^2 f32 each (96 MiB): five fit
+    // in 512 MiB, the other 35 use shadow rays.
+    let cube = 6 * 2048 * 2048 * 4u64;
+    let (by_ray, bytes) = crate::shadow::plan_budget(&vec![Some(cube); 40], SHADOW_MAP_BUDGET);
+    assert!(bytes <= SHADOW_MAP_BUDGET);
+    assert_eq!(by_ray.iter().filter(|&&r| !r).count(), 5);
+    assert!(by_ray[5..].iter().all(|&r| r));
+    // Built for real with a small budget: the maps kept stay within it, a
+    // warning names the others, and those see the shadow rays' shadows.
+    let scene = many_point_lights(40);
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let sm = chiaro_core::scene::ShadowMapSettings {
+        resolution: 128,
+        ..Default::default()
+    };
+    let budget = 4 << 20;
+    let maps = ShadowMaps::new(&ps, &sm, 1, budget);
+    let per_light = 6 * 128 * 128 * 4;
+    assert_eq!(maps.bytes, (budget / per_light) * per_light);
+    let warning = maps.warning.as_deref().expect("a warning");
+    assert!(
+        warning.contains("lights 10, 11,") && warning.contains("39 use shadow rays"),
+        "{warning}"
+    );
+    let rays = crate::shadow::RayShadows::new(&ps);
+    let p = Vec3::new(-0.9, 0.0, 1.5);
+    let ng = Vec3::Y;
+    let (mut lit, mut dark) = (0, 0);
+    for li in 10..40 {
+        let s = chiaro_core::shading::sample_light(&ps.lights[li], p, Vec2::splat(0.5));
+        let Some(s) = s else { continue };
+        let v = maps.visibility(li, 0, 1, p, ng, &s);
+        assert_eq!(v, rays.visibility(p, ng, &s), "light {li}");
+        lit += usize::from(v == Vec3::ONE);
+        dark += usize::from(v == Vec3::ZERO);
+    }
+    assert!(lit > 0 && dark > 0, "lit {lit} dark {dark}");
+    // A whole render with the default budget and settings finishes.
+    let s = settings(ShadowMethod::Map, 32, 24);
+    let f = render_prepared(&ps, &s, ShadeMode::Phong, &NoProgress).expect("render");
+    assert!(f.color.iter().all(|c| c.is_finite()));
 }

@@ -46,6 +46,7 @@ use chiaro_core::shading::{
     LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, fresnel_dielectric,
     reflect, refract, sanitize, shade_local,
 };
+use chiaro_core::shadow::ShadowCasters;
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -100,17 +101,6 @@ pub struct PrimarySample {
     /// Unit shading normal at the first surface (facing the camera), zero
     /// when nothing was hit.
     pub normal: Vec3,
-}
-
-/// How a primitive affects shadow rays.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Blocker {
-    /// Ignored (its object does not cast shadows).
-    Ignore,
-    /// Blocks all light.
-    Opaque,
-    /// Lets light through, tinted by `kt`.
-    Filter(Vec3),
 }
 
 /// The specular continuation of a ray at a hit.
@@ -190,13 +180,8 @@ pub struct Tracer<'s> {
     /// The render settings.
     pub settings: RenderSettings,
     indirect: Option<Box<IndirectFn<'s>>>,
-    /// Per material: its transmit colour (zero when opaque).
-    material_kt: Vec<Vec3>,
-    /// Per object: casts shadows.
-    object_casts: Vec<bool>,
-    /// True when every primitive is an opaque shadow caster (shadow rays
-    /// can stop at the first hit).
-    all_opaque: bool,
+    /// How each primitive affects shadow rays.
+    casters: ShadowCasters,
 }
 
 impl std::fmt::Debug for Tracer<'_> {
@@ -225,31 +210,13 @@ impl<'s> Tracer<'s> {
     /// A tracer over an already prepared scene.
     pub fn from_prepared(prepared: PreparedScene<'s>, settings: &RenderSettings) -> Self {
         let accel = build_accelerator(&prepared);
-        let scene = prepared.scene;
-        let material_kt: Vec<Vec3> = scene
-            .materials
-            .iter()
-            .map(|m| m.transmit.max(Vec3::ZERO))
-            .collect();
-        let object_casts: Vec<bool> = scene.objects.iter().map(|o| o.casts_shadows).collect();
-        let all_opaque = object_casts.iter().all(|&c| c)
-            && prepared
-                .tri_material
-                .iter()
-                .chain(prepared.spheres.iter().map(|s| &s.material))
-                .all(|m| {
-                    material_kt
-                        .get(m.index())
-                        .is_none_or(|kt| kt.max_element() <= 0.0)
-                });
+        let casters = ShadowCasters::new(&prepared);
         Self {
             prepared,
             accel,
             settings: settings.clone(),
             indirect: None,
-            material_kt,
-            object_casts,
-            all_opaque,
+            casters,
         }
     }
 
@@ -268,49 +235,12 @@ impl<'s> Tracer<'s> {
         self
     }
 
-    fn object_of(&self, prim: u32) -> u32 {
-        let nt = self.prepared.triangles.len();
-        let p = prim as usize;
-        if p < nt {
-            self.prepared.tri_object[p]
-        } else {
-            self.prepared
-                .spheres
-                .get(p - nt)
-                .map_or(u32::MAX, |s| s.object)
-        }
-    }
-
-    fn blocker(&self, prim: u32) -> Blocker {
-        let nt = self.prepared.triangles.len();
-        let p = prim as usize;
-        let (material, object) = if p < nt {
-            (self.prepared.tri_material[p], self.prepared.tri_object[p])
-        } else {
-            match self.prepared.spheres.get(p - nt) {
-                Some(s) => (s.material, s.object),
-                None => return Blocker::Opaque,
-            }
-        };
-        if !self
-            .object_casts
-            .get(object as usize)
-            .copied()
-            .unwrap_or(true)
-        {
-            return Blocker::Ignore;
-        }
-        match self.material_kt.get(material.index()) {
-            Some(kt) if kt.max_element() > 0.0 => Blocker::Filter(kt.min(Vec3::ONE)),
-            _ => Blocker::Opaque,
-        }
-    }
-
     /// RGB transmittance from the surface point `p` (unit geometric normal
     /// `ng`, either side) to the light sample: 0 when an opaque surface is in
     /// between, the product of the transmit colours of the transparent
-    /// surfaces crossed otherwise (1 when nothing is in between). Always 1
-    /// with `settings.shadows == ShadowMethod::None`.
+    /// surfaces crossed otherwise (1 when nothing is in between), by the
+    /// one rule of [`chiaro_core::shadow`]. Always 1 with
+    /// `settings.shadows == ShadowMethod::None`.
     pub fn light_visibility(&self, p: Vec3, ng: Vec3, sample: &LightSample) -> Vec3 {
         let mut rays = 0;
         self.light_visibility_counted(p, ng, sample, &mut rays)
@@ -326,47 +256,8 @@ impl<'s> Tracer<'s> {
         if self.settings.shadows == ShadowMethod::None {
             return Vec3::ONE;
         }
-        *rays += 1;
-        let origin = offset_ray_origin(p, ng, sample.wi);
-        // A segment that stops just short of the sample (which may lie on
-        // an emissive triangle).
-        let ray = Ray::segment(origin, sample.point);
-        if self.all_opaque {
-            return if self.accel.occluded(&ray) {
-                Vec3::ZERO
-            } else {
-                Vec3::ONE
-            };
-        }
-        let mut tr = Vec3::ONE;
-        // Filter crossings already counted, as (t, object): a ray through
-        // the shared edge of two triangles of one surface (which the
-        // watertight test reports on both) must tint once.
-        let mut seen = [(0.0f32, u32::MAX); 16];
-        let mut nseen = 0usize;
-        let blocked = self
-            .accel
-            .for_each_hit(&ray, &mut |h| match self.blocker(h.prim) {
-                Blocker::Ignore => false,
-                Blocker::Opaque => true,
-                Blocker::Filter(kt) => {
-                    let object = self.object_of(h.prim);
-                    let tol = 1e-5 * h.t.abs().max(1e-3);
-                    if seen[..nseen]
-                        .iter()
-                        .any(|&(t, o)| o == object && (t - h.t).abs() <= tol)
-                    {
-                        return false;
-                    }
-                    if nseen < seen.len() {
-                        seen[nseen] = (h.t, object);
-                        nseen += 1;
-                    }
-                    tr *= kt;
-                    tr.max_element() <= 0.0
-                }
-            });
-        if blocked { Vec3::ZERO } else { tr }
+        self.casters
+            .light_transmittance(&*self.accel, p, ng, sample, rays)
     }
 
     /// The radiance arriving along `ray` (any direction length), traced

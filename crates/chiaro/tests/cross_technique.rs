@@ -76,6 +76,88 @@ fn phong_scan_conversion_equals_whitted_at_depth_zero() {
 }
 
 #[test]
+fn phong_and_whitted_shadow_rays_agree_through_transparent_occluders() {
+    // Over the shadow test scene: a coloured pane (two triangles) and a
+    // closed transparent cube, tilted so that no face of theirs is
+    // horizontal. On the horizontal surfaces both techniques call the one
+    // shadow-ray query, so the shadows tinted by kt (pane) and kt^2 (cube,
+    // crossed twice) are the same.
+    use chiaro::scene::{Geometry, Material, Object, Transform};
+    let mut scene = scenes::shadow_test(64);
+    let pane = scene.add_material(Material {
+        transmit: Vec3::new(0.9, 0.5, 0.2),
+        two_sided: true,
+        ..Material::diffuse("pane", Vec3::splat(0.1))
+    });
+    let glass = scene.add_material(Material {
+        transmit: Vec3::new(0.3, 0.8, 0.6),
+        ..Material::diffuse("glass", Vec3::splat(0.1))
+    });
+    let quad = scene.add_mesh(chiaro_core::geometry::primitives::plane(0.6, 1));
+    let cube = scene.add_mesh(chiaro_core::geometry::primitives::cube());
+    scene.objects.push(Object {
+        name: "pane".into(),
+        geometry: Geometry::Mesh(quad),
+        material: pane,
+        transform: Transform {
+            translate: Vec3::new(0.2, 2.2, 0.8),
+            rotate_degrees: Vec3::new(20.0, 0.0, 10.0),
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
+    scene.objects.push(Object {
+        name: "glass".into(),
+        geometry: Geometry::Mesh(cube),
+        material: glass,
+        smooth: false,
+        transform: Transform {
+            translate: Vec3::new(-1.2, 2.6, -1.0),
+            rotate_degrees: Vec3::new(30.0, 20.0, 0.0),
+            scale: Vec3::splat(0.35),
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
+    let mut s = scene.render.clone();
+    s.shadows = ShadowMethod::Ray;
+    s.technique = Technique::Phong;
+    let raster = render(&scene, &s);
+    s.technique = Technique::Whitted;
+    s.whitted.max_depth = 0;
+    let traced = render(&scene, &s);
+    s.shadows = ShadowMethod::None;
+    let unshadowed = render(&scene, &s);
+    // Horizontal surfaces (not the pane or the cube, which the scan
+    // converter blends with what is behind them), away from the edges of
+    // shadows and tints (where the two techniques' shading points differ
+    // by rounding).
+    let w = traced.width as usize;
+    let ratio: Vec<Vec3> = (0..traced.color.len())
+        .map(|i| traced.color[i] / unshadowed.color[i].max(Vec3::splat(1e-6)))
+        .collect();
+    let same = same_surface(&raster, &traced);
+    let mask = |i: usize| {
+        same(i)
+            && traced.normal[i].y > 0.999
+            && [i - 1, i + 1, i - w, i + w]
+                .iter()
+                .all(|&j| (ratio[j] - ratio[i]).abs().max_element() < 1e-3)
+    };
+    let tinted = (0..ratio.len())
+        .filter(|&i| mask(i) && ratio[i].max_element() < 0.99 && ratio[i].min_element() > 0.01)
+        .count();
+    let d = diff_films(&raster, &traced, 1e-3, mask);
+    if d.over > 0 {
+        dump_ppm(&raster, "transparent_shadows_raster");
+        dump_ppm(&traced, "transparent_shadows_whitted");
+    }
+    assert!(d.compared > 64 * 64 / 4, "too few pixels compared: {d:?}");
+    assert!(tinted > 40, "only {tinted} pixels in a tinted shadow");
+    assert_eq!(d.over, 0, "{d:?}");
+}
+
+#[test]
 fn gouraud_and_phong_agree_on_flat_lit_faces_only_where_they_should() {
     // Gouraud interpolates vertex colours, Phong shades per pixel: on the
     // specular sphere they must differ, on the diffuse faceted box (one

@@ -19,8 +19,8 @@ pub use material::{Bump, Distribution, Material, ReflectanceModel, TransparencyM
 pub use mesh::{Geometry, Mesh, Object, Transform};
 pub use settings::{
     AaMode, DepthCue, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, PathSettings, PixelFilter,
-    RadiositySettings, RenderSettings, ShadeMode, ShadowMapSettings, ShadowMethod, Technique,
-    ToneMap, WhittedSettings,
+    RadiositySettings, RenderSettings, SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings,
+    ShadowMethod, Technique, ToneMap, WhittedSettings,
 };
 pub use texture::{Environment, ImageTexture, Procedural, ProceduralKind, Texture, WrapMode};
 pub use validate::{Issue, Severity};

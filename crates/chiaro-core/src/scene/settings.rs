@@ -13,6 +13,8 @@ pub const MAX_IMAGE_SIDE: u32 = 16_384;
 pub const MAX_IMAGE_PIXELS: u64 = 8192 * 8192;
 /// Largest accepted samples per pixel.
 pub const MAX_SAMPLES: u32 = 1 << 16;
+/// Accepted shadow-map resolutions (texels per side of a map or cube face).
+pub const SHADOW_MAP_RESOLUTIONS: std::ops::RangeInclusive<u32> = 16..=8192;
 
 /// A complete way of making a picture.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]

@@ -1,7 +1,8 @@
 //! `Scene::validate`: every problem in a scene, not only the first.
 
 use super::{
-    AreaShape, Geometry, Light, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, Scene, Texture,
+    AreaShape, Geometry, Light, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES,
+    SHADOW_MAP_RESOLUTIONS, Scene, Texture,
 };
 use glam::Vec3;
 use std::fmt;
@@ -107,6 +108,17 @@ impl Scene {
         }
         if !r.exposure.is_finite() {
             c.error("render.exposure", "expected a finite number");
+        }
+        if !SHADOW_MAP_RESOLUTIONS.contains(&r.shadow_map.resolution) {
+            c.error(
+                "render.shadow_map.resolution",
+                format!(
+                    "expected {}..={} texels per side, got {}",
+                    SHADOW_MAP_RESOLUTIONS.start(),
+                    SHADOW_MAP_RESOLUTIONS.end(),
+                    r.shadow_map.resolution
+                ),
+            );
         }
 
         let cam = &self.camera;
@@ -386,6 +398,20 @@ mod tests {
             .filter(|i| i.severity == Severity::Error)
             .count();
         assert!(errors >= 4, "{issues:#?}");
+    }
+
+    #[test]
+    fn shadow_map_resolution_is_bounded() {
+        for (res, ok) in [(16, true), (8192, true), (0, false), (16384, false)] {
+            let mut s = Scene::default();
+            s.render.shadow_map.resolution = res;
+            let bad: Vec<_> = s
+                .validate()
+                .into_iter()
+                .filter(|i| i.path == "render.shadow_map.resolution")
+                .collect();
+            assert_eq!(bad.is_empty(), ok, "{res}: {bad:?}");
+        }
     }
 
     #[test]
