@@ -78,7 +78,9 @@ pub struct PreparedScene<'s> {
     pub emissive_triangles: Vec<u32>,
     /// The lights every technique uses: the scene's lights followed by one
     /// [`AreaShape::Triangle`] area light per emissive triangle (radiance =
-    /// the material's emission, one-sided unless the material is two-sided).
+    /// the material's emission times its emission texture's mean over the
+    /// triangle, [`Self::emission_texture_mean`]; one-sided unless the
+    /// material is two-sided).
     pub lights: Vec<Light>,
     /// World-space bounds of everything.
     pub bounds: Aabb,
@@ -171,9 +173,10 @@ impl<'s> PreparedScene<'s> {
             let [a, b, c] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
             let m = ps.material(ps.tri_material[t as usize]);
             if crate::geometry::face_normal(a, b, c).is_some() {
+                let emission = m.emission * ps.emission_texture_mean(t);
                 ps.lights.push(Light::Area {
                     shape: AreaShape::Triangle { a, b, c },
-                    color: m.emission,
+                    color: emission,
                     intensity: 1.0,
                     two_sided: m.two_sided,
                 });
@@ -433,6 +436,43 @@ impl<'s> PreparedScene<'s> {
         sm
     }
 
+    /// The mean of triangle `t`'s emission texture over the triangle (one
+    /// without a texture): the base level at the 15 points of a 4-per-side
+    /// barycentric lattice. An emissive triangle's light carries it, so that a
+    /// mostly black emission texture (a glTF `emissiveTexture` under
+    /// `emissiveFactor = 1`) does not light the scene, nor take the light
+    /// choice from the other lights, as if it glowed all over.
+    pub fn emission_texture_mean(&self, t: u32) -> Vec3 {
+        let Some(tex) = self
+            .tri_material
+            .get(t as usize)
+            .and_then(|&m| self.material(m).emission_texture)
+        else {
+            return Vec3::ONE;
+        };
+        let [i0, i1, i2] = self.triangles[t as usize].map(|i| i as usize);
+        const N: u32 = 4;
+        let mut sum = Vec3::ZERO;
+        let mut count = 0.0;
+        for i in 0..=N {
+            for j in 0..=N - i {
+                let (u, v) = (i as f32 / N as f32, j as f32 / N as f32);
+                let w = 1.0 - u - v;
+                let tc = TexCoord {
+                    uv: self.uvs[i0] * w + self.uvs[i1] * u + self.uvs[i2] * v,
+                    duv_dx: Vec2::ZERO,
+                    duv_dy: Vec2::ZERO,
+                    p_object: self.object_positions[i0] * w
+                        + self.object_positions[i1] * u
+                        + self.object_positions[i2] * v,
+                };
+                sum += self.eval_texture(tex, &tc).truncate();
+                count += 1.0;
+            }
+        }
+        crate::shading::sanitize(sum / count)
+    }
+
     /// `(dp/du, dp/dv)`: world-space derivatives of position with respect to
     /// the texture coordinates on triangle `t` (pbrt-v4 section 6.5.3). For
     /// degenerate uvs, an arbitrary orthonormal tangent frame of the face.
@@ -569,6 +609,47 @@ mod tests {
         let ps = PreparedScene::new(&s, PrepareOptions::default());
         for t in 0..ps.triangle_count() as u32 {
             assert!(ps.face_normal(t).dot(Vec3::Z) > 0.99);
+        }
+    }
+
+    /// An emissive quad whose emission texture is constant (2, 0, 0.5): each
+    /// triangle light carries factor times texture; without the texture the
+    /// factor alone. A black texture gives lights of zero radiance.
+    #[test]
+    fn emissive_triangle_lights_carry_the_emission_texture() {
+        for (texel, want) in [
+            (Some([2.0, 0.0, 0.5]), Vec3::new(6.0, 0.0, 1.5)),
+            (Some([0.0; 3]), Vec3::ZERO),
+            (None, Vec3::splat(3.0)),
+        ] {
+            let mut s = Scene::default();
+            let emission_texture = texel.map(|[r, g, b]| {
+                s.add_texture(Texture::Image(crate::scene::ImageTexture {
+                    source: "t".into(),
+                    width: 2,
+                    height: 2,
+                    texels: vec![[r, g, b, 1.0]; 4],
+                    wrap: crate::scene::WrapMode::Repeat,
+                }))
+            });
+            s.add_material(Material {
+                emission: Vec3::splat(3.0),
+                emission_texture,
+                ..Material::default()
+            });
+            let m = s.add_mesh(primitives::quad(Vec3::ZERO, Vec3::X, Vec3::Y));
+            s.objects.push(Object {
+                geometry: Geometry::Mesh(m),
+                ..Default::default()
+            });
+            let ps = PreparedScene::new(&s, PrepareOptions::default());
+            assert_eq!(ps.lights.len(), 2);
+            for l in &ps.lights {
+                let Light::Area { color, .. } = l else {
+                    panic!("{l:?}");
+                };
+                assert!((*color - want).abs().max_element() < 1e-6, "{color}");
+            }
         }
     }
 }

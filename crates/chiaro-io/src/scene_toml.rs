@@ -17,7 +17,7 @@
 //! | `[[light]]` | `type` = `ambient` {`color`, `intensity`}; `point` {+ `position`, `attenuation`}; `directional` {`direction`, the way the light travels}; `spot` {`position`, `direction` or `look_at`, `attenuation`, `exponent` (Warn's n, default 1), `cone` (half-angle, default 90), `cone_softness`, `flaps` = [{`axis`, `min`, `max`}]}; `area` {`shape` = `quad` {`corner`, `edge_u`, `edge_v`} / `disk` {`center`, `normal`, `radius`} / `sphere` {`center`, `radius`}, `two_sided`} |
 //! | `[material.NAME]` | `ambient` (ka, relative to kd), `diffuse`, `specular`, `shininess`, `model` (`phong`, `blinn`, `torrance-sparrow`), `roughness`, `distribution` (`ggx`, `beckmann`), `reflect`, `transmit`, `ior`, `absorption`, `fresnel`, `transparency` (`interpolated`, `screen-door`, `filtered`), `texture`, `bump`, `normal_map`, `emission`, `emission_texture`, `two_sided` |
 //! | `[[object]]` | `name`, `mesh` (`.obj`, `.gltf`, `.glb`) or `primitive`, `material`, `transform`, `smooth`, `crease_angle`, `shade` (`flat`, `gouraud`, `phong`), `casts_shadows` |
-//! | `[environment]` | `texture` (lat-long image), `intensity`, `rotate_y`, `background` (draw it behind the scene) |
+//! | `[environment]` | `texture` (lat-long image), `intensity`, `rotate_y` (degrees, right-handed about +y like an object's), `background` (camera rays see it; reflections and lighting use it either way) |
 //! | top level | `background` (colour where nothing is hit) |
 //!
 //! Colours and most RGB coefficients take a scalar or three numbers

@@ -54,6 +54,7 @@ use chiaro_core::film::Film;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::scene::{RadiositySettings, RenderSettings, Scene, Severity};
+use chiaro_core::shading::texture::background_radiance;
 use formfactor::{PairFormFactor, PairRule, Visibility, pair, point_light_direct};
 use glam::Vec3;
 use mesh::{Element, ElementMesh, SourceKind, material_at};
@@ -530,9 +531,10 @@ fn build_solution(
 /// `round(sqrt(samples))^2` samples per pixel, and each visible sample gets
 /// the Gouraud interpolation of its element's vertex radiance (exact
 /// barycentrics on the element's plane along the pixel ray). Background:
-/// `scene.background`. Fills the film's depth and normal buffers. Only the
-/// pixels of `settings.crop_rect()` are shaded (the rest stay black with
-/// infinite depth), each equal to the full render's.
+/// what every technique's camera sees (`texture::background_radiance`).
+/// Fills the film's depth and normal buffers. Only the pixels of
+/// `settings.crop_rect()` are shaded (the rest stay black with infinite
+/// depth), each equal to the full render's.
 ///
 /// # Errors
 /// [`CoreError::Unsupported`] if the solution belongs to another scene;
@@ -587,12 +589,12 @@ pub fn render_solution(
                         for sx in 0..ss {
                             let (px, py) = (x * ss + sx, y * ss + sy);
                             let id = buf.id[(py * sw + px) as usize];
+                            let d = cam.ray_direction(px as f32 + 0.5, py as f32 + 0.5, sw, sh);
                             if id == chiaro_raster::zbuffer::NO_ITEM {
-                                col += scene.background;
+                                col += background_radiance(scene, d);
                                 continue;
                             }
                             let e = id as usize;
-                            let d = cam.ray_direction(px as f32 + 0.5, py as f32 + 0.5, sw, sh);
                             let n = normals[e];
                             let c = solution.elements[e].map(|i| solution.vertices[i as usize]);
                             let denom = n.dot(d);

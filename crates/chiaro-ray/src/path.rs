@@ -635,7 +635,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 }
             };
             let Some(hit) = hit else {
-                l += beta * self.escaped(&ray, depth == 0 || prev_pdf == 0.0);
+                l += beta * self.escaped(&ray, depth, prev_pdf);
                 break;
             };
             // The hit is used field by field: a copy of the whole struct
@@ -708,15 +708,16 @@ impl<'a, 's> PathTracer<'a, 's> {
         (l, first)
     }
 
-    /// Radiance of an escaped ray: the environment map lights the scene; the
-    /// plain background is seen only directly (camera or delta chains).
-    fn escaped(&self, ray: &Ray, direct_view: bool) -> Vec3 {
+    /// Radiance of a ray that escaped at path depth `depth` after a scatter
+    /// of pdf `prev_pdf` (0: a delta lobe): `miss_radiance`'s rule (the
+    /// camera sees the background, other rays the environment map, which
+    /// lights the scene); without a map the plain background is seen only
+    /// directly (camera or delta chains) and lights nothing.
+    #[inline]
+    fn escaped(&self, ray: &Ray, depth: u32, prev_pdf: f32) -> Vec3 {
         let scene = self.prepared.scene;
-        if let Some(env) = &scene.environment {
-            return environment_radiance(scene, env, ray.dir.normalize());
-        }
-        if direct_view {
-            scene.background
+        if scene.environment.is_some() || depth == 0 || prev_pdf == 0.0 {
+            chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0)
         } else {
             Vec3::ZERO
         }
@@ -1093,19 +1094,6 @@ fn sample_microfacet_normal(dist: Distribution, alpha: f32, u: Vec2) -> Vec3 {
     let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
     let phi = 2.0 * PI * u.y;
     Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
-}
-
-/// Radiance of the lat-long environment map in direction `d` (unit): `+y` is
-/// up and `u = 0.5` looks down `-z` (see [`chiaro_core::scene::Environment`]).
-fn environment_radiance(scene: &Scene, env: &chiaro_core::scene::Environment, d: Vec3) -> Vec3 {
-    let Some(chiaro_core::scene::Texture::Image(img)) = scene.textures.get(env.texture.index())
-    else {
-        return Vec3::ZERO;
-    };
-    let phi = d.x.atan2(-d.z) - env.rotate_y_degrees.to_radians();
-    let u = (0.5 + phi / (2.0 * PI)).rem_euclid(1.0);
-    let v = d.y.clamp(-1.0, 1.0).acos() / PI;
-    chiaro_core::shading::texture::bilinear(img, Vec2::new(u, v)).truncate() * env.intensity
 }
 
 #[cfg(test)]

@@ -2,6 +2,8 @@
 //! shading function with an eye light (a point light at the camera, no
 //! attenuation) plus a little ambient, and no shadows. Fast, always
 //! available, and the simplest end-to-end path through the whole system.
+//! Where no surface is hit it shows the background every technique shows
+//! (`texture::background_radiance`: the environment map or the colour).
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::error::{CoreError, Result};
@@ -11,6 +13,7 @@ use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{pixel_rng, uniform2};
 use chiaro_core::scene::{Attenuation, Light, RenderSettings, Scene};
+use chiaro_core::shading::texture::background_radiance;
 use chiaro_core::shading::{LocalLighting, ShadingPoint, sanitize, shade_local};
 use glam::{Vec2, Vec3};
 
@@ -89,7 +92,7 @@ pub fn render_with(
                             cam.ray_direction(px as f32 + offset.x, py as f32 + offset.y, w, h);
                         let ray = Ray::new(cam.eye, dir);
                         let Some(hit) = accel.intersect(&ray) else {
-                            sum += scene.background;
+                            sum += background_radiance(scene, dir);
                             continue;
                         };
                         let surf = prepared.surface(&ray, &hit);

@@ -41,7 +41,7 @@ use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, RenderSettings, Scene, ShadowMethod};
-use chiaro_core::shading::texture::{background_radiance, environment_radiance};
+use chiaro_core::shading::texture::miss_radiance;
 use chiaro_core::shading::{
     LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, fresnel_dielectric,
     reflect, refract, sanitize, shade_local,
@@ -268,17 +268,12 @@ impl<'s> Tracer<'s> {
         self.trace_hit(ray, depth, weight, state).0
     }
 
-    /// What a ray that hits nothing sees: camera rays see the background
-    /// (the environment map when it is drawn as background); reflected and
-    /// refracted rays see the environment map when the scene has one (a
-    /// reflection map), the background colour otherwise.
+    /// What a ray that hits nothing sees (`texture::miss_radiance`): camera
+    /// rays see the background (the environment map when it is drawn as
+    /// background); reflected and refracted rays see the environment map
+    /// when the scene has one, the background colour otherwise.
     fn miss_radiance(&self, dir: Vec3, depth: u32) -> Vec3 {
-        let scene = self.prepared.scene;
-        if depth > 0 && scene.environment.is_some() {
-            environment_radiance(scene, dir)
-        } else {
-            background_radiance(scene, dir)
-        }
+        miss_radiance(self.prepared.scene, dir, depth == 0)
     }
 
     /// Like [`Tracer::trace`], also returning the hit distance (in units of

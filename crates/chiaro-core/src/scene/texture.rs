@@ -89,8 +89,10 @@ pub struct Environment {
     pub texture: super::TextureId,
     /// Radiance scale.
     pub intensity: f32,
-    /// Rotation about +y, degrees.
+    /// Rotation about +y, degrees, right-handed as an object's `rotate_y`:
+    /// +90 shows the map's `-z` towards `-x`.
     pub rotate_y_degrees: f32,
-    /// Draw it as the background (otherwise `Scene::background`).
+    /// Camera rays see it where nothing is hit (otherwise they see
+    /// `Scene::background`); reflected rays and lighting always use it.
     pub as_background: bool,
 }

@@ -367,20 +367,30 @@ pub fn environment_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
     let Some(d) = dir.try_normalize() else {
         return Vec3::ZERO;
     };
-    // Rotating the map by +a about y is looking up the direction rotated by -a.
-    let d = glam::Quat::from_rotation_y(-env.rotate_y_degrees.to_radians()) * d;
+    // The map turned by +a about +y (right-handed, as an object's `rotate_y`
+    // turns it) shows at `d` what it showed at `R_y(-a) d`; a rotation about
+    // y keeps `v` and moves the azimuth `u` by `+a / 360`.
     let mut uv = latlong_uv(d);
-    uv.x = uv.x.rem_euclid(1.0);
+    uv.x = (uv.x + env.rotate_y_degrees / 360.0).rem_euclid(1.0);
     bilinear(img, uv).truncate() * env.intensity
 }
 
-/// What the camera sees in direction `dir` where no surface is hit: the
-/// environment map when it is drawn as background, else `scene.background`.
-pub fn background_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
+/// What a ray that leaves the scene in direction `dir` sees: a camera ray
+/// (`camera`) sees the environment map only when it is drawn as background
+/// (`Environment::as_background`), else `scene.background`; any other ray
+/// (reflected, refracted, scattered) sees the environment map when there is
+/// one, else `scene.background`. The one rule for every technique.
+pub fn miss_radiance(scene: &Scene, dir: Vec3, camera: bool) -> Vec3 {
     match &scene.environment {
-        Some(env) if env.as_background => environment_radiance(scene, dir),
+        Some(env) if env.as_background || !camera => environment_radiance(scene, dir),
         _ => scene.background,
     }
+}
+
+/// What the camera sees in direction `dir` where no surface is hit:
+/// [`miss_radiance`] of a camera ray.
+pub fn background_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
+    miss_radiance(scene, dir, true)
 }
 
 // ---------------------------------------------------------------------------
@@ -566,5 +576,89 @@ mod tests {
             background_radiance(&scene, Vec3::NEG_Z),
             environment_radiance(&scene, Vec3::NEG_Z)
         );
+    }
+
+    /// One bright texel at the map's `-z` (u = 0.5, on the horizon); after
+    /// `rotate_y = a` it must be seen at `R_y(a) (-z) = (-sin a, 0, -cos a)`,
+    /// the direction a right-handed rotation of the world by `a` about +y
+    /// turns `-z` to (as an object's `rotate_y` does).
+    #[test]
+    fn rotate_y_turns_the_map_right_handed() {
+        // 8 x 4 texels; texel (3, 1)'s centre is u = 3.5 / 8 = 0.4375,
+        // v = 1.5 / 4 = 0.375. Make it the only bright one.
+        let img = image(8, 4, |x, y| if (x, y) == (3, 1) { 100.0 } else { 0.0 });
+        let mut scene = Scene::default();
+        let t = scene.add_texture(Texture::Image(img));
+        let texel_dir = |rot_deg: f32| {
+            // The texel's direction in the unrotated map, turned by rot_deg.
+            let (u, v) = (0.4375_f32, 0.375_f32);
+            let phi = (u - 0.5) * std::f32::consts::TAU; // azimuth from -z towards +x
+            let theta = v * std::f32::consts::PI; // from +y
+            let d = Vec3::new(
+                theta.sin() * phi.sin(),
+                theta.cos(),
+                -theta.sin() * phi.cos(),
+            );
+            glam::Quat::from_rotation_y(rot_deg.to_radians()) * d
+        };
+        for rot in [0.0_f32, 90.0, -90.0, 180.0, 30.0, 450.0] {
+            scene.environment = Some(crate::scene::Environment {
+                texture: t,
+                intensity: 1.0,
+                rotate_y_degrees: rot,
+                as_background: true,
+            });
+            let d = texel_dir(rot);
+            let seen = environment_radiance(&scene, d).x;
+            assert!((seen - 100.0).abs() < 1e-2, "rotate_y {rot}: {seen} at {d}");
+            // The unrotated direction sees darkness once the turn exceeds the
+            // bilinear footprint (one texel, 45 degrees).
+            if (45.0..=315.0).contains(&rot.rem_euclid(360.0)) {
+                let off = environment_radiance(&scene, texel_dir(0.0)).x;
+                assert!(off < 1e-3, "rotate_y {rot}: {off}");
+            }
+        }
+        // Pinned by hand: rotate_y = 90 takes the map's -z to -x, so a texel
+        // at the map's centre column is seen looking down -x.
+        let centre = image(8, 4, |x, _| if x == 3 || x == 4 { 1.0 } else { 0.0 });
+        let c = scene.add_texture(Texture::Image(centre));
+        scene.environment = Some(crate::scene::Environment {
+            texture: c,
+            intensity: 1.0,
+            rotate_y_degrees: 90.0,
+            as_background: true,
+        });
+        assert!((environment_radiance(&scene, Vec3::NEG_X).x - 1.0).abs() < 1e-6);
+        assert!(environment_radiance(&scene, Vec3::NEG_Z).x.abs() < 1e-6);
+        assert!(environment_radiance(&scene, Vec3::X).x.abs() < 1e-6);
+    }
+
+    /// `background = false`: the camera sees `scene.background`, every other
+    /// ray the environment.
+    #[test]
+    fn miss_radiance_rule() {
+        let mut scene = Scene {
+            background: Vec3::new(0.25, 0.5, 0.75),
+            ..Scene::default()
+        };
+        assert_eq!(miss_radiance(&scene, Vec3::Z, true), scene.background);
+        assert_eq!(miss_radiance(&scene, Vec3::Z, false), scene.background);
+        let t = scene.add_texture(Texture::Image(image(4, 2, |_, _| 2.0)));
+        for as_background in [true, false] {
+            scene.environment = Some(crate::scene::Environment {
+                texture: t,
+                intensity: 1.5,
+                rotate_y_degrees: 0.0,
+                as_background,
+            });
+            let camera = if as_background {
+                Vec3::splat(3.0)
+            } else {
+                scene.background
+            };
+            assert_eq!(miss_radiance(&scene, Vec3::Z, true), camera);
+            assert_eq!(background_radiance(&scene, Vec3::Z), camera);
+            assert_eq!(miss_radiance(&scene, Vec3::Z, false), Vec3::splat(3.0));
+        }
     }
 }

@@ -226,7 +226,7 @@ impl PathTracer<'_, '_> {
                 *rays += 1;
                 let ray = Ray::new(org.get(i), dir.get(i));
                 let Some(hit) = self.accel.intersect(&ray) else {
-                    let seen = self.escaped(&ray, depth == 0 || prev_pdf[i] == 0.0);
+                    let seen = self.escaped(&ray, depth, prev_pdf[i]);
                     out[i] = l.get(i) + beta.get(i) * seen;
                     alive[i] = false;
                     continue;
