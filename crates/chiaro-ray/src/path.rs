@@ -5,11 +5,11 @@
 //!   combined with BSDF sampling by multiple importance sampling (power
 //!   heuristic, Veach 1997) for area lights and emissive triangles; delta
 //!   lights (point, spot, directional) by next-event estimation only.
-//! - The BSDF is the local model's (`chiaro_core::shading::eval_brdf_cos`:
-//!   Lambert plus Phong, Blinn or Torrance-Sparrow), sampled lobe by lobe,
-//!   plus ideal mirror reflection (kr) and transmission (kt): a dielectric
-//!   with Fresnel's equations and total internal reflection when the
-//!   material has `fresnel = true`, fixed kr/kt weights otherwise.
+//! - The BSDF is the shading layer's (`chiaro_core::shading::Bsdf`: the
+//!   local model's Lambert plus Phong, Blinn or Torrance-Sparrow, sampled
+//!   lobe by lobe, plus ideal mirror reflection (kr) and transmission (kt):
+//!   a dielectric with Fresnel's equations and total internal reflection
+//!   when the material has `fresnel = true`, fixed kr/kt weights otherwise).
 //! - Russian roulette from `settings.path.rr_depth`; at most
 //!   `settings.path.max_depth` scattering vertices (1 = direct light only).
 //! - Random numbers from `chiaro_core::sampling::SobolSampler`: a pixel's
@@ -34,24 +34,21 @@
 use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::error::{CoreError, Result};
 use chiaro_core::film::{Film, TilePixels, render_tiles_in};
-use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
+use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{
-    SobolSampler, cosine_hemisphere_pdf, phong_lobe_pdf, power_heuristic, sample_cosine_hemisphere,
-    sample_phong_lobe, sample_uniform_triangle,
+    SobolSampler, pixel_rng, power_heuristic, sample_uniform_triangle, uniform2,
 };
-use chiaro_core::scene::{AreaShape, Distribution, Light, ReflectanceModel, RenderSettings, Scene};
-use chiaro_core::shading::brdf::eval_brdf_cos;
-use chiaro_core::shading::microfacet;
-use chiaro_core::shading::{
-    SurfaceMaterial, fresnel_dielectric, reflect, refract, sample_light, sanitize,
-};
+use chiaro_core::scene::{AreaShape, Light, RenderSettings, Scene};
+use chiaro_core::shading::bsdf::luminance;
+use chiaro_core::shading::{Bsdf, BsdfSample, SurfaceMaterial, sample_light, sanitize};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 mod lanes;
+mod reference;
 
 use chiaro_core::sampling::sobol::LANES;
 
@@ -78,7 +75,8 @@ pub fn render_with(
     render_with_kernel(scene, settings, progress, make_accel, Kernel::Lanes)
 }
 
-/// Which loop traces the paths. Both compute the same image, bit for bit.
+/// Which loop traces the paths. `Lanes` and `Scalar` compute the same
+/// image, bit for bit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kernel {
     /// The lock-step kernel (`path/lanes.rs`): a pixel's samples sixteen
@@ -86,6 +84,10 @@ pub enum Kernel {
     Lanes,
     /// One path at a time.
     Scalar,
+    /// The plain reference tracer (`path/reference.rs`): one path at a
+    /// time on the BSDF layer with independent PCG numbers. Agrees with
+    /// the others statistically, not bit for bit.
+    Reference,
 }
 
 /// [`render_with`] with the path loop chosen: for tests and benchmarks
@@ -141,7 +143,19 @@ pub fn render_with_kernel(
                 let mut sum = Vec3::ZERO;
                 rng.set_pixel(px, py);
                 let mut first_hit = None;
-                if lanes {
+                if kernel == Kernel::Reference {
+                    for s in 0..spp {
+                        let mut rng = pixel_rng(settings.seed, px, py, s);
+                        let j = uniform2(&mut rng);
+                        let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
+                        let ray = Ray::new(cam.eye, dir);
+                        let (l, fh) = tracer.reference_radiance(ray, &mut rng, &mut count);
+                        sum += sanitize(l);
+                        if s == 0 {
+                            first_hit = fh;
+                        }
+                    }
+                } else if lanes {
                     let camera =
                         |j: Vec2| Ray::new(cam.eye, camera_dir(px as f32 + j.x, py as f32 + j.y));
                     for first in (0..spp).step_by(LANES) {
@@ -250,9 +264,8 @@ struct TriInfo {
 /// A material's parameters and the constants derived from them: per
 /// material for the untextured case, per hit point otherwise.
 struct MaterialInfo {
-    surface: SurfaceMaterial,
-    lobes: Lobes,
-    fresnel: bool,
+    /// The parameters and their lobe choice.
+    bsdf: Bsdf,
     two_sided: bool,
     /// True when the emission is positive in some channel.
     emissive: bool,
@@ -266,75 +279,18 @@ struct MaterialInfo {
 
 impl MaterialInfo {
     fn new(surface: SurfaceMaterial, m: &chiaro_core::scene::Material) -> Self {
-        let lobes = Lobes::new(&surface, m.fresnel);
+        let bsdf = Bsdf::new(surface, m.fresnel);
+        let lobes = &bsdf.lobes;
         let [wd, ws, wr, wt] = lobes.weights;
         // (The lone lobe's probability is wd / wd = 1 and its weight kd / 1
         // = kd exactly; the kernel relies on both.)
         let lambert = wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular;
         Self {
             lambert: lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd,
-            lobes,
             emissive: surface.emission.max_element() > 0.0,
-            surface,
-            fresnel: m.fresnel,
+            bsdf,
             two_sided: m.two_sided,
             textured: m.texture.is_some() || m.emission_texture.is_some(),
-        }
-    }
-}
-
-/// How [`PathTracer::sample_scatter`] chooses a lobe, fixed by the material.
-#[derive(Clone, Copy)]
-struct Lobes {
-    /// Selection weights: diffuse, glossy, mirror, transmission. A Fresnel
-    /// dielectric's reflection is part of its transmission lobe.
-    weights: [f32; 4],
-    /// Their sum.
-    total: f32,
-    /// `wd / total` and `ws / total`: the non-delta mixture's lobe
-    /// probabilities (0 when `total` is not positive).
-    p_diffuse: f32,
-    p_glossy: f32,
-    /// The lobe choice's value when only one lobe can be chosen (the middle
-    /// of its interval of `[0, total)`): its number is then skipped.
-    single: Option<f32>,
-    /// True when the specular lobe contributes (`has_specular`).
-    specular: bool,
-    /// `kd / p_diffuse`: the throughput weight of a diffuse sample of a
-    /// material without specular lobe.
-    lambert_weight: Vec3,
-}
-
-impl Lobes {
-    fn new(m: &SurfaceMaterial, fresnel: bool) -> Self {
-        let t = luminance(m.kt);
-        let r = if fresnel && t > 0.0 {
-            0.0
-        } else {
-            luminance(m.kr)
-        };
-        let weights = [luminance(m.kd), luminance(m.ks), r, t];
-        let [wd, ws, wr, wt] = weights;
-        let total = wd + ws + wr + wt;
-        // (With `total > 0`, a lone non-zero weight is the positive one.)
-        let single = weights.iter().filter(|&&w| w != 0.0).count() == 1;
-        let single = match weights.iter().position(|&w| w > 0.0) {
-            Some(k) if single => Some(weights[..k].iter().sum::<f32>() + 0.5 * weights[k]),
-            _ => None,
-        };
-        let (p_diffuse, p_glossy) = if total > 0.0 {
-            (wd / total, ws / total)
-        } else {
-            (0.0, 0.0)
-        };
-        Self {
-            weights,
-            total,
-            p_diffuse,
-            p_glossy,
-            single,
-            specular: m.has_specular(),
-            lambert_weight: m.kd / p_diffuse,
         }
     }
 }
@@ -379,21 +335,6 @@ impl PathState {
             prev_p: ray.origin,
         }
     }
-}
-
-/// One sampled scattering direction.
-struct ScatterSample {
-    wi: Vec3,
-    /// Throughput multiplier `f cos / pdf` (or the delta lobe's weight).
-    weight: Vec3,
-    /// Solid-angle pdf of the non-delta mixture, for MIS; 0 for delta lobes.
-    pdf: f32,
-    /// True for mirror and refraction lobes.
-    delta: bool,
-}
-
-fn luminance(c: Vec3) -> f32 {
-    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
 impl<'a, 's> PathTracer<'a, 's> {
@@ -663,7 +604,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             if depth == 0 {
                 first = Some((t * ray.dir.length(), v.ns));
             }
-            let m = &info.surface;
+            let m = &info.bsdf.m;
             let cos_o = v.ng.dot(wo);
             // Emission seen along the path (one-sided unless two-sided).
             if info.emissive && (info.two_sided || cos_o > 0.0) {
@@ -686,7 +627,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 break;
             }
             // Continue the path.
-            let Some(s) = Self::sample_scatter(info, n, ng, wo, front, rng) else {
+            let Some(s) = Self::sample_bsdf(&info.bsdf, n, ng, wo, front, rng) else {
                 break;
             };
             beta *= s.weight;
@@ -857,7 +798,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             if ng.dot(wi) <= 0.0 {
                 return Vec3::ZERO;
             }
-            let f_cos = eval_brdf_cos(&info.surface, n, wo, wi);
+            let f_cos = info.bsdf.eval(n, wo, wi);
             if f_cos == Vec3::ZERO {
                 return Vec3::ZERO;
             }
@@ -872,7 +813,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             // The power heuristic's weight over the light's pdf, in one
             // division: (l^2 / (l^2 + b^2)) / l = l / (l^2 + b^2).
             let w_over_pdf = if mis {
-                let bsdf_pdf = Self::scatter_pdf(info, n, wo, wi);
+                let bsdf_pdf = info.bsdf.pdf(n, wo, wi);
                 light_pdf / (light_pdf * light_pdf + bsdf_pdf * bsdf_pdf)
             } else {
                 1.0 / light_pdf
@@ -883,7 +824,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         let Some(s) = sample_light(light, p, u) else {
             return Vec3::ZERO;
         };
-        let f_cos = eval_brdf_cos(&info.surface, n, wo, s.wi);
+        let f_cos = info.bsdf.eval(n, wo, s.wi);
         if f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
             return Vec3::ZERO;
         }
@@ -902,198 +843,37 @@ impl<'a, 's> PathTracer<'a, 's> {
             && !s.is_delta
             && let Some(light_pdf) = Self::light_solid_angle_pdf(light, p, s.point)
         {
-            let bsdf_pdf = Self::scatter_pdf(info, n, wo, s.wi);
+            let bsdf_pdf = info.bsdf.pdf(n, wo, s.wi);
             w = power_heuristic(light_pdf * pick, bsdf_pdf);
         }
         PI * f_cos * s.intensity * (w / pick)
     }
 
-    /// Solid-angle pdf with which [`Self::sample_scatter`] picks `wi` through
-    /// its non-delta lobes (for MIS).
+    /// Samples the next direction through [`Bsdf::sample`], drawing its
+    /// numbers in the order the lock-step kernel follows: the lobe choice's
+    /// (its pair skipped when there is one lobe), the direction's pair, and
+    /// the Fresnel choice's only when the layer asks for it.
     #[inline]
-    fn scatter_pdf(info: &MaterialInfo, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
-        let lobes = &info.lobes;
-        if lobes.total <= 0.0 {
-            return 0.0;
-        }
-        let cos_i = n.dot(wi);
-        if cos_i <= 0.0 {
-            return 0.0;
-        }
-        let mut pdf = lobes.p_diffuse * cosine_hemisphere_pdf(cos_i);
-        if lobes.weights[1] > 0.0 {
-            pdf += lobes.p_glossy * glossy_pdf(&info.surface, n, wo, wi);
-        }
-        pdf
-    }
-
-    /// Samples the next direction.
-    #[inline]
-    fn sample_scatter(
-        info: &MaterialInfo,
+    fn sample_bsdf(
+        bsdf: &Bsdf,
         n: Vec3,
         ng: Vec3,
         wo: Vec3,
         front: bool,
         rng: &mut SobolSampler,
-    ) -> Option<ScatterSample> {
-        let (m, lobes, fresnel) = (&info.surface, &info.lobes, info.fresnel);
-        let [wd, ws, wr, wt] = lobes.weights;
-        let total = lobes.total;
-        if total <= 0.0 {
+    ) -> Option<BsdfSample> {
+        if !bsdf.scatters() {
             return None;
         }
-        // The lobe choice's number, unless only one lobe can be chosen (then
-        // its pair is skipped, which leaves every later number unchanged).
-        let pick = match lobes.single {
-            Some(pick) => {
-                rng.skip(1);
-                pick
-            }
-            None => rng.next_1d() * total,
+        let u_lobe = if bsdf.needs_lobe_number() {
+            rng.next_1d()
+        } else {
+            rng.skip(1);
+            0.0
         };
         let u = rng.next_2d();
-        if pick < wd + ws {
-            // A non-delta lobe: sample one, weight by the mixture pdf.
-            let frame = Frame::from_normal(n);
-            let wi = if pick < wd {
-                frame.to_world(sample_cosine_hemisphere(u))
-            } else {
-                sample_glossy(m, n, wo, u)?
-            };
-            if n.dot(wi) <= 0.0 || ng.dot(wi) <= 0.0 {
-                return None;
-            }
-            if !lobes.specular {
-                // Lambert alone: f cos / pdf = (kd cos / pi) / (p_d cos / pi).
-                let p_d = lobes.p_diffuse;
-                return Some(ScatterSample {
-                    wi,
-                    weight: lobes.lambert_weight,
-                    pdf: p_d * cosine_hemisphere_pdf(n.dot(wi)),
-                    delta: false,
-                });
-            }
-            let pdf = Self::scatter_pdf(info, n, wo, wi);
-            if pdf <= 0.0 {
-                return None;
-            }
-            let f_cos = eval_brdf_cos(m, n, wo, wi);
-            return Some(ScatterSample {
-                wi,
-                weight: f_cos / pdf,
-                pdf,
-                delta: false,
-            });
-        }
-        let p_r = wr / total;
-        let p_t = wt / total;
-        if pick < wd + ws + wr {
-            // Fixed-weight mirror.
-            let wi = reflect(wo, n);
-            return Some(ScatterSample {
-                wi,
-                weight: m.kr / p_r,
-                pdf: 0.0,
-                delta: true,
-            });
-        }
-        // Transmission: entering when on the front side.
-        let (n1, n2) = if front { (1.0, m.ior) } else { (m.ior, 1.0) };
-        let cos_o = n.dot(wo).clamp(0.0, 1.0);
-        let refracted = refract(wo, n, n1 / n2);
-        if fresnel {
-            // A dielectric: reflect with probability F (1 under total
-            // internal reflection), else refract tinted by kt.
-            let f = fresnel_dielectric(cos_o, n1, n2);
-            return match refracted {
-                Some(wi) if rng.next_1d() >= f => Some(ScatterSample {
-                    wi,
-                    weight: m.kt / p_t,
-                    pdf: 0.0,
-                    delta: true,
-                }),
-                _ => Some(ScatterSample {
-                    wi: reflect(wo, n),
-                    weight: Vec3::ONE / p_t,
-                    pdf: 0.0,
-                    delta: true,
-                }),
-            };
-        }
-        match refracted {
-            Some(wi) => Some(ScatterSample {
-                wi,
-                weight: m.kt / p_t,
-                pdf: 0.0,
-                delta: true,
-            }),
-            // Total internal reflection: the reflection takes everything.
-            None => Some(ScatterSample {
-                wi: reflect(wo, n),
-                weight: m.kt / p_t,
-                pdf: 0.0,
-                delta: true,
-            }),
-        }
+        bsdf.sample(n, ng, wo, front, u_lobe, u, || rng.next_1d())
     }
-}
-
-/// Samples the glossy lobe of `m` around its peak.
-fn sample_glossy(m: &SurfaceMaterial, n: Vec3, wo: Vec3, u: Vec2) -> Option<Vec3> {
-    match m.model {
-        ReflectanceModel::Phong => {
-            let r = reflect(wo, n);
-            Some(Frame::from_normal(r).to_world(sample_phong_lobe(u, m.shininess)))
-        }
-        ReflectanceModel::Blinn => {
-            let h = Frame::from_normal(n).to_world(sample_phong_lobe(u, m.shininess));
-            let wi = reflect(wo, h);
-            Some(wi)
-        }
-        ReflectanceModel::TorranceSparrow => {
-            let alpha = m.roughness.max(1e-3);
-            let h =
-                Frame::from_normal(n).to_world(sample_microfacet_normal(m.distribution, alpha, u));
-            Some(reflect(wo, h))
-        }
-    }
-}
-
-/// Solid-angle pdf of [`sample_glossy`].
-fn glossy_pdf(m: &SurfaceMaterial, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
-    match m.model {
-        ReflectanceModel::Phong => phong_lobe_pdf(reflect(wo, n).dot(wi), m.shininess),
-        ReflectanceModel::Blinn | ReflectanceModel::TorranceSparrow => {
-            let Some(h) = (wo + wi).try_normalize() else {
-                return 0.0;
-            };
-            let cos_h = n.dot(h);
-            let o_h = wo.dot(h);
-            if cos_h <= 0.0 || o_h <= 0.0 {
-                return 0.0;
-            }
-            let pdf_h = if m.model == ReflectanceModel::Blinn {
-                phong_lobe_pdf(cos_h, m.shininess)
-            } else {
-                microfacet::d(m.distribution, cos_h, m.roughness.max(1e-3)) * cos_h
-            };
-            pdf_h / (4.0 * o_h)
-        }
-    }
-}
-
-/// Samples a microfacet normal about +z with density `D(h) cos_theta_h`
-/// (Walter et al. 2007, eqs. 28, 35).
-fn sample_microfacet_normal(dist: Distribution, alpha: f32, u: Vec2) -> Vec3 {
-    let tan2 = match dist {
-        Distribution::Ggx => alpha * alpha * u.x / (1.0 - u.x).max(1e-7),
-        Distribution::Beckmann => -alpha * alpha * (1.0 - u.x).max(1e-7).ln(),
-    };
-    let cos_t = 1.0 / (1.0 + tan2).sqrt();
-    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-    let phi = 2.0 * PI * u.y;
-    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
 }
 
 #[cfg(test)]

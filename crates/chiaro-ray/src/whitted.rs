@@ -43,8 +43,8 @@ use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, RenderSettings, Scene, ShadowMethod};
 use chiaro_core::shading::texture::miss_radiance;
 use chiaro_core::shading::{
-    LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, fresnel_dielectric,
-    reflect, refract, sanitize, shade_local,
+    LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, delta_split, depth_cue, sanitize,
+    shade_local,
 };
 use chiaro_core::shadow::ShadowCasters;
 use glam::{Vec2, Vec3};
@@ -113,9 +113,10 @@ pub struct SpecularRays {
     pub refracted: Option<(Ray, Vec3)>,
 }
 
-/// Reflected and refracted rays at a surface point (Whitted 1980, eqs. 2-3
-/// in vector form; Snell's law via [`refract`], Fresnel via
-/// [`fresnel_dielectric`]).
+/// Reflected and refracted rays at a surface point: the BSDF layer's
+/// [`delta_split`] (directions, Fresnel, total internal reflection, the ior
+/// rule) with rays offset from `p`; a refracted ray of zero weight is not
+/// traced.
 ///
 /// `n` and `ng` are the unit shading and geometric normals flipped to the
 /// side of `wo` (the unit direction back along the incoming ray);
@@ -131,41 +132,15 @@ pub fn specular_rays(
     wo: Vec3,
     entering: bool,
 ) -> SpecularRays {
-    let dir_r = reflect(wo, n);
-    let reflected_ray = Ray::new(offset_ray_origin(p, ng, dir_r), dir_r);
-    let transmissive = m.kt.max_element() > 0.0;
-    if !transmissive {
-        return SpecularRays {
-            reflected: (reflected_ray, m.kr),
-            refracted: None,
-        };
-    }
-    let ior = if m.ior.is_finite() && m.ior > 0.0 {
-        m.ior
-    } else {
-        1.0
-    };
-    let (n1, n2) = if entering { (1.0, ior) } else { (ior, 1.0) };
-    let cos_i = n.dot(wo).clamp(0.0, 1.0);
-    let (mut wr, wt) = if fresnel {
-        let f = fresnel_dielectric(cos_i, n1, n2);
-        (Vec3::splat(f), (1.0 - f) * m.kt)
-    } else {
-        (m.kr, m.kt)
-    };
-    let refracted = match refract(wo, n, n1 / n2) {
-        Some(dir_t) => {
-            (wt.max_element() > 0.0).then(|| (Ray::new(offset_ray_origin(p, ng, dir_t), dir_t), wt))
-        }
-        None => {
-            // Total internal reflection: everything is reflected.
-            wr += wt;
-            None
-        }
-    };
+    let split = delta_split(m, fresnel, n, wo, entering);
+    let ray = |dir: Vec3| Ray::new(offset_ray_origin(p, ng, dir), dir);
+    let wt = split.refract_weight;
     SpecularRays {
-        reflected: (reflected_ray, wr),
-        refracted,
+        reflected: (ray(split.reflected), split.reflect_weight),
+        refracted: split
+            .refracted
+            .filter(|_| wt.max_element() > 0.0)
+            .map(|dir| (ray(dir), wt)),
     }
 }
 
@@ -610,6 +585,7 @@ mod tests {
     use chiaro_core::scene::{
         AreaShape, Attenuation, Geometry, Light, Material, MaterialId, Mesh, Object, Transform,
     };
+    use chiaro_core::shading::{fresnel_dielectric, refract};
 
     fn lambert(kd: f32) -> Material {
         Material {

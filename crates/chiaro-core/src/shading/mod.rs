@@ -20,6 +20,7 @@
 //! [`shade_local`] for everything else.
 
 pub mod brdf;
+pub mod bsdf;
 pub mod fresnel;
 pub mod lights;
 pub mod microfacet;
@@ -27,6 +28,7 @@ pub mod point;
 pub mod texture;
 
 pub use brdf::{SurfaceMaterial, eval_brdf_cos};
+pub use bsdf::{Bsdf, BsdfSample, DeltaSplit, delta_split};
 pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract};
 pub use lights::{LightSample, sample_light};
 pub use point::PointLighting;

@@ -168,7 +168,7 @@ impl PointLighting {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Material;
+    use crate::scene::{Distribution, Material};
     use crate::shading::{LocalLighting, shade_local, shade_local_split};
     use glam::Vec2;
 
@@ -214,17 +214,24 @@ mod tests {
             },
         ];
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-        for model in [
-            ReflectanceModel::Phong,
-            ReflectanceModel::Blinn,
-            ReflectanceModel::TorranceSparrow,
+        // Every lobe: Lambert alone (ks = 0), Phong, Blinn, Torrance-Sparrow
+        // with either distribution.
+        let (ggx, beckmann) = (Distribution::Ggx, Distribution::Beckmann);
+        for (model, distribution, ks) in [
+            (ReflectanceModel::Phong, ggx, 0.0),
+            (ReflectanceModel::Phong, ggx, 0.3),
+            (ReflectanceModel::Blinn, ggx, 0.3),
+            (ReflectanceModel::TorranceSparrow, ggx, 0.3),
+            (ReflectanceModel::TorranceSparrow, beckmann, 0.3),
         ] {
             let mat = Material {
                 diffuse: Vec3::new(0.6, 0.5, 0.4),
-                specular: Vec3::splat(0.3),
+                specular: Vec3::splat(ks),
                 ambient: Vec3::splat(0.7),
                 shininess: 24.0,
                 model,
+                distribution,
+                roughness: 0.35,
                 ..Material::default()
             };
             let m = SurfaceMaterial::from_material(&mat);

@@ -264,13 +264,13 @@ impl PathTracer<'_, '_> {
                         } else {
                             self.emitter_mis_weight(prim, prev_p.get(i), &v, wo, prev_pdf[i])
                         };
-                        l.set(i, l.get(i) + beta.get(i) * m.surface.emission * w);
+                        l.set(i, l.get(i) + beta.get(i) * m.bsdf.m.emission * w);
                     }
                 }
                 vx.p.set(i, v.p);
                 vx.ng.set(i, v.ng);
                 vx.n.set(i, v.ns);
-                vx.kd.set(i, m.surface.kd);
+                vx.kd.set(i, m.bsdf.m.kd);
                 info[i] = Some(m);
                 shade[i] = true;
             }

@@ -1,0 +1,272 @@
+//! The plain reference path tracer ([`super::Kernel::Reference`]), kept
+//! beside the fast one as pbrt-v4's `SimplePathIntegrator` is beside its
+//! `PathIntegrator`: the shape of `PathIntegrator::Li`, built only on the
+//! BSDF layer ([`Bsdf`]) and the light functions ([`sample_light`]), with
+//! independent PCG numbers (`sampling::pixel_rng`), one path at a time,
+//! no lanes and no per-triangle caches. It shares the fast tracer's light
+//! selection (power CDF, emissive triangle to light index) and its escaped
+//! ray radiance. Tests compare the two statistically, not bit for bit.
+
+use super::PathTracer;
+use chiaro_core::geometry::{Ray, offset_ray_origin};
+use chiaro_core::sampling::{Rng, power_heuristic, uniform, uniform2};
+use chiaro_core::shading::{Bsdf, sample_light};
+use glam::Vec3;
+use std::f32::consts::PI;
+
+impl PathTracer<'_, '_> {
+    /// Radiance along camera ray `ray`, and the first hit's distance and
+    /// normal: an unbiased estimate with next-event estimation and BSDF
+    /// sampling combined by the power heuristic, and Russian roulette.
+    pub(super) fn reference_radiance(
+        &self,
+        mut ray: Ray,
+        rng: &mut Rng,
+        rays: &mut u64,
+    ) -> (Vec3, Option<(f32, Vec3)>) {
+        let (mut l, mut beta) = (Vec3::ZERO, Vec3::ONE);
+        let mut first = None;
+        // The previous bounce's solid-angle pdf (0: camera or delta) and point.
+        let (mut prev_pdf, mut prev_p) = (0.0f32, ray.origin);
+        for depth in 0..self.max_depth {
+            // Find the next vertex, or add what the escaped ray sees.
+            *rays += 1;
+            let Some(hit) = self.accel.intersect(&ray) else {
+                l += beta * self.escaped(&ray, depth == 0 || prev_pdf == 0.0);
+                break;
+            };
+            let surf = self.prepared.surface(&ray, &hit);
+            let mat = self.prepared.material(surf.material);
+            let bsdf = Bsdf::new(self.prepared.surface_material(&surf), mat.fresnel);
+            let wo = -ray.dir.normalize();
+            if depth == 0 {
+                first = Some((hit.t * ray.dir.length(), surf.ns));
+            }
+            // Emission found by the path, MIS-weighted against next-event
+            // estimation when the light could have been sampled.
+            let cos_o = surf.ng.dot(wo);
+            let le = bsdf.m.emission;
+            if le.max_element() > 0.0 && (mat.two_sided || cos_o > 0.0) {
+                let light_pdf = (prev_pdf > 0.0)
+                    .then(|| self.triangle_light.get(hit.prim as usize))
+                    .flatten()
+                    .filter(|&&li| li != super::NO_LIGHT)
+                    .and_then(|&li| {
+                        let li = li as usize;
+                        Self::light_solid_angle_pdf(self.lights[li], prev_p, surf.p)
+                            .map(|pdf| pdf * self.light_pick_pdf(li))
+                    });
+                let w = light_pdf.map_or(1.0, |lp| power_heuristic(prev_pdf, lp));
+                l += beta * le * w;
+            }
+            // The shading frame on the viewer's side.
+            let front = cos_o >= 0.0;
+            let side = if front { 1.0 } else { -1.0 };
+            let (n, ng) = (surf.ns * side, surf.ng * side);
+            let last = depth + 1 >= self.max_depth;
+            // Next-event estimation.
+            l += beta * self.reference_direct(surf.p, &bsdf, n, ng, wo, !last, rng, rays);
+            if last {
+                break;
+            }
+            // Sample the BSDF for the next direction.
+            let (u_lobe, u) = (uniform(rng), uniform2(rng));
+            let Some(s) = bsdf.sample(n, ng, wo, front, u_lobe, u, || uniform(rng)) else {
+                break;
+            };
+            beta *= s.weight;
+            if !beta.is_finite() || beta.max_element() <= 0.0 {
+                break;
+            }
+            prev_pdf = if s.delta { 0.0 } else { s.pdf };
+            prev_p = surf.p;
+            ray = Ray::new(offset_ray_origin(surf.p, surf.ng, s.wi), s.wi);
+            // Russian roulette.
+            if depth + 1 >= self.rr_depth {
+                let q = beta.max_element().min(0.95);
+                if uniform(rng) >= q {
+                    break;
+                }
+                beta /= q;
+            }
+        }
+        (l, first)
+    }
+
+    /// One light chosen by power, one [`sample_light`] sample on it and a
+    /// shadow ray: `f cos Le / pdf`, MIS-weighted against BSDF sampling
+    /// (`mis`) for area lights.
+    #[allow(clippy::too_many_arguments)]
+    fn reference_direct(
+        &self,
+        p: Vec3,
+        bsdf: &Bsdf,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        mis: bool,
+        rng: &mut Rng,
+        rays: &mut u64,
+    ) -> Vec3 {
+        let (u_pick, u) = (uniform(rng), uniform2(rng));
+        let Some(li) = self.pick_light(u_pick) else {
+            return Vec3::ZERO;
+        };
+        let pick = self.light_pick_pdf(li);
+        let light = self.lights[li];
+        let Some(s) = sample_light(light, p, u) else {
+            return Vec3::ZERO;
+        };
+        let f_cos = bsdf.eval(n, wo, s.wi);
+        if pick <= 0.0 || f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        *rays += 1;
+        let origin = offset_ray_origin(p, ng, s.wi);
+        let shadow = if s.distance.is_finite() {
+            Ray::segment(origin, s.point)
+        } else {
+            Ray::new(origin, s.wi)
+        };
+        if self.accel.occluded(&shadow) {
+            return Vec3::ZERO;
+        }
+        // `pi * intensity` is the light sample's `Le / pdf` (see `LightSample`).
+        let mut w = 1.0;
+        if mis
+            && !s.is_delta
+            && let Some(light_pdf) = Self::light_solid_angle_pdf(light, p, s.point)
+        {
+            w = power_heuristic(light_pdf * pick, bsdf.pdf(n, wo, s.wi));
+        }
+        PI * f_cos * s.intensity * (w / pick)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Kernel, render_with_kernel};
+    use chiaro_core::accel::Accelerator;
+    use chiaro_core::accel::bvh::SceneBvh;
+    use chiaro_core::prepared::PreparedScene;
+    use chiaro_core::progress::NoProgress;
+    use chiaro_core::scene::{Distribution, ReflectanceModel, Scene};
+    use glam::Vec3;
+
+    fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+        Box::new(SceneBvh::new(p))
+    }
+
+    fn shipped(name: &str, size: u32, spp: u32) -> Scene {
+        let path = format!("{}/../../scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+        let mut s = chiaro_io::load_scene(std::path::Path::new(&path))
+            .expect("the shipped scene loads")
+            .scene;
+        s.render.width = size;
+        s.render.height = size;
+        s.render.samples = spp;
+        s
+    }
+
+    /// Per-pixel means over `seeds` renders of `kernel` and the variance of
+    /// each pixel's single-render value (unbiased, across seeds).
+    fn renders(scene: &Scene, kernel: Kernel, seeds: u64) -> (Vec<Vec3>, Vec<Vec3>) {
+        let films: Vec<_> = (0..seeds)
+            .map(|k| {
+                let mut settings = scene.render.clone();
+                settings.seed = 1000 + k;
+                let (film, _) = render_with_kernel(scene, &settings, &NoProgress, &bvh, kernel)
+                    .expect("renders");
+                assert!(film.is_clean(), "{kernel:?}: NaN or negative pixels");
+                film.color
+            })
+            .collect();
+        let m = seeds as f32;
+        let mean: Vec<Vec3> = (0..films[0].len())
+            .map(|i| films.iter().map(|f| f[i]).sum::<Vec3>() / m)
+            .collect();
+        let var = (0..films[0].len())
+            .map(|i| {
+                films
+                    .iter()
+                    .map(|f| (f[i] - mean[i]) * (f[i] - mean[i]))
+                    .sum::<Vec3>()
+                    / (m - 1.0)
+            })
+            .collect();
+        (mean, var)
+    }
+
+    /// The fast tracer and the reference agree per 8x8 block within four
+    /// standard errors (each estimated from the per-pixel variance across
+    /// seeds; the pixels of a block are independent).
+    fn assert_tracers_agree(scene: &Scene, what: &str) {
+        const SEEDS: u64 = 6;
+        let size = scene.render.width;
+        let (fast, fast_var) = renders(scene, Kernel::Lanes, SEEDS);
+        let (reference, ref_var) = renders(scene, Kernel::Reference, SEEDS);
+        let mut worst = 0.0f32;
+        for by in 0..size / 8 {
+            for bx in 0..size / 8 {
+                let (mut d, mut var) = (Vec3::ZERO, Vec3::ZERO);
+                for y in by * 8..by * 8 + 8 {
+                    for x in bx * 8..bx * 8 + 8 {
+                        let i = (y * size + x) as usize;
+                        d += fast[i] - reference[i];
+                        var += fast_var[i] + ref_var[i];
+                    }
+                }
+                // Block means of SEEDS renders each: the mean difference and its
+                // standard error.
+                let n = 64.0;
+                let d = d / n;
+                let se = (var / (n * n * SEEDS as f32)).powf(0.5);
+                for c in 0..3 {
+                    let z = d[c].abs() / se[c].max(1e-6);
+                    worst = worst.max(z);
+                    assert!(
+                        z <= 4.0,
+                        "{what}: block ({bx}, {by}) channel {c}: difference {} is {z:.1} standard errors {}",
+                        d[c],
+                        se[c]
+                    );
+                }
+            }
+        }
+        assert!(
+            fast.iter().any(|c| c.max_element() > 0.0),
+            "{what}: black image"
+        );
+        eprintln!("{what}: largest block difference {worst:.2} standard errors");
+    }
+
+    #[test]
+    fn reference_agrees_with_the_fast_tracer_on_the_cornell_box() {
+        assert_tracers_agree(&shipped("mitsuba-cbox", 32, 8), "Mitsuba's box");
+    }
+
+    #[test]
+    fn reference_agrees_with_the_fast_tracer_on_glossy_mirror_and_glass() {
+        // The Whitted scene (checker, mirror, Fresnel glass, point lights).
+        assert_tracers_agree(&shipped("whitted", 32, 8), "whitted.toml");
+        // Mitsuba's box with glossy walls under its area light (MIS).
+        let mut s = shipped("mitsuba-cbox", 32, 8);
+        for (k, m) in s.materials.iter_mut().enumerate() {
+            match k % 3 {
+                0 => {
+                    m.model = ReflectanceModel::TorranceSparrow;
+                    m.distribution = Distribution::Ggx;
+                    m.roughness = 0.25;
+                    m.specular = Vec3::splat(0.5);
+                }
+                1 => {
+                    m.model = ReflectanceModel::Blinn;
+                    m.shininess = 30.0;
+                    m.specular = Vec3::splat(0.3);
+                }
+                _ => {}
+            }
+        }
+        assert_tracers_agree(&s, "glossy box");
+    }
+}
