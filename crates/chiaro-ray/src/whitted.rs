@@ -43,8 +43,8 @@ use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, RenderSettings, Scene, ShadowMethod};
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
-    LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, fresnel_dielectric,
-    reflect, refract, sanitize, shade_local,
+    EmitterGroup, LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue,
+    fresnel_dielectric, reflect, refract, sanitize, shade_local,
 };
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
@@ -197,6 +197,8 @@ pub struct Tracer<'s> {
     /// True when every primitive is an opaque shadow caster (shadow rays
     /// can stop at the first hit).
     all_opaque: bool,
+    /// The emissive triangles sampled as one light, when there are many.
+    emitters: Option<EmitterGroup>,
 }
 
 impl std::fmt::Debug for Tracer<'_> {
@@ -242,6 +244,7 @@ impl<'s> Tracer<'s> {
                         .get(m.index())
                         .is_none_or(|kt| kt.max_element() <= 0.0)
                 });
+        let emitters = EmitterGroup::of_scene(&prepared, settings.light_samples.max(1));
         Self {
             prepared,
             accel,
@@ -250,6 +253,7 @@ impl<'s> Tracer<'s> {
             material_kt,
             object_casts,
             all_opaque,
+            emitters,
         }
     }
 
@@ -434,6 +438,7 @@ impl<'s> Tracer<'s> {
             lights: &self.prepared.lights,
             area_samples: self.settings.light_samples.max(1),
             ambient: self.indirect.is_none(),
+            group: self.emitters.as_ref(),
         };
         let TraceState { rng, rays } = state;
         let mut color = shade_local(

@@ -234,6 +234,7 @@ mod tests {
                     lights: &lights,
                     area_samples: 4,
                     ambient,
+                    group: None,
                 };
                 for _ in 0..500 {
                     let n = unit(&mut rng);
