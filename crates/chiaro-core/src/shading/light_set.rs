@@ -189,6 +189,225 @@ impl EmitterGroup {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::AreaShape;
+    use crate::shading::{LocalLighting, ShadingPoint, SurfaceMaterial, shade_local};
+    use glam::Vec2;
+
+    /// The square `[-a, a]^2` at height `h`, facing down, as `n x n` cells
+    /// of two triangle lights each; cell `(i, j)` emits `le(i, j)`.
+    fn emitting_square(a: f32, h: f32, n: u32, le: impl Fn(u32, u32) -> Vec3) -> Vec<Light> {
+        let mut lights = Vec::new();
+        let step = 2.0 * a / n as f32;
+        for j in 0..n {
+            for i in 0..n {
+                let p = |di: u32, dj: u32| {
+                    Vec3::new(-a + (i + di) as f32 * step, h, -a + (j + dj) as f32 * step)
+                };
+                // (p00, p10, p11) winds clockwise seen from below: normal -y.
+                for [x, y, z] in [[p(0, 0), p(1, 0), p(1, 1)], [p(0, 0), p(1, 1), p(0, 1)]] {
+                    lights.push(Light::Area {
+                        shape: AreaShape::Triangle { a: x, b: y, c: z },
+                        color: le(i, j),
+                        intensity: 1.0,
+                        two_sided: false,
+                    });
+                }
+            }
+        }
+        lights
+    }
+
+    /// Irradiance at `p` (normal +y) from a uniformly emitting polygon of
+    /// radiance `le` with vertices `v` (Lambert's formula), in f64.
+    fn polygon_irradiance(p: Vec3, v: &[Vec3], le: f64) -> f64 {
+        type V = [f64; 3];
+        let norm = |d: V| {
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            [d[0] / l, d[1] / l, d[2] / l]
+        };
+        let r: Vec<V> = v
+            .iter()
+            .map(|q| {
+                let d = *q - p;
+                norm([f64::from(d.x), f64::from(d.y), f64::from(d.z)])
+            })
+            .collect();
+        let mut sum = 0.0f64;
+        for i in 0..r.len() {
+            let (a, b) = (r[i], r[(i + 1) % r.len()]);
+            let cross = [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ];
+            let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+            sum += dot.clamp(-1.0, 1.0).acos() * norm(cross)[1];
+        }
+        le * 0.5 * sum.abs()
+    }
+
+    /// xorshift64* numbers in `[0, 1)^2`.
+    fn rng2(state: &mut u64) -> Vec2 {
+        let mut next = || {
+            *state ^= *state >> 12;
+            *state ^= *state << 25;
+            *state ^= *state >> 27;
+            ((state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32) / (1u64 << 24) as f32
+        };
+        Vec2::new(next(), next())
+    }
+
+    /// Mean and standard error of `k` grouped estimates at `sp`.
+    fn grouped_estimate(
+        lights: &[Light],
+        group: &EmitterGroup,
+        samples: u32,
+        sp: &ShadingPoint,
+        k: u32,
+    ) -> (f64, f64) {
+        let m = SurfaceMaterial {
+            kd: Vec3::ONE,
+            ..SurfaceMaterial::default()
+        };
+        let env = LocalLighting {
+            lights,
+            area_samples: samples,
+            ambient: false,
+            group: Some(group),
+        };
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let (mut s1, mut s2) = (0.0f64, 0.0f64);
+        for _ in 0..k {
+            let c = shade_local(&m, sp, &env, |_, _| rng2(&mut state), |_, _| Vec3::ONE);
+            let x = f64::from(c.x);
+            s1 += x;
+            s2 += x * x;
+        }
+        let mean = s1 / f64::from(k);
+        let var = (s2 / f64::from(k) - mean * mean).max(0.0);
+        (mean, (var / f64::from(k)).sqrt())
+    }
+
+    fn point(p: Vec3) -> ShadingPoint {
+        ShadingPoint {
+            p,
+            n: Vec3::Y,
+            ng: Vec3::Y,
+            wo: Vec3::Y,
+        }
+    }
+
+    #[test]
+    fn grouped_emitters_match_the_closed_form_irradiance() {
+        // 512 small triangles of radiance 2 over a white Lambertian point:
+        // the reflected radiance is E / pi, E from Lambert's polygon formula.
+        let (a, h) = (1.0f32, 1.5f32);
+        let lights = emitting_square(a, h, 16, |_, _| Vec3::splat(2.0));
+        let group = EmitterGroup::new(&lights, 0..lights.len(), 16).expect("grouped");
+        for p in [
+            Vec3::ZERO,
+            Vec3::new(0.7, 0.0, -0.4),
+            Vec3::new(2.0, 0.0, 1.0),
+        ] {
+            let corners = [
+                Vec3::new(-a, h, -a),
+                Vec3::new(a, h, -a),
+                Vec3::new(a, h, a),
+                Vec3::new(-a, h, a),
+            ];
+            let exact = polygon_irradiance(p, &corners, 2.0) / std::f64::consts::PI;
+            let (mean, se) = grouped_estimate(&lights, &group, 16, &point(p), 4000);
+            // Five standard errors (the estimate's own noise) and f32 rounding.
+            assert!(
+                (mean - exact).abs() <= 5.0 * se + 1e-4 * exact,
+                "{p}: {mean} +- {se} vs {exact}"
+            );
+            assert!(se < 0.01 * exact, "{p}: noisy {se}");
+        }
+    }
+
+    #[test]
+    fn grouped_emitters_match_the_per_triangle_sum() {
+        // Unequal emitters (a pattern from 0 to 3, some dark): the grouped
+        // estimate's mean equals the per-triangle sum, here computed with 64
+        // strata per triangle.
+        let le = |i: u32, j: u32| {
+            let x = ((i * 7 + j * 3) % 5) as f32 * 0.75;
+            Vec3::new(x, 0.5 * x, 0.25)
+        };
+        let lights = emitting_square(1.0, 1.0, 12, le);
+        let group = EmitterGroup::new(&lights, 0..lights.len(), 9).expect("grouped");
+        let m = SurfaceMaterial {
+            kd: Vec3::ONE,
+            ..SurfaceMaterial::default()
+        };
+        for p in [Vec3::new(0.1, 0.0, 0.2), Vec3::new(-1.5, 0.0, 0.5)] {
+            let sp = point(p);
+            let per_triangle = LocalLighting {
+                lights: &lights,
+                area_samples: 64,
+                ambient: false,
+                group: None,
+            };
+            let exact = f64::from(
+                shade_local(
+                    &m,
+                    &sp,
+                    &per_triangle,
+                    |_, _| Vec2::splat(0.5),
+                    |_, _| Vec3::ONE,
+                )
+                .x,
+            );
+            let (mean, se) = grouped_estimate(&lights, &group, 9, &sp, 4000);
+            assert!(
+                (mean - exact).abs() <= 5.0 * se + 1e-4 * exact,
+                "{p}: {mean} +- {se} vs {exact}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_grouped_mesh_takes_light_samples_samples_per_point() {
+        // 5,000 emitting triangles, 16 samples: at most 16 visibility queries
+        // (shadow rays) per shading point, however many triangles emit.
+        let lights = emitting_square(1.0, 1.0, 50, |_, _| Vec3::ONE);
+        assert_eq!(lights.len(), 5000);
+        for samples in [1u32, 5, 16] {
+            let group = EmitterGroup::new(&lights, 0..lights.len(), samples).expect("grouped");
+            let env = LocalLighting {
+                lights: &lights,
+                area_samples: samples,
+                ambient: false,
+                group: Some(&group),
+            };
+            let mut queries = 0u32;
+            let c = shade_local(
+                &SurfaceMaterial::default(),
+                &point(Vec3::ZERO),
+                &env,
+                |_, _| Vec2::splat(0.5),
+                |_, _| {
+                    queries += 1;
+                    Vec3::ONE
+                },
+            );
+            assert!(c.x > 0.0);
+            assert_eq!(queries, samples, "{samples} samples");
+        }
+    }
+
+    #[test]
+    fn small_emitters_stay_per_triangle() {
+        // The Cornell box's two-triangle light at 16 samples: 32 <= 64.
+        let lights = emitting_square(0.5, 1.0, 1, |_, _| Vec3::ONE);
+        assert!(EmitterGroup::new(&lights, 0..2, 16).is_none());
+        let lights = emitting_square(0.5, 1.0, 3, |_, _| Vec3::ONE);
+        assert!(EmitterGroup::new(&lights, 0..18, 16).is_some());
+        // Nothing emits: no group.
+        let dark = emitting_square(0.5, 1.0, 3, |_, _| Vec3::ZERO);
+        assert!(EmitterGroup::new(&dark, 0..18, 16).is_none());
+    }
 
     #[test]
     fn alias_table_picks_in_proportion_to_weight() {
