@@ -51,7 +51,7 @@ impl AliasTable {
     pub fn new(weights: &[f32]) -> Option<Self> {
         let clean = |w: f32| if w.is_finite() && w > 0.0 { w } else { 0.0 };
         let total: f64 = weights.iter().map(|&w| f64::from(clean(w))).sum();
-        if !(total > 0.0) || !total.is_finite() {
+        if total <= 0.0 || !total.is_finite() {
             return None;
         }
         let n = weights.len();
@@ -233,8 +233,7 @@ mod tests {
             })
             .collect();
         let mut sum = 0.0f64;
-        for i in 0..r.len() {
-            let (a, b) = (r[i], r[(i + 1) % r.len()]);
+        for (&a, &b) in r.iter().zip(r.iter().cycle().skip(1)) {
             let cross = [
                 a[1] * b[2] - a[2] * b[1],
                 a[2] * b[0] - a[0] * b[2],

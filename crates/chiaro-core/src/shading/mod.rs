@@ -234,7 +234,7 @@ fn local_model<const SPLIT: bool>(
         let mut sum = [Vec3::ZERO; 2];
         for i in 0..count {
             let (li, pick, u) = g.pick(i, count, jitter(g.range.start, i));
-            if !(pick > 0.0) {
+            if pick <= 0.0 {
                 continue;
             }
             if let Some(mut s) = sample_light(&env.lights[li], sp.p, u) {
