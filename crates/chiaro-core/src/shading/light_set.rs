@@ -106,7 +106,14 @@ impl AliasTable {
         let b = (x as usize).min(n - 1);
         let f = (x - b as f64).clamp(0.0, 1.0);
         let k = f64::from(self.keep[b]);
-        let below_one = |v: f64| (v as f32).min(1.0 - f32::EPSILON / 2.0).max(0.0);
+        // Into [0, 1) (NaN, from a bucket kept with certainty, to 0).
+        let below_one = |v: f64| {
+            if v >= 0.0 {
+                (v as f32).min(1.0 - f32::EPSILON / 2.0)
+            } else {
+                0.0
+            }
+        };
         if f < k {
             (b, below_one(f / k))
         } else {
