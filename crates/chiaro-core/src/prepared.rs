@@ -78,9 +78,8 @@ pub struct PreparedScene<'s> {
     pub emissive_triangles: Vec<u32>,
     /// The lights every technique uses: the scene's lights followed by one
     /// [`AreaShape::Triangle`] area light per emissive triangle (radiance =
-    /// the material's emission times its emission texture's mean over the
-    /// triangle, [`Self::emission_texture_mean`]; one-sided unless the
-    /// material is two-sided).
+    /// the material's emission, times its emission texture's mean over the
+    /// triangle; one-sided unless the material is two-sided).
     pub lights: Vec<Light>,
     /// World-space bounds of everything.
     pub bounds: Aabb,
@@ -169,20 +168,67 @@ impl<'s> PreparedScene<'s> {
         ps.emissive_triangles = (0..ps.triangles.len() as u32)
             .filter(|&t| ps.material(ps.tri_material[t as usize]).is_emissive())
             .collect();
-        for &t in &ps.emissive_triangles {
+        let emitted: Vec<Vec3> = {
+            use rayon::prelude::*;
+            ps.emissive_triangles
+                .par_iter()
+                .map(|&t| ps.triangle_emission(t))
+                .collect()
+        };
+        for (&t, color) in ps.emissive_triangles.iter().zip(emitted) {
             let [a, b, c] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
             let m = ps.material(ps.tri_material[t as usize]);
             if crate::geometry::face_normal(a, b, c).is_some() {
-                let emission = m.emission * ps.emission_texture_mean(t);
                 ps.lights.push(Light::Area {
                     shape: AreaShape::Triangle { a, b, c },
-                    color: emission,
+                    color,
                     intensity: 1.0,
                     two_sided: m.two_sided,
                 });
             }
         }
         ps
+    }
+
+    /// The indices in [`Self::lights`] of the emissive triangles' lights
+    /// (they follow the scene's own lights).
+    pub fn emissive_lights(&self) -> std::ops::Range<usize> {
+        self.scene.lights.len().min(self.lights.len())..self.lights.len()
+    }
+
+    /// The emitted radiance of triangle `t` as a light: its material's
+    /// emission, times the mean of the emission texture over the triangle
+    /// when there is one, estimated from a stratified grid of 16 bilinear
+    /// lookups (the mip-maps are not built for this: that took longer than
+    /// a path-traced preview of a textured emitter).
+    fn triangle_emission(&self, t: u32) -> Vec3 {
+        let m = self.material(self.tri_material[t as usize]);
+        let Some(tex) = m.emission_texture else {
+            return m.emission;
+        };
+        let [i0, i1, i2] = self.triangles[t as usize].map(|i| i as usize);
+        const N: u32 = 16;
+        let mut sum = Vec3::ZERO;
+        for i in 0..N {
+            let b = crate::sampling::sample_uniform_triangle(crate::shading::stratum(
+                i,
+                N,
+                Vec2::splat(0.5),
+            ));
+            // `sample_uniform_triangle` weights (a, b, c) by (x, y, 1 - x - y).
+            let w = [b.x, b.y, 1.0 - b.x - b.y];
+            let tc = TexCoord {
+                uv: self.uvs[i0] * w[0] + self.uvs[i1] * w[1] + self.uvs[i2] * w[2],
+                duv_dx: Vec2::ZERO,
+                duv_dy: Vec2::ZERO,
+                p_object: self.object_positions[i0] * w[0]
+                    + self.object_positions[i1] * w[1]
+                    + self.object_positions[i2] * w[2],
+            };
+            sum += self.eval_texture(tex, &tc).truncate().max(Vec3::ZERO);
+        }
+        let mean = m.emission * (sum / N as f32);
+        if mean.is_finite() { mean } else { Vec3::ZERO }
     }
 
     fn add_mesh(
@@ -434,43 +480,6 @@ impl<'s> PreparedScene<'s> {
             sm.emission *= self.eval_texture(t, &tc).truncate();
         }
         sm
-    }
-
-    /// The mean of triangle `t`'s emission texture over the triangle (one
-    /// without a texture): the base level at the 15 points of a 4-per-side
-    /// barycentric lattice. An emissive triangle's light carries it, so that a
-    /// mostly black emission texture (a glTF `emissiveTexture` under
-    /// `emissiveFactor = 1`) does not light the scene, nor take the light
-    /// choice from the other lights, as if it glowed all over.
-    pub fn emission_texture_mean(&self, t: u32) -> Vec3 {
-        let Some(tex) = self
-            .tri_material
-            .get(t as usize)
-            .and_then(|&m| self.material(m).emission_texture)
-        else {
-            return Vec3::ONE;
-        };
-        let [i0, i1, i2] = self.triangles[t as usize].map(|i| i as usize);
-        const N: u32 = 4;
-        let mut sum = Vec3::ZERO;
-        let mut count = 0.0;
-        for i in 0..=N {
-            for j in 0..=N - i {
-                let (u, v) = (i as f32 / N as f32, j as f32 / N as f32);
-                let w = 1.0 - u - v;
-                let tc = TexCoord {
-                    uv: self.uvs[i0] * w + self.uvs[i1] * u + self.uvs[i2] * v,
-                    duv_dx: Vec2::ZERO,
-                    duv_dy: Vec2::ZERO,
-                    p_object: self.object_positions[i0] * w
-                        + self.object_positions[i1] * u
-                        + self.object_positions[i2] * v,
-                };
-                sum += self.eval_texture(tex, &tc).truncate();
-                count += 1.0;
-            }
-        }
-        crate::shading::sanitize(sum / count)
     }
 
     /// `(dp/du, dp/dv)`: world-space derivatives of position with respect to

@@ -58,7 +58,7 @@ use crate::clip::outcode;
 use crate::raster::{
     DepthKey, RasterTri, Rect, Viewport, rasterize_window, rasterize_window_masked, sample_offsets,
 };
-use crate::shadow::{ShadowVolumes, Shadows, VolumeCounting};
+use crate::shadow::{RayShadows, ShadowVolumes, Shadows, VolumeCounting};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
@@ -70,7 +70,7 @@ use chiaro_core::scene::{MaterialId, PixelFilter};
 use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
-    LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
+    EmitterGroup, LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
     samples_for_light, sanitize, shade_local, shade_local_split,
 };
 use glam::{Vec2, Vec3, Vec3A, Vec4};
@@ -268,6 +268,9 @@ struct Ctx<'a, 's> {
     lighting: LocalLighting<'a>,
     object_mode: Vec<ShadeMode>,
     shadows: Shadows,
+    /// Shadow rays for the samples of a grouped emissive mesh under shadow
+    /// maps (its lights get no maps).
+    group_rays: Option<RayShadows>,
     /// Per material: how it is drawn ([`Class`]).
     class: Vec<Class>,
     /// `lighting` specialised, when there are no shadows and only point
@@ -404,6 +407,10 @@ impl Ctx<'_, '_> {
         match &self.shadows {
             Shadows::None => Vec3::ONE,
             Shadows::Ray(r) => r.visibility(sp.p, sp.ng, s),
+            Shadows::Map(_) if self.lighting.group.is_some_and(|g| g.contains(li)) => self
+                .group_rays
+                .as_ref()
+                .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s)),
             Shadows::Map(m) => {
                 let count = self
                     .ps
@@ -1288,6 +1295,9 @@ pub fn render_prepared_into(
         .iter()
         .map(|o| o.shade_mode.unwrap_or(mode))
         .collect();
+    let emitters = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
+    let group_rays =
+        (emitters.is_some() && matches!(shadows, Shadows::Map(_))).then(|| RayShadows::new(ps));
     let ctx = Ctx {
         ps,
         settings,
@@ -1296,7 +1306,9 @@ pub fn render_prepared_into(
             lights: &ps.lights,
             area_samples: settings.light_samples.max(1),
             ambient: true,
+            group: emitters.as_ref(),
         },
+        group_rays,
         one_mode: object_mode
             .first()
             .copied()

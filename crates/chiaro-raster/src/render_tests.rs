@@ -111,6 +111,7 @@ fn ray_cast(ps: &PreparedScene<'_>, w: u32, h: u32) -> Vec<Option<(u32, Vec3)>> 
         lights: &ps.lights,
         area_samples: 16,
         ambient: true,
+        group: None,
     };
     let mut out = Vec::new();
     for y in 0..h {
@@ -228,6 +229,7 @@ fn flat_is_constant_per_polygon_and_gouraud_interpolates_vertex_colours() {
         lights: &s.lights,
         area_samples: 1,
         ambient: true,
+        group: None,
     };
     let vertex = |p: Vec3| {
         let sp = ShadingPoint {
@@ -646,9 +648,11 @@ fn test_ctx<'a, 's>(
             lights: &ps.lights,
             area_samples: 1,
             ambient: true,
+            group: None,
         },
         object_mode: vec![mode; s.objects.len()],
         shadows: Shadows::None,
+        group_rays: None,
         class: Vec::new(),
         point_lighting: if point {
             PointLighting::new(&ps.lights, true)

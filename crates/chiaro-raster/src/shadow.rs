@@ -678,15 +678,22 @@ impl ShadowMaps {
         let centre = (ps.bounds.min + ps.bounds.max) * 0.5;
         let radius = ((ps.bounds.max - ps.bounds.min).length() * 0.5).max(1e-3);
         let radius = if radius.is_finite() { radius } else { 1.0 };
+        // The lights of a grouped emissive mesh get no maps: the renderer
+        // gives their samples shadow rays.
+        let group = chiaro_core::shading::EmitterGroup::of_scene(ps, area_samples);
+        let grouped = |li: usize| group.as_ref().is_some_and(|g| g.contains(li));
         let area_lights = ps
             .lights
             .iter()
-            .filter(|l| matches!(l, Light::Area { .. }))
+            .enumerate()
+            .filter(|&(li, l)| matches!(l, Light::Area { .. }) && !grouped(li))
             .count();
         let mut lights: Vec<Option<LightMaps>> = ps
             .lights
             .iter()
-            .map(|light| match light {
+            .enumerate()
+            .map(|(li, light)| match light {
+                _ if grouped(li) => None,
                 Light::Ambient { .. } => None,
                 Light::Directional { direction, .. } => Some(LightMaps {
                     views: vec![MapView::orthographic(

@@ -352,16 +352,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         let scene_radius = 0.5 * prepared.bounds.diagonal().max(1e-3);
         let power: Vec<f32> = lights
             .iter()
-            .map(|l| {
-                let p = luminance(l.power_rgb()).max(0.0);
-                match l {
-                    Light::Area {
-                        shape, two_sided, ..
-                    } => p * shape.area() * PI * if *two_sided { 2.0 } else { 1.0 },
-                    Light::Directional { .. } => p * PI * scene_radius * scene_radius,
-                    _ => p * 4.0 * PI,
-                }
-            })
+            .map(|l| chiaro_core::shading::light_power(l, scene_radius))
             .collect();
         let total: f32 = power.iter().sum();
         let mut acc = 0.0;

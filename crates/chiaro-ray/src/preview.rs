@@ -65,6 +65,7 @@ pub fn render_with(
         lights: &eye_light,
         area_samples: 1,
         ambient: true,
+        group: None,
     };
     let (w, h) = (settings.width, settings.height);
     let spp = settings.samples.max(1);

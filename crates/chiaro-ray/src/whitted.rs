@@ -43,8 +43,8 @@ use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, RenderSettings, Scene, ShadowMethod};
 use chiaro_core::shading::texture::miss_radiance;
 use chiaro_core::shading::{
-    LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, delta_split, depth_cue, sanitize,
-    shade_local,
+    EmitterGroup, LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, delta_split,
+    depth_cue, sanitize, shade_local,
 };
 use chiaro_core::shadow::ShadowCasters;
 use glam::{Vec2, Vec3};
@@ -157,6 +157,8 @@ pub struct Tracer<'s> {
     indirect: Option<Box<IndirectFn<'s>>>,
     /// How each primitive affects shadow rays.
     casters: ShadowCasters,
+    /// The emissive triangles sampled as one light, when there are many.
+    emitters: Option<EmitterGroup>,
 }
 
 impl std::fmt::Debug for Tracer<'_> {
@@ -186,12 +188,14 @@ impl<'s> Tracer<'s> {
     pub fn from_prepared(prepared: PreparedScene<'s>, settings: &RenderSettings) -> Self {
         let accel = build_accelerator(&prepared);
         let casters = ShadowCasters::new(&prepared);
+        let emitters = EmitterGroup::of_scene(&prepared, settings.light_samples.max(1));
         Self {
             prepared,
             accel,
             settings: settings.clone(),
             indirect: None,
             casters,
+            emitters,
         }
     }
 
@@ -295,6 +299,7 @@ impl<'s> Tracer<'s> {
             lights: &self.prepared.lights,
             area_samples: self.settings.light_samples.max(1),
             ambient: self.indirect.is_none(),
+            group: self.emitters.as_ref(),
         };
         let TraceState { rng, rays } = state;
         let mut color = shade_local(
@@ -639,6 +644,42 @@ mod tests {
             samples: 1,
             ..RenderSettings::default()
         }
+    }
+
+    #[test]
+    fn an_emissive_mesh_costs_light_samples_shadow_rays_per_point() {
+        // 3,200 emissive triangles (a two-sided panel above the floor) and
+        // light_samples = 4: at most 4 shadow rays per camera hit, not one
+        // per triangle and sample.
+        let mut s = floor_scene();
+        s.lights.clear();
+        let panel = s.add_material(Material {
+            emission: Vec3::splat(2.0),
+            two_sided: true,
+            ..lambert(0.5)
+        });
+        add(
+            &mut s,
+            primitives::plane(1.0, 40),
+            panel,
+            Vec3::new(0.0, 2.0, 0.0),
+        );
+        let mut st = settings(40, 30);
+        st.light_samples = 4;
+        st.whitted.max_depth = 0;
+        let (film, stats) = render_with_stats(&s, &st, &NoProgress).expect("render");
+        assert_eq!(stats.primary_rays, 40 * 30);
+        let shadow_rays = stats.rays - stats.primary_rays;
+        assert!(shadow_rays > 0);
+        assert!(
+            shadow_rays <= 4 * stats.primary_rays,
+            "{shadow_rays} shadow rays for {} camera rays",
+            stats.primary_rays
+        );
+        // The floor is lit by the panel, and no pixel is NaN.
+        assert!(film.color.iter().all(|c| c.is_finite()));
+        let lit = film.color.iter().filter(|c| c.x > 0.05).count();
+        assert!(lit > 40 * 30 / 4, "{lit} lit pixels");
     }
 
     /// A floor (y = 0, kd 0.5) lit by a point light at (0, 4, 0) of

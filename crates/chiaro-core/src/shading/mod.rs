@@ -22,14 +22,16 @@
 pub mod brdf;
 pub mod bsdf;
 pub mod fresnel;
+pub mod light_set;
 pub mod lights;
 pub mod microfacet;
 pub mod point;
 pub mod texture;
 
 pub use brdf::{SurfaceMaterial, eval_brdf_cos};
-pub use bsdf::{Bsdf, BsdfSample, DeltaSplit, delta_split};
+pub use bsdf::{Bsdf, BsdfSample, DeltaSplit, delta_split, luminance};
 pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract};
+pub use light_set::{AliasTable, EmitterGroup, light_power};
 pub use lights::{LightSample, sample_light};
 pub use point::PointLighting;
 
@@ -122,6 +124,10 @@ pub struct LocalLighting<'a> {
     /// Include the ambient term (false for direct-only comparisons with the
     /// path tracer, and for the hybrid technique, which uses radiosity).
     pub ambient: bool,
+    /// The emissive triangles sampled as one light (`EmitterGroup::samples`
+    /// samples chosen by power, not `area_samples` per triangle); `None`:
+    /// every light on its own.
+    pub group: Option<&'a EmitterGroup>,
 }
 
 /// The local illumination model at one point: emission (if facing the
@@ -179,7 +185,21 @@ fn local_model<const SPLIT: bool>(
     let mut out = m.emission;
     let mut rest = m.emission;
     let has_specular = m.has_specular();
-    for (li, light) in env.lights.iter().enumerate() {
+    // A group's lights are sampled together, after the others.
+    let group = env
+        .group
+        .filter(|g| g.range.start < g.range.end && g.range.end <= env.lights.len());
+    let (before, after) = match group {
+        Some(g) => (&env.lights[..g.range.start], g.range.end),
+        None => (env.lights, env.lights.len()),
+    };
+    let singles = before.iter().enumerate().chain(
+        env.lights[after..]
+            .iter()
+            .enumerate()
+            .map(|(k, l)| (after + k, l)),
+    );
+    for (li, light) in singles {
         if let Light::Ambient { .. } = light {
             if env.ambient {
                 out += ambient_term(m, light.power_rgb());
@@ -187,53 +207,87 @@ fn local_model<const SPLIT: bool>(
             continue;
         }
         let count = samples_for_light(light, env.area_samples);
-        let mut sum = Vec3::ZERO;
-        let mut sum_rest = Vec3::ZERO;
+        let mut sum = [Vec3::ZERO; 2];
         for i in 0..count {
             let j = jitter(li, i);
             // A single sample is its stratum's jitter itself (stratum(0, 1, j) == j).
             let u = if count == 1 { j } else { stratum(i, count, j) };
             if let Some(s) = sample_light(light, sp.p, u) {
-                let cos_i = s.wi.dot(sp.n);
-                if cos_i <= 0.0 {
-                    continue;
-                }
-                let v = visibility(li, &s);
-                if v == Vec3::ZERO {
-                    continue;
-                }
-                // direct_from_sample / eval_brdf_cos, inlined with the
-                // specular lobe evaluated once for both parts.
-                let spec = if has_specular {
-                    brdf::specular_cos(m, sp.n, sp.wo, s.wi, cos_i)
-                } else {
-                    Vec3::ZERO
-                };
-                let mut f = m.kd * (std::f32::consts::FRAC_1_PI * cos_i);
-                if has_specular {
-                    f += spec;
-                }
-                sum += PI * f * s.intensity * v;
-                if SPLIT {
-                    // eval_brdf_cos with kd = 0 is `spec` (zero without specular).
-                    sum_rest += PI * spec * s.intensity * v;
-                }
+                add_sample::<SPLIT>(m, sp, has_specular, li, &s, &mut visibility, &mut sum);
             }
         }
         if count == 1 {
             // `x / 1.0 == x` exactly: skip the divisions.
-            out += sum;
+            out += sum[0];
             if SPLIT {
-                rest += sum_rest;
+                rest += sum[1];
             }
         } else {
-            out += sum / count as f32;
+            out += sum[0] / count as f32;
             if SPLIT {
-                rest += sum_rest / count as f32;
+                rest += sum[1] / count as f32;
             }
         }
     }
+    if let Some(g) = group {
+        // Each sample picks a light by power and is weighted by 1 / (pick
+        // probability): the mean estimates the sum over the group's lights.
+        let count = EmitterGroup::samples(env.area_samples);
+        let mut sum = [Vec3::ZERO; 2];
+        for i in 0..count {
+            let (li, pick, u) = g.pick(i, count, jitter(g.range.start, i));
+            if pick <= 0.0 {
+                continue;
+            }
+            if let Some(mut s) = sample_light(&env.lights[li], sp.p, u) {
+                s.intensity /= pick;
+                add_sample::<SPLIT>(m, sp, has_specular, li, &s, &mut visibility, &mut sum);
+            }
+        }
+        out += sum[0] / count as f32;
+        if SPLIT {
+            rest += sum[1] / count as f32;
+        }
+    }
     [out, if SPLIT { rest } else { Vec3::ZERO }]
+}
+
+/// Adds light sample `s` of light `li` to `sum` (`[total, rest]`, `rest`
+/// only when `SPLIT`): [`direct_from_sample`] / `eval_brdf_cos` inlined with
+/// the specular lobe evaluated once for both parts; `visibility` is asked
+/// only for samples in front of the surface.
+#[inline(always)]
+fn add_sample<const SPLIT: bool>(
+    m: &SurfaceMaterial,
+    sp: &ShadingPoint,
+    has_specular: bool,
+    li: usize,
+    s: &LightSample,
+    visibility: &mut impl FnMut(usize, &LightSample) -> Vec3,
+    sum: &mut [Vec3; 2],
+) {
+    let cos_i = s.wi.dot(sp.n);
+    if cos_i <= 0.0 {
+        return;
+    }
+    let v = visibility(li, s);
+    if v == Vec3::ZERO {
+        return;
+    }
+    let spec = if has_specular {
+        brdf::specular_cos(m, sp.n, sp.wo, s.wi, cos_i)
+    } else {
+        Vec3::ZERO
+    };
+    let mut f = m.kd * (std::f32::consts::FRAC_1_PI * cos_i);
+    if has_specular {
+        f += spec;
+    }
+    sum[0] += PI * f * s.intensity * v;
+    if SPLIT {
+        // eval_brdf_cos with kd = 0 is `spec` (zero without specular).
+        sum[1] += PI * spec * s.intensity * v;
+    }
 }
 
 /// Depth cueing (Foley et al. 16.1.3): blend the shaded colour `c` towards
@@ -295,6 +349,7 @@ mod tests {
                 lights: std::slice::from_ref(&light),
                 area_samples: 1,
                 ambient: true,
+                group: None,
             };
             let c = shade_local(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
             // f_att Ip kd cos = (1/4) * 4 * 0.5 * cos
@@ -324,6 +379,7 @@ mod tests {
             lights: &lights,
             area_samples: 1,
             ambient: true,
+            group: None,
         };
         let c = shade_local(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
         assert!((c - Vec3::new(0.05, 0.1, 0.0)).length() < 1e-6);
@@ -371,6 +427,7 @@ mod tests {
             lights: &lights,
             area_samples: 4,
             ambient: true,
+            group: None,
         };
         let models = [
             ReflectanceModel::Phong,

@@ -241,6 +241,7 @@ mod tests {
                     lights: &lights,
                     area_samples: 4,
                     ambient,
+                    group: None,
                 };
                 for _ in 0..500 {
                     let n = unit(&mut rng);
