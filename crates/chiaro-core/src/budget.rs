@@ -201,7 +201,7 @@ impl Estimate {
             return Ok(());
         }
         let mut items = self.items.clone();
-        items.sort_by(|a, b| b.1.cmp(&a.1));
+        items.sort_by_key(|item| std::cmp::Reverse(item.1));
         let largest: Vec<String> = items
             .iter()
             .take(3)
@@ -273,7 +273,7 @@ mod tests {
         e.add("textures", 1 << 30);
         e.add("bvh", 10 << 20);
         assert!(e.check(MemoryBudget::new(8 << 30)).is_ok());
-        let msg = e.check(MemoryBudget::new(1 << 30)).unwrap_err();
+        let msg = e.check(MemoryBudget::new(1 << 30)).expect_err("over");
         assert!(
             msg.contains("triangles 3.0 GiB, textures 1.0 GiB, film 100.0 MiB")
                 && msg.contains("limit is 1.0 GiB")

@@ -427,12 +427,12 @@ mod tests {
         let mut out = Vec::new();
         for (f, t) in indices.iter().enumerate() {
             let [a, b, c] = tri(f);
-            let nf = face_normal(a, b, c).unwrap();
+            let nf = face_normal(a, b, c).expect("test mesh");
             for k in 0..3 {
                 let mut sum = Vec3::ZERO;
                 for (g, u) in indices.iter().enumerate() {
                     let [a, b, c] = tri(g);
-                    let ng = face_normal(a, b, c).unwrap();
+                    let ng = face_normal(a, b, c).expect("test mesh");
                     for j in 0..3 {
                         if weld[u[j] as usize] == weld[t[k] as usize] && ng.dot(nf) >= cos_crease {
                             sum += ng * angle(g, j);
@@ -552,6 +552,31 @@ mod tests {
         let s = assert_bounded(&pos, &idx);
         for n in &s.normals {
             assert!((n.length() - 1.0).abs() < 1e-5, "normal {n}");
+        }
+    }
+
+    proptest::proptest! {
+        /// Jittered copies of lattice points (spacing 1, jitter within a
+        /// quarter of the tolerance per axis) weld to the first copy of
+        /// their lattice point, and welding is idempotent.
+        #[test]
+        fn weld_merges_exactly_the_copies_of_a_point(
+            pts in proptest::collection::vec(
+                (0u8..4, 0u8..4, 0u8..4, -0.024f32..0.024, -0.024f32..0.024, -0.024f32..0.024),
+                1..80,
+            )
+        ) {
+            let tol = 0.1;
+            let pos: Vec<Vec3> = pts
+                .iter()
+                .map(|&(x, y, z, a, b, c)| Vec3::new(f32::from(x) + a, f32::from(y) + b, f32::from(z) + c))
+                .collect();
+            let w = weld(&pos, tol, &mut Work::default());
+            for (i, p) in pts.iter().enumerate() {
+                let first = pts.iter().position(|q| q.0 == p.0 && q.1 == p.1 && q.2 == p.2).expect("itself");
+                proptest::prop_assert_eq!(w[i] as usize, first);
+                proptest::prop_assert_eq!(w[w[i] as usize], w[i]);
+            }
         }
     }
 }
