@@ -51,6 +51,9 @@ pub fn settings_from(scene: &Scene, opts: &RenderOptions) -> Result<RenderSettin
 
 /// `chiaro render`.
 pub fn render(args: RenderArgs) -> Result<()> {
+    if args.display_server.is_none() {
+        chiaro::io::output::check_output_path(&args.output)?;
+    }
     let scene = load(&args.scene)?;
     let mut settings = settings_from(&scene, &args.opts)?;
     if let Some(t) = args.tonemap {
