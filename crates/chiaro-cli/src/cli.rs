@@ -10,6 +10,10 @@ pub struct Cli {
     /// What to do.
     #[command(subcommand)]
     pub command: Command,
+    /// The memory a job may use (e.g. 512M, 8G; default: half the machine's).
+    /// A scene whose estimate exceeds it is refused before allocating.
+    #[arg(long, global = true, value_name = "SIZE")]
+    pub memory_limit: Option<chiaro::budget::ByteSize>,
 }
 
 const EXAMPLES: &str = "Examples:

@@ -65,12 +65,11 @@ pub fn settings_from(scene: &Scene, opts: &RenderOptions) -> Result<RenderSettin
     Ok(s)
 }
 
-/// Checks an output file before anything is rendered: its extension names a
-/// format chiaro writes, and its directory exists.
+/// Checks an output image before anything is rendered: its extension names
+/// a format chiaro writes, and its directory exists and is writable.
 fn check_output(path: &Path) -> Result<ImageFormat> {
-    let format = ImageFormat::from_path(path)?;
-    check_output_dir(path)?;
-    Ok(format)
+    chiaro::io::output::check_output_path(path)?;
+    Ok(ImageFormat::from_path(path)?)
 }
 
 /// An error unless `path`'s directory exists.

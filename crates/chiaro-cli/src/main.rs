@@ -10,6 +10,9 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let args = cli::Cli::parse();
+    if let Some(limit) = args.memory_limit {
+        chiaro::budget::MemoryBudget::set_process(limit);
+    }
     let result = match args.command {
         cli::Command::Render(r) => commands::render(r),
         cli::Command::Info { scene } => commands::info(&scene),

@@ -210,3 +210,33 @@ fn compare_writes_sheet_and_report_and_reuses_the_reference() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!stderr(&o).contains("cached"), "{}", stderr(&o));
 }
+
+#[test]
+fn memory_limit_and_output_path_are_checked_before_rendering() {
+    let dir = fresh_dir("memory");
+    let scene = dir.join("plane.toml");
+    std::fs::write(
+        &scene,
+        "[[object]]\nprimitive = \"plane\"\nsubdivisions = 4096\n",
+    )
+    .expect("write scene");
+    let scene = scene.display().to_string();
+    // `info` too: the plane is refused before it is tessellated.
+    let o = chiaro(&["info", &scene, "--memory-limit", "1G"]);
+    assert_one_line_error(&o, "memory limit is 1.0 GiB");
+    let o = chiaro(&["render", &cornell(), "--memory-limit", "lots"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    // An output directory that does not exist fails before the render.
+    let out = dir.join("missing/out.png").display().to_string();
+    let o = chiaro(&[
+        "render",
+        &cornell(),
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "-o",
+        &out,
+    ]);
+    assert_one_line_error(&o, "does not exist");
+}

@@ -21,6 +21,7 @@
 //!   phong, whitted, radiosity, hybrid, path, preview).
 
 pub mod accel;
+pub mod budget;
 pub mod error;
 pub mod film;
 pub mod geometry;

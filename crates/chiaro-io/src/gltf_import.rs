@@ -42,6 +42,7 @@
 //! 0. `range` is ignored.
 
 use crate::{Imported, ImportedObject, IoError, Result};
+use chiaro_core::budget::MemoryBudget;
 use chiaro_core::scene::{Attenuation, ImageTexture};
 use chiaro_core::scene::{
     Camera, Light, Material, Mesh, ReflectanceModel, SpotLight, Texture, TextureId,
@@ -65,22 +66,40 @@ const MAX_FILE_BYTES: u64 = 2 << 30;
 /// [`IoError`] naming the file and what is wrong (with the JSON line and
 /// column or the JSON path).
 pub fn load_gltf(path: &Path) -> Result<Imported> {
+    load_gltf_within(path, MemoryBudget::process())
+}
+
+/// [`load_gltf`] within `budget`: an accessor whose count no bytes back (it
+/// has no buffer view) is refused when its decoded size exceeds it.
+pub fn load_gltf_within(path: &Path, budget: MemoryBudget) -> Result<Imported> {
     let meta = std::fs::metadata(path).map_err(|e| IoError::io(path, e))?;
     if meta.len() > MAX_FILE_BYTES {
         return Err(IoError::format(path, "file too large"));
     }
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
     let base = path.parent().unwrap_or_else(|| Path::new("."));
-    load_gltf_slice(&bytes, Some(base), path)
+    load_gltf_slice_within(&bytes, Some(base), path, budget)
 }
 
 /// Reads glTF or GLB bytes held in memory. External files resolve against
 /// `base` (none: only embedded data is allowed); `path` names the input in
 /// messages. Returns what [`load_gltf`] returns.
 pub fn load_gltf_slice(bytes: &[u8], base: Option<&Path>, path: &Path) -> Result<Imported> {
+    load_gltf_slice_within(bytes, base, path, MemoryBudget::process())
+}
+
+/// [`load_gltf_slice`] within `budget` (see [`load_gltf_within`]).
+pub fn load_gltf_slice_within(
+    bytes: &[u8],
+    base: Option<&Path>,
+    path: &Path,
+    budget: MemoryBudget,
+) -> Result<Imported> {
     // Every known panic is prevented by the checks below; a panic inside the
     // gltf crate on input nobody foresaw is still turned into an error.
-    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read(bytes, base, path)));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        read(bytes, base, path, budget)
+    }));
     match result {
         Ok(r) => r,
         Err(_) => Err(IoError::format(
@@ -98,7 +117,7 @@ fn in_err(path: &Path, location: impl Into<String>, message: impl Into<String>) 
     }
 }
 
-fn read(bytes: &[u8], base: Option<&Path>, path: &Path) -> Result<Imported> {
+fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) -> Result<Imported> {
     let is_glb = bytes.starts_with(b"glTF");
     // The gltf crate subtracts the 12-byte header from the declared length unchecked.
     if is_glb {
@@ -205,6 +224,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path) -> Result<Imported> {
         material_map: HashMap::new(),
         texture_map: HashMap::new(),
         noted: BTreeSet::new(),
+        budget,
     };
     b.out.warnings = warnings;
     if doc.skins().len() > 0 {
@@ -318,6 +338,8 @@ struct Builder<'a> {
     material_map: HashMap<usize, usize>,
     texture_map: HashMap<(usize, bool), Option<TextureId>>,
     noted: BTreeSet<String>,
+    /// Bounds what accessors without a buffer view may expand to.
+    budget: MemoryBudget,
 }
 
 impl Builder<'_> {
@@ -451,8 +473,11 @@ impl Builder<'_> {
         self.out.lights.push(l);
     }
 
-    /// Checks an accessor: element type among `allowed`, count >= 1, and
-    /// every byte it reads inside its buffer view and buffer.
+    /// Checks an accessor: element type among `allowed`, count >= 1, every
+    /// byte it reads inside its buffer view and buffer (so its count is
+    /// backed by bytes), the sparse count within the count, and, for an
+    /// accessor without a buffer view (zeros, whose count nothing backs),
+    /// its decoded size within the memory budget.
     fn check_accessor(
         &self,
         acc: &gltf::Accessor,
@@ -474,6 +499,16 @@ impl Builder<'_> {
         }
         if acc.count() == 0 {
             return Err(in_err(self.path, loc, format!("{what}: count is 0")));
+        }
+        if acc.view().is_none() {
+            // Decoded, an element takes at most 16 bytes (a `Vec4` of f32).
+            let bytes = chiaro_core::budget::bytes_of(acc.count() as u64, 16);
+            self.budget
+                .check(
+                    &format!("{what}: {} elements without a buffer view", acc.count()),
+                    bytes,
+                )
+                .map_err(|m| in_err(self.path, loc.clone(), m))?;
         }
         let elem = acc.size();
         let check_view =
@@ -512,6 +547,16 @@ impl Builder<'_> {
                     self.path,
                     sloc,
                     format!("{what}: sparse count is 0"),
+                ));
+            }
+            if n > acc.count() {
+                return Err(in_err(
+                    self.path,
+                    sloc,
+                    format!(
+                        "{what}: sparse count {n} exceeds the accessor's count {}",
+                        acc.count()
+                    ),
                 ));
             }
             let idx = sparse.indices();
@@ -1038,5 +1083,48 @@ mod tests {
     fn bad_percent_encoding_is_refused() {
         assert!(check_uri("a%20b.bin").is_ok());
         assert!(check_uri("a%ff.bin").is_err());
+    }
+
+    /// A sparse POSITION accessor of count 2^31 without a buffer view: its
+    /// zeros would take 24 GiB, refused before anything is sized by it.
+    #[test]
+    fn unbacked_accessor_counts_are_checked_against_the_budget() {
+        let scene = |count: u64, sparse: u64| {
+            format!(
+                r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+                "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+                "accessors": [{{"componentType": 5126, "count": {count}, "type": "VEC3",
+                  "min": [0, 0, 0], "max": [1, 2, 3],
+                  "sparse": {{"count": {sparse}, "indices": {{"bufferView": 0, "componentType": 5125}},
+                    "values": {{"bufferView": 1}}}}}}],
+                "bufferViews": [{{"buffer": 0, "byteLength": 4}}, {{"buffer": 0, "byteOffset": 4, "byteLength": 12}}],
+                "buffers": [{{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}}]}}"#
+            )
+        };
+        let budget = MemoryBudget::new(1 << 30);
+        let huge = scene(1 << 31, 1);
+        assert!(huge.len() < 1000, "{} bytes", huge.len());
+        let e = load_gltf_slice_within(huge.as_bytes(), None, Path::new("sparse.gltf"), budget)
+            .expect_err("2^31 zeros");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("sparse.gltf")
+                && msg.contains("accessors[0]")
+                && msg.contains("2147483648 elements")
+                && msg.contains("memory limit is 1.0 GiB"),
+            "{msg}"
+        );
+        // The same accessor with a count that fits: zeros and the one value.
+        let small =
+            load_gltf_slice_within(scene(3, 1).as_bytes(), None, Path::new("s.gltf"), budget)
+                .expect("loads");
+        assert_eq!(
+            small.meshes[0].positions,
+            vec![Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO]
+        );
+        // More sparse entries than elements.
+        let e = load_gltf_slice_within(scene(1, 2).as_bytes(), None, Path::new("s.gltf"), budget)
+            .expect_err("sparse count");
+        assert!(e.to_string().contains("sparse count 2 exceeds"), "{e}");
     }
 }

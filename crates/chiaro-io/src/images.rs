@@ -8,12 +8,15 @@
 //! - Alpha is always linear, 1 where the file has none.
 //! - NaN, infinite and negative colour values (possible in HDR/EXR files) are
 //!   read as 0; alpha is clamped to `[0, 1]`.
-//! - Images wider or taller than [`MAX_IMAGE_SIDE`] are refused before they
-//!   are decoded; undecodable files give an error naming the file.
+//! - Images wider or taller than [`MAX_IMAGE_SIDE`], or whose decoding would
+//!   not fit the memory budget ([`decode_bytes`]), are refused from their
+//!   header before they are decoded; undecodable files give an error naming
+//!   the file.
 //!
 //! The format is found from the file's first bytes, not its extension.
 
 use crate::error::{IoError, Result};
+use chiaro_core::budget::MemoryBudget;
 use chiaro_core::film::tonemap::{srgb_eotf, srgb8_to_linear_table};
 use chiaro_core::glam::Vec3;
 use chiaro_core::scene::{ImageTexture, WrapMode};
@@ -33,10 +36,19 @@ const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
 /// [`IoError::Io`] if the file cannot be read; [`IoError::Format`] naming
 /// the file if it is not a PNG, JPEG, Radiance HDR or OpenEXR image, is
 /// corrupt, has no RGB or luminance channels (EXR), or is larger than
-/// [`MAX_IMAGE_SIDE`] on a side.
+/// [`MAX_IMAGE_SIDE`] on a side or needs more memory than the process
+/// budget ([`MemoryBudget::process`]).
 pub fn load_texture(path: &Path, srgb: bool) -> Result<ImageTexture> {
+    load_texture_within(path, srgb, MemoryBudget::process())
+}
+
+/// [`load_texture`] within `budget`.
+///
+/// # Errors
+/// As [`load_texture`].
+pub fn load_texture_within(path: &Path, srgb: bool, budget: MemoryBudget) -> Result<ImageTexture> {
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
-    let img = decode_image(&bytes, path, srgb)?;
+    let img = decode_image_within(&bytes, path, srgb, budget)?;
     Ok(img.into_texture(path.display().to_string()))
 }
 
@@ -47,8 +59,28 @@ pub fn load_texture(path: &Path, srgb: bool) -> Result<ImageTexture> {
 /// # Errors
 /// As [`load_texture`], with `name` in place of the path.
 pub fn load_texture_bytes(bytes: &[u8], name: &str, srgb: bool) -> Result<ImageTexture> {
-    let img = decode_image(bytes, Path::new(name), srgb)?;
+    load_texture_bytes_within(bytes, name, srgb, MemoryBudget::process())
+}
+
+/// [`load_texture_bytes`] within `budget`.
+///
+/// # Errors
+/// As [`load_texture`].
+pub fn load_texture_bytes_within(
+    bytes: &[u8],
+    name: &str,
+    srgb: bool,
+    budget: MemoryBudget,
+) -> Result<ImageTexture> {
+    let img = decode_image_within(bytes, Path::new(name), srgb, budget)?;
     Ok(img.into_texture(name.to_string()))
+}
+
+/// The most memory decoding a `width x height` image takes, in bytes: its
+/// RGBA `f32` texels (16 a pixel), their mip levels (a third more), and the
+/// decoder's own buffers (at most 16 a pixel, for a 32-bit float file).
+pub fn decode_bytes(width: u32, height: u32) -> u64 {
+    (u64::from(width) * u64::from(height)).saturating_mul(16 * 7) / 3
 }
 
 /// A decoded image with whatever extra buffers its file had.
@@ -88,7 +120,7 @@ fn clean_alpha(a: f32) -> f32 {
     if a.is_nan() { 1.0 } else { a.clamp(0.0, 1.0) }
 }
 
-fn check_size(width: u32, height: u32, name: &Path) -> Result<()> {
+fn check_size(width: u32, height: u32, name: &Path, budget: MemoryBudget) -> Result<()> {
     if width == 0 || height == 0 {
         return Err(IoError::format(name, "the image is empty (0 pixels)"));
     }
@@ -100,19 +132,39 @@ fn check_size(width: u32, height: u32, name: &Path) -> Result<()> {
             ),
         ));
     }
-    Ok(())
+    budget
+        .check(
+            &format!("decoding the {width}x{height} image"),
+            decode_bytes(width, height),
+        )
+        .map_err(|m| IoError::format(name, m))
 }
 
 /// Decodes any supported image from its bytes; `name` is for messages.
 pub(crate) fn decode_image(bytes: &[u8], name: &Path, srgb: bool) -> Result<DecodedImage> {
+    decode_image_within(bytes, name, srgb, MemoryBudget::process())
+}
+
+/// [`decode_image`] within `budget`.
+pub(crate) fn decode_image_within(
+    bytes: &[u8],
+    name: &Path,
+    srgb: bool,
+    budget: MemoryBudget,
+) -> Result<DecodedImage> {
     if bytes.starts_with(&EXR_MAGIC) {
-        decode_exr(bytes, name)
+        decode_exr(bytes, name, budget)
     } else {
-        decode_with_image_crate(bytes, name, srgb)
+        decode_with_image_crate(bytes, name, srgb, budget)
     }
 }
 
-fn decode_with_image_crate(bytes: &[u8], name: &Path, srgb: bool) -> Result<DecodedImage> {
+fn decode_with_image_crate(
+    bytes: &[u8],
+    name: &Path,
+    srgb: bool,
+    budget: MemoryBudget,
+) -> Result<DecodedImage> {
     use image::DynamicImage;
     let bad =
         |e: &dyn std::fmt::Display| IoError::format(name, format!("cannot decode the image: {e}"));
@@ -129,13 +181,13 @@ fn decode_with_image_crate(bytes: &[u8], name: &Path, srgb: bool) -> Result<Deco
     }
     // Check the header's size before allocating anything.
     let (width, height) = reader()?.into_dimensions().map_err(|e| bad(&e))?;
-    check_size(width, height, name)?;
+    check_size(width, height, name, budget)?;
     let mut r = reader()?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_IMAGE_SIDE);
     limits.max_image_height = Some(MAX_IMAGE_SIDE);
-    // RGBA f32 at the largest size is 4 GiB; allow what the side limit allows.
-    limits.max_alloc = Some(u64::from(MAX_IMAGE_SIDE).pow(2) * 16);
+    // The decoder's own buffers stay within the budget too.
+    limits.max_alloc = Some(budget.limit.0);
     r.limits(limits);
     let img = r.decode().map_err(|e| bad(&e))?;
 
@@ -196,7 +248,7 @@ fn decode_with_image_crate(bytes: &[u8], name: &Path, srgb: bool) -> Result<Deco
 /// Reads the first valid layer of an OpenEXR file: `R`, `G`, `B` (or `Y`
 /// for luminance), optional `A`, `Z`, `N.X`/`N.Y`/`N.Z`. Channels may carry
 /// a layer prefix (`beauty.R`) for colour.
-fn decode_exr(bytes: &[u8], name: &Path) -> Result<DecodedImage> {
+fn decode_exr(bytes: &[u8], name: &Path, budget: MemoryBudget) -> Result<DecodedImage> {
     use exr::prelude::*;
     let bad = |e: &dyn std::fmt::Display| {
         IoError::format(name, format!("cannot decode the OpenEXR image: {e}"))
@@ -210,6 +262,7 @@ fn decode_exr(bytes: &[u8], name: &Path) -> Result<DecodedImage> {
             u32::try_from(s.width()).unwrap_or(u32::MAX),
             u32::try_from(s.height()).unwrap_or(u32::MAX),
             name,
+            budget,
         )?;
     }
     let image = read()
@@ -379,6 +432,41 @@ mod tests {
             msg.contains("huge.png") && msg.contains("20000x20000"),
             "{msg}"
         );
+    }
+
+    /// A PNG of a `side x side` 8-bit grey image, all black: rows of a
+    /// filter byte and zeros, deflated by the `image` crate's PNG encoder.
+    fn grey_png(side: u32) -> Vec<u8> {
+        use image::ImageEncoder;
+        let mut out = Vec::new();
+        let enc = image::codecs::png::PngEncoder::new(&mut out);
+        let pixels = vec![0u8; (side * side) as usize];
+        enc.write_image(&pixels, side, side, image::ExtendedColorType::L8)
+            .expect("encodes");
+        out
+    }
+
+    #[test]
+    fn images_beyond_the_budget_are_refused_from_their_header() {
+        // A valid 16384 x 16384 grey PNG's header, as a file of that size
+        // opens (the refusal reads nothing past IHDR).
+        let mut png = grey_png(1);
+        png[16..20].copy_from_slice(&16384u32.to_be_bytes());
+        png[20..24].copy_from_slice(&16384u32.to_be_bytes());
+        let crc = crc32(&png[12..29]);
+        png[29..33].copy_from_slice(&crc.to_be_bytes());
+        let budget = MemoryBudget::new(1 << 30);
+        let e = load_texture_bytes_within(&png, "grey.png", false, budget).expect_err("budget");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("grey.png") && msg.contains("16384x16384") && msg.contains("1.0 GiB"),
+            "{msg}"
+        );
+        // A small image within the same budget decodes.
+        let small = grey_png(64);
+        let t = load_texture_bytes_within(&small, "small.png", false, budget).expect("decodes");
+        assert_eq!((t.width, t.height), (64, 64));
+        assert_eq!(decode_bytes(16384, 16384), 16384 * 16384 * 112 / 3);
     }
 
     /// CRC-32 (ISO 3309, as PNG uses), bit by bit.

@@ -271,6 +271,17 @@ impl Imported {
 /// Builds a whole scene from one mesh file: its objects, its lights or
 /// default ones, its first camera or one framing the bounds.
 fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
+    if imported.meshes.iter().all(|m| m.indices.is_empty()) {
+        let skipped = if imported.warnings.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", imported.warnings.join("; "))
+        };
+        return Err(IoError::format(
+            path,
+            format!("nothing to render: the file has no triangles{skipped}"),
+        ));
+    }
     let mut scene = Scene::default();
     let template = Object::default();
     imported.merge_into(&mut scene, Mat4::IDENTITY, None, &template);

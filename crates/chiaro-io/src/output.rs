@@ -107,6 +107,45 @@ impl ImageFormat {
     }
 }
 
+/// Checks, before anything is rendered, that a film can be written to
+/// `path`: its extension names a known format, it is not a directory, and
+/// its directory exists and accepts a new file (probed by creating and
+/// removing an empty temporary file there).
+///
+/// # Errors
+/// [`IoError::Format`] for an unknown extension or a directory;
+/// [`IoError::Io`] naming `path` when its directory is missing or not
+/// writable.
+pub fn check_output_path(path: &Path) -> Result<()> {
+    ImageFormat::from_path(path)?;
+    if path.is_dir() {
+        return Err(IoError::format(path, "is a directory, not an image file"));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !dir.is_dir() {
+        return Err(IoError::io(
+            path,
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("the directory {} does not exist", dir.display()),
+            ),
+        ));
+    }
+    let probe = dir.join(format!(
+        ".chiaro-write-probe-{}-{}.tmp",
+        std::process::id(),
+        PROBE_COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::File::create_new(&probe).map_err(|e| IoError::io(path, e))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+static PROBE_COUNTER: AtomicU64 = AtomicU64::new(0);
+
 /// Writes `film` to `path` in the format of its extension (see the module
 /// docs), atomically: through a temporary file in the same directory,
 /// renamed into place.

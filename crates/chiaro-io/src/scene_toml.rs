@@ -12,7 +12,7 @@
 //!
 //! | table | keys |
 //! | --- | --- |
-//! | `[render]` | `technique` (`preview`, `flat`, `gouraud`, `phong`, `whitted`, `radiosity`, `hybrid`, `path`), `width`, `height` (1..=16384, at most 64 Mpixel), `samples`, `seed`, `shadows` (`none`, `map`, `volume`, `ray`, `object`, `scanline`), `transparency`, `aa` (`supersample`, `adaptive`, `post`), `filter` (`box`, `tent`: the reconstruction of the scan converter's supersamples), `light_samples`, `tonemap` (`clamp`, `reinhard`, `filmic`), `exposure`, `cull_backfaces`; sub-tables `shadow_map` {`resolution`, `bias`, `slope_bias`, `pcf_radius`}, `whitted` {`max_depth`, `min_weight`, `adaptive_threshold`, `adaptive_max_depth`}, `path` {`max_depth`, `rr_depth`}, `radiosity` {`solver` (`jacobi`, `gauss-seidel`, `progressive`, `hierarchical`), `formfactor` (`hemicube`, `raycast`, `analytic`), `patch_size`, `hemicube_resolution`, `tolerance`, `max_iterations`}, `depth_cue` {`color`, `near`, `far`, `max_scale`, `min_scale`} |
+//! | `[render]` | `technique` (`preview`, `flat`, `gouraud`, `phong`, `whitted`, `radiosity`, `hybrid`, `path`), `width`, `height` (1..=16384, at most 64 Mpixel), `samples`, `seed`, `shadows` (`none`, `map`, `volume`, `ray`, `object`, `scanline`), `transparency`, `aa` (`supersample`, `adaptive`, `post`), `filter` (`box`, `tent`: the reconstruction of the scan converter's supersamples), `light_samples`, `tonemap` (`clamp`, `reinhard`, `filmic`), `exposure`, `cull_backfaces`, `memory_limit` (`"8G"`, `"512M"` or bytes: the memory this scene may use; by default half the machine's); sub-tables `shadow_map` {`resolution`, `bias`, `slope_bias`, `pcf_radius`}, `whitted` {`max_depth`, `min_weight`, `adaptive_threshold`, `adaptive_max_depth`}, `path` {`max_depth`, `rr_depth`}, `radiosity` {`solver` (`jacobi`, `gauss-seidel`, `progressive`, `hierarchical`), `formfactor` (`hemicube`, `raycast`, `analytic`), `patch_size`, `hemicube_resolution`, `tolerance`, `max_iterations`}, `depth_cue` {`color`, `near`, `far`, `max_scale`, `min_scale`} |
 //! | `[camera]` | `eye`, `look_at`, `up`, `fov` (vertical, 0..180), `near`, `far` |
 //! | `[[light]]` | `type` = `ambient` {`color`, `intensity`}; `point` {+ `position`, `attenuation`}; `directional` {`direction`, the way the light travels}; `spot` {`position`, `direction` or `look_at`, `attenuation`, `exponent` (Warn's n, default 1), `cone` (half-angle, default 90), `cone_softness`, `flaps` = [{`axis`, `min`, `max`}]}; `area` {`shape` = `quad` {`corner`, `edge_u`, `edge_v`} / `disk` {`center`, `normal`, `radius`} / `sphere` {`center`, `radius`}, `two_sided`} |
 //! | `[material.NAME]` | `ambient` (ka, relative to kd), `diffuse`, `specular`, `shininess`, `model` (`phong`, `blinn`, `torrance-sparrow`), `roughness`, `distribution` (`ggx`, `beckmann`), `reflect`, `transmit`, `ior`, `absorption`, `fresnel`, `transparency` (`interpolated`, `screen-door`, `filtered`), `texture`, `bump`, `normal_map`, `emission`, `emission_texture`, `two_sided` |
@@ -114,7 +114,9 @@ mod raw;
 
 use crate::{IoError, Loaded, Result};
 use chiaro_core::Vec3;
+use chiaro_core::budget::MemoryBudget;
 use chiaro_core::geometry::primitives;
+use chiaro_core::geometry::primitives::MeshSize;
 use chiaro_core::glam::Mat4;
 use chiaro_core::scene::{
     AreaShape, Attenuation, Bump, Camera, DepthCue, Environment, Flap, Geometry, Light,
@@ -127,6 +129,7 @@ use raw::{
     RawTransform, Sp, Splat3, TextureSpec,
 };
 use serde::Deserialize;
+use std::cell::Cell;
 use std::collections::HashMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -151,6 +154,8 @@ pub fn parse_scene(text: &str, base: &Path, path: &Path) -> Result<Loaded> {
         primitive_meshes: HashMap::new(),
         mesh_files: HashMap::new(),
         spans: SpanIndex::default(),
+        budget: MemoryBudget::process(),
+        load_bytes: Cell::new(0),
     };
     // Parse once with spans, refuse NaN/Inf anywhere, then deserialize.
     let root = toml::de::DeTable::parse(text).map_err(|e| ctx.toml_err(&e))?;
@@ -232,6 +237,10 @@ struct Ctx<'a> {
     /// meshes and materials (instances) instead of reading it again.
     mesh_files: MeshFiles,
     spans: SpanIndex,
+    /// The scene's memory budget (`render.memory_limit` or the process's).
+    budget: MemoryBudget,
+    /// Bytes the primitives' meshes and their prepared copies take so far.
+    load_bytes: Cell<u64>,
 }
 
 /// See [`Ctx::mesh_files`].
@@ -335,6 +344,7 @@ impl Ctx<'_> {
             render: self.render(raw.render)?,
             ..Scene::default()
         };
+        self.budget = scene.render.memory_budget();
         if let Some(cam) = raw.camera {
             self.spans.camera = Some(cam.span());
             scene.camera = self.camera(cam)?;
@@ -395,6 +405,7 @@ impl Ctx<'_> {
     fn render(&self, raw: Option<RawRender>) -> Result<RenderSettings> {
         let mut r = RenderSettings::default();
         let Some(raw) = raw else { return Ok(r) };
+        r.memory_limit = raw.memory_limit;
         if let Some(t) = raw.technique {
             r.technique = t;
         }
@@ -747,7 +758,7 @@ impl Ctx<'_> {
                 ),
             ));
         }
-        let mut img = crate::images::load_texture(&path, srgb)
+        let mut img = crate::images::load_texture_within(&path, srgb, self.budget)
             .map_err(|e| self.at(rel.span(), format!("cannot load texture: {e}")))?;
         img.wrap = wrap;
         let id = scene.add_texture(Texture::Image(img));
@@ -1164,7 +1175,11 @@ impl Ctx<'_> {
                     r.edge_v.as_ref().map(|v| v.get_ref().map(f32::to_bits)),
                 );
                 let geometry = match self.primitive_meshes.get(&key) {
-                    Some(&mesh) => Geometry::Mesh(mesh),
+                    Some(&mesh) => {
+                        let size = MeshSize::of(&scene.meshes[mesh.index()]);
+                        self.account(None, size, prim, prim.span())?;
+                        Geometry::Mesh(mesh)
+                    }
                     None => {
                         let geometry = self.primitive(scene, r, prim, &present)?;
                         if let Geometry::Mesh(mesh) = geometry {
@@ -1222,6 +1237,7 @@ impl Ctx<'_> {
             }
             "plane" => {
                 self.only(&what, present, &["size", "subdivisions"])?;
+                let span = span_of(&r.subdivisions).unwrap_or(prim.span());
                 let size = match &r.size {
                     None => 2.0,
                     Some(s) => match *s.get_ref() {
@@ -1241,6 +1257,8 @@ impl Ctx<'_> {
                     MAX_PLANE_SUBDIVISIONS,
                     1,
                 )?;
+                let m = MeshSize::plane(n);
+                self.account(Some(m), m, prim, span)?;
                 primitives::plane(0.5 * size, n)
             }
             "quad" => {
@@ -1260,10 +1278,10 @@ impl Ctx<'_> {
             }
             "disk" => {
                 self.only(&what, present, &["radius", "segments"])?;
-                primitives::disk(
-                    f(&r.radius, "radius", 1.0)?,
-                    count(&r.segments, "segments", 3, MAX_SEGMENTS, 64)?,
-                )
+                let segments = count(&r.segments, "segments", 3, MAX_SEGMENTS, 64)?;
+                let m = MeshSize::disk(segments);
+                self.account(Some(m), m, prim, prim.span())?;
+                primitives::disk(f(&r.radius, "radius", 1.0)?, segments)
             }
             "box" => {
                 self.only(&what, present, &["size"])?;
@@ -1281,10 +1299,13 @@ impl Ctx<'_> {
             }
             "cylinder" => {
                 self.only(&what, present, &["radius", "height", "segments"])?;
+                let segments = count(&r.segments, "segments", 3, MAX_SEGMENTS, 64)?;
+                let m = MeshSize::cylinder(segments);
+                self.account(Some(m), m, prim, prim.span())?;
                 primitives::cylinder(
                     f(&r.radius, "radius", 1.0)?,
                     f(&r.height, "height", 2.0)?,
-                    count(&r.segments, "segments", 3, MAX_SEGMENTS, 64)?,
+                    segments,
                 )
             }
             "teapot" => {
@@ -1296,6 +1317,8 @@ impl Ctx<'_> {
                     MAX_TEAPOT_SUBDIVISIONS,
                     8,
                 )?;
+                let m = MeshSize::teapot(n);
+                self.account(Some(m), m, prim, prim.span())?;
                 chiaro_core::geometry::teapot::teapot(n)
             }
             other => {
@@ -1382,7 +1405,7 @@ impl Ctx<'_> {
         let ext = crate::lowercase_extension(path);
         match ext.as_str() {
             "obj" => crate::obj::load_obj_meshes(path),
-            "gltf" | "glb" => crate::gltf_import::load_gltf(path),
+            "gltf" | "glb" => crate::gltf_import::load_gltf_within(path, self.budget),
             _ => {
                 return Err(self.at(
                     file.span(),
@@ -1394,6 +1417,35 @@ impl Ctx<'_> {
             }
         }
         .map_err(|e| self.at(file.span(), format!("cannot load mesh file: {e}")))
+    }
+
+    /// Adds a primitive object's memory (a `new` mesh, if it is tessellated
+    /// for it, and the prepared copy of `instance`) to the scene's total,
+    /// refused at `span` when the total exceeds the budget.
+    fn account(
+        &self,
+        new: Option<MeshSize>,
+        instance: MeshSize,
+        prim: &Sp<String>,
+        span: Range<usize>,
+    ) -> Result<()> {
+        let total = self
+            .load_bytes
+            .get()
+            .saturating_add(new.map_or(0, |m| m.mesh_bytes()))
+            .saturating_add(instance.prepared_bytes());
+        self.budget
+            .check(
+                &format!(
+                    "primitive {:?} ({} triangles), with the primitives before it,",
+                    prim.get_ref(),
+                    instance.triangles
+                ),
+                total,
+            )
+            .map_err(|m| self.at(span, m))?;
+        self.load_bytes.set(total);
+        Ok(())
     }
 
     fn where_(&self, span: Range<usize>) -> String {

@@ -85,7 +85,8 @@ fn obj_edge_cases_load_or_fail_without_panicking() {
         find("test-nan.obj:")
     );
     assert!(
-        find("line-prim.obj:").contains("ok, 0 triangles"),
+        find("line-prim.obj:").contains("nothing to render")
+            && find("line-prim.obj:").contains("skipped"),
         "{}",
         find("line-prim.obj:")
     );
@@ -177,4 +178,23 @@ fn mcguire_cornell_boxes_load_with_negative_indices() {
         "{:?}",
         red.ambient
     );
+}
+
+#[test]
+fn a_file_with_nothing_to_render_is_an_error_naming_what_was_skipped() {
+    let dir = std::env::temp_dir().join(format!("chiaro-io-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let f = dir.join("points.obj");
+    std::fs::write(&f, "v 0 0 0\nv 1 0 0\nv 0 1 0\np 1 2\nl 1 2 3\n").expect("write");
+    let e = load_scene(&f).expect_err("no faces");
+    let g = dir.join("verts.obj");
+    std::fs::write(&g, "v 0 0 0\nv 1 0 0\n").expect("write");
+    let e2 = load_scene(&g).expect_err("no faces");
+    let _ = std::fs::remove_dir_all(&dir);
+    let msg = e.to_string();
+    assert!(
+        msg.contains("points.obj") && msg.contains("nothing to render") && msg.contains("skipped"),
+        "{msg}"
+    );
+    assert!(e2.to_string().contains("nothing to render"), "{e2}");
 }

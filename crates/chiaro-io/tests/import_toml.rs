@@ -396,3 +396,37 @@ mesh = "meshes/cornell-tall-block.obj"
     assert_eq!(pa.material, pb.material);
     assert_ne!(pa.transform, pb.transform);
 }
+
+#[test]
+fn primitives_beyond_the_memory_limit_are_refused_before_tessellating() {
+    // The documented maximum subdivisions: 33.5M triangles, refused at the
+    // parameter under a 1 GiB limit (nothing is tessellated).
+    let (line, col, msg) = error_at(
+        "[render]\nmemory_limit = \"1G\"\n\n[[object]]\nprimitive = \"plane\"\nsubdivisions = 4096\n",
+    );
+    assert_eq!((line, col), (6, 16), "{msg}");
+    assert!(
+        msg.contains("33554432 triangles") && msg.contains("memory limit is 1.0 GiB"),
+        "{msg}"
+    );
+    // Instances add up: one plane of 524,288 triangles fits, 20 do not.
+    let mut text = String::from("[render]\nmemory_limit = \"1G\"\n");
+    for _ in 0..20 {
+        text += "[[object]]\nprimitive = \"plane\"\nsubdivisions = 512\n";
+    }
+    let (_, _, msg) = error_at(&text);
+    assert!(msg.contains("with the primitives before it"), "{msg}");
+    // A small limit that fits, read back as bytes.
+    let l = load_scene_str(
+        "[render]\nmemory_limit = \"64M\"\n[[object]]\nprimitive = \"plane\"\nsubdivisions = 8\n",
+        Path::new("."),
+        "m.toml",
+    )
+    .expect("fits");
+    assert_eq!(
+        l.scene.render.memory_limit,
+        Some(chiaro_core::budget::ByteSize(64 << 20))
+    );
+    let (_, _, msg) = error_at("[render]\nmemory_limit = \"lots\"\n");
+    assert!(msg.contains("not a size"), "{msg}");
+}

@@ -291,3 +291,35 @@ fn reading_garbage_names_the_file() {
     assert!(e.to_string().contains("short.ppm") && e.to_string().contains("truncated"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn output_paths_are_checked_before_rendering() {
+    use chiaro_io::output::check_output_path;
+    let dir = scratch("check");
+    assert!(check_output_path(&dir.join("ok.png")).is_ok());
+    assert!(check_output_path(&dir.join("ok.EXR")).is_ok());
+    let e = check_output_path(&dir.join("missing/out.png")).expect_err("no directory");
+    assert!(e.to_string().contains("does not exist"), "{e}");
+    let e = check_output_path(&dir.join("out.jpg")).expect_err("format");
+    assert!(e.to_string().contains(".png"), "{e}");
+    let sub = dir.join("sub.png");
+    std::fs::create_dir_all(&sub).expect("dir");
+    let e = check_output_path(&sub).expect_err("a directory");
+    assert!(e.to_string().contains("directory"), "{e}");
+    // A read-only directory (root may still write there: then it passes).
+    let ro = dir.join("ro");
+    std::fs::create_dir_all(&ro).expect("dir");
+    let mut perms = std::fs::metadata(&ro).expect("meta").permissions();
+    perms.set_readonly(true);
+    std::fs::set_permissions(&ro, perms).expect("chmod");
+    let writable = std::fs::File::create(ro.join("x")).is_ok();
+    let r = check_output_path(&ro.join("out.png"));
+    assert_eq!(r.is_ok(), writable, "{r:?}");
+    let mut perms = std::fs::metadata(&ro).expect("meta").permissions();
+    #[allow(clippy::permissions_set_readonly_false)]
+    perms.set_readonly(false);
+    std::fs::set_permissions(&ro, perms).expect("chmod");
+    // The probe leaves nothing behind.
+    assert_eq!(entries(&dir), vec!["ro", "sub.png"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

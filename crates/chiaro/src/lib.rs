@@ -25,6 +25,7 @@ pub mod hybrid;
 pub mod settings;
 pub mod sheet;
 
+pub use chiaro_core::budget;
 pub use chiaro_core::film::{self, Film};
 pub use chiaro_core::progress::{self, NoProgress, Progress};
 pub use chiaro_core::scene::{self, RenderSettings, Scene, Technique};
@@ -121,6 +122,106 @@ fn accelerator(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
     chiaro_core::accel::instanced::build_accelerator(p)
 }
 
+/// What rendering `scene` with `settings` will allocate, by consumer, in
+/// bytes: the prepared triangles and vertices (with the spheres the scan
+/// converter and radiosity tessellate), texture mip levels, the film and
+/// the scan converter's supersamples, shadow maps, and a dense radiosity
+/// matrix. The per-item sizes are the constants of
+/// [`chiaro_core::budget`]; the sum is an estimate of the peak, made
+/// without allocating anything.
+pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> chiaro_core::budget::Estimate {
+    use chiaro_core::budget::bytes_of;
+    use chiaro_core::geometry::primitives::MeshSize;
+    use chiaro_core::scene::{Geometry, RadiositySettings, ShadowMethod, Texture};
+    let analytic = matches!(
+        settings.technique,
+        Technique::Preview | Technique::Whitted | Technique::Path
+    );
+    let (mut meshes, mut spheres) = (
+        MeshSize {
+            vertices: 0,
+            triangles: 0,
+        },
+        0u64,
+    );
+    for obj in &scene.objects {
+        match obj.geometry {
+            Geometry::Mesh(id) => {
+                if let Some(m) = scene.meshes.get(id.index()) {
+                    let s = MeshSize::of(m);
+                    meshes.vertices = meshes.vertices.saturating_add(s.vertices);
+                    meshes.triangles = meshes.triangles.saturating_add(s.triangles);
+                }
+            }
+            Geometry::Sphere { .. } => spheres += 1,
+        }
+    }
+    let slices = chiaro_core::prepared::PrepareOptions::default().sphere_slices;
+    let sphere = MeshSize::uv_sphere(slices, slices / 2).times(spheres);
+    let mut e = chiaro_core::budget::Estimate::default();
+    e.add(
+        format!("{} mesh triangles", meshes.triangles),
+        meshes.prepared_bytes(),
+    );
+    if !analytic {
+        e.add(
+            format!(
+                "{spheres} tessellated spheres ({} triangles)",
+                sphere.triangles
+            ),
+            sphere.prepared_bytes(),
+        );
+    }
+    let texels: u64 = scene
+        .textures
+        .iter()
+        .map(|t| match t {
+            Texture::Image(i) => u64::from(i.width) * u64::from(i.height),
+            Texture::Procedural(_) => 0,
+        })
+        .sum();
+    // Mip levels: a third of the texels again, RGBA f32.
+    e.add("texture mip levels", bytes_of(texels, 16) / 3);
+    let pixels = u64::from(settings.width) * u64::from(settings.height);
+    // Colour, depth and normal a pixel.
+    e.add("film", bytes_of(pixels, 28));
+    if matches!(
+        settings.technique,
+        Technique::Flat | Technique::Gouraud | Technique::Phong
+    ) {
+        // Colour, depth and item a supersample.
+        e.add(
+            "supersamples",
+            bytes_of(
+                pixels.saturating_mul(u64::from(settings.samples.max(1))),
+                20,
+            ),
+        );
+    }
+    if settings.shadows == ShadowMethod::Map {
+        // Up to six depth faces of f32 per light.
+        let r = u64::from(settings.shadow_map.resolution);
+        let lights = scene.lights.len() as u64;
+        e.add("shadow maps", bytes_of(r * r * 6, 4).saturating_mul(lights));
+    }
+    if matches!(settings.technique, Technique::Radiosity | Technique::Hybrid) {
+        let RadiositySettings { solver, .. } = &settings.radiosity;
+        if solver == "jacobi" || solver == "gauss-seidel" {
+            // Two f32 matrices over at least one element a triangle.
+            let n = meshes.triangles.saturating_add(sphere.triangles);
+            e.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
+        }
+    }
+    e
+}
+
+/// Refuses a render whose [`memory_estimate`] exceeds the settings' budget.
+fn check_memory(scene: &Scene, settings: &RenderSettings) -> Result<(), CoreError> {
+    memory_estimate(scene, settings)
+        .check(settings.memory_budget())
+        .map_err(CoreError::Unsupported)
+}
+
 /// Renders `scene` with `settings` (which override `scene.render`), reporting
 /// to `progress`. The scene is validated first: every error found is
 /// reported at once.
@@ -146,6 +247,7 @@ pub fn render_with_stats(
     if !errors.is_empty() {
         return Err(CoreError::InvalidScene { issues: errors }.into());
     }
+    check_memory(scene, settings)?;
     if settings.aa == chiaro_core::scene::AaMode::Post {
         // The seeds' "render, then remove the aliasing": one sample per
         // pixel, then an edge-aware post filter (FXAA).
@@ -238,6 +340,7 @@ pub fn render_with_solution_files(
         .into());
     }
     check_settings(settings)?;
+    check_memory(scene, settings)?;
     let start = Instant::now();
     let solution = match files.load {
         Some(path) => {

@@ -20,6 +20,7 @@ pub fn known_keys() -> Vec<String> {
     let full = RenderSettings {
         transparency: Some(TransparencyMode::Filtered),
         depth_cue: Some(DepthCue::default()),
+        memory_limit: Some(chiaro_core::budget::ByteSize(1)),
         ..RenderSettings::default()
     };
     let mut keys = Vec::new();

@@ -6,6 +6,98 @@ use crate::scene::Mesh;
 use glam::{Vec2, Vec3};
 use std::f32::consts::{PI, TAU};
 
+/// The vertex and triangle counts of a primitive before it is tessellated,
+/// so that its memory can be checked first (upper bounds where a primitive
+/// drops degenerate triangles).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MeshSize {
+    /// Vertices.
+    pub vertices: u64,
+    /// Triangles.
+    pub triangles: u64,
+}
+
+impl MeshSize {
+    /// [`uv_sphere`]'s counts.
+    pub fn uv_sphere(slices: u32, stacks: u32) -> Self {
+        let (sl, st) = (u64::from(slices.max(3)), u64::from(stacks.max(2)));
+        Self {
+            vertices: (sl + 1) * (st + 1),
+            triangles: sl * (2 * st - 2),
+        }
+    }
+
+    /// [`plane`]'s counts.
+    pub fn plane(n: u32) -> Self {
+        let n = u64::from(n.max(1));
+        Self {
+            vertices: (n + 1) * (n + 1),
+            triangles: 2 * n * n,
+        }
+    }
+
+    /// [`disk`]'s counts.
+    pub fn disk(segments: u32) -> Self {
+        let s = u64::from(segments.max(3));
+        Self {
+            vertices: s + 1,
+            triangles: s,
+        }
+    }
+
+    /// [`cylinder`]'s counts.
+    pub fn cylinder(segments: u32) -> Self {
+        let s = u64::from(segments.max(3));
+        Self {
+            vertices: 4 * s + 4,
+            triangles: 4 * s,
+        }
+    }
+
+    /// [`super::teapot::teapot`]'s counts (at most).
+    pub fn teapot(subdivisions: u32) -> Self {
+        let n = u64::from(subdivisions.max(1));
+        Self {
+            vertices: 32 * (n + 1) * (n + 1),
+            triangles: 64 * n * n,
+        }
+    }
+
+    /// Bytes of the authoring [`Mesh`]: positions, normals, uvs, tangents
+    /// and colours a vertex, indices and a face material a triangle.
+    pub fn mesh_bytes(&self) -> u64 {
+        use crate::budget::{MESH_TRIANGLE_BYTES, MESH_VERTEX_BYTES};
+        self.vertices
+            .saturating_mul(MESH_VERTEX_BYTES)
+            .saturating_add(self.triangles.saturating_mul(MESH_TRIANGLE_BYTES))
+    }
+
+    /// Bytes of a technique's prepared copy (see
+    /// [`crate::budget::PREPARED_TRIANGLE_BYTES`]).
+    pub fn prepared_bytes(&self) -> u64 {
+        use crate::budget::{PREPARED_TRIANGLE_BYTES, PREPARED_VERTEX_BYTES};
+        self.vertices
+            .saturating_mul(PREPARED_VERTEX_BYTES)
+            .saturating_add(self.triangles.saturating_mul(PREPARED_TRIANGLE_BYTES))
+    }
+
+    /// The counts of an existing mesh.
+    pub fn of(mesh: &Mesh) -> Self {
+        Self {
+            vertices: mesh.positions.len() as u64,
+            triangles: mesh.indices.len() as u64,
+        }
+    }
+
+    /// `self` `times` over.
+    pub fn times(&self, times: u64) -> Self {
+        Self {
+            vertices: self.vertices.saturating_mul(times),
+            triangles: self.triangles.saturating_mul(times),
+        }
+    }
+}
+
 /// A UV sphere of `radius` centred at the origin, poles on +-y, with
 /// `slices` segments around and `stacks` from pole to pole.
 pub fn uv_sphere(radius: f32, slices: u32, stacks: u32) -> Mesh {
@@ -308,5 +400,27 @@ mod tests {
         outward(&quad(Vec3::ZERO, Vec3::X, Vec3::Y));
         outward(&icosphere(1.0, 2));
         assert_eq!(icosphere(1.0, 4).indices.len(), 5120);
+    }
+
+    #[test]
+    fn sizes_match_the_tessellations() {
+        let size = |m: &Mesh| (m.positions.len() as u64, m.indices.len() as u64);
+        let exact = |s: MeshSize| (s.vertices, s.triangles);
+        for (slices, stacks) in [(3, 2), (16, 8), (64, 32)] {
+            assert_eq!(
+                size(&uv_sphere(1.0, slices, stacks)),
+                exact(MeshSize::uv_sphere(slices, stacks))
+            );
+        }
+        for n in [1, 7] {
+            assert_eq!(size(&plane(1.0, n)), exact(MeshSize::plane(n)));
+        }
+        assert_eq!(size(&disk(1.0, 12)), exact(MeshSize::disk(12)));
+        assert_eq!(size(&cylinder(1.0, 1.0, 12)), exact(MeshSize::cylinder(12)));
+        for n in [1, 8] {
+            let (v, t) = size(&crate::geometry::teapot::teapot(n));
+            let bound = MeshSize::teapot(n);
+            assert!(v <= bound.vertices && t <= bound.triangles && 2 * t > bound.triangles);
+        }
     }
 }

@@ -319,6 +319,11 @@ pub struct RenderSettings {
     /// exactly the value it has in a full render (distributed rendering
     /// relies on it).
     pub crop: Option<[u32; 4]>,
+    /// The memory this render may use (`"8G"`, or bytes), a ceiling below
+    /// the process budget ([`crate::budget::MemoryBudget::process`]: the
+    /// CLI's `--memory-limit`, else half the machine's memory).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_limit: Option<crate::budget::ByteSize>,
 }
 
 impl Default for RenderSettings {
@@ -343,6 +348,7 @@ impl Default for RenderSettings {
             path: PathSettings::default(),
             radiosity: RadiositySettings::default(),
             crop: None,
+            memory_limit: None,
         }
     }
 }
@@ -357,6 +363,16 @@ impl RenderSettings {
                 [x0.min(x1), y0.min(y1), x1, y1]
             }
             None => [0, 0, self.width, self.height],
+        }
+    }
+
+    /// The memory budget of this render: the smaller of `memory_limit` and
+    /// the process budget (both are ceilings).
+    pub fn memory_budget(&self) -> crate::budget::MemoryBudget {
+        let process = crate::budget::MemoryBudget::process();
+        match self.memory_limit {
+            Some(b) if b < process.limit => crate::budget::MemoryBudget::new(b.0),
+            _ => process,
         }
     }
 

@@ -216,6 +216,7 @@ pub(crate) struct RawRender {
     pub whitted: Option<WhittedSettings>,
     pub path: Option<PathSettings>,
     pub radiosity: Option<RawRadiosity>,
+    pub memory_limit: Option<chiaro_core::budget::ByteSize>,
 }
 
 /// `[render.depth_cue]`.
