@@ -479,14 +479,15 @@ impl<'s> Tracer<'s> {
         let (w, h) = (self.settings.width.max(1), self.settings.height.max(1));
         let dir = scene.camera.ray_direction(film.x, film.y, w, h);
         let ray = Ray::new(scene.camera.eye, dir);
-        let differentials = RayDifferentials {
+        // The rays through the neighbouring pixels, for texture filtering.
+        let differentials = (!scene.textures.is_empty()).then(|| RayDifferentials {
             origin: ray.origin,
             dir_dx: scene.camera.ray_direction(film.x + 1.0, film.y, w, h),
             dir_dy: scene.camera.ray_direction(film.x, film.y + 1.0, w, h),
-        };
+        });
         let mut state = TraceState::new(rng);
         let (mut color, depth, normal) =
-            self.trace_hit(&ray, Some(&differentials), 0, Vec3::ONE, &mut state);
+            self.trace_hit(&ray, differentials.as_ref(), 0, Vec3::ONE, &mut state);
         *rays += state.rays;
         if let Some(cue) = &self.settings.depth_cue
             && depth.is_finite()
