@@ -184,3 +184,45 @@ fn path_at_depth_one_equals_direct_local_shading_on_a_normal_mapped_model() {
         "{bad} of {compared} pixels differ by more than 2%"
     );
 }
+
+/// Whitted's normal buffer of a close-up of the model around the point seen
+/// through pixel `(x, y)` of a 256-pixel render.
+fn close_up_normals(x: f32, y: f32) -> Film {
+    let mut scene = model().clone();
+    let cam = &mut scene.camera;
+    let dir = cam.ray_direction(x, y, 256, 256);
+    cam.look_at = cam.eye + dir * (-cam.eye.z / dir.z);
+    cam.fov_y_degrees = 5.0;
+    render(&scene, &settings(&scene, 64, Technique::Whitted))
+}
+
+/// `(sum n.x (col - mean), sum n.y (row - mean))` over the pixels whose
+/// normal is tilted from the quads' (+z): positive, negative for a dome.
+fn tilt_correlation(f: &Film) -> (f32, f32) {
+    let w = f.width as usize;
+    let tilted: Vec<usize> = (0..f.normal.len())
+        .filter(|&i| f.depth[i].is_finite() && f.normal[i].z < 0.95)
+        .collect();
+    let n = tilted.len().max(1) as f32;
+    let mean_col = tilted.iter().map(|&i| (i % w) as f32).sum::<f32>() / n;
+    let mean_row = tilted.iter().map(|&i| (i / w) as f32).sum::<f32>() / n;
+    tilted.iter().fold((0.0, 0.0), |(cx, cy), &i| {
+        let nn = f.normal[i];
+        (
+            cx + nn.x * ((i % w) as f32 - mean_col),
+            cy + nn.y * ((i / w) as f32 - mean_row),
+        )
+    })
+}
+
+#[test]
+fn normal_mapped_dome_tilts_like_the_real_one() {
+    // The top left pair: real geometry on the left, a normal-mapped quad on
+    // the right. Both domes' normals tilt right on the right and up at the
+    // top (a flipped green channel or bitangent sign makes the mapped one
+    // a bowl, README of the model).
+    for (what, x) in [("geometry", 59.0), ("normal map", 83.0)] {
+        let (cx, cy) = tilt_correlation(&close_up_normals(x, 61.0));
+        assert!(cx > 0.0 && cy < 0.0, "{what}: {cx} {cy}");
+    }
+}
