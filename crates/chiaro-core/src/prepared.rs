@@ -469,17 +469,31 @@ impl<'s> PreparedScene<'s> {
         duv_dx: Vec2,
         duv_dy: Vec2,
     ) -> SurfaceMaterial {
+        self.textured_material(hit, duv_dx, duv_dy).0
+    }
+
+    /// [`PreparedScene::surface_material_lod`] and the coverage (alpha) at
+    /// the point: the diffuse texture's alpha, one without a texture.
+    fn textured_material(
+        &self,
+        hit: &SurfaceHit,
+        duv_dx: Vec2,
+        duv_dy: Vec2,
+    ) -> (SurfaceMaterial, f32) {
         let m = self.material(hit.material);
         let mut sm = SurfaceMaterial::from_material(m);
         sm.kd *= hit.color;
+        let mut alpha = 1.0;
         let tc = Self::tex_coord(hit, duv_dx, duv_dy);
         if let Some(t) = m.texture {
-            sm.kd *= self.eval_texture(t, &tc).truncate();
+            let c = self.eval_texture(t, &tc);
+            sm.kd *= c.truncate();
+            alpha = c.w;
         }
         if let Some(t) = m.emission_texture {
             sm.emission *= self.eval_texture(t, &tc).truncate();
         }
-        sm
+        (sm, alpha)
     }
 
     /// `(dp/du, dp/dv)`: world-space derivatives of position with respect to
@@ -595,6 +609,162 @@ impl<'s> PreparedScene<'s> {
         }
         bump_normal(n, grad)
     }
+
+    /// `(dp/du, dp/dv)` at the surface point `sh` of primitive `prim`
+    /// (triangles first, then spheres): [`PreparedScene::triangle_dpduv`]
+    /// for a triangle; for a sphere the derivatives of its uv mapping
+    /// (`u` the azimuth over 2 pi, `v` the polar angle over pi, object space),
+    /// an orthonormal frame of the normal at the poles.
+    pub fn surface_dpduv(&self, prim: u32, sh: &SurfaceHit) -> (Vec3, Vec3) {
+        let nt = self.triangles.len() as u32;
+        if prim < nt {
+            return self.triangle_dpduv(prim);
+        }
+        let fallback = || {
+            let f = crate::geometry::Frame::from_normal(sh.ng);
+            (f.s, f.t)
+        };
+        let Some(s) = self.spheres.get((prim - nt) as usize) else {
+            return fallback();
+        };
+        // Object space: p = r_o (sin th sin ph, cos th, sin th cos ph) with
+        // ph = 2 pi (u - 1/2), th = pi v, r_o the object-space radius.
+        let po = sh.p_object;
+        let rho = (po.x * po.x + po.z * po.z).sqrt();
+        let r_o = po.length();
+        if rho <= 1e-6 * r_o || !rho.is_finite() {
+            return fallback();
+        }
+        use std::f32::consts::{PI, TAU};
+        let dpdu_o = Vec3::new(po.z, 0.0, -po.x) * TAU;
+        let dpdv_o = Vec3::new(po.y * po.x / rho, -rho, po.y * po.z / rho) * PI;
+        let world_from_object = Mat3::from_mat4(s.object_from_world.inverse());
+        let (dpdu, dpdv) = (world_from_object * dpdu_o, world_from_object * dpdv_o);
+        if dpdu.is_finite() && dpdv.is_finite() && dpdu.cross(dpdv) != Vec3::ZERO {
+            (dpdu, dpdv)
+        } else {
+            fallback()
+        }
+    }
+
+    /// The surface layer for ray tracers: what `ray`'s `hit` shades, with
+    /// image textures filtered over the pixel footprint of `differentials`
+    /// (the camera rays through the neighbouring pixels; `None` for the
+    /// base level, as for secondary rays). See [`PreparedScene::shading_surface_at`].
+    pub fn shading_surface(
+        &self,
+        ray: &Ray,
+        hit: &crate::accel::Hit,
+        differentials: Option<&RayDifferentials>,
+    ) -> ShadingSurface {
+        let sh = self.surface(ray, hit);
+        let (dpdu, dpdv) = self.surface_dpduv(hit.prim, &sh);
+        let (duv_dx, duv_dy) = differentials.map_or((Vec2::ZERO, Vec2::ZERO), |d| {
+            d.uv_footprint(sh.p, sh.ng, dpdu, dpdv)
+        });
+        self.shading_surface_at(sh, dpdu, dpdv, duv_dx, duv_dy)
+    }
+
+    /// The surface layer every technique shades through: from the
+    /// interpolated surface `sh` with position derivatives `dpdu`, `dpdv`
+    /// and the pixel footprint in uv (`duv_dx`, `duv_dy`: uv units per
+    /// pixel, zero for the base level), the textured material, the alpha,
+    /// and the shading normal after the normal map and the bump map.
+    ///
+    /// The shading normal is on the front side of the geometric normal:
+    /// a map that tilts it below the geometric horizon (`ns . ng < 0`) is
+    /// mirrored back about the tangent plane (`ns - 2 (ns . ng) ng`), which
+    /// is continuous at the horizon and keeps the tilt's direction.
+    /// Techniques flip `ns` and `ng` together for the back of a surface.
+    pub fn shading_surface_at(
+        &self,
+        sh: SurfaceHit,
+        dpdu: Vec3,
+        dpdv: Vec3,
+        duv_dx: Vec2,
+        duv_dy: Vec2,
+    ) -> ShadingSurface {
+        let m = self.material(sh.material);
+        let (material, alpha) = self.textured_material(&sh, duv_dx, duv_dy);
+        let mut ns = sh.ns;
+        if m.bump.is_some() || m.normal_map.is_some() {
+            ns = self.perturbed_normal(&sh, ns, dpdu, dpdv, duv_dx, duv_dy);
+            let below = ns.dot(sh.ng);
+            if below < 0.0 {
+                ns = (ns - 2.0 * below * sh.ng).try_normalize().unwrap_or(sh.ng);
+            }
+        }
+        ShadingSurface {
+            hit: sh,
+            ns,
+            dpdu,
+            dpdv,
+            material,
+            alpha,
+            two_sided: m.two_sided,
+        }
+    }
+}
+
+/// What a technique shades at a surface point: the output of the surface
+/// layer ([`PreparedScene::shading_surface_at`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShadingSurface {
+    /// The interpolated surface: position, geometric normal, uv, ids
+    /// (`hit.ns` is the interpolated normal before the maps).
+    pub hit: SurfaceHit,
+    /// Unit shading normal after the normal and bump maps, on the front
+    /// side of `hit.ng`.
+    pub ns: Vec3,
+    /// World-space derivative of the position with respect to `u`.
+    pub dpdu: Vec3,
+    /// World-space derivative of the position with respect to `v`.
+    pub dpdv: Vec3,
+    /// Material parameters with textures and vertex colours applied.
+    pub material: SurfaceMaterial,
+    /// Coverage in `[0, 1]`: the diffuse texture's alpha (one without one).
+    pub alpha: f32,
+    /// The material is shaded on both sides.
+    pub two_sided: bool,
+}
+
+/// The rays through the neighbouring pixels `(x + 1, y)` and `(x, y + 1)`
+/// of a camera ray (pbrt-v4 section 10.1.1), from which ray tracers find a
+/// hit's pixel footprint in uv as the scan converter does from its plane
+/// equations.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayDifferentials {
+    /// Origin of both rays.
+    pub origin: Vec3,
+    /// Direction of the ray one pixel to the right.
+    pub dir_dx: Vec3,
+    /// Direction of the ray one pixel down.
+    pub dir_dy: Vec3,
+}
+
+impl RayDifferentials {
+    /// `(du/dx, dv/dx)` and `(du/dy, dv/dy)` at the point `p` of a surface with
+    /// unit normal `n` and position derivatives `dpdu`, `dpdv`: each neighbour
+    /// ray meets the tangent plane at `p + dp`, and `dp = dpdu du + dpdv dv`
+    /// is solved in the least-squares sense (pbrt-v4 section 10.1.1). Zero
+    /// where a ray is parallel to the plane or the parametrisation degenerate.
+    pub fn uv_footprint(&self, p: Vec3, n: Vec3, dpdu: Vec3, dpdv: Vec3) -> (Vec2, Vec2) {
+        let a00 = dpdu.dot(dpdu);
+        let a01 = dpdu.dot(dpdv);
+        let a11 = dpdv.dot(dpdv);
+        let inv_det = 1.0 / (a00 * a11 - a01 * a01);
+        let solve = |dir: Vec3| {
+            let t = n.dot(p - self.origin) / n.dot(dir);
+            let dp = self.origin + dir * t - p;
+            let (b0, b1) = (dpdu.dot(dp), dpdv.dot(dp));
+            let duv = Vec2::new(a11 * b0 - a01 * b1, a00 * b1 - a01 * b0) * inv_det;
+            duv.is_finite().then_some(duv)
+        };
+        match (solve(self.dir_dx), solve(self.dir_dy)) {
+            (Some(dx), Some(dy)) => (dx, dy),
+            _ => (Vec2::ZERO, Vec2::ZERO),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -660,5 +830,119 @@ mod tests {
                 assert!((*color - want).abs().max_element() < 1e-6, "{color}");
             }
         }
+    }
+
+    #[test]
+    fn uv_footprint_of_a_plane_facing_the_camera_is_the_closed_form() {
+        // A plane at distance d with dp/du = a x, dp/dv = b y, seen along -z:
+        // a neighbour ray tilted by e in x meets it d e further, du = d e / a.
+        let (d, e, a, b) = (4.0f32, 0.01f32, 2.0f32, 0.5f32);
+        let rd = RayDifferentials {
+            origin: Vec3::ZERO,
+            dir_dx: Vec3::new(e, 0.0, -1.0),
+            dir_dy: Vec3::new(0.0, -e, -1.0),
+        };
+        let p = Vec3::new(0.0, 0.0, -d);
+        let (dx, dy) = rd.uv_footprint(p, Vec3::Z, Vec3::X * a, Vec3::Y * b);
+        assert!(
+            (dx - Vec2::new(d * e / a, 0.0)).abs().max_element() < 1e-6,
+            "{dx}"
+        );
+        assert!(
+            (dy - Vec2::new(0.0, -d * e / b)).abs().max_element() < 1e-6,
+            "{dy}"
+        );
+        // A ray parallel to the plane has no footprint.
+        let par = RayDifferentials {
+            dir_dx: Vec3::X,
+            ..rd
+        };
+        let none = par.uv_footprint(p, Vec3::Z, Vec3::X * a, Vec3::Y * b);
+        assert_eq!(none, (Vec2::ZERO, Vec2::ZERO));
+    }
+
+    #[test]
+    fn sphere_dpduv_matches_finite_differences_of_its_uv_mapping() {
+        let mut s = Scene::default();
+        s.add_material(Material::default());
+        s.objects.push(Object {
+            geometry: Geometry::Sphere { radius: 1.5 },
+            transform: Transform {
+                translate: Vec3::new(1.0, 2.0, -3.0),
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let ps = PreparedScene::new(
+            &s,
+            PrepareOptions {
+                analytic_spheres: true,
+                ..Default::default()
+            },
+        );
+        let c = ps.spheres[0].center;
+        let r = ps.spheres[0].radius;
+        let at = |dir: Vec3| {
+            let ray = Ray::new(c + dir * 10.0, -dir);
+            let hit = crate::accel::Hit {
+                t: 10.0 - r,
+                prim: 0,
+                u: 0.0,
+                v: 0.0,
+            };
+            ps.surface(&ray, &hit)
+        };
+        let sh = at(Vec3::new(0.3, 0.4, 0.8).normalize());
+        let (dpdu, dpdv) = ps.surface_dpduv(0, &sh);
+        // Moving along dp/du by h changes u by h and v by 0 (and vice versa).
+        for (dp, want) in [(dpdu, Vec2::X), (dpdv, Vec2::Y)] {
+            let h = 1e-3;
+            let q = at((sh.p + dp * h - c).normalize());
+            let got = (q.uv - sh.uv) / h;
+            assert!((got - want).abs().max_element() < 2e-2, "{got} vs {want}");
+        }
+        assert!(dpdu.cross(dpdv).dot(sh.ng) != 0.0);
+    }
+
+    #[test]
+    fn maps_never_leave_the_shading_normal_below_the_geometric_horizon() {
+        use crate::scene::{ImageTexture, WrapMode};
+        // A one-texel normal map that tilts the normal 60 degrees along +x,
+        // on a quad whose interpolated normals already lean 45 degrees to
+        // +x: the map's tilt goes below the horizon and is mirrored back.
+        let mut s = Scene::default();
+        let tilt = Vec3::new(0.75f32.sqrt(), 0.0, 0.5);
+        let rgb = (tilt + Vec3::ONE) * 0.5;
+        let tex = s.add_texture(Texture::Image(ImageTexture {
+            source: "n".into(),
+            width: 1,
+            height: 1,
+            texels: vec![[rgb.x, rgb.y, rgb.z, 1.0]],
+            wrap: WrapMode::Repeat,
+        }));
+        s.add_material(Material {
+            normal_map: Some(tex),
+            ..Default::default()
+        });
+        let mut mesh = primitives::quad(Vec3::ZERO, Vec3::X, Vec3::Y);
+        let lean = Vec3::new(1.0, 0.0, 1.0).normalize();
+        mesh.normals = vec![lean; mesh.positions.len()];
+        let m = s.add_mesh(mesh);
+        s.objects.push(Object {
+            geometry: Geometry::Mesh(m),
+            smooth: true,
+            ..Default::default()
+        });
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        let sh = ps.triangle_surface(0, 0.25, 0.25);
+        let (dpdu, dpdv) = ps.triangle_dpduv(0);
+        let ss = ps.shading_surface_at(sh, dpdu, dpdv, Vec2::ZERO, Vec2::ZERO);
+        let raw = ps.perturbed_normal(&sh, sh.ns, dpdu, dpdv, Vec2::ZERO, Vec2::ZERO);
+        assert!(raw.dot(sh.ng) < 0.0, "the set-up must go below: {raw}");
+        assert!(ss.ns.dot(sh.ng) > 0.0, "{}", ss.ns);
+        let mirrored = raw - 2.0 * raw.dot(sh.ng) * sh.ng;
+        assert!((ss.ns - mirrored).length() < 1e-6);
+        assert!((ss.ns.length() - 1.0).abs() < 1e-6);
+        assert_eq!(ss.alpha, 1.0);
     }
 }

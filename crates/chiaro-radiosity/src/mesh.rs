@@ -17,7 +17,7 @@ use chiaro_core::geometry::face_normal;
 use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::{AreaShape, Light};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 
 /// Largest number of elements a solution may have.
@@ -242,8 +242,16 @@ pub(crate) fn source_triangles(ps: &PreparedScene<'_>) -> Vec<SourceTri> {
 pub(crate) fn material_at(ps: &PreparedScene<'_>, s: &SourceTri, u: f32, v: f32) -> (Vec3, Vec3) {
     match s.kind {
         SourceKind::Prepared(t) => {
-            let hit = ps.triangle_surface(t, u, v);
-            let m = ps.surface_material(&hit);
+            // The surface layer at the base level of textures.
+            let (dpdu, dpdv) = ps.triangle_dpduv(t);
+            let ss = ps.shading_surface_at(
+                ps.triangle_surface(t, u, v),
+                dpdu,
+                dpdv,
+                Vec2::ZERO,
+                Vec2::ZERO,
+            );
+            let m = ss.material;
             (
                 m.kd.clamp(Vec3::ZERO, Vec3::ONE),
                 m.emission.max(Vec3::ZERO),

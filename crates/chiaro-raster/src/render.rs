@@ -2084,19 +2084,17 @@ fn shade_sample(
             (c, n, base.kr)
         }
         ShadeMode::Phong => {
-            let sm = if needs_footprint {
-                ps.surface_material_lod(&hit, duv_dx, duv_dy)
+            let (sm, n) = if needs_footprint {
+                // The surface layer: textures, normal and bump maps.
+                let (dpdu, dpdv) = ps.triangle_dpduv(t);
+                let ss = ps.shading_surface_at(hit, dpdu, dpdv, duv_dx, duv_dy);
+                (ss.material, ss.ns)
             } else {
-                // surface_material_lod without textures: the vertex colour only.
+                // The layer without textures or maps: the vertex colour only.
                 let mut sm = ctx.base(td);
                 sm.kd *= hit.color;
-                sm
+                (sm, hit.ns)
             };
-            let mut n = hit.ns;
-            if material.bump.is_some() || material.normal_map.is_some() {
-                let (dpdu, dpdv) = ps.triangle_dpduv(t);
-                n = ps.perturbed_normal(&hit, n, dpdu, dpdv, duv_dx, duv_dy);
-            }
             let n = n * sign;
             let sp = ShadingPoint {
                 p: hit.p,

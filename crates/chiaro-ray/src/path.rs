@@ -269,7 +269,8 @@ struct MaterialInfo {
     two_sided: bool,
     /// True when the emission is positive in some channel.
     emissive: bool,
-    /// True when textures change the parameters per point.
+    /// True when textures, a bump map or a normal map change the
+    /// parameters or the shading normal per point.
     textured: bool,
     /// True when the only lobe is Lambert's (no glossy, mirror or
     /// transmission lobe), chosen with probability 1 and weighted by `kd`:
@@ -290,7 +291,10 @@ impl MaterialInfo {
             emissive: surface.emission.max_element() > 0.0,
             bsdf,
             two_sided: m.two_sided,
-            textured: m.texture.is_some() || m.emission_texture.is_some(),
+            textured: m.texture.is_some()
+                || m.emission_texture.is_some()
+                || m.bump.is_some()
+                || m.normal_map.is_some(),
         }
     }
 }
@@ -495,8 +499,8 @@ impl<'a, 's> PathTracer<'a, 's> {
     }
 
     /// The vertex at `hit` and its cached material when `hit` is on a plain
-    /// triangle (`None`: evaluate it with textures through
-    /// `PreparedScene::surface` and `surface_material`).
+    /// triangle (`None`: evaluate it through the surface layer,
+    /// `PreparedScene::shading_surface`).
     #[inline(always)]
     fn plain_surface(&self, prim: u32, u: f32, v: f32) -> Option<(Vertex, &MaterialInfo)> {
         let t = prim as usize;
@@ -578,13 +582,14 @@ impl<'a, 's> PathTracer<'a, 's> {
                 Some(plain) => plain,
                 None => {
                     let hit = Hit { t, prim, u, v: hv };
-                    let surf = self.prepared.surface(&ray, &hit);
-                    let mat = self.prepared.material(surf.material);
-                    owned = MaterialInfo::new(self.prepared.surface_material(&surf), mat);
+                    // The surface layer, base level of textures.
+                    let ss = self.prepared.shading_surface(&ray, &hit, None);
+                    let mat = self.prepared.material(ss.hit.material);
+                    owned = MaterialInfo::new(ss.material, mat);
                     let v = Vertex {
-                        p: surf.p,
-                        ng: surf.ng,
-                        ns: surf.ns,
+                        p: ss.hit.p,
+                        ng: ss.hit.ng,
+                        ns: ss.ns,
                     };
                     (v, &owned)
                 }

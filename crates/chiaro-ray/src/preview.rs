@@ -96,13 +96,15 @@ pub fn render_with(
                             sum += background_radiance(scene, dir);
                             continue;
                         };
-                        let surf = prepared.surface(&ray, &hit);
+                        // The surface layer at the base level of textures.
+                        let ss = prepared.shading_surface(&ray, &hit, None);
+                        let surf = ss.hit;
                         let wo = -dir;
                         // Face the viewer: the eye light lights whatever side we see.
                         let (n, ng) = if surf.ng.dot(wo) < 0.0 {
-                            (-surf.ns, -surf.ng)
+                            (-ss.ns, -surf.ng)
                         } else {
-                            (surf.ns, surf.ng)
+                            (ss.ns, surf.ng)
                         };
                         let sp = ShadingPoint {
                             p: surf.p,
@@ -110,7 +112,7 @@ pub fn render_with(
                             ng,
                             wo,
                         };
-                        let m = prepared.surface_material(&surf);
+                        let m = ss.material;
                         sum += shade_local(
                             &m,
                             &sp,

@@ -37,7 +37,7 @@ use chiaro_core::accel::instanced::build_accelerator;
 use chiaro_core::error::{CoreError, Result};
 use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles_in};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
-use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
+use chiaro_core::prepared::{PrepareOptions, PreparedScene, RayDifferentials, SurfaceHit};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, RenderSettings, Scene, ShadowMethod};
@@ -244,7 +244,7 @@ impl<'s> Tracer<'s> {
     /// rays) and `weight` the product of the weights on its path, used for
     /// the cutoff. Counts every ray it traces in `state.rays`.
     pub fn trace(&self, ray: &Ray, depth: u32, weight: Vec3, state: &mut TraceState) -> Vec3 {
-        self.trace_hit(ray, depth, weight, state).0
+        self.trace_hit(ray, None, depth, weight, state).0
     }
 
     /// What a ray that hits nothing sees (`texture::miss_radiance`): camera
@@ -257,9 +257,12 @@ impl<'s> Tracer<'s> {
 
     /// Like [`Tracer::trace`], also returning the hit distance (in units of
     /// `ray.dir`) and the facing shading normal, for the film's buffers.
+    /// A camera ray's `differentials` give the pixel footprint over which
+    /// image textures are filtered, as the scan converter filters them.
     fn trace_hit(
         &self,
         ray: &Ray,
+        differentials: Option<&RayDifferentials>,
         depth: u32,
         weight: Vec3,
         state: &mut TraceState,
@@ -272,9 +275,10 @@ impl<'s> Tracer<'s> {
                 Vec3::ZERO,
             );
         };
-        let sh = self.prepared.surface(ray, &hit);
+        let ss = self.prepared.shading_surface(ray, &hit, differentials);
+        let sh = ss.hit;
         let material = self.prepared.material(sh.material);
-        let mut sm = self.prepared.surface_material(&sh);
+        let mut sm = ss.material;
         let Some(wo) = (-ray.dir).try_normalize() else {
             return (Vec3::ZERO, hit.t, Vec3::ZERO);
         };
@@ -284,9 +288,9 @@ impl<'s> Tracer<'s> {
         // shaded on the side the ray arrives from.
         let flip = !front && (material.two_sided || transmissive);
         let (n, ng) = if flip {
-            (-sh.ns, -sh.ng)
+            (-ss.ns, -sh.ng)
         } else {
-            (sh.ns, sh.ng)
+            (ss.ns, sh.ng)
         };
         if !front && !material.two_sided {
             // One-sided emitters emit from their front only.
@@ -341,8 +345,15 @@ impl<'s> Tracer<'s> {
         let (w, h) = (self.settings.width.max(1), self.settings.height.max(1));
         let dir = scene.camera.ray_direction(film.x, film.y, w, h);
         let ray = Ray::new(scene.camera.eye, dir);
+        // The rays through the neighbouring pixels, for texture filtering.
+        let differentials = (!scene.textures.is_empty()).then(|| RayDifferentials {
+            origin: ray.origin,
+            dir_dx: scene.camera.ray_direction(film.x + 1.0, film.y, w, h),
+            dir_dy: scene.camera.ray_direction(film.x, film.y + 1.0, w, h),
+        });
         let mut state = TraceState::new(rng);
-        let (mut color, depth, normal) = self.trace_hit(&ray, 0, Vec3::ONE, &mut state);
+        let (mut color, depth, normal) =
+            self.trace_hit(&ray, differentials.as_ref(), 0, Vec3::ONE, &mut state);
         *rays += state.rays;
         if let Some(cue) = &self.settings.depth_cue
             && depth.is_finite()

@@ -309,7 +309,10 @@ fn weld(positions: &[Vec3], tol: f32, work: &mut Work) -> Vec<u32> {
 }
 
 /// Per-vertex tangents from uv derivatives (Lengyel's method), orthogonalised
-/// against the normals, with the bitangent sign in `w` (glTF convention).
+/// against the normals, with the bitangent sign in `w` (glTF convention:
+/// the bitangent `w (n x t)` is the normal map's +Y, up in the image, which
+/// with `v = 0` at the top row is the direction of decreasing `v`, as the
+/// glTF sample viewer and MikkTSpace on flipped `v` give).
 /// Vertices without a usable uv gradient get an arbitrary tangent
 /// perpendicular to the normal.
 pub fn tangents(
@@ -345,7 +348,8 @@ pub fn tangents(
             let t = (tan[i] - nn * nn.dot(tan[i]))
                 .try_normalize()
                 .unwrap_or_else(|| super::Frame::from_normal(nn).s);
-            let w = if nn.cross(t).dot(bit[i]) < 0.0 {
+            // +1 when n x t points up the image (along -dp/dv), -1 for mirrored uvs.
+            let w = if nn.cross(t).dot(bit[i]) > 0.0 {
                 -1.0
             } else {
                 1.0
@@ -359,6 +363,25 @@ pub fn tangents(
 mod tests {
     use super::*;
     use crate::geometry::primitives;
+
+    #[test]
+    fn tangent_bitangent_is_up_the_image_and_flips_for_mirrored_uvs() {
+        // An upright image on a quad facing +z (v = 0 at its top edge): the
+        // tangent is +x and the bitangent n x t = +y, the normal map's +Y.
+        let q = primitives::quad(Vec3::ZERO, Vec3::X, Vec3::Y);
+        for t in tangents(&q.positions, &q.normals, &q.uvs, &q.indices) {
+            assert!((t.truncate() - Vec3::X).length() < 1e-6, "{t}");
+            assert_eq!(t.w, 1.0);
+        }
+        // The image mirrored left to right: the tangent is -x, and the
+        // bitangent must stay +y, so w = -1.
+        let uvs: Vec<Vec2> = q.uvs.iter().map(|uv| Vec2::new(1.0 - uv.x, uv.y)).collect();
+        for t in tangents(&q.positions, &q.normals, &uvs, &q.indices) {
+            assert!((t.truncate() + Vec3::X).length() < 1e-6, "{t}");
+            assert_eq!(t.w, -1.0);
+            assert!((Vec3::Z.cross(t.truncate()) * t.w - Vec3::Y).length() < 1e-6);
+        }
+    }
 
     #[test]
     fn coincident_points_give_no_normal() {

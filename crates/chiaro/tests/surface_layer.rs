@@ -1,0 +1,228 @@
+//! The surface layer (`PreparedScene::shading_surface`) across techniques,
+//! on Khronos' NormalTangentTest (normal-mapped quads beside real geometry
+//! of the same shapes): the scan converter, Whitted and the path tracer shade
+//! the same normal-mapped, textured surface.
+
+use chiaro::scene::{Light, ShadowMethod, Technique};
+use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
+use chiaro_testkit::{diff_films, dump_ppm};
+use std::path::Path;
+use std::sync::OnceLock;
+
+fn render(scene: &Scene, settings: &RenderSettings) -> Film {
+    chiaro::render(scene, settings, &NoProgress).expect("renders")
+}
+
+/// The model as the CLI loads it (its own camera framing, default lights).
+fn model() -> &'static Scene {
+    static SCENE: OnceLock<Scene> = OnceLock::new();
+    SCENE.get_or_init(|| {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/NormalTangentTest.glb");
+        chiaro::io::load_scene(&path).expect("loads").scene
+    })
+}
+
+/// The same scene with the normal maps removed.
+fn without_normal_maps(scene: &Scene) -> Scene {
+    let mut s = scene.clone();
+    for m in &mut s.materials {
+        m.normal_map = None;
+    }
+    s
+}
+
+fn settings(scene: &Scene, size: u32, technique: Technique) -> RenderSettings {
+    let mut s = scene.render.clone();
+    s.width = size;
+    s.height = size;
+    s.samples = 1;
+    s.shadows = ShadowMethod::None;
+    s.technique = technique;
+    s.whitted.max_depth = 0;
+    s
+}
+
+/// Pixels where both films see a surface at the same depth, with the same
+/// normal, and so do their four neighbours (no silhouettes).
+fn same_surface(a: &Film, b: &Film) -> impl Fn(usize) -> bool {
+    let w = a.width as usize;
+    let h = a.height as usize;
+    let ok: Vec<bool> = (0..a.color.len())
+        .map(|i| {
+            let (da, db) = (a.depth[i], b.depth[i]);
+            da.is_finite()
+                && db.is_finite()
+                && (da - db).abs() <= 1e-3 * da.max(1.0)
+                && a.normal[i].dot(b.normal[i]) > 0.999
+        })
+        .collect();
+    move |i| {
+        let (x, y) = (i % w, i / w);
+        ok[i]
+            && x > 0
+            && y > 0
+            && x + 1 < w
+            && y + 1 < h
+            && ok[i - 1]
+            && ok[i + 1]
+            && ok[i - w]
+            && ok[i + w]
+    }
+}
+
+#[test]
+fn model_has_normal_maps() {
+    let s = model();
+    assert!(s.materials.iter().any(|m| m.normal_map.is_some()));
+}
+
+#[test]
+fn phong_equals_whitted_at_depth_zero_on_a_normal_mapped_model() {
+    let scene = model();
+    let raster = render(scene, &settings(scene, 128, Technique::Phong));
+    let traced = render(scene, &settings(scene, 128, Technique::Whitted));
+    let mask = same_surface(&raster, &traced);
+    // The untextured test's tolerance: Whitted's camera rays filter the
+    // textures and the normal map over the same footprint as the scan
+    // converter, so a lookup changes by about the texture's contrast per
+    // pixel, and the two place a sample the same up to rounding (about
+    // 1e-4 pixel), as on untextured surfaces.
+    let d = diff_films(&raster, &traced, 1e-3, &mask);
+    eprintln!("phong vs whitted: {d:?}");
+    if d.over > 0 {
+        dump_ppm(&raster, "surface_phong");
+        dump_ppm(&traced, "surface_whitted");
+    }
+    assert!(
+        d.compared > 128 * 128 / 10,
+        "too few pixels compared: {d:?}"
+    );
+    assert_eq!(d.over, 0, "{d:?}");
+}
+
+#[test]
+fn whitted_and_path_show_the_normal_map() {
+    let scene = model();
+    let flat = without_normal_maps(scene);
+    for technique in [Technique::Whitted, Technique::Path] {
+        let mut s = settings(scene, 64, technique);
+        s.samples = 16;
+        s.path.max_depth = 1;
+        let a = render(scene, &s);
+        let b = render(&flat, &s);
+        // The same sample positions in both renders: outside the mapped
+        // quads the films are equal, so every difference is the map's.
+        let d = diff_films(&a, &b, 0.05, |i| a.depth[i].is_finite());
+        eprintln!("{technique:?} with vs without normal maps: {d:?}");
+        assert!(d.over * 10 > d.compared, "{technique:?}: {d:?}");
+    }
+}
+
+#[test]
+fn path_at_depth_one_equals_direct_local_shading_on_a_normal_mapped_model() {
+    let mut scene = model().clone();
+    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    // Lambertian: the model's near-mirror GGX highlights (roughness 0.017)
+    // are smaller than a pixel, and the two techniques' 64 sample positions
+    // in a pixel see different parts of them; the Lambert term varies with
+    // the mapped normal on the scale of the normal map's texels.
+    for m in &mut scene.materials {
+        m.specular = Vec3::ZERO;
+    }
+    // Close up on the upper left of the top left normal-mapped dome (a
+    // 2048-texel map, about 80 texels over the 64 pixels): Whitted filters
+    // the normal map over the pixel's footprint, the path tracer averages
+    // its samples' shading on the base level, and the two agree only where
+    // the footprint is about a texel (a prefiltered normal does not shade
+    // as the mean of the normals it replaces).
+    let cam = &mut scene.camera;
+    let dir = cam.ray_direction(78.0, 58.0, 256, 256);
+    cam.look_at = cam.eye + dir * (-cam.eye.z / dir.z);
+    cam.fov_y_degrees = 1.2;
+    let mut s = settings(&scene, 64, Technique::Whitted);
+    s.samples = 64;
+    s.shadows = ShadowMethod::Ray;
+    let whitted = render(&scene, &s);
+    s.technique = Technique::Path;
+    s.path.max_depth = 1;
+    let path = render(&scene, &s);
+    let mask = same_surface(&whitted, &whitted);
+    // As in cross_technique.rs: the two techniques place their samples in
+    // a pixel differently, so pixels across an edge of the image (here the
+    // normal map's rim and the terminator) differ by their coverage;
+    // compare only pixels whose neighbours are within 10 %.
+    let w = whitted.width as usize;
+    let smooth = |i: usize| {
+        let c = whitted.color[i].max_element().max(0.02);
+        [i - 1, i + 1, i - w, i + w]
+            .iter()
+            .all(|&j| (whitted.color[j] - whitted.color[i]).abs().max_element() <= 0.1 * c)
+    };
+    let mut compared = 0;
+    let mut bad = 0;
+    let mut worst = 0.0f32;
+    for i in 0..whitted.color.len() {
+        if !mask(i) || !smooth(i) {
+            continue;
+        }
+        compared += 1;
+        let (a, b) = (whitted.color[i], path.color[i]);
+        let e = (a - b).abs().max_element() / a.max_element().max(0.05);
+        worst = worst.max(e);
+        if e > 0.02 {
+            bad += 1;
+        }
+    }
+    eprintln!("path vs whitted: {bad} of {compared} over 2 %, worst {worst}");
+    if bad > compared / 50 {
+        dump_ppm(&whitted, "surface_depth1_whitted");
+        dump_ppm(&path, "surface_depth1_path");
+    }
+    assert!(compared > 64 * 64 / 2, "{compared}");
+    assert!(
+        bad <= compared / 50,
+        "{bad} of {compared} pixels differ by more than 2%"
+    );
+}
+
+/// Whitted's normal buffer of a close-up of the model around the point seen
+/// through pixel `(x, y)` of a 256-pixel render.
+fn close_up_normals(x: f32, y: f32) -> Film {
+    let mut scene = model().clone();
+    let cam = &mut scene.camera;
+    let dir = cam.ray_direction(x, y, 256, 256);
+    cam.look_at = cam.eye + dir * (-cam.eye.z / dir.z);
+    cam.fov_y_degrees = 5.0;
+    render(&scene, &settings(&scene, 64, Technique::Whitted))
+}
+
+/// `(sum n.x (col - mean), sum n.y (row - mean))` over the pixels whose
+/// normal is tilted from the quads' (+z): positive, negative for a dome.
+fn tilt_correlation(f: &Film) -> (f32, f32) {
+    let w = f.width as usize;
+    let tilted: Vec<usize> = (0..f.normal.len())
+        .filter(|&i| f.depth[i].is_finite() && f.normal[i].z < 0.95)
+        .collect();
+    let n = tilted.len().max(1) as f32;
+    let mean_col = tilted.iter().map(|&i| (i % w) as f32).sum::<f32>() / n;
+    let mean_row = tilted.iter().map(|&i| (i / w) as f32).sum::<f32>() / n;
+    tilted.iter().fold((0.0, 0.0), |(cx, cy), &i| {
+        let nn = f.normal[i];
+        (
+            cx + nn.x * ((i % w) as f32 - mean_col),
+            cy + nn.y * ((i / w) as f32 - mean_row),
+        )
+    })
+}
+
+#[test]
+fn normal_mapped_dome_tilts_like_the_real_one() {
+    // The top left pair: real geometry on the left, a normal-mapped quad on
+    // the right. Both domes' normals tilt right on the right and up at the
+    // top (a flipped green channel or bitangent sign makes the mapped one
+    // a bowl, README of the model).
+    for (what, x) in [("geometry", 59.0), ("normal map", 83.0)] {
+        let (cx, cy) = tilt_correlation(&close_up_normals(x, 61.0));
+        assert!(cx > 0.0 && cy < 0.0, "{what}: {cx} {cy}");
+    }
+}
