@@ -278,7 +278,7 @@ impl MaterialInfo {
             surface,
             fresnel: m.fresnel,
             two_sided: m.two_sided,
-            textured: m.texture.is_some() || m.emission_texture.is_some(),
+            textured: m.is_textured(),
         }
     }
 }
@@ -1549,6 +1549,7 @@ mod tests {
                     .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
                     .collect(),
                 wrap: chiaro_core::scene::WrapMode::Repeat,
+                ..Default::default()
             },
         ));
         s.environment = Some(chiaro_core::scene::Environment {
