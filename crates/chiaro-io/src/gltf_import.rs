@@ -4,32 +4,37 @@
 //! What is read: the default scene's node hierarchy (or every root node when
 //! the file names no scene), each node's mesh primitives (triangles; strips
 //! and fans are converted; points and lines are skipped with a warning) with
-//! positions, normals, tangents, `TEXCOORD_0`, `COLOR_0` and sparse
-//! accessors; perspective cameras; `KHR_lights_punctual`; materials.
+//! positions, normals, tangents (float, or normalized integers with
+//! `KHR_mesh_quantization`), the material's `TEXCOORD_n`, `COLOR_0` and
+//! sparse accessors; perspective cameras; `KHR_lights_punctual`; materials.
 //! Skins, morph targets and animations are not applied: the bind pose is
 //! loaded and a warning given.
 //!
 //! The file is checked before anything is read: JSON errors give the line
 //! and column, schema errors the JSON path (`meshes[0].primitives[0].indices`),
 //! a required extension chiaro does not implement (Draco, meshopt, ...) is an
-//! error naming it, and every accessor's type and byte range is checked
+//! error naming it, a file whose meshes hold no triangles is an error, and every accessor's type and byte range is checked
 //! against its buffer, and every index against its vertex count, so a
 //! malformed file gives an error, never a panic.
 //!
 //! # Materials (metallic-roughness to chiaro)
 //!
-//! - `model = torrance-sparrow`, `roughness = roughnessFactor^2` (the GGX
-//!   alpha of the glTF BRDF, glTF 2.0 spec appendix B), clamped to `[1e-3, 1]`.
-//! - `specular` (F0) `= mix(0.04, baseColor, metallic)` and
-//!   `diffuse = baseColor * (1 - metallic)` (spec appendix B.3.5).
-//! - `baseColorTexture` -> `texture` (sRGB decoded); it multiplies the
-//!   diffuse colour only. chiaro has no per-texel metallic or roughness: a
-//!   `metallicRoughnessTexture` is averaged (G = roughness, B = metallic)
-//!   into the factors, with a warning. Occlusion textures are ignored.
-//! - `normalTexture` -> `normal_map` (linear); `emissiveFactor *
-//!   KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
-//!   `emission_texture`; `doubleSided` -> `two_sided`; `alphaMode = BLEND`
-//!   -> `transmit = 1 - alpha` drawn `interpolated`.
+//! Every material gets `model = torrance-sparrow` and a
+//! [`MetallicRoughness`] that `PreparedScene::surface_material_lod`
+//! evaluates per point (ARCHITECTURE.md, "glTF materials"): base colour =
+//! `baseColorFactor * baseColorTexture * COLOR_0`, metallic and roughness =
+//! factors times the B and G of `metallicRoughnessTexture`, then `kd =
+//! base (1 - metallic)`, F0 `= mix(0.04, base, metallic)`, alpha =
+//! roughness^2. `occlusionTexture` (R, with `strength`) scales the ambient
+//! term; `normalTexture` -> `normal_map`; `emissiveFactor *
+//! KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
+//! `emission_texture`; `KHR_materials_unlit` -> emission = base colour, no
+//! reflection; `doubleSided` -> `two_sided`; `alphaMode`/`alphaCutoff` ->
+//! `alpha_mode`, and `BLEND` with a factor alpha below 1 -> `transmit = 1 -
+//! alpha` (ior 1) drawn `interpolated`. Samplers give both wrap axes and
+//! the min/mag/mip filters; `KHR_texture_transform` is applied to the base
+//! colour, metallic-roughness and emissive textures; the mesh carries the
+//! one `TEXCOORD_n` set its material's textures use.
 //!
 //! # Lights
 //!
