@@ -6,7 +6,9 @@
 use crate::geometry::normals::{tangents, vertex_normals};
 use crate::geometry::{Aabb, Ray, face_normal, primitives};
 use crate::scene::TextureId;
-use crate::scene::{AreaShape, Geometry, Light, Material, MaterialId, Scene, Texture};
+use crate::scene::{
+    AreaShape, Geometry, Light, Material, MaterialId, MetallicRoughness, Scene, Texture,
+};
 use crate::shading::SurfaceMaterial;
 use crate::shading::texture::{
     MipMap, TexCoord, bump_normal, eval_height, eval_texture, normal_map_normal,
@@ -473,7 +475,7 @@ impl<'s> PreparedScene<'s> {
     }
 
     /// [`PreparedScene::surface_material_lod`] and the coverage (alpha) at
-    /// the point: the diffuse texture's alpha, one without a texture.
+    /// the point: the alpha factor times the diffuse texture's alpha.
     fn textured_material(
         &self,
         hit: &SurfaceHit,
@@ -482,13 +484,35 @@ impl<'s> PreparedScene<'s> {
     ) -> (SurfaceMaterial, f32) {
         let m = self.material(hit.material);
         let mut sm = SurfaceMaterial::from_material(m);
-        sm.kd *= hit.color;
-        let mut alpha = 1.0;
         let tc = Self::tex_coord(hit, duv_dx, duv_dy);
-        if let Some(t) = m.texture {
-            let c = self.eval_texture(t, &tc);
-            sm.kd *= c.truncate();
-            alpha = c.w;
+        let texel = m.texture.map(|t| self.eval_texture(t, &tc));
+        // Coverage: the base colour's alpha factor times the texture's alpha.
+        let alpha = m.alpha * texel.map_or(1.0, |c| c.w);
+        let texture = texel.map(|c| c.truncate());
+        match m.metallic_roughness {
+            // Metallic-roughness: the base colour feeds kd and ks (F0).
+            Some(mr) => {
+                let base = texture.unwrap_or(Vec3::ONE) * hit.color;
+                let (metallic, rough) = mr.texture.map_or((1.0, 1.0), |t| {
+                    let c = self.eval_texture(t, &tc);
+                    (c.z, c.y)
+                });
+                (sm.kd, sm.ks, sm.roughness) = MetallicRoughness::coefficients(
+                    mr.base_color * base,
+                    mr.metallic * metallic,
+                    mr.roughness * rough,
+                );
+            }
+            None => {
+                sm.kd *= hit.color;
+                if let Some(t) = texture {
+                    sm.kd *= t;
+                }
+            }
+        }
+        if let Some(o) = m.occlusion {
+            let r = self.eval_texture(o.texture, &tc).x.clamp(0.0, 1.0);
+            sm.ka *= 1.0 + o.strength.clamp(0.0, 1.0) * (r - 1.0);
         }
         if let Some(t) = m.emission_texture {
             sm.emission *= self.eval_texture(t, &tc).truncate();

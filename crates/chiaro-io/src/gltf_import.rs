@@ -4,32 +4,37 @@
 //! What is read: the default scene's node hierarchy (or every root node when
 //! the file names no scene), each node's mesh primitives (triangles; strips
 //! and fans are converted; points and lines are skipped with a warning) with
-//! positions, normals, tangents, `TEXCOORD_0`, `COLOR_0` and sparse
-//! accessors; perspective cameras; `KHR_lights_punctual`; materials.
+//! positions, normals, tangents (float, or normalized integers with
+//! `KHR_mesh_quantization`), the material's `TEXCOORD_n`, `COLOR_0` and
+//! sparse accessors; perspective cameras; `KHR_lights_punctual`; materials.
 //! Skins, morph targets and animations are not applied: the bind pose is
 //! loaded and a warning given.
 //!
 //! The file is checked before anything is read: JSON errors give the line
 //! and column, schema errors the JSON path (`meshes[0].primitives[0].indices`),
 //! a required extension chiaro does not implement (Draco, meshopt, ...) is an
-//! error naming it, and every accessor's type and byte range is checked
+//! error naming it, a file whose meshes hold no triangles is an error, and every accessor's type and byte range is checked
 //! against its buffer, and every index against its vertex count, so a
 //! malformed file gives an error, never a panic.
 //!
 //! # Materials (metallic-roughness to chiaro)
 //!
-//! - `model = torrance-sparrow`, `roughness = roughnessFactor^2` (the GGX
-//!   alpha of the glTF BRDF, glTF 2.0 spec appendix B), clamped to `[1e-3, 1]`.
-//! - `specular` (F0) `= mix(0.04, baseColor, metallic)` and
-//!   `diffuse = baseColor * (1 - metallic)` (spec appendix B.3.5).
-//! - `baseColorTexture` -> `texture` (sRGB decoded); it multiplies the
-//!   diffuse colour only. chiaro has no per-texel metallic or roughness: a
-//!   `metallicRoughnessTexture` is averaged (G = roughness, B = metallic)
-//!   into the factors, with a warning. Occlusion textures are ignored.
-//! - `normalTexture` -> `normal_map` (linear); `emissiveFactor *
-//!   KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
-//!   `emission_texture`; `doubleSided` -> `two_sided`; `alphaMode = BLEND`
-//!   -> `transmit = 1 - alpha` drawn `interpolated`.
+//! Every material gets `model = torrance-sparrow` and a
+//! [`MetallicRoughness`] that `PreparedScene::surface_material_lod`
+//! evaluates per point (ARCHITECTURE.md, "glTF materials"): base colour =
+//! `baseColorFactor * baseColorTexture * COLOR_0`, metallic and roughness =
+//! factors times the B and G of `metallicRoughnessTexture`, then `kd =
+//! base (1 - metallic)`, F0 `= mix(0.04, base, metallic)`, alpha =
+//! roughness^2. `occlusionTexture` (R, with `strength`) scales the ambient
+//! term; `normalTexture` -> `normal_map`; `emissiveFactor *
+//! KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
+//! `emission_texture`; `KHR_materials_unlit` -> emission = base colour, no
+//! reflection; `doubleSided` -> `two_sided`; `alphaMode`/`alphaCutoff` ->
+//! `alpha_mode`, and `BLEND` with a factor alpha below 1 -> `transmit = 1 -
+//! alpha` (ior 1) drawn `interpolated`. Samplers give both wrap axes and
+//! the min/mag/mip filters; `KHR_texture_transform` is applied to the base
+//! colour, metallic-roughness and emissive textures; the mesh carries the
+//! one `TEXCOORD_n` set its material's textures use.
 //!
 //! # Lights
 //!
@@ -43,19 +48,26 @@
 
 use crate::{Imported, ImportedObject, IoError, Result};
 use chiaro_core::budget::MemoryBudget;
-use chiaro_core::scene::{Attenuation, ImageTexture};
 use chiaro_core::scene::{
-    Camera, Light, Material, Mesh, ReflectanceModel, SpotLight, Texture, TextureId,
-    TransparencyMode, WrapMode,
+    AlphaMode, Camera, Filter, Light, Material, Mesh, MetallicRoughness, Occlusion,
+    ReflectanceModel, SpotLight, Texture, TextureId, TransparencyMode, UvTransform, WrapMode,
 };
+use chiaro_core::scene::{Attenuation, ImageTexture};
 use chiaro_core::{Mat4, Vec2, Vec3, Vec4};
+use gltf::accessor::util::{Item, Iter};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 
-/// Extensions whose absence would change the result, that chiaro reads.
-const SUPPORTED_REQUIRED: &[&str] = &["KHR_lights_punctual", "KHR_materials_emissive_strength"];
+/// Extensions chiaro reads: a file may require them.
+const SUPPORTED: &[&str] = &[
+    "KHR_lights_punctual",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_unlit",
+    "KHR_mesh_quantization",
+    "KHR_texture_transform",
+];
 
 /// Largest glTF file read (bytes); bigger inputs are refused.
 const MAX_FILE_BYTES: u64 = 2 << 30;
@@ -151,7 +163,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
     })?;
     let doc = &gltf.document;
     for (i, ext) in doc.extensions_required().enumerate() {
-        if !SUPPORTED_REQUIRED.contains(&ext) {
+        if !SUPPORTED.contains(&ext) {
             return Err(in_err(
                 path,
                 format!("extensionsRequired[{i}]"),
@@ -160,7 +172,6 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
                     match ext {
                         "KHR_draco_mesh_compression" => " (Draco-compressed meshes)",
                         "EXT_meshopt_compression" => " (meshopt-compressed buffers)",
-                        "KHR_mesh_quantization" => " (quantized vertex attributes)",
                         _ => "",
                     }
                 ),
@@ -191,7 +202,13 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         let mut errors = Vec::new();
         let root = doc.as_json();
         root.validate(root, gltf::json::Path::new, &mut |p, e| {
-            errors.push((p(), e))
+            let p = p();
+            // The validator knows only the extensions of the crate's features.
+            let s = p.to_string();
+            let ours = s.starts_with("extensions") && SUPPORTED.iter().any(|x| s.contains(x));
+            if !ours {
+                errors.push((p, e));
+            }
         });
         if let Some((p, e)) = errors.first() {
             let more = if errors.len() > 1 {
@@ -203,9 +220,8 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         }
     }
     let mut warnings = Vec::new();
-    let supported_used = ["KHR_lights_punctual", "KHR_materials_emissive_strength"];
     for ext in doc.extensions_used() {
-        if !supported_used.contains(&ext) {
+        if !SUPPORTED.contains(&ext) {
             warnings.push(format!(
                 "{}: extension {ext} is not supported and is ignored",
                 path.display()
@@ -273,6 +289,14 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
             stack.push((c, world));
         }
     }
+    if b.out.objects.is_empty() && doc.meshes().len() > 0 {
+        let mut msg = String::from("nothing to render: the file has no triangle primitives");
+        for w in &b.out.warnings {
+            msg.push_str("\n  ");
+            msg.push_str(w);
+        }
+        return Err(IoError::format(path, msg));
+    }
     Ok(b.out)
 }
 
@@ -324,6 +348,10 @@ fn check_uri(uri: &str) -> std::result::Result<(), String> {
         .map_err(|_| format!("URI {uri:?} does not decode to UTF-8"))
 }
 
+/// A texture reference: image, colour space, sampler and the bits of its
+/// uv transform (offset, rotation, scale).
+type TextureKey = (usize, bool, Option<usize>, [u32; 5]);
+
 /// A converted primitive: its mesh index in the output and its material.
 type ConvertedPrimitive = (usize, Option<usize>);
 
@@ -336,7 +364,7 @@ struct Builder<'a> {
     /// (mesh, primitive) -> (mesh index in out, material) or None when skipped.
     mesh_cache: HashMap<(usize, usize), Option<ConvertedPrimitive>>,
     material_map: HashMap<usize, usize>,
-    texture_map: HashMap<(usize, bool), Option<TextureId>>,
+    texture_map: HashMap<TextureKey, Option<TextureId>>,
     noted: BTreeSet<String>,
     /// Bounds what accessors without a buffer view may expand to.
     budget: MemoryBudget,
@@ -603,11 +631,19 @@ impl Builder<'_> {
             self.note(format!("{loc}: no POSITION attribute: skipped"));
             return Ok(None);
         };
-        self.check_accessor(&pos_acc, "POSITION", &[Dimensions::Vec3], &[DataType::F32])?;
+        const QUANTIZED: &[DataType] = &[
+            DataType::F32,
+            DataType::I8,
+            DataType::U8,
+            DataType::I16,
+            DataType::U16,
+        ];
+        const SIGNED: &[DataType] = &[DataType::F32, DataType::I8, DataType::I16];
+        self.check_accessor(&pos_acc, "POSITION", &[Dimensions::Vec3], QUANTIZED)?;
         let buffers = self.buffers;
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-        let positions: Vec<Vec3> = match reader.read_positions() {
-            Some(it) => it.map(Vec3::from).collect(),
+        let positions: Vec<Vec3> = match read_f32::<3>(&pos_acc, buffers) {
+            Some(v) => v.into_iter().map(Vec3::from).collect(),
             None => vec![Vec3::ZERO; pos_acc.count()],
         };
         let n = positions.len();
@@ -616,6 +652,13 @@ impl Builder<'_> {
                 self.path,
                 loc,
                 "POSITION data is shorter than its count",
+            ));
+        }
+        if !positions.iter().all(|p| p.is_finite()) {
+            return Err(in_err(
+                self.path,
+                format!("{loc}.attributes.POSITION"),
+                "a vertex position is not finite",
             ));
         }
         let mut m = Mesh {
@@ -632,9 +675,12 @@ impl Builder<'_> {
             ..Mesh::default()
         };
         if let Some(acc) = prim.get(&gltf::Semantic::Normals) {
-            self.check_accessor(&acc, "NORMAL", &[Dimensions::Vec3], &[DataType::F32])?;
-            if let Some(it) = reader.read_normals() {
-                let v: Vec<Vec3> = it.map(|x| Vec3::from(x).normalize_or_zero()).collect();
+            self.check_accessor(&acc, "NORMAL", &[Dimensions::Vec3], SIGNED)?;
+            if let Some(v) = read_f32::<3>(&acc, buffers) {
+                let v: Vec<Vec3> = v
+                    .into_iter()
+                    .map(|x| Vec3::from(x).normalize_or_zero())
+                    .collect();
                 if v.len() == n && v.iter().all(|x| x.is_finite() && *x != Vec3::ZERO) {
                     m.normals = v;
                 } else {
@@ -645,27 +691,42 @@ impl Builder<'_> {
             }
         }
         if let Some(acc) = prim.get(&gltf::Semantic::Tangents) {
-            self.check_accessor(&acc, "TANGENT", &[Dimensions::Vec4], &[DataType::F32])?;
-            if let Some(it) = reader.read_tangents() {
-                let v: Vec<Vec4> = it.map(Vec4::from).collect();
+            self.check_accessor(&acc, "TANGENT", &[Dimensions::Vec4], SIGNED)?;
+            if let Some(v) = read_f32::<4>(&acc, buffers) {
+                let v: Vec<Vec4> = v.into_iter().map(Vec4::from).collect();
                 if v.len() == n && v.iter().all(|x| x.is_finite()) {
                     m.tangents = v;
                 }
             }
         }
-        if let Some(acc) = prim.get(&gltf::Semantic::TexCoords(0)) {
+        // The one uv set the material's textures use (chiaro meshes carry one).
+        let set = prim.material().index().map_or(0, |_| {
+            let (set, mixed) = uv_set(&prim.material());
+            if mixed {
+                self.note(format!(
+                    "{loc}: the material's textures use different TEXCOORD sets: \
+                     TEXCOORD_{set} is used for all"
+                ));
+            }
+            set
+        });
+        if let Some(acc) = prim.get(&gltf::Semantic::TexCoords(set)) {
             self.check_accessor(
                 &acc,
-                "TEXCOORD_0",
+                &format!("TEXCOORD_{set}"),
                 &[Dimensions::Vec2],
-                &[DataType::F32, DataType::U8, DataType::U16],
+                QUANTIZED,
             )?;
-            if let Some(it) = reader.read_tex_coords(0) {
-                let v: Vec<Vec2> = it.into_f32().map(Vec2::from).collect();
-                if v.len() == n {
+            if let Some(v) = read_f32::<2>(&acc, buffers) {
+                let v: Vec<Vec2> = v.into_iter().map(Vec2::from).collect();
+                if v.len() == n && v.iter().all(|x| x.is_finite()) {
                     m.uvs = v;
                 }
             }
+        } else if set != 0 {
+            self.note(format!(
+                "{loc}: the material uses TEXCOORD_{set}, which is missing"
+            ));
         }
         if let Some(acc) = prim.get(&gltf::Semantic::Colors(0)) {
             self.check_accessor(
@@ -747,55 +808,83 @@ impl Builder<'_> {
         };
         let pbr = gm.pbr_metallic_roughness();
         let base = Vec4::from(pbr.base_color_factor());
-        let mut metallic = pbr.metallic_factor().clamp(0.0, 1.0);
-        let mut rough = pbr.roughness_factor().clamp(0.0, 1.0);
-        // chiaro has no per-texel metallic/roughness: a metallic-roughness
-        // texture (roughness in G, metallic in B) is averaged into the factors.
-        if let Some(info) = pbr.metallic_roughness_texture() {
-            match self.decode_image(&info.texture().source(), false) {
-                Ok(img) if !img.texels.is_empty() => {
-                    let n = img.texels.len() as f32;
-                    let (g, b) = img
-                        .texels
-                        .iter()
-                        .fold((0.0f32, 0.0f32), |(g, b), t| (g + t[1], b + t[2]));
-                    rough *= (g / n).clamp(0.0, 1.0);
-                    metallic *= (b / n).clamp(0.0, 1.0);
-                    self.note("metallic-roughness textures are averaged into the factors");
-                }
-                _ => self.note("a metallic-roughness texture could not be read: factors only"),
-            }
-        }
-        let base_rgb = base.truncate().max(Vec3::ZERO);
-        let d = Material::default();
+        let base_rgb = if base.is_finite() {
+            base.truncate().max(Vec3::ZERO)
+        } else {
+            Vec3::ONE
+        };
+        let mr = MetallicRoughness {
+            base_color: base_rgb,
+            metallic: pbr.metallic_factor(),
+            roughness: pbr.roughness_factor(),
+            texture: None,
+        };
+        let (diffuse, specular, roughness) =
+            MetallicRoughness::coefficients(mr.base_color, mr.metallic, mr.roughness);
         let strength = gm.emissive_strength().unwrap_or(1.0).max(0.0);
         let mut mat = Material {
             name: gm
                 .name()
                 .map_or_else(|| format!("material{index}"), str::to_string),
-            diffuse: base_rgb * (1.0 - metallic),
-            specular: Vec3::splat(0.04).lerp(base_rgb, metallic),
+            diffuse,
+            specular,
             model: ReflectanceModel::TorranceSparrow,
-            roughness: (rough * rough).clamp(1e-3, 1.0),
+            roughness,
             emission: Vec3::from(gm.emissive_factor()).max(Vec3::ZERO) * strength,
             two_sided: gm.double_sided(),
-            ..d
+            metallic_roughness: Some(mr),
+            ..Material::default()
         };
-        if gm.alpha_mode() == gltf::material::AlphaMode::Blend && base.w < 1.0 {
-            mat.transmit = Vec3::splat((1.0 - base.w).clamp(0.0, 1.0));
-            mat.transparency = TransparencyMode::Interpolated;
-        }
         if let Some(info) = pbr.base_color_texture() {
-            mat.texture = self.texture_info(info.texture(), info.tex_coord(), true);
+            mat.texture = self.info_texture(&info, true);
+        }
+        if let Some(info) = pbr.metallic_roughness_texture() {
+            let t = self.info_texture(&info, false);
+            if let Some(m) = mat.metallic_roughness.as_mut() {
+                m.texture = t;
+            }
         }
         if let Some(info) = gm.emissive_texture() {
-            mat.emission_texture = self.texture_info(info.texture(), info.tex_coord(), true);
+            mat.emission_texture = self.info_texture(&info, true);
         }
         if let Some(nt) = gm.normal_texture() {
-            mat.normal_map = self.texture_info(nt.texture(), nt.tex_coord(), false);
+            mat.normal_map = self.texture_info(nt.texture(), UvTransform::default(), false);
         }
-        if gm.occlusion_texture().is_some() {
-            self.note("occlusion textures are ignored");
+        if let Some(ot) = gm.occlusion_texture() {
+            mat.occlusion = self
+                .texture_info(ot.texture(), UvTransform::default(), false)
+                .map(|texture| Occlusion {
+                    texture,
+                    strength: ot.strength().clamp(0.0, 1.0),
+                });
+        }
+        mat.alpha = if base.w.is_finite() {
+            base.w.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        mat.alpha_mode = match gm.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Mask => AlphaMode::Mask {
+                cutoff: gm.alpha_cutoff().unwrap_or(0.5),
+            },
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+        };
+        if mat.alpha_mode == AlphaMode::Blend && mat.alpha < 1.0 {
+            // The techniques draw the factor's alpha as straight-through transmission.
+            mat.transmit = Vec3::splat(1.0 - mat.alpha);
+            mat.ior = 1.0;
+            mat.transparency = TransparencyMode::Interpolated;
+        }
+        if gm.unlit() {
+            // KHR_materials_unlit: the base colour is emitted, nothing reflected.
+            mat.emission = base_rgb;
+            mat.emission_texture = mat.texture.take();
+            mat.diffuse = Vec3::ZERO;
+            mat.specular = Vec3::ZERO;
+            mat.ambient = Vec3::ZERO;
+            mat.metallic_roughness = None;
+            mat.occlusion = None;
         }
         for c in [&mut mat.diffuse, &mut mat.specular, &mut mat.emission] {
             if !c.is_finite() {
@@ -808,29 +897,75 @@ impl Builder<'_> {
         Ok(i)
     }
 
+    /// The texture of a `textureInfo` (base colour, metallic-roughness,
+    /// emissive), with its sampler and `KHR_texture_transform`.
+    fn info_texture(&mut self, info: &gltf::texture::Info, srgb: bool) -> Option<TextureId> {
+        let transform = info.texture_transform().map(|t| UvTransform {
+            offset: Vec2::from(t.offset()),
+            rotation: t.rotation(),
+            scale: Vec2::from(t.scale()),
+        });
+        self.texture_info(info.texture(), transform.unwrap_or_default(), srgb)
+    }
+
     fn texture_info(
         &mut self,
         tex: gltf::Texture,
-        tex_coord: u32,
+        transform: UvTransform,
         srgb: bool,
     ) -> Option<TextureId> {
-        if tex_coord != 0 {
-            self.note("textures on TEXCOORD_1 or later are ignored");
-            return None;
-        }
         let image = tex.source();
-        let key = (image.index(), srgb);
+        let sampler = tex.sampler();
+        let tb = [
+            transform.offset.x,
+            transform.offset.y,
+            transform.rotation,
+            transform.scale.x,
+            transform.scale.y,
+        ]
+        .map(f32::to_bits);
+        let key = (image.index(), srgb, sampler.index(), tb);
         if let Some(t) = self.texture_map.get(&key) {
             return *t;
         }
-        let wrap = match tex.sampler().wrap_s() {
+        if !(transform.offset.is_finite()
+            && transform.rotation.is_finite()
+            && transform.scale.is_finite())
+        {
+            self.note("a non-finite KHR_texture_transform was ignored");
+        }
+        let wrap = |w| match w {
             gltf::texture::WrappingMode::ClampToEdge => WrapMode::Clamp,
             gltf::texture::WrappingMode::MirroredRepeat => WrapMode::Mirror,
             gltf::texture::WrappingMode::Repeat => WrapMode::Repeat,
         };
+        use gltf::texture::{MagFilter, MinFilter};
+        let mag_filter = match sampler.mag_filter() {
+            Some(MagFilter::Nearest) => Filter::Nearest,
+            _ => Filter::Linear,
+        };
+        // Unset: trilinear (the spec leaves it to the implementation).
+        let (min_filter, mip_filter) = match sampler.min_filter() {
+            Some(MinFilter::Nearest) => (Filter::Nearest, None),
+            Some(MinFilter::Linear) => (Filter::Linear, None),
+            Some(MinFilter::NearestMipmapNearest) => (Filter::Nearest, Some(Filter::Nearest)),
+            Some(MinFilter::LinearMipmapNearest) => (Filter::Linear, Some(Filter::Nearest)),
+            Some(MinFilter::NearestMipmapLinear) => (Filter::Nearest, Some(Filter::Linear)),
+            Some(MinFilter::LinearMipmapLinear) | None => (Filter::Linear, Some(Filter::Linear)),
+        };
         let id = match self.decode_image(&image, srgb) {
             Ok(mut img) => {
-                img.wrap = wrap;
+                img.wrap = wrap(sampler.wrap_s());
+                img.wrap_t = Some(wrap(sampler.wrap_t()));
+                img.mag_filter = mag_filter;
+                img.min_filter = min_filter;
+                img.mip_filter = mip_filter;
+                if transform.offset.is_finite()
+                    && transform.rotation.is_finite()
+                    && transform.scale.is_finite()
+                {
+                    img.uv_transform = transform;
+                }
                 self.out.textures.push(Texture::Image(img));
                 Some(TextureId(self.out.textures.len() as u32 - 1))
             }
@@ -886,6 +1021,70 @@ impl Builder<'_> {
         };
         crate::images::load_texture_bytes(&bytes, &source, srgb).map_err(|e| e.to_string())
     }
+}
+
+/// The uv set the textures of `gm` use (after `KHR_texture_transform`'s
+/// `texCoord` override), the base colour's when they differ, and whether they do.
+fn uv_set(gm: &gltf::Material) -> (u32, bool) {
+    let info_set = |i: &gltf::texture::Info| {
+        i.texture_transform()
+            .and_then(|t| t.tex_coord())
+            .unwrap_or(i.tex_coord())
+    };
+    let pbr = gm.pbr_metallic_roughness();
+    let sets: Vec<u32> = [
+        pbr.base_color_texture().map(|i| info_set(&i)),
+        pbr.metallic_roughness_texture().map(|i| info_set(&i)),
+        gm.emissive_texture().map(|i| info_set(&i)),
+        gm.normal_texture().map(|t| t.tex_coord()),
+        gm.occlusion_texture().map(|t| t.tex_coord()),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let first = sets.first().copied().unwrap_or(0);
+    (first, sets.iter().any(|&s| s != first))
+}
+
+/// Reads an accessor of `N` components as floats: floats as they are,
+/// integers (`KHR_mesh_quantization`) normalized to `[0, 1]` / `[-1, 1]` when
+/// the accessor says so, else converted. `None` for other component types.
+fn read_f32<const N: usize>(
+    acc: &gltf::Accessor,
+    buffers: &[gltf::buffer::Data],
+) -> Option<Vec<[f32; N]>>
+where
+    [f32; N]: Item,
+    [i8; N]: Item,
+    [u8; N]: Item,
+    [i16; N]: Item,
+    [u16; N]: Item,
+{
+    fn conv<T: Copy + Into<f32>, const N: usize>(a: [T; N], scale: Option<f32>) -> [f32; N] {
+        a.map(|c| {
+            let v: f32 = c.into();
+            scale.map_or(v, |s| (v / s).max(-1.0))
+        })
+    }
+    let get = |b: gltf::Buffer| buffers.get(b.index()).map(|d| &d.0[..]);
+    let norm = |s: f32| acc.normalized().then_some(s);
+    let a = acc.clone();
+    Some(match acc.data_type() {
+        DataType::F32 => Iter::<[f32; N]>::new(a, get)?.collect(),
+        DataType::I8 => Iter::<[i8; N]>::new(a, get)?
+            .map(|x| conv(x, norm(127.0)))
+            .collect(),
+        DataType::U8 => Iter::<[u8; N]>::new(a, get)?
+            .map(|x| conv(x, norm(255.0)))
+            .collect(),
+        DataType::I16 => Iter::<[i16; N]>::new(a, get)?
+            .map(|x| conv(x, norm(32767.0)))
+            .collect(),
+        DataType::U16 => Iter::<[u16; N]>::new(a, get)?
+            .map(|x| conv(x, norm(65535.0)))
+            .collect(),
+        DataType::U32 => return None,
+    })
 }
 
 fn percent_decode(s: &str) -> String {
@@ -1070,6 +1269,50 @@ mod tests {
             Path::new("h.glb"),
         );
         assert!(e.is_err());
+    }
+
+    #[test]
+    fn supported_required_extensions_load_and_points_only_is_an_error() {
+        let req = SCENE.replace(
+            r#""extensionsUsed": ["KHR_lights_punctual"],"#,
+            r#""extensionsUsed": ["KHR_lights_punctual", "KHR_mesh_quantization",
+                "KHR_texture_transform"],
+              "extensionsRequired": ["KHR_mesh_quantization", "KHR_texture_transform"],"#,
+        );
+        let imp = load_gltf_slice(req.as_bytes(), None, Path::new("q.gltf")).expect("loads");
+        assert_eq!(imp.meshes.len(), 1);
+        // The default metallic (1) keeps the base colour on ks.
+        let mr = imp.materials[0].metallic_roughness.expect("pbr");
+        assert_eq!(mr.base_color, Vec3::new(1.0, 0.5, 0.0));
+        // Quantized positions: i16 normalized (32767 = 1.0), 3 vertices.
+        let q = SCENE
+            .replace(
+                r#""componentType": 5126, "count": 3, "type": "VEC3",
+        "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+                r#""componentType": 5122, "normalized": true, "count": 3, "type": "VEC3",
+        "min": [0, 0, 0], "max": [32767, 32767, 0]}"#,
+            )
+            .replace(r#""byteLength": 36}]"#, r#""byteLength": 24, "byteStride": 8}]"#)
+            .replace(
+                r#""byteLength": 36,
+        "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]"#,
+                r#""byteLength": 24,
+        "uri": "data:application/octet-stream;base64,AAAAAAAAAAD/fwAAAAAAAAAA/38AAAAA"}]"#,
+            );
+        let imp = load_gltf_slice(q.as_bytes(), None, Path::new("q.gltf")).expect("quantized");
+        assert_eq!(
+            imp.meshes[0].positions,
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            "quantized positions"
+        );
+        // Points only: nothing to render is an error naming the primitive.
+        let pts = SCENE.replace(
+            r#""attributes": {"POSITION": 0}, "material": 0"#,
+            r#""attributes": {"POSITION": 0}, "material": 0, "mode": 0"#,
+        );
+        let e = load_gltf_slice(pts.as_bytes(), None, Path::new("p.gltf")).expect_err("points");
+        assert!(e.to_string().contains("nothing to render"), "{e}");
+        assert!(e.to_string().contains("meshes[0].primitives[0]"), "{e}");
     }
 
     #[test]

@@ -104,6 +104,7 @@ impl DecodedImage {
             height: self.height,
             texels: self.texels,
             wrap: WrapMode::default(),
+            ..Default::default()
         }
     }
 }

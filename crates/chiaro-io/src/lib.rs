@@ -4,6 +4,7 @@
 //!   `file:line:col` errors and unknown keys rejected.
 //! - [`obj`]: Wavefront OBJ + MTL through tobj.
 //! - [`gltf_import`]: glTF 2.0 (`.gltf`, `.glb`, embedded) through the gltf crate.
+//! - [`ply`]: Stanford PLY (ASCII and binary) through ply-rs-bw.
 //! - [`images`]: decoding image textures (PNG, JPEG, HDR, EXR) to linear texels.
 //! - [`output`]: writing films (PNG 8/16-bit, OpenEXR with depth and normal,
 //!   Radiance HDR, PPM, palette PNG), always through a temporary file and a rename.
@@ -25,6 +26,7 @@ pub mod images;
 pub mod obj;
 pub mod output;
 pub mod plain;
+pub mod ply;
 pub mod scene_toml;
 
 pub use error::{IoError, Result};
@@ -58,7 +60,7 @@ pub(crate) fn lowercase_extension(path: &Path) -> String {
 
 /// Reads a scene file, choosing the reader by extension (case-insensitive):
 /// `.toml` (the chiaro scene format, see [`scene_toml`]), `.obj` (with its
-/// `.mtl`), `.gltf` or `.glb`.
+/// `.mtl`), `.gltf`, `.glb` or `.ply`.
 ///
 /// A mesh file read this way becomes a whole scene: its first camera (or one
 /// framing its bounds, looking down -z), its lights (or an ambient light plus
@@ -76,19 +78,27 @@ pub fn load_scene(path: &Path) -> Result<Loaded> {
             let base = path.parent().unwrap_or_else(|| Path::new("."));
             scene_toml::parse_scene(&text, base, path)
         }
-        "obj" => {
-            let imported = obj::load_obj_meshes(path)?;
-            whole_scene(imported, path)
-        }
-        "gltf" | "glb" => {
-            let imported = gltf_import::load_gltf(path)?;
-            whole_scene(imported, path)
-        }
-        _ => Err(IoError::format(
-            path,
-            format!("unknown scene file extension {ext:?}: expected .toml, .obj, .gltf or .glb"),
-        )),
+        _ => match load_mesh_file(path) {
+            Some(imported) => whole_scene(imported?, path),
+            None => Err(IoError::format(
+                path,
+                format!(
+                    "unknown scene file extension {ext:?}: expected .toml, .obj, .gltf, .glb or .ply"
+                ),
+            )),
+        },
     }
+}
+
+/// Reads a mesh file by its extension (`.obj`, `.gltf`, `.glb`, `.ply`);
+/// `None` for another extension.
+pub fn load_mesh_file(path: &Path) -> Option<Result<Imported>> {
+    Some(match lowercase_extension(path).as_str() {
+        "obj" => obj::load_obj_meshes(path),
+        "gltf" | "glb" => gltf_import::load_gltf(path),
+        "ply" => ply::load_ply(path),
+        _ => return None,
+    })
 }
 
 /// Parses a `.toml` scene held in memory (tests, Python). Relative mesh and

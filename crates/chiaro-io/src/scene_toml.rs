@@ -39,7 +39,8 @@
 //! `matrix` (16 numbers, column-major as in glTF).
 //!
 //! Textures: `texture = "wood.png"` (decoded as sRGB), or
-//! `{ image = "wood.png", wrap = "repeat" | "clamp" | "mirror" }`, or
+//! `{ image = "wood.png", wrap = "repeat" | "clamp" | "mirror" }` (both
+//! axes; `wrap_t` sets v apart), or
 //! `{ procedural = "checker" | "wood" | "marble" | "noise" | "dimples",
 //! scale = 1, color_a = ..., color_b = ..., use_uv = false }`. Bump maps use
 //! the same forms plus `height` (scene units of a texture value of 1,
@@ -227,7 +228,7 @@ struct Ctx<'a> {
     base: &'a Path,
     warnings: Vec<String>,
     /// Decoded image files: (resolved path, sRGB) -> texture.
-    images: HashMap<(PathBuf, bool), TextureId>,
+    images: HashMap<(PathBuf, bool, WrapMode, Option<WrapMode>), TextureId>,
     /// Tessellated primitives by their parameters: objects with the same
     /// primitive share one object-space mesh (instances, which the
     /// two-level BVH builds once).
@@ -387,7 +388,7 @@ impl Ctx<'_> {
                 .map(str::to_ascii_lowercase)
                 .unwrap_or_default();
             let srgb = !matches!(ext.as_str(), "hdr" | "exr");
-            let texture = self.image(&mut scene, &e.texture, srgb, WrapMode::Repeat)?;
+            let texture = self.image(&mut scene, &e.texture, srgb, WrapMode::Repeat, None)?;
             let intensity = e.intensity.unwrap_or(1.0);
             if intensity < 0.0 {
                 return Err(self.at(env.span(), "environment intensity must be >= 0"));
@@ -669,7 +670,13 @@ impl Ctx<'_> {
         let span = spec.span();
         match spec.get_ref() {
             TextureSpec::Path(p) => {
-                let id = self.image(scene, &Sp::new(span, p.clone()), srgb, WrapMode::Repeat)?;
+                let id = self.image(
+                    scene,
+                    &Sp::new(span, p.clone()),
+                    srgb,
+                    WrapMode::Repeat,
+                    None,
+                )?;
                 Ok((id, None))
             }
             TextureSpec::Table(t) => {
@@ -702,12 +709,15 @@ impl Ctx<'_> {
                             &Sp::new(span, path.clone()),
                             srgb,
                             t.wrap.unwrap_or_default(),
+                            t.wrap_t,
                         )?;
                         Ok((id, t.height))
                     }
                     (Some(kind), None) => {
-                        if t.wrap.is_some() {
-                            return Err(self.at(span, "`wrap` applies only to image textures"));
+                        if t.wrap.is_some() || t.wrap_t.is_some() {
+                            return Err(
+                                self.at(span, "`wrap` and `wrap_t` apply only to image textures")
+                            );
                         }
                         let scale = t.scale.unwrap_or(1.0);
                         if scale <= 0.0 {
@@ -743,9 +753,11 @@ impl Ctx<'_> {
         rel: &Sp<String>,
         srgb: bool,
         wrap: WrapMode,
+        wrap_t: Option<WrapMode>,
     ) -> Result<TextureId> {
         let path = crate::resolve(self.base, rel.get_ref());
-        if let Some(id) = self.images.get(&(path.clone(), srgb)) {
+        let key = (path.clone(), srgb, wrap, wrap_t);
+        if let Some(id) = self.images.get(&key) {
             return Ok(*id);
         }
         if !path.is_file() {
@@ -761,8 +773,9 @@ impl Ctx<'_> {
         let mut img = crate::images::load_texture_within(&path, srgb, self.budget)
             .map_err(|e| self.at(rel.span(), format!("cannot load texture: {e}")))?;
         img.wrap = wrap;
+        img.wrap_t = wrap_t;
         let id = scene.add_texture(Texture::Image(img));
-        self.images.insert((path, srgb), id);
+        self.images.insert(key, id);
         Ok(id)
     }
 
@@ -1402,21 +1415,23 @@ impl Ctx<'_> {
 
     /// Reads an OBJ or glTF file (`path`, resolved from `file`).
     fn read_mesh_file(&self, path: &Path, file: &Sp<String>) -> Result<crate::Imported> {
-        let ext = crate::lowercase_extension(path);
-        match ext.as_str() {
-            "obj" => crate::obj::load_obj_meshes(path),
-            "gltf" | "glb" => crate::gltf_import::load_gltf_within(path, self.budget),
-            _ => {
-                return Err(self.at(
+        // glTF is read within the scene's memory budget; other formats as
+        // `load_mesh_file` reads them.
+        let loaded = match crate::lowercase_extension(path).as_str() {
+            "gltf" | "glb" => Some(crate::gltf_import::load_gltf_within(path, self.budget)),
+            _ => crate::load_mesh_file(path),
+        };
+        loaded
+            .ok_or_else(|| {
+                self.at(
                     file.span(),
                     format!(
-                        "mesh file {:?}: expected a .obj, .gltf or .glb file",
+                        "mesh file {:?}: expected a .obj, .gltf, .glb or .ply file",
                         file.get_ref()
                     ),
-                ));
-            }
-        }
-        .map_err(|e| self.at(file.span(), format!("cannot load mesh file: {e}")))
+                )
+            })?
+            .map_err(|e| self.at(file.span(), format!("cannot load mesh file: {e}")))
     }
 
     /// Adds a primitive object's memory (a `new` mesh, if it is tessellated

@@ -635,10 +635,7 @@ impl TriData<'_> {
 /// True when `m` has a texture, bump, normal or emission map (which need
 /// the uv footprint): [`TriData::textured`].
 fn needs_footprint(m: &Material) -> bool {
-    m.texture.is_some()
-        || m.bump.is_some()
-        || m.normal_map.is_some()
-        || m.emission_texture.is_some()
+    m.is_textured() || m.bump.is_some() || m.normal_map.is_some()
 }
 
 /// Number of entries of [`TriCache`] (a power of two).

@@ -285,6 +285,7 @@ fn textures_are_interpolated_perspective_correctly() {
             .map(|i| [(i as f32 + 0.5) / n as f32, 0.0, 0.0, 1.0])
             .collect(),
         wrap: WrapMode::Clamp,
+        ..Default::default()
     };
     let tex = s.add_texture(Texture::Image(ramp));
     let m = s.add_material(Material {
@@ -352,6 +353,7 @@ fn distant_checker_is_filtered_to_its_mean_by_mip_mapping() {
             })
             .collect(),
         wrap: WrapMode::Repeat,
+        ..Default::default()
     };
     let tex = s.add_texture(Texture::Image(checker));
     let m = s.add_material(Material {
@@ -478,6 +480,7 @@ fn environment_is_background_and_reflection() {
             .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
             .collect(),
         wrap: WrapMode::Repeat,
+        ..Default::default()
     };
     let t = s.add_texture(Texture::Image(env_img));
     s.environment = Some(Environment {

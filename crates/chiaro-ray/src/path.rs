@@ -291,10 +291,7 @@ impl MaterialInfo {
             emissive: surface.emission.max_element() > 0.0,
             bsdf,
             two_sided: m.two_sided,
-            textured: m.texture.is_some()
-                || m.emission_texture.is_some()
-                || m.bump.is_some()
-                || m.normal_map.is_some(),
+            textured: m.is_textured() || m.bump.is_some() || m.normal_map.is_some(),
         }
     }
 }
@@ -1313,6 +1310,7 @@ mod tests {
                     .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
                     .collect(),
                 wrap: chiaro_core::scene::WrapMode::Repeat,
+                ..Default::default()
             },
         ));
         s.environment = Some(chiaro_core::scene::Environment {

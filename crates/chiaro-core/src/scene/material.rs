@@ -52,6 +52,87 @@ pub struct Bump {
     pub height: f32,
 }
 
+/// glTF 2.0's metallic-roughness parameters (glTF 2.0 spec, appendix B),
+/// evaluated per point: the base colour (these factors times
+/// [`Material::texture`] and the vertex colour) goes to the diffuse colour
+/// of a dielectric and to the specular colour (F0) of a metal.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct MetallicRoughness {
+    /// `baseColorFactor` (RGB; alpha is [`Material::alpha`]).
+    pub base_color: Vec3,
+    /// `metallicFactor`.
+    pub metallic: f32,
+    /// `roughnessFactor` (perceptual roughness; the microfacet alpha is its square).
+    pub roughness: f32,
+    /// `metallicRoughnessTexture`: roughness in G, metallic in B (linear),
+    /// multiplying the factors.
+    pub texture: Option<TextureId>,
+}
+
+impl Default for MetallicRoughness {
+    fn default() -> Self {
+        Self {
+            base_color: Vec3::ONE,
+            metallic: 1.0,
+            roughness: 1.0,
+            texture: None,
+        }
+    }
+}
+
+impl MetallicRoughness {
+    /// The chiaro coefficients `(kd, ks, alpha)` of base colour `base`,
+    /// metallic `metallic` and perceptual roughness `roughness`:
+    /// `kd = base (1 - metallic)`, `ks = mix(0.04, base, metallic)` (F0 of
+    /// Schlick's Fresnel), `alpha = roughness^2` clamped to `[1e-3, 1]`.
+    pub fn coefficients(base: Vec3, metallic: f32, roughness: f32) -> (Vec3, Vec3, f32) {
+        let metallic = if metallic.is_finite() {
+            metallic.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let rough = if roughness.is_finite() {
+            roughness.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let base = base.max(Vec3::ZERO);
+        (
+            base * (1.0 - metallic),
+            Vec3::splat(0.04).lerp(base, metallic),
+            (rough * rough).clamp(1e-3, 1.0),
+        )
+    }
+}
+
+/// An ambient-occlusion texture (glTF `occlusionTexture`): its R channel
+/// scales the ambient term, `1 + strength (R - 1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Occlusion {
+    /// The texture (linear; R is used).
+    pub texture: TextureId,
+    /// glTF `strength` in `[0, 1]`.
+    pub strength: f32,
+}
+
+/// How the alpha of the base colour (factor, texture and vertex colour) is
+/// used (glTF `alphaMode`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum AlphaMode {
+    /// Alpha is ignored.
+    #[default]
+    Opaque,
+    /// Points with alpha below `cutoff` are not drawn; the rest are opaque.
+    Mask {
+        /// glTF `alphaCutoff`.
+        cutoff: f32,
+    },
+    /// The surface covers a fraction alpha of what lies behind it.
+    Blend,
+}
+
 /// A surface material. Colours are linear RGB.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -100,6 +181,16 @@ pub struct Material {
     /// Draw and shade both faces (no back-face culling, normals flipped to
     /// face the viewer).
     pub two_sided: bool,
+    /// glTF metallic-roughness: when set, `diffuse`, `specular` and
+    /// `roughness` are derived from it at every point (and hold its
+    /// untextured values).
+    pub metallic_roughness: Option<MetallicRoughness>,
+    /// Ambient-occlusion texture.
+    pub occlusion: Option<Occlusion>,
+    /// Alpha of the base colour (glTF `baseColorFactor`'s alpha).
+    pub alpha: f32,
+    /// How alpha is used.
+    pub alpha_mode: AlphaMode,
 }
 
 impl Default for Material {
@@ -125,6 +216,10 @@ impl Default for Material {
             emission: Vec3::ZERO,
             emission_texture: None,
             two_sided: false,
+            metallic_roughness: None,
+            occlusion: None,
+            alpha: 1.0,
+            alpha_mode: AlphaMode::Opaque,
         }
     }
 }
@@ -137,6 +232,15 @@ impl Material {
             diffuse: kd,
             ..Self::default()
         }
+    }
+
+    /// True if the material is evaluated per point from textures (its
+    /// coefficients vary over the surface).
+    pub fn is_textured(&self) -> bool {
+        self.texture.is_some()
+            || self.emission_texture.is_some()
+            || self.metallic_roughness.is_some_and(|m| m.texture.is_some())
+            || self.occlusion.is_some()
     }
 
     /// True if the surface emits light.
@@ -152,5 +256,28 @@ impl Material {
     /// True if the ray tracers should spawn a mirror ray.
     pub fn is_reflective(&self) -> bool {
         self.reflect.max_element() > 0.0 || (self.fresnel && self.is_transparent())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metallic_roughness_closed_forms() {
+        let base = Vec3::new(0.8, 0.4, 0.2);
+        // A dielectric: base colour to kd, F0 = 0.04.
+        let (kd, ks, a) = MetallicRoughness::coefficients(base, 0.0, 0.5);
+        assert_eq!((kd, ks, a), (base, Vec3::splat(0.04), 0.25));
+        // A metal: no diffuse, F0 = base colour.
+        let (kd, ks, _) = MetallicRoughness::coefficients(base, 1.0, 0.0);
+        assert_eq!((kd, ks), (Vec3::ZERO, base));
+        // Half metal; roughness 0 is clamped to a usable alpha; NaN is refused.
+        let (kd, ks, a) = MetallicRoughness::coefficients(base, 0.5, 0.0);
+        assert!((kd - base * 0.5).abs().max_element() < 1e-6);
+        assert!((ks - (Vec3::splat(0.04) + base) * 0.5).abs().max_element() < 1e-6);
+        assert_eq!(a, 1e-3);
+        let (kd, ks, a) = MetallicRoughness::coefficients(base, f32::NAN, f32::NAN);
+        assert!(kd.is_finite() && ks.is_finite() && a.is_finite());
     }
 }

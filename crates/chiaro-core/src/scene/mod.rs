@@ -15,14 +15,19 @@ mod validate;
 
 pub use camera::Camera;
 pub use light::{AreaShape, Attenuation, Flap, Light, SpotLight};
-pub use material::{Bump, Distribution, Material, ReflectanceModel, TransparencyMode};
+pub use material::{
+    AlphaMode, Bump, Distribution, Material, MetallicRoughness, Occlusion, ReflectanceModel,
+    TransparencyMode,
+};
 pub use mesh::{Geometry, Mesh, Object, Transform};
 pub use settings::{
     AaMode, DepthCue, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, PathSettings, PixelFilter,
     RadiositySettings, RenderSettings, SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings,
     ShadowMethod, Technique, ToneMap, WhittedSettings,
 };
-pub use texture::{Environment, ImageTexture, Procedural, ProceduralKind, Texture, WrapMode};
+pub use texture::{
+    Environment, Filter, ImageTexture, Procedural, ProceduralKind, Texture, UvTransform, WrapMode,
+};
 pub use validate::{Issue, Severity};
 
 use glam::Vec3;

@@ -1,10 +1,10 @@
 //! Textures: decoded images (linear RGB(A) f32) and procedural solid textures.
 
-use glam::Vec3;
+use glam::{Mat2, Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// What happens to texture coordinates outside `[0, 1]`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum WrapMode {
     /// Tile the image.
@@ -16,9 +16,64 @@ pub enum WrapMode {
     Mirror,
 }
 
+/// A texture filter: the nearest texel or a bilinear blend of four.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Filter {
+    /// The nearest texel (or mip level).
+    Nearest,
+    /// Linear interpolation between texels (or between two mip levels).
+    #[default]
+    Linear,
+}
+
+/// An affine map applied to the texture coordinates before the lookup
+/// (glTF's `KHR_texture_transform`): `uv' = T * R * S * uv`, with `R` a
+/// rotation by `rotation` radians counter-clockwise in uv space as the
+/// extension defines it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct UvTransform {
+    /// Translation, added last.
+    pub offset: Vec2,
+    /// Rotation in radians.
+    pub rotation: f32,
+    /// Per-axis scale, applied first.
+    pub scale: Vec2,
+}
+
+impl Default for UvTransform {
+    fn default() -> Self {
+        Self {
+            offset: Vec2::ZERO,
+            rotation: 0.0,
+            scale: Vec2::ONE,
+        }
+    }
+}
+
+impl UvTransform {
+    /// The linear part as a column-major 2x2 matrix (applies to uv derivatives).
+    pub fn linear(&self) -> Mat2 {
+        let (s, c) = self.rotation.sin_cos();
+        // The extension's matrix: [[c, s], [-s, c]] (rows) times the scale.
+        Mat2::from_cols(Vec2::new(c, -s), Vec2::new(s, c)) * Mat2::from_diagonal(self.scale)
+    }
+
+    /// Applies the transform to `uv`.
+    pub fn apply(&self, uv: Vec2) -> Vec2 {
+        self.linear() * uv + self.offset
+    }
+
+    /// True for the identity.
+    pub fn is_identity(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
 /// A decoded image. Texels are linear (sRGB already removed for colour
 /// textures), row-major from the top-left, RGBA.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ImageTexture {
     /// Where the image came from (for messages and `chiaro info`).
     pub source: String,
@@ -28,8 +83,44 @@ pub struct ImageTexture {
     pub height: u32,
     /// `width * height` texels.
     pub texels: Vec<[f32; 4]>,
-    /// Wrap mode for u and v.
+    /// Wrap mode for u (glTF's `wrapS`), and for v unless `wrap_t` is set.
     pub wrap: WrapMode,
+    /// Wrap mode for v (glTF's `wrapT`); `None`: the same as `wrap`.
+    #[serde(default)]
+    pub wrap_t: Option<WrapMode>,
+    /// Filter when a texel covers more than a pixel.
+    #[serde(default)]
+    pub mag_filter: Filter,
+    /// Filter within a mip level when a pixel covers more than a texel.
+    #[serde(default)]
+    pub min_filter: Filter,
+    /// Filter between mip levels; `None`: no mip-mapping (level 0 only).
+    #[serde(default = "default_mip_filter")]
+    pub mip_filter: Option<Filter>,
+    /// Transform of the texture coordinates before the lookup.
+    #[serde(default)]
+    pub uv_transform: UvTransform,
+}
+
+fn default_mip_filter() -> Option<Filter> {
+    Some(Filter::Linear)
+}
+
+impl Default for ImageTexture {
+    fn default() -> Self {
+        Self {
+            source: String::new(),
+            width: 0,
+            height: 0,
+            texels: Vec::new(),
+            wrap: WrapMode::Repeat,
+            wrap_t: None,
+            mag_filter: Filter::Linear,
+            min_filter: Filter::Linear,
+            mip_filter: default_mip_filter(),
+            uv_transform: UvTransform::default(),
+        }
+    }
 }
 
 impl ImageTexture {
@@ -37,6 +128,23 @@ impl ImageTexture {
     #[inline]
     pub fn texel(&self, x: u32, y: u32) -> [f32; 4] {
         self.texels[(y * self.width + x) as usize]
+    }
+
+    /// The wrap modes of u and v.
+    #[inline]
+    pub fn wrap_uv(&self) -> (WrapMode, WrapMode) {
+        (self.wrap, self.wrap_t.unwrap_or(self.wrap))
+    }
+
+    /// An image with default sampling (repeat, trilinear, no uv transform).
+    pub fn new(source: String, width: u32, height: u32, texels: Vec<[f32; 4]>) -> Self {
+        Self {
+            source,
+            width,
+            height,
+            texels,
+            ..Self::default()
+        }
     }
 }
 

@@ -4,7 +4,7 @@
 //! bump mapping by the height gradient, tangent-space normal maps, and the
 //! lat-long environment map.
 
-use crate::scene::{ImageTexture, Procedural, ProceduralKind, Scene, Texture, WrapMode};
+use crate::scene::{Filter, ImageTexture, Procedural, ProceduralKind, Scene, Texture, WrapMode};
 use glam::{Vec2, Vec3, Vec4};
 
 /// Wraps a texel coordinate into `0..size`.
@@ -22,7 +22,8 @@ pub fn wrap_index(i: i64, size: u32, mode: WrapMode) -> u32 {
 }
 
 /// Bilinear lookup of `img` at `uv` (`v = 0` at the top row, as glTF and
-/// OBJ-with-flip use), returning linear RGBA.
+/// OBJ-with-flip use), returning linear RGBA. The image's uv transform is
+/// not applied here (see [`eval_texture`]).
 pub fn bilinear(img: &ImageTexture, uv: Vec2) -> Vec4 {
     if img.texels.is_empty() {
         return Vec4::ONE;
@@ -32,18 +33,45 @@ pub fn bilinear(img: &ImageTexture, uv: Vec2) -> Vec4 {
     if !(x.is_finite() && y.is_finite()) {
         return Vec4::from(img.texels[0]);
     }
+    let (wrap_u, wrap_v) = img.wrap_uv();
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = (x - x0, y - y0);
     let (x0, y0) = (x0 as i64, y0 as i64);
     let t = |dx: i64, dy: i64| {
         Vec4::from(img.texel(
-            wrap_index(x0 + dx, img.width, img.wrap),
-            wrap_index(y0 + dy, img.height, img.wrap),
+            wrap_index(x0 + dx, img.width, wrap_u),
+            wrap_index(y0 + dy, img.height, wrap_v),
         ))
     };
     let top = t(0, 0).lerp(t(1, 0), fx);
     let bottom = t(0, 1).lerp(t(1, 1), fx);
     top.lerp(bottom, fy)
+}
+
+/// Nearest-texel lookup of `img` at `uv` (the texel containing it), linear RGBA.
+pub fn nearest(img: &ImageTexture, uv: Vec2) -> Vec4 {
+    if img.texels.is_empty() {
+        return Vec4::ONE;
+    }
+    let x = (uv.x * img.width as f32).floor();
+    let y = (uv.y * img.height as f32).floor();
+    if !(x.is_finite() && y.is_finite()) {
+        return Vec4::from(img.texels[0]);
+    }
+    let (wrap_u, wrap_v) = img.wrap_uv();
+    Vec4::from(img.texel(
+        wrap_index(x as i64, img.width, wrap_u),
+        wrap_index(y as i64, img.height, wrap_v),
+    ))
+}
+
+/// A lookup in one level with `filter`.
+#[inline]
+fn filtered(img: &ImageTexture, uv: Vec2, filter: Filter) -> Vec4 {
+    match filter {
+        Filter::Linear => bilinear(img, uv),
+        Filter::Nearest => nearest(img, uv),
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -90,7 +118,7 @@ impl MipMap {
                 width: w,
                 height: h,
                 texels,
-                wrap: prev.wrap,
+                ..*prev
             };
             levels.push(next);
         }
@@ -112,22 +140,40 @@ impl MipMap {
         lod.clamp(0.0, (self.levels.len() - 1) as f32)
     }
 
-    /// Trilinear lookup: bilinear in the two levels around `lod`, blended
-    /// linearly. Linear RGBA.
+    /// Lookup at level of detail `lod` with the image's filters (OpenGL 4.6
+    /// section 8.14): `lod <= 0` is magnification (`mag_filter` on level 0);
+    /// otherwise `min_filter` within a level, on the nearest level
+    /// (`mip_filter` nearest), blended between the two levels around `lod`
+    /// (linear: trilinear with linear filters), or on level 0 (no mip-map).
+    /// Linear RGBA.
     pub fn sample(&self, uv: Vec2, lod: f32) -> Vec4 {
+        let base = &self.levels[0];
         let max = (self.levels.len() - 1) as f32;
         let lod = if lod.is_finite() {
             lod.clamp(0.0, max)
         } else {
             0.0
         };
-        let l0 = lod.floor() as usize;
-        let f = lod - l0 as f32;
-        let a = bilinear(&self.levels[l0], uv);
-        if f <= 0.0 || l0 + 1 >= self.levels.len() {
-            return a;
+        if lod <= 0.0 {
+            return filtered(base, uv, base.mag_filter);
         }
-        a.lerp(bilinear(&self.levels[l0 + 1], uv), f)
+        let min = base.min_filter;
+        match base.mip_filter {
+            None => filtered(base, uv, min),
+            Some(Filter::Nearest) => {
+                let l = (lod.round() as usize).min(self.levels.len() - 1);
+                filtered(&self.levels[l], uv, min)
+            }
+            Some(Filter::Linear) => {
+                let l0 = lod.floor() as usize;
+                let f = lod - l0 as f32;
+                let a = filtered(&self.levels[l0], uv, min);
+                if f <= 0.0 || l0 + 1 >= self.levels.len() {
+                    return a;
+                }
+                a.lerp(filtered(&self.levels[l0 + 1], uv, min), f)
+            }
+        }
     }
 
     /// Trilinear lookup with the level chosen from the uv derivatives.
@@ -315,15 +361,25 @@ pub struct TexCoord {
     pub p_object: Vec3,
 }
 
-/// Evaluates texture `t` at `tc` as linear RGBA: image textures through the
-/// mip-map `mip` when given (trilinear), else bilinear on the base image;
+/// Evaluates texture `t` at `tc` as linear RGBA: image textures (their uv
+/// transform applied) through the mip-map `mip` when given, with the image's
+/// filters, else its magnification filter on the base image;
 /// procedural textures give their colour with alpha 1.
 pub fn eval_texture(t: &Texture, mip: Option<&MipMap>, tc: &TexCoord) -> Vec4 {
     match t {
-        Texture::Image(img) => match mip {
-            Some(m) => m.sample_footprint(tc.uv, tc.duv_dx, tc.duv_dy),
-            None => bilinear(img, tc.uv),
-        },
+        Texture::Image(img) => {
+            let tr = &img.uv_transform;
+            let (uv, dx, dy) = if tr.is_identity() {
+                (tc.uv, tc.duv_dx, tc.duv_dy)
+            } else {
+                let l = tr.linear();
+                (tr.apply(tc.uv), l * tc.duv_dx, l * tc.duv_dy)
+            };
+            match mip {
+                Some(m) => m.sample_footprint(uv, dx, dy),
+                None => filtered(img, uv, img.mag_filter),
+            }
+        }
         Texture::Procedural(p) => procedural_color(p, tc.p_object, tc.uv).extend(1.0),
     }
 }
@@ -447,6 +503,7 @@ pub fn normal_map_normal(n: Vec3, tangent: Vec4, rgb: Vec3) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::UvTransform;
 
     #[test]
     fn wrap_modes() {
@@ -468,7 +525,52 @@ mod tests {
                 })
                 .collect(),
             wrap: WrapMode::Repeat,
+            ..Default::default()
         }
+    }
+
+    #[test]
+    fn per_axis_wrap_filters_and_uv_transform() {
+        // A 4x4 ramp in x (value x / 4): repeat in u, clamp in v.
+        let mut img = image(4, 4, |x, _| x as f32 / 4.0);
+        img.wrap = WrapMode::Repeat;
+        img.wrap_t = Some(WrapMode::Clamp);
+        img.mag_filter = Filter::Nearest;
+        // u = 1.1 wraps to texel 0; v = 5 clamps to the last row.
+        assert_eq!(nearest(&img, Vec2::new(1.1, 5.0)).x, 0.0);
+        // Clamped in u too: texel 3.
+        img.wrap = WrapMode::Clamp;
+        assert_eq!(nearest(&img, Vec2::new(1.1, 0.5)).x, 0.75);
+        // Nearest picks the containing texel, linear blends the neighbours.
+        assert_eq!(nearest(&img, Vec2::new(0.3, 0.5)).x, 0.25);
+        assert!((bilinear(&img, Vec2::new(0.25, 0.5)).x - 0.125).abs() < 1e-6);
+        // KHR_texture_transform: scale 2 then offset 0.25 maps u = 0.1 to
+        // 0.45 (texel 1); a quarter turn maps (u, v) to (v, -u) (the
+        // extension's matrix), so u = 0.6 at v = 0.6 reads u' = 0.6.
+        let t = UvTransform {
+            offset: Vec2::new(0.25, 0.0),
+            rotation: 0.0,
+            scale: Vec2::splat(2.0),
+        };
+        assert!((t.apply(Vec2::new(0.1, 0.2)) - Vec2::new(0.45, 0.4)).length() < 1e-6);
+        let r = UvTransform {
+            rotation: std::f32::consts::FRAC_PI_2,
+            ..UvTransform::default()
+        };
+        assert!((r.apply(Vec2::new(0.3, 0.6)) - Vec2::new(0.6, -0.3)).length() < 1e-6);
+        img.uv_transform = t;
+        let tc = TexCoord {
+            uv: Vec2::new(0.1, 0.5),
+            ..TexCoord::default()
+        };
+        let v = eval_texture(&Texture::Image(img.clone()), None, &tc);
+        assert_eq!(v.x, 0.25);
+        // Mip filter none: minification stays on level 0 with the min filter.
+        img.uv_transform = UvTransform::default();
+        img.min_filter = Filter::Nearest;
+        img.mip_filter = None;
+        let m = MipMap::new(&img);
+        assert_eq!(m.sample(Vec2::new(0.3, 0.5), 2.0).x, 0.25);
     }
 
     #[test]

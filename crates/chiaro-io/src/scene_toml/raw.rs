@@ -133,7 +133,7 @@ impl<'de> Deserialize<'de> for AttenuationSpec {
 
 /// A texture: `"path.png"` or a table
 /// `{ procedural = "marble", scale, color_a, color_b, use_uv }` /
-/// `{ image = "path.png", wrap }`, with `height` for bump maps.
+/// `{ image = "path.png", wrap, wrap_t }`, with `height` for bump maps.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum TextureSpec {
     /// An image file, relative to the scene file.
@@ -153,6 +153,7 @@ pub(crate) struct TextureTable {
     pub color_b: Option<Splat3>,
     pub use_uv: Option<bool>,
     pub wrap: Option<WrapMode>,
+    pub wrap_t: Option<WrapMode>,
     pub height: Option<f32>,
 }
 
