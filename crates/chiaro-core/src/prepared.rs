@@ -746,7 +746,7 @@ pub struct ShadingSurface {
     pub dpdv: Vec3,
     /// Material parameters with textures and vertex colours applied.
     pub material: SurfaceMaterial,
-    /// Coverage in `[0, 1]`: the diffuse texture's alpha (one without one).
+    /// Coverage in `[0, 1]`: the alpha factor times the diffuse texture's alpha.
     pub alpha: f32,
     /// The material is shaded on both sides.
     pub two_sided: bool,
@@ -833,6 +833,7 @@ mod tests {
                     height: 2,
                     texels: vec![[r, g, b, 1.0]; 4],
                     wrap: crate::scene::WrapMode::Repeat,
+                    ..Default::default()
                 }))
             });
             s.add_material(Material {
@@ -943,6 +944,7 @@ mod tests {
             height: 1,
             texels: vec![[rgb.x, rgb.y, rgb.z, 1.0]],
             wrap: WrapMode::Repeat,
+            ..Default::default()
         }));
         s.add_material(Material {
             normal_map: Some(tex),

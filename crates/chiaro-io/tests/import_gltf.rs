@@ -45,12 +45,10 @@ fn walk(dir: &Path, exts: &[&str], out: &mut Vec<PathBuf>) {
 const NEEDS_UNSUPPORTED: &[(&str, &str)] = &[
     ("Box/glTF-Draco/Box.gltf", "KHR_draco_mesh_compression"),
     ("Duck/glTF-Draco/Duck.gltf", "KHR_draco_mesh_compression"),
-    ("Duck/glTF-Quantized/Duck.gltf", "KHR_mesh_quantization"),
     (
         "IridescenceSuzanne/glTF-Binary/IridescenceSuzanne.glb",
         "KHR_materials_iridescence",
     ),
-    ("UnlitTest/glTF-Binary/UnlitTest.glb", "KHR_materials_unlit"),
 ];
 
 #[test]
@@ -127,5 +125,9 @@ fn broken_validator_files_never_panic() {
         0,
         "the loader panicked (see stderr)"
     );
-    assert!(err > 0 && ok > 0);
+    // Every file is either loaded or refused with a message; most have no
+    // triangle at all (they test the JSON), which is refused as nothing to
+    // render.
+    assert_eq!(ok + err, files.len());
+    assert!(err > 0);
 }

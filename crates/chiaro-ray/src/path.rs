@@ -41,7 +41,6 @@ use chiaro_core::sampling::{
     SobolSampler, pixel_rng, power_heuristic, sample_uniform_triangle, uniform2,
 };
 use chiaro_core::scene::{AreaShape, Light, RenderSettings, Scene};
-use chiaro_core::shading::bsdf::luminance;
 use chiaro_core::shading::{Bsdf, BsdfSample, SurfaceMaterial, sample_light, sanitize};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;

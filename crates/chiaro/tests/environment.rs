@@ -41,6 +41,7 @@ fn block_map() -> ImageTexture {
             })
             .collect(),
         wrap: WrapMode::Repeat,
+        ..Default::default()
     }
 }
 
@@ -170,6 +171,7 @@ fn a_mirror_shows_the_environment_whatever_the_background_flag() {
         height: 2,
         texels: vec![c.extend(1.0).into(); 8],
         wrap: WrapMode::Repeat,
+        ..Default::default()
     };
     let mirror = Material {
         ambient: Vec3::ZERO,

@@ -343,10 +343,8 @@ mod tests {
             &flat(1, 1, Vec3::splat(20.0)),
         );
         let (dim, bright) = (dim.unwrap_or(0.0), bright.unwrap_or(0.0));
-        assert!(
-            dim > 0.008 && bright > 0.0099 && bright < 0.01,
-            "{dim} {bright}"
-        );
+        assert!((dim - 0.008).abs() < 1e-6, "{dim}");
+        assert!((bright - 4.0 / 400.01).abs() < 1e-7, "{bright}");
     }
 
     #[test]

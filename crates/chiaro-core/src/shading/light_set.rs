@@ -5,7 +5,6 @@
 
 use super::bsdf::luminance;
 use crate::scene::Light;
-use glam::Vec3;
 use std::f32::consts::PI;
 use std::ops::Range;
 
@@ -193,7 +192,7 @@ mod tests {
     use super::*;
     use crate::scene::AreaShape;
     use crate::shading::{LocalLighting, ShadingPoint, SurfaceMaterial, shade_local};
-    use glam::Vec2;
+    use glam::{Vec2, Vec3};
 
     /// The square `[-a, a]^2` at height `h`, facing down, as `n x n` cells
     /// of two triangle lights each; cell `(i, j)` emits `le(i, j)`.

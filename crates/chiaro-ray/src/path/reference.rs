@@ -32,15 +32,17 @@ impl PathTracer<'_, '_> {
             // Find the next vertex, or add what the escaped ray sees.
             *rays += 1;
             let Some(hit) = self.accel.intersect(&ray) else {
-                l += beta * self.escaped(&ray, depth == 0 || prev_pdf == 0.0);
+                l += beta * self.escaped(&ray, depth, prev_pdf);
                 break;
             };
-            let surf = self.prepared.surface(&ray, &hit);
+            // The surface layer: maps, textured coefficients.
+            let ss = self.prepared.shading_surface(&ray, &hit, None);
+            let surf = ss.hit;
             let mat = self.prepared.material(surf.material);
-            let bsdf = Bsdf::new(self.prepared.surface_material(&surf), mat.fresnel);
+            let bsdf = Bsdf::new(ss.material, mat.fresnel);
             let wo = -ray.dir.normalize();
             if depth == 0 {
-                first = Some((hit.t * ray.dir.length(), surf.ns));
+                first = Some((hit.t * ray.dir.length(), ss.ns));
             }
             // Emission found by the path, MIS-weighted against next-event
             // estimation when the light could have been sampled.
@@ -62,7 +64,7 @@ impl PathTracer<'_, '_> {
             // The shading frame on the viewer's side.
             let front = cos_o >= 0.0;
             let side = if front { 1.0 } else { -1.0 };
-            let (n, ng) = (surf.ns * side, surf.ng * side);
+            let (n, ng) = (ss.ns * side, surf.ng * side);
             let last = depth + 1 >= self.max_depth;
             // Next-event estimation.
             l += beta * self.reference_direct(surf.p, &bsdf, n, ng, wo, !last, rng, rays);
