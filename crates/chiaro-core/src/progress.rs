@@ -66,7 +66,7 @@ impl Convergence {
     /// `log(1 / residual) / log(1 / tolerance)` in `[0, 1]`.
     fn fraction(&self, residual: f32) -> f32 {
         let tol = self.tolerance.clamp(1e-30, 0.999);
-        if !(residual > tol) {
+        if residual.is_nan() || residual <= tol {
             return 1.0;
         }
         (residual.min(1.0).ln() / tol.ln()).clamp(0.0, 1.0)

@@ -322,5 +322,9 @@ fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominatin
             shares[2],
             shares[3]
         );
+        // Linear MSE is the emitter's (under 1 % of the pixels); relative
+        // MSE and FLIP are not.
+        assert!(shares[0] > 0.5, "{shares:?}");
+        assert!(shares[1] < 0.3 && shares[3] < 0.1, "{shares:?}");
     }
 }

@@ -139,7 +139,7 @@ impl Bsdf {
     /// [`Self::sample`] then returns `None` without reading its numbers.
     #[inline]
     pub fn scatters(&self) -> bool {
-        !(self.lobes.total <= 0.0)
+        self.lobes.total > 0.0 || self.lobes.total.is_nan()
     }
 
     /// True when [`Self::sample`] reads its lobe number `u_lobe` (more than
@@ -314,7 +314,8 @@ pub fn delta_split(
     entering: bool,
 ) -> DeltaSplit {
     let reflected = reflect(wo, n);
-    if !(m.kt.max_element() > 0.0) {
+    let kt = m.kt.max_element();
+    if kt.is_nan() || kt <= 0.0 {
         return DeltaSplit {
             reflected,
             reflect_weight: m.kr,
