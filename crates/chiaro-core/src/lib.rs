@@ -14,7 +14,7 @@
 //! - **radiance**: linear RGB `f32`, W/(sr m^2) per channel in the scene's
 //!   relative units. sRGB appears only at the 8-bit boundary (chiaro-io).
 //! - **Ip**: a point light's intensity times its colour; it gives irradiance
-//!   `pi * Ip * cos(theta) / d^2` (DESIGN.md section 3).
+//!   `pi * Ip * cos(theta) / d^2` (the radiometric convention, ARCHITECTURE.md).
 //! - **ka, kd, ks, n, kr, kt**: the classic material coefficients (ambient,
 //!   diffuse albedo, specular, Phong exponent, mirror reflection, transmission).
 //! - **technique**: one complete way of making a picture (flat, gouraud,

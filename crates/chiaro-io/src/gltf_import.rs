@@ -40,7 +40,7 @@
 //!
 //! glTF gives point and spot intensity in candela (lm/sr), so the
 //! irradiance at distance d is `I cos(theta) / d^2`; chiaro's convention
-//! (DESIGN.md section 3) is `pi Ip cos(theta) / d^2`, hence `Ip = I / pi`
+//! (the radiometric convention, ARCHITECTURE.md) is `pi Ip cos(theta) / d^2`, hence `Ip = I / pi`
 //! with inverse-square fall-off. Directional lights give illuminance in lux,
 //! `E = pi Ip`, hence also `Ip = lux / pi`. Spot cones: `cone =
 //! outerConeAngle`, `cone_softness = outer - inner` (degrees), Warn exponent

@@ -1,6 +1,6 @@
 //! chiaro-io: everything that touches files.
 //!
-//! - [`scene_toml`]: the `.toml` scene format (DESIGN.md section 2), with
+//! - [`scene_toml`]: the `.toml` scene format (README.md, "The scene format"), with
 //!   `file:line:col` errors and unknown keys rejected.
 //! - [`obj`]: Wavefront OBJ + MTL through tobj.
 //! - [`gltf_import`]: glTF 2.0 (`.gltf`, `.glb`, embedded) through the gltf crate.

@@ -1,4 +1,4 @@
-//! The `.toml` scene format (DESIGN.md section 2): parsing, checking, and
+//! The `.toml` scene format (README.md, "The scene format"): parsing, checking, and
 //! building a [`Scene`].
 //!
 //! Every field has a default; lengths are scene units, angles degrees,

@@ -1,4 +1,4 @@
-//! The `.toml` scene format: every section of DESIGN.md section 2 builds the
+//! The `.toml` scene format: every section of the format builds the
 //! expected scene, and every kind of bad input gives an error at the exact
 //! line and column of the offending value.
 

@@ -325,8 +325,8 @@ impl FormFactor for PairFormFactor<'_> {
 /// Reflected radiance at an element from the point, spot and directional
 /// lights (the "first unshot gather"): `rho * sum_l mean_x f_att Ip spot
 /// cos_theta V`, over 4 points of the element, with shadow rays. This is
-/// `rho / pi` times the irradiance `pi Ip f_att cos / d^2` of DESIGN.md
-/// section 3, so it equals what the local techniques and the path tracer
+/// `rho / pi` times the irradiance `pi Ip f_att cos / d^2` of the
+/// radiometric convention, so it equals what the local techniques and the path tracer
 /// give for a Lambertian surface. Area and ambient lights give nothing here.
 pub(crate) fn point_light_direct(e: &Element, lights: &[Light], vis: &Visibility<'_>) -> Vec3 {
     if e.rho == Vec3::ZERO {

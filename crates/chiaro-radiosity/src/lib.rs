@@ -8,7 +8,7 @@
 //! radiance through chiaro-raster's z-buffer (item buffer); [`render`] does
 //! both.
 //!
-//! # Conventions (decided here, DESIGN.md section 3)
+//! # Conventions (decided here; see ARCHITECTURE.md)
 //! - Every quantity a solver stores is **radiance** `L` (W sr^-1 m^-2), not
 //!   radiosity `B = pi L`: the displayed pixel is then exactly what a
 //!   converged path tracer returns for the same Lambertian surface. The

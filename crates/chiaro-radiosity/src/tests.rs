@@ -392,7 +392,7 @@ fn energy_is_conserved_in_the_open_cornell_box() {
 #[test]
 fn point_light_direct_matches_the_shading_convention() {
     // A single floor quad under a point light: no interreflection, so the
-    // radiance is rho * Ip * cos / d^2 (DESIGN.md section 3).
+    // radiance is rho * Ip * cos / d^2 (the radiometric convention, ARCHITECTURE.md).
     let mut s = Scene::default();
     s.add_material(Material::diffuse("m", Vec3::splat(0.5)));
     add_quad(

@@ -1,4 +1,4 @@
-//! Invariants across techniques (DESIGN.md section 4): techniques that should
+//! Invariants across techniques (ARCHITECTURE.md, "Goals"): techniques that should
 //! agree do, pixel by pixel, on small images.
 
 use chiaro::scene::{Light, ShadowMethod, Technique};

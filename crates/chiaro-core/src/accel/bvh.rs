@@ -2133,8 +2133,8 @@ mod tests {
     use crate::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
     use crate::scene::{Geometry, Material, Mesh, Object, Scene, Transform};
 
-    /// The Stanford bunny in the shared assets beside the repository
-    /// (`../shared`, as laid out for developers and CI).
+    /// The Stanford bunny from the test-asset folder laid beside the
+    /// repository for developers and CI (read in place, not redistributed).
     const BUNNY: &str = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../../shared/assets/common-3d-test-models/stanford-bunny.obj"

@@ -39,17 +39,22 @@ fn channels<'f>(a: &'f Film, b: &'f Film) -> impl Iterator<Item = (f64, f64)> + 
     })
 }
 
-/// Mean squared error over all channels (linear units squared).
-///
-/// # Errors
-/// [`CoreError::Unsupported`] if the films differ in size.
-pub fn mse(a: &Film, b: &Film) -> Result<f64> {
+/// The mean over all channel pairs of `err(a, b)` (0 for empty films).
+fn mean_channel_error(a: &Film, b: &Film, err: impl Fn(f64, f64) -> f64) -> Result<f64> {
     check_sizes(a, b)?;
     let n = a.color.len() * 3;
     if n == 0 {
         return Ok(0.0);
     }
-    Ok(channels(a, b).map(|(p, q)| (p - q) * (p - q)).sum::<f64>() / n as f64)
+    Ok(channels(a, b).map(|(p, q)| err(p, q)).sum::<f64>() / n as f64)
+}
+
+/// Mean squared error over all channels (linear units squared).
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn mse(a: &Film, b: &Film) -> Result<f64> {
+    mean_channel_error(a, b, |p, q| (p - q) * (p - q))
 }
 
 /// Root mean squared error over all channels, in linear radiance units:
@@ -89,16 +94,8 @@ pub fn psnr(a: &Film, b: &Film, peak: f32) -> Result<f64> {
 /// # Errors
 /// [`CoreError::Unsupported`] if the films differ in size.
 pub fn mean_relative_error(a: &Film, b: &Film) -> Result<f64> {
-    check_sizes(a, b)?;
-    let n = a.color.len() * 3;
-    if n == 0 {
-        return Ok(0.0);
-    }
     let eps = f64::from(RELATIVE_EPSILON);
-    Ok(channels(a, b)
-        .map(|(p, q)| (p - q).abs() / (q + eps))
-        .sum::<f64>()
-        / n as f64)
+    mean_channel_error(a, b, |p, q| (p - q).abs() / (q + eps))
 }
 
 /// Relative mean squared error over all channels,
@@ -109,16 +106,8 @@ pub fn mean_relative_error(a: &Film, b: &Film) -> Result<f64> {
 /// # Errors
 /// [`CoreError::Unsupported`] if the films differ in size.
 pub fn relative_mse(a: &Film, b: &Film) -> Result<f64> {
-    check_sizes(a, b)?;
-    let n = a.color.len() * 3;
-    if n == 0 {
-        return Ok(0.0);
-    }
     let eps = f64::from(RELATIVE_EPSILON);
-    Ok(channels(a, b)
-        .map(|(p, q)| (p - q) * (p - q) / (q * q + eps))
-        .sum::<f64>()
-        / n as f64)
+    mean_channel_error(a, b, |p, q| (p - q) * (p - q) / (q * q + eps))
 }
 
 /// The displayed value of a linear channel: clamped to `[0, 1]` and
@@ -135,18 +124,10 @@ pub fn display_channel(x: f32) -> f32 {
 /// # Errors
 /// [`CoreError::Unsupported`] if the films differ in size.
 pub fn display_mse(a: &Film, b: &Film) -> Result<f64> {
-    check_sizes(a, b)?;
-    let n = a.color.len() * 3;
-    if n == 0 {
-        return Ok(0.0);
-    }
-    Ok(channels(a, b)
-        .map(|(p, q)| {
-            let d = f64::from(display_channel(p as f32)) - f64::from(display_channel(q as f32));
-            d * d
-        })
-        .sum::<f64>()
-        / n as f64)
+    mean_channel_error(a, b, |p, q| {
+        let d = f64::from(display_channel(p as f32)) - f64::from(display_channel(q as f32));
+        d * d
+    })
 }
 
 /// PSNR of the displayed images ([`display_mse`]) in dB, peak 1 (white):

@@ -9,7 +9,7 @@
 //!   `pi * f(wo, wi) * cos_theta_i * intensity`, where `f` is the BRDF in
 //!   1/sr. With `f = kd / pi` this is exactly the textbook Lambert term
 //!   `f_att Ip kd (N . L)`, and with inverse-square attenuation it is the
-//!   physical reflected radiance (DESIGN.md section 3).
+//!   physical reflected radiance (the radiometric convention, ARCHITECTURE.md).
 //! - The classic Phong and Blinn specular terms are kept exact:
 //!   `pi * f * cos_theta_i = ks (R . V)^n` (or `ks (N . H)^n`), i.e.
 //!   `f = ks (R . V)^n / (pi cos_theta_i)`. Torrance-Sparrow is the physical
