@@ -4,9 +4,9 @@
 //! ([`mesh`]), computes form factors ([`formfactor`], [`hemicube`]), solves
 //! the radiosity system with the chosen solver ([`solver`],
 //! [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
-//! draws it from the scene's camera with Gouraud interpolation of the vertex
-//! radiance through chiaro-raster's z-buffer (item buffer); [`render`] does
-//! both.
+//! draws it from the scene's camera through chiaro-raster's z-buffer (item
+//! buffer): the textured colour from the surface layer times the Gouraud
+//! interpolation of the vertex irradiance; [`render`] does both.
 //!
 //! # Conventions (decided here; see ARCHITECTURE.md)
 //! - Every quantity a solver stores is **radiance** `L` (W sr^-1 m^-2), not
@@ -46,6 +46,7 @@ pub mod solution;
 pub mod solver;
 
 pub use formfactor::{FormFactor, disc_to_disc, perpendicular_rectangles, point_to_polygon};
+use solution::{RHO_MIN, clamped_weights, irradiance_from};
 pub use solution::{RadiositySolution, SolveStats, fingerprint};
 
 use chiaro_core::accel::Accelerator;
@@ -56,7 +57,7 @@ use chiaro_core::progress::Progress;
 use chiaro_core::scene::{RadiositySettings, RenderSettings, Scene, Severity};
 use chiaro_core::shading::texture::background_radiance;
 use formfactor::{PairFormFactor, PairRule, Visibility, pair, point_light_direct};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use mesh::{Element, ElementMesh, SourceKind, material_at};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -447,35 +448,30 @@ pub fn solve(
         }
     };
     let l: Vec<Vec3> = l.into_iter().map(chiaro_core::shading::sanitize).collect();
-    // Indirect irradiance for the hybrid: pi (L - Le - direct) / rho.
+    // Irradiance for the display, pi (L - Le) / rho, and its indirect part
+    // for the hybrid, pi (L - Le - direct) / rho.
     let direct = direct_light(&ps, &mesh, &point_direct, &vis, tol);
-    let indirect: Vec<Vec3> = mesh
+    let (irradiance, indirect): (Vec<Vec3>, Vec<Vec3>) = mesh
         .elements
         .iter()
         .zip(&l)
         .zip(&direct)
         .map(|((el, l), d)| {
-            let refl = (*l - el.le - *d).max(Vec3::ZERO);
-            let f = |r: f32, rho: f32| {
-                if rho > 1e-4 {
-                    std::f32::consts::PI * r / rho
-                } else {
-                    0.0
-                }
-            };
-            Vec3::new(
-                f(refl.x, el.rho.x),
-                f(refl.y, el.rho.y),
-                f(refl.z, el.rho.z),
+            let reflected = (*l - el.le).max(Vec3::ZERO);
+            (
+                irradiance_from(reflected, el.rho),
+                irradiance_from((reflected - *d).max(Vec3::ZERO), el.rho),
             )
         })
-        .collect();
+        .unzip();
     stats.seconds = start.elapsed().as_secs_f64();
     progress.message(&format!(
         "radiosity: solved in {:.2} s ({} iterations, unshot {:.3e})",
         stats.seconds, stats.iterations, stats.unshot
     ));
-    Ok(build_solution(scene, &ps, &mesh, l, indirect, stats))
+    Ok(build_solution(
+        scene, &ps, &mesh, l, irradiance, indirect, stats,
+    ))
 }
 
 fn build_solution(
@@ -483,25 +479,40 @@ fn build_solution(
     ps: &PreparedScene<'_>,
     mesh: &ElementMesh,
     l: Vec<Vec3>,
+    irradiance: Vec<Vec3>,
     indirect: Vec<Vec3>,
     stats: SolveStats,
 ) -> RadiositySolution {
     let nv = mesh.vertices.len();
     let mut vr = vec![Vec3::ZERO; nv];
-    let mut vi = vec![Vec3::ZERO; nv];
     let mut w = vec![0.0f32; nv];
-    for ((el, l), ind) in mesh.elements.iter().zip(&l).zip(&indirect) {
+    // Irradiance is known only on elements that reflect: each channel is
+    // averaged over those (`wi`), so a black neighbour does not darken it.
+    let (mut ve, mut vi, mut wi) = (
+        vec![Vec3::ZERO; nv],
+        vec![Vec3::ZERO; nv],
+        vec![Vec3::ZERO; nv],
+    );
+    for (((el, l), e), ind) in mesh.elements.iter().zip(&l).zip(&irradiance).zip(&indirect) {
+        let reflects = Vec3::select(el.rho.cmpgt(Vec3::splat(RHO_MIN)), Vec3::ONE, Vec3::ZERO);
         for &v in &el.verts {
-            vr[v as usize] += *l * el.area;
-            vi[v as usize] += *ind * el.area;
-            w[v as usize] += el.area;
+            let v = v as usize;
+            vr[v] += *l * el.area;
+            w[v] += el.area;
+            ve[v] += *e * el.area;
+            vi[v] += *ind * el.area;
+            wi[v] += reflects * el.area;
         }
     }
-    for ((r, i), w) in vr.iter_mut().zip(vi.iter_mut()).zip(&w) {
+    for (r, w) in vr.iter_mut().zip(&w) {
         if *w > 0.0 {
             *r /= *w;
-            *i /= *w;
         }
+    }
+    for ((e, i), w) in ve.iter_mut().zip(vi.iter_mut()).zip(&wi) {
+        let inv = Vec3::select(w.cmpgt(Vec3::ZERO), Vec3::ONE / *w, Vec3::ZERO);
+        *e *= inv;
+        *i *= inv;
     }
     RadiositySolution {
         version: solution::FORMAT_VERSION,
@@ -510,6 +521,7 @@ fn build_solution(
         vertices: mesh.vertices.clone(),
         vertex_radiance: vr,
         vertex_indirect: vi,
+        vertex_irradiance: ve,
         elements: mesh.elements.iter().map(|e| e.verts).collect(),
         element_radiance: l,
         element_emission: mesh.elements.iter().map(|e| e.le).collect(),
@@ -529,8 +541,10 @@ fn build_solution(
 /// Draws `solution` from `scene`'s camera: the display mesh is scan
 /// converted into chiaro-raster's item buffer (z-buffer) at
 /// `round(sqrt(samples))^2` samples per pixel, and each visible sample gets
-/// the Gouraud interpolation of its element's vertex radiance (exact
-/// barycentrics on the element's plane along the pixel ray). Background:
+/// its surface's emission plus its textured `kd / pi` times the Gouraud
+/// interpolation of its element's vertex irradiance (exact barycentrics on
+/// the element's plane along the pixel ray): display-time texture
+/// modulation, so textures keep their detail. Background:
 /// what every technique's camera sees (`texture::background_radiance`).
 /// Fills the film's depth and normal buffers. Only the pixels of
 /// `settings.crop_rect()` are shaded (the rest stay black with infinite
@@ -574,6 +588,7 @@ pub fn render_solution(
             (c[1] - c[0]).cross(c[2] - c[0]).normalize_or_zero()
         })
         .collect();
+    let surfaces = DisplaySurfaces::new(scene, solution);
     let mut film = Film::new(w, h);
     // Only the crop window's pixels are shaded (the others stay black with
     // infinite depth); each pixel depends only on its own samples, so the
@@ -604,14 +619,7 @@ pub fn render_solution(
                                 0.0
                             };
                             let p = cam.eye + d * t;
-                            let (a, b) = mesh::barycentric(&c, p);
-                            let (a, b) = (a.clamp(0.0, 1.0), b.clamp(0.0, 1.0));
-                            let s = (a + b).max(1.0);
-                            let wts = [1.0 - (a + b) / s, a / s, b / s];
-                            let v = solution.elements[e];
-                            col += solution.vertex_radiance[v[0] as usize] * wts[0]
-                                + solution.vertex_radiance[v[1] as usize] * wts[1]
-                                + solution.vertex_radiance[v[2] as usize] * wts[2];
+                            col += surfaces.radiance(solution, e, &c, p);
                             if t.is_finite() && t < depth {
                                 depth = t;
                                 normal = n;
@@ -633,6 +641,81 @@ pub fn render_solution(
     }
     progress.advance(1);
     Ok(film)
+}
+
+/// What the display reads from the scene: the surface layer (tessellated
+/// spheres, as solved), each element's source triangle, and the `(kd,
+/// emission)` of the source triangles whose surface is uniform (untextured,
+/// one vertex colour), evaluated once.
+struct DisplaySurfaces<'a> {
+    ps: PreparedScene<'a>,
+    sources: Vec<u32>,
+    uniform: Vec<Option<(Vec3, Vec3)>>,
+}
+
+impl<'a> DisplaySurfaces<'a> {
+    fn new(scene: &'a Scene, solution: &RadiositySolution) -> Self {
+        let ps = PreparedScene::new(scene, PrepareOptions::default());
+        let n = (solution.prepared_triangles as usize).min(ps.triangles.len());
+        let uniform = (0..n as u32)
+            .into_par_iter()
+            .map(|t| {
+                let m = ps.material(ps.tri_material[t as usize]);
+                let [a, b, c] = ps.triangles[t as usize].map(|i| ps.colors[i as usize]);
+                (!m.is_textured() && a == b && b == c)
+                    .then(|| surface(&ps, t, 1.0 / 3.0, 1.0 / 3.0))
+            })
+            .collect();
+        Self {
+            ps,
+            sources: solution.element_sources(),
+            uniform,
+        }
+    }
+
+    /// The displayed radiance at point `p` of element `e` (corners `c`):
+    /// display-time texture modulation. On a surface of the scene it is the
+    /// surface layer's emission plus its textured `kd / pi` times the
+    /// Gouraud-interpolated irradiance of the solution (solved with each
+    /// patch's albedo), so a texture keeps its detail within a patch; an
+    /// area light's element shows its emission.
+    fn radiance(&self, solution: &RadiositySolution, e: usize, c: &[Vec3; 3], p: Vec3) -> Vec3 {
+        let s = self.sources[e];
+        let Some(uniform) = self.uniform.get(s as usize) else {
+            return solution.element_emission[e];
+        };
+        let irradiance = solution.interpolate(
+            &solution.vertex_irradiance,
+            e,
+            clamped_weights(mesh::barycentric(c, p)),
+        );
+        let (kd, emission) = uniform.unwrap_or_else(|| {
+            let [_, u, v] =
+                clamped_weights(mesh::barycentric(&solution.source_corners[s as usize], p));
+            surface(&self.ps, s, u, v)
+        });
+        emission + kd * irradiance * std::f32::consts::FRAC_1_PI
+    }
+}
+
+/// `(kd, emission)` of prepared triangle `t` at barycentrics `(u, v)`, as
+/// the solve and the display read it: the surface layer at the base level
+/// of textures, `kd` clamped to `[0, 1]`, emission to `>= 0`.
+pub(crate) fn surface(ps: &PreparedScene<'_>, t: u32, u: f32, v: f32) -> (Vec3, Vec3) {
+    let (dpdu, dpdv) = ps.triangle_dpduv(t);
+    let m = ps
+        .shading_surface_at(
+            ps.triangle_surface(t, u, v),
+            dpdu,
+            dpdv,
+            Vec2::ZERO,
+            Vec2::ZERO,
+        )
+        .material;
+    (
+        m.kd.clamp(Vec3::ZERO, Vec3::ONE),
+        m.emission.max(Vec3::ZERO),
+    )
 }
 
 /// Solves and displays: [`solve`] then [`render_solution`].

@@ -17,7 +17,7 @@ use chiaro_core::geometry::face_normal;
 use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::{AreaShape, Light};
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use std::collections::HashMap;
 
 /// Largest number of elements a solution may have.
@@ -241,22 +241,7 @@ pub(crate) fn source_triangles(ps: &PreparedScene<'_>) -> Vec<SourceTri> {
 /// Albedo and emitted radiance of a source triangle at barycentrics `(u, v)`.
 pub(crate) fn material_at(ps: &PreparedScene<'_>, s: &SourceTri, u: f32, v: f32) -> (Vec3, Vec3) {
     match s.kind {
-        SourceKind::Prepared(t) => {
-            // The surface layer at the base level of textures.
-            let (dpdu, dpdv) = ps.triangle_dpduv(t);
-            let ss = ps.shading_surface_at(
-                ps.triangle_surface(t, u, v),
-                dpdu,
-                dpdv,
-                Vec2::ZERO,
-                Vec2::ZERO,
-            );
-            let m = ss.material;
-            (
-                m.kd.clamp(Vec3::ZERO, Vec3::ONE),
-                m.emission.max(Vec3::ZERO),
-            )
-        }
+        SourceKind::Prepared(t) => crate::surface(ps, t, u, v),
         SourceKind::AreaLight { le, .. } => (Vec3::ZERO, le.max(Vec3::ZERO)),
     }
 }

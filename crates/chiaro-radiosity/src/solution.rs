@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use std::io::{Read, Write};
 
 /// Format version written by [`RadiositySolution::save`].
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// How a solution was computed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
@@ -53,6 +53,7 @@ pub struct RadiositySolution {
     pub(crate) vertices: Vec<Vec3>,
     pub(crate) vertex_radiance: Vec<Vec3>,
     pub(crate) vertex_indirect: Vec<Vec3>,
+    pub(crate) vertex_irradiance: Vec<Vec3>,
     pub(crate) elements: Vec<[u32; 3]>,
     pub(crate) element_radiance: Vec<Vec3>,
     pub(crate) element_emission: Vec<Vec3>,
@@ -62,6 +63,37 @@ pub struct RadiositySolution {
     pub(crate) source_first: Vec<u32>,
     /// Number of sources that are prepared-scene triangles (the rest are area lights).
     pub(crate) prepared_triangles: u32,
+}
+
+/// Smallest albedo an element's irradiance is recovered from; below it the
+/// element reflects (almost) nothing and its irradiance is unknown.
+pub(crate) const RHO_MIN: f32 = 1e-4;
+
+/// The incident irradiance `pi L_r / rho` (W/m^2) of a Lambertian element
+/// that reflects radiance `reflected` with albedo `rho`, per channel; 0 in a
+/// channel where `rho <= RHO_MIN` (no division by zero).
+pub(crate) fn irradiance_from(reflected: Vec3, rho: Vec3) -> Vec3 {
+    let f = |r: f32, rho: f32| {
+        if rho > RHO_MIN {
+            std::f32::consts::PI * r / rho
+        } else {
+            0.0
+        }
+    };
+    Vec3::new(
+        f(reflected.x, rho.x),
+        f(reflected.y, rho.y),
+        f(reflected.z, rho.z),
+    )
+}
+
+/// Gouraud weights of corners 0, 1, 2 from barycentrics `(a, b)` (weights of
+/// corners 1 and 2), clamped into the triangle.
+pub(crate) fn clamped_weights((a, b): (f32, f32)) -> [f32; 3] {
+    let (a, b) = (a.clamp(0.0, 1.0), b.clamp(0.0, 1.0));
+    let s = (a + b).max(1.0);
+    let (a, b) = (a / s, b / s);
+    [1.0 - a - b, a, b]
 }
 
 /// FNV-1a over bytes.
@@ -137,14 +169,30 @@ impl RadiositySolution {
         let c = self.source_corners[t];
         let p = c[0] + u * (c[1] - c[0]) + v * (c[2] - c[0]);
         let corners = tri.map(|i| self.vertices[i as usize]);
-        let (a, b) = barycentric(&corners, p);
-        let (a, b) = (a.clamp(0.0, 1.0), b.clamp(0.0, 1.0));
-        let s = (a + b).max(1.0);
-        let (a, b) = (a / s, b / s);
-        Some((e, [1.0 - a - b, a, b]))
+        Some((e, clamped_weights(barycentric(&corners, p))))
     }
 
-    fn interpolate(&self, values: &[Vec3], e: usize, w: [f32; 3]) -> Vec3 {
+    /// Incident irradiance (W/m^2, all of it: direct and reflected light)
+    /// of each vertex, the area-weighted mean over the elements around it
+    /// that reflect (see [`irradiance_from`]): the display multiplies it by
+    /// the textured `kd / pi` at each pixel.
+    pub fn vertex_irradiance(&self) -> &[Vec3] {
+        &self.vertex_irradiance
+    }
+
+    /// The source triangle of each element.
+    pub(crate) fn element_sources(&self) -> Vec<u32> {
+        let mut out = vec![0; self.elements.len()];
+        for (s, (&first, &k)) in self.source_first.iter().zip(&self.source_k).enumerate() {
+            let first = first as usize;
+            for o in out.iter_mut().skip(first).take((k * k) as usize) {
+                *o = s as u32;
+            }
+        }
+        out
+    }
+
+    pub(crate) fn interpolate(&self, values: &[Vec3], e: usize, w: [f32; 3]) -> Vec3 {
         let tri = self.elements[e];
         values[tri[0] as usize] * w[0]
             + values[tri[1] as usize] * w[1]
@@ -291,6 +339,7 @@ impl RadiositySolution {
         let ne = self.elements.len();
         let ok = self.vertex_radiance.len() == nv
             && self.vertex_indirect.len() == nv
+            && self.vertex_irradiance.len() == nv
             && self.element_radiance.len() == ne
             && self.element_emission.len() == ne
             && self
