@@ -323,6 +323,16 @@ pub fn info(path: &Path) -> Result<()> {
         point(s.camera.look_at),
         num(s.camera.fov_y_degrees)
     );
+    println!("cannot show (per technique, see the README's table):");
+    for &t in chiaro::available_techniques() {
+        let limits = chiaro::limitations(s, t);
+        if limits.is_empty() {
+            println!("  {}: none of the table's limitations apply", t.name());
+        }
+        for l in limits {
+            println!("  {l}");
+        }
+    }
     for w in &loaded.warnings {
         println!("warning    {w}");
     }

@@ -29,8 +29,8 @@ use pyo3::prelude::*;
 use std::ffi::CString;
 use std::path::PathBuf;
 
-/// Emits each loader warning as a Python `UserWarning`.
-fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
+/// Emits each loader or render warning as a Python `UserWarning`.
+pub(crate) fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
     let category = py.get_type::<PyUserWarning>();
     for w in warnings {
         let msg = CString::new(w.replace('\0', " ")).unwrap_or_default();

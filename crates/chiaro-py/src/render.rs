@@ -34,6 +34,7 @@ pub struct PollProgress {
     total: AtomicU64,
     done: AtomicU64,
     cancel: AtomicBool,
+    warnings: Mutex<Vec<String>>,
 }
 
 impl PollProgress {
@@ -45,6 +46,14 @@ impl PollProgress {
             self.done.load(Ordering::Relaxed),
             self.total.load(Ordering::Relaxed),
         )
+    }
+
+    /// The warnings the render gave so far, taken out.
+    pub fn take_warnings(&self) -> Vec<String> {
+        self.warnings
+            .lock()
+            .map(|mut w| std::mem::take(&mut *w))
+            .unwrap_or_default()
     }
 
     /// Asks the render to stop at its next poll.
@@ -63,6 +72,11 @@ impl Progress for PollProgress {
     }
     fn advance(&self, n: u64) {
         self.done.fetch_add(n, Ordering::Relaxed);
+    }
+    fn warning(&self, text: &str) {
+        if let Ok(mut w) = self.warnings.lock() {
+            w.push(text.to_owned());
+        }
     }
     fn cancelled(&self) -> bool {
         self.cancel.load(Ordering::Relaxed)
@@ -219,6 +233,9 @@ where
     if let Some(e) = interrupt {
         return Err(e);
     }
+    // The render's warnings (what the technique cannot show, fallbacks)
+    // take the loader warnings' path: Python `UserWarning`s.
+    crate::warn_all(py, &progress.take_warnings())?;
     result.map_err(|_| {
         RenderError::new_err("the render thread panicked (a bug in chiaro; please report it)")
     })

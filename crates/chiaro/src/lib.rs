@@ -22,6 +22,7 @@
 
 pub mod compare;
 pub mod hybrid;
+pub mod limitations;
 pub mod settings;
 pub mod sheet;
 
@@ -31,6 +32,7 @@ pub use chiaro_core::progress::{self, NoProgress, Progress};
 pub use chiaro_core::scene::{self, RenderSettings, Scene, Technique};
 pub use chiaro_core::{Vec2, Vec3};
 pub use chiaro_io as io;
+pub use limitations::{Limitation, limitations};
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::error::CoreError;
@@ -259,6 +261,7 @@ pub fn render_with_stats(
         let (film, stats) = render_with_stats(scene, &one, progress)?;
         return Ok((chiaro_core::film::postfilter::fxaa(&film), stats));
     }
+    warn_limitations(scene, settings, progress);
     let start = Instant::now();
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     let (film, rays) = match settings.technique {
@@ -291,6 +294,14 @@ pub fn render_with_stats(
     };
     debug_assert!(film.is_clean());
     Ok((film, stats))
+}
+
+/// Says, once each, what `scene` has that `settings.technique` cannot
+/// show, naming the objects ([`limitations`]).
+fn warn_limitations(scene: &Scene, settings: &RenderSettings, progress: &dyn Progress) {
+    for l in limitations::limitations_of_render(scene, settings) {
+        progress.warning(&l.to_string());
+    }
 }
 
 /// World-space bounds of everything in the scene.
@@ -341,6 +352,7 @@ pub fn render_with_solution_files(
     }
     check_settings(settings)?;
     check_memory(scene, settings)?;
+    warn_limitations(scene, settings, progress);
     let start = Instant::now();
     let solution = match files.load {
         Some(path) => {

@@ -75,6 +75,25 @@ impl Checker {
 }
 
 impl Scene {
+    /// Whether anything lights the scene: a light of any kind, an object
+    /// with an emissive material, or an environment map.
+    pub fn has_light_source(&self) -> bool {
+        let emits = |m: super::MaterialId| {
+            self.materials
+                .get(m.index())
+                .is_some_and(|m| m.is_emissive())
+        };
+        !self.lights.is_empty()
+            || self.environment.is_some()
+            || self.objects.iter().any(|o| {
+                emits(o.material)
+                    || matches!(o.geometry, Geometry::Mesh(id) if self
+                        .meshes
+                        .get(id.index())
+                        .is_some_and(|mesh| mesh.face_materials.iter().any(|&f| emits(f))))
+            })
+    }
+
     /// Checks the whole scene and returns every problem found (empty when
     /// the scene is fine). Errors make a scene unrenderable; warnings do not.
     pub fn validate(&self) -> Vec<Issue> {
@@ -193,6 +212,14 @@ impl Scene {
                     c.error(format!("{p}.bump.height"), "expected a finite number");
                 }
             }
+        }
+
+        if !self.objects.is_empty() && !self.has_light_source() {
+            c.warn(
+                "lights",
+                "the scene has no lights, no emissive material and no environment map: \
+                 every technique but preview (which brings its own eye light) renders it black",
+            );
         }
 
         for (i, t) in self.textures.iter().enumerate() {

@@ -1,0 +1,206 @@
+//! What a technique cannot show: `chiaro::limitations` on the shipped
+//! scenes, the warnings a render emits (once each, naming the objects),
+//! the README's table, and the warning for a scene that nothing lights.
+
+use chiaro::limitations::{Feature, limitations, markdown_table};
+use chiaro::{NoProgress, Progress, Scene, Technique, Vec3};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn load(name: &str) -> Scene {
+    chiaro::io::load_scene(&repo().join("scenes").join(name))
+        .expect("loads")
+        .scene
+}
+
+/// The objects named for `feature`, or `None` when it is not listed.
+fn named(scene: &Scene, t: Technique, feature: Feature) -> Option<Vec<String>> {
+    limitations(scene, t)
+        .into_iter()
+        .find(|l| l.feature == feature)
+        .map(|l| l.objects)
+}
+
+#[derive(Default)]
+struct Warnings(Mutex<Vec<String>>);
+
+impl Progress for Warnings {
+    fn begin(&self, _: &str, _: u64) {}
+    fn advance(&self, _: u64) {}
+    fn warning(&self, text: &str) {
+        self.0.lock().expect("lock").push(text.to_string());
+    }
+}
+
+#[test]
+fn whitted_scene_in_radiosity_names_the_mirror_and_the_glass() {
+    let s = load("whitted.toml");
+    let mirror = "sphere (mirror)".to_string();
+    let glass = "sphere (glass)".to_string();
+    let t = Technique::Radiosity;
+    assert_eq!(
+        named(&s, t, Feature::Mirrors),
+        Some(vec![mirror.clone(), glass.clone()])
+    );
+    assert_eq!(
+        named(&s, t, Feature::Transparency),
+        Some(vec![glass.clone()])
+    );
+    assert_eq!(
+        named(&s, t, Feature::Highlights),
+        Some(vec![mirror.clone(), glass.clone()])
+    );
+    assert_eq!(named(&s, t, Feature::NormalMaps), None);
+    // The scan converter refracts nothing; Whitted shows it all.
+    assert_eq!(
+        named(&s, Technique::Phong, Feature::Refraction),
+        Some(vec![glass])
+    );
+    assert!(limitations(&s, Technique::Whitted).is_empty());
+    // The path tracer lacks only the ambient term.
+    let path: Vec<Feature> = limitations(&s, Technique::Path)
+        .iter()
+        .map(|l| l.feature)
+        .collect();
+    assert_eq!(path, [Feature::AmbientLight]);
+    // Gouraud misses what falls inside the floor's two triangles.
+    assert_eq!(
+        named(&s, Technique::Gouraud, Feature::InsideLargePolygons),
+        Some(vec!["plane".to_string()])
+    );
+}
+
+#[test]
+fn transparency_scene_names_the_panes() {
+    let s = load("transparency.toml");
+    let see_through = vec![
+        "red pane".to_string(),
+        "blue pane".to_string(),
+        "green ball".to_string(),
+    ];
+    assert_eq!(
+        named(&s, Technique::Radiosity, Feature::Transparency),
+        Some(see_through.clone())
+    );
+    assert_eq!(
+        named(&s, Technique::Phong, Feature::Refraction),
+        Some(see_through.clone())
+    );
+    assert_eq!(
+        named(&s, Technique::Hybrid, Feature::SpecularIndirect),
+        Some(see_through)
+    );
+    assert_eq!(named(&s, Technique::Phong, Feature::Transparency), None);
+}
+
+#[test]
+fn a_render_warns_once_per_limitation_naming_the_objects() {
+    let s = load("whitted.toml");
+    let mut settings = s.render.clone();
+    (
+        settings.technique,
+        settings.width,
+        settings.height,
+        settings.samples,
+    ) = (Technique::Preview, 8, 6, 1);
+    let w = Warnings::default();
+    chiaro::render(&s, &settings, &w).expect("renders");
+    let got = w.0.into_inner().expect("lock");
+    let expected: Vec<String> = limitations(&s, Technique::Preview)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    assert_eq!(got, expected);
+    assert!(
+        got.iter()
+            .any(|w| w.starts_with("preview cannot show mirror reflections")
+                && w.contains("`sphere (mirror)`, `sphere (glass)`")),
+        "{got:?}"
+    );
+}
+
+#[test]
+fn long_lists_end_with_a_count() {
+    let mut s = load("whitted.toml");
+    let ball = s.objects[1].clone();
+    for i in 0..5 {
+        s.objects.push(chiaro::scene::Object {
+            name: format!("ball {i}"),
+            ..ball.clone()
+        });
+    }
+    let l = limitations(&s, Technique::Radiosity)
+        .into_iter()
+        .find(|l| l.feature == Feature::Mirrors)
+        .expect("mirrors");
+    assert_eq!(l.objects.len(), 7);
+    assert!(
+        l.to_string()
+            .ends_with("`sphere (glass)`, `ball 0` and 4 more)"),
+        "{l}"
+    );
+}
+
+#[test]
+fn readme_and_architecture_show_the_table_the_code_knows() {
+    let table = markdown_table();
+    for (t, _, text) in chiaro::limitations::CANNOT_SHOW {
+        assert!(table.contains(text), "{} {text}", t.name());
+    }
+    for doc in ["README.md", "ARCHITECTURE.md"] {
+        let text = std::fs::read_to_string(repo().join(doc)).expect("reads");
+        assert!(
+            text.contains(&table),
+            "{doc} must hold the table of `chiaro::limitations::markdown_table()`:\n{table}"
+        );
+    }
+}
+
+const DARK: &str = r#"
+background = [0, 0, 0]
+[render]
+width = 8
+height = 6
+samples = 1
+[camera]
+eye = [0, 1, -4]
+look_at = [0, 0, 0]
+[material.grey]
+diffuse = [0.5, 0.5, 0.5]
+[[object]]
+primitive = "sphere"
+material = "grey"
+"#;
+
+#[test]
+fn a_scene_that_nothing_lights_is_said_to_render_black() {
+    let loaded = chiaro::io::load_scene_str(DARK, Path::new("."), "dark.toml").expect("loads");
+    let warned: Vec<&String> = loaded
+        .warnings
+        .iter()
+        .filter(|w| w.contains("no lights"))
+        .collect();
+    assert_eq!(warned.len(), 1, "{:?}", loaded.warnings);
+    assert!(warned[0].starts_with("dark.toml:"), "{}", warned[0]);
+    // It is true: phong renders it black, preview (its own eye light) does not.
+    let s = loaded.scene;
+    let mut settings = s.render.clone();
+    settings.technique = Technique::Phong;
+    let film = chiaro::render(&s, &settings, &NoProgress).expect("renders");
+    assert!(film.color.iter().all(|c| *c == Vec3::ZERO));
+    settings.technique = Technique::Preview;
+    let film = chiaro::render(&s, &settings, &NoProgress).expect("renders");
+    assert!(film.color.iter().any(|c| c.max_element() > 0.1));
+    // An emissive material lights it: no warning.
+    let lit = DARK.replace("diffuse = [0.5, 0.5, 0.5]", "emission = [1, 1, 1]");
+    let loaded = chiaro::io::load_scene_str(&lit, Path::new("."), "lit.toml").expect("loads");
+    assert!(
+        loaded.warnings.iter().all(|w| !w.contains("no lights")),
+        "{:?}",
+        loaded.warnings
+    );
+}
