@@ -47,7 +47,7 @@ trap 'rm -rf "$OUT"' EXIT
 echo "Machine: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores, $(free -g | awk '/Mem:/{print $2}') GiB."
 echo "Date: $(date -u '+%Y-%m-%d %H:%M UTC'); binary $BIN; tree at commit $(git rev-parse --short HEAD)$(git diff --quiet HEAD -- crates || echo ' (with uncommitted changes)')."
 echo "Load average before: $(cut -d' ' -f1-3 /proc/loadavg)."
-echo "Size ${WIDTH}x${HEIGHT}, scene defaults otherwise; per cell: wall s / CPU s / peak RSS MB; '> $LIMIT / c / m' = stopped at the limit, having used c CPU seconds and m MB; 'error' = refused (message below)."
+echo "Size ${WIDTH}x${HEIGHT}, scene defaults otherwise; per cell: wall s / CPU s / peak RSS MB; '> $LIMIT / c' = stopped at the limit, having used c CPU seconds; 'error' = refused (message below)."
 echo
 header="| scene |"
 rule="|---|"
@@ -69,8 +69,9 @@ for s in $SCENES; do
     # GNU time puts "Command exited with non-zero status" first on failure.
     read -r wall user sys rss < <(tail -n 1 "$OUT/time") || true
     if [ "$rc" = 124 ]; then
-      cell=$(awk -v u="$user" -v s="$sys" -v r="$rss" -v l="$LIMIT" \
-        'BEGIN { printf "> %d / %.0f / %d", l, u + s, r / 1024 }')
+      # (GNU time's peak RSS is then the timeout wrapper's: left out.)
+      cell=$(awk -v u="$user" -v s="$sys" -v l="$LIMIT" \
+        'BEGIN { printf "> %d / %.0f", l, u + s }')
     elif [ "$rc" != 0 ]; then
       cell="error"
       errors="$errors
