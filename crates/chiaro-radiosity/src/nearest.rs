@@ -226,10 +226,10 @@ mod tests {
             if obj[t] != object {
                 continue;
             }
-            if let Some((d, u, v)) = measure(&c[t], p, n) {
-                if best.is_none_or(|b| d < b.0) {
-                    best = Some((d, t, u, v));
-                }
+            if let Some((d, u, v)) = measure(&c[t], p, n)
+                && best.is_none_or(|b| d < b.0)
+            {
+                best = Some((d, t, u, v));
             }
         }
         best.map(|(_, t, u, v)| (t, u, v))
