@@ -10,6 +10,13 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let args = cli::Cli::parse();
+    // The server runs until Ctrl-C ends it; renders stop cleanly instead.
+    if matches!(
+        args.command,
+        cli::Command::Render(_) | cli::Command::Compare(_)
+    ) {
+        progress::handle_interrupt();
+    }
     if let Some(limit) = args.memory_limit {
         chiaro::budget::MemoryBudget::set_process(limit);
     }
@@ -29,6 +36,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(_) if progress::interrupted() => {
+            eprintln!("interrupted: nothing written");
+            ExitCode::from(progress::INTERRUPTED_EXIT)
+        }
         Err(e) => {
             eprintln!("error: {}", one_cause_each(&e));
             ExitCode::from(1)

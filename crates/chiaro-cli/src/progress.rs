@@ -1,8 +1,32 @@
-//! A progress bar on stderr (indicatif), hidden when stderr is not a terminal.
+//! A progress bar on stderr (indicatif), hidden when stderr is not a
+//! terminal, and Ctrl-C: the first asks the render to stop (it returns
+//! `Cancelled` and nothing is written), a second ends the process.
 
 use chiaro::Progress;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Set by the first Ctrl-C.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// Exit code of a process stopped by Ctrl-C (128 + SIGINT, as shells report it).
+pub const INTERRUPTED_EXIT: u8 = 130;
+
+/// Installs the Ctrl-C handler (a failure only means Ctrl-C kills the
+/// process as it would without one).
+pub fn handle_interrupt() {
+    let _ = ctrlc::set_handler(|| {
+        if INTERRUPTED.swap(true, Ordering::SeqCst) {
+            std::process::exit(i32::from(INTERRUPTED_EXIT));
+        }
+    });
+}
+
+/// Whether Ctrl-C was pressed.
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
 
 /// Shows each render stage as a bar.
 #[derive(Debug)]
@@ -48,5 +72,8 @@ impl Progress for Bar {
     }
     fn warning(&self, text: &str) {
         self.bar.suspend(|| eprintln!("warning: {text}"));
+    }
+    fn cancelled(&self) -> bool {
+        interrupted()
     }
 }

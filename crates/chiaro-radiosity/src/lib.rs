@@ -42,6 +42,7 @@ pub mod formfactor;
 pub mod hemicube;
 pub mod hierarchical;
 pub mod mesh;
+mod nearest;
 pub mod solution;
 pub mod solver;
 
@@ -535,6 +536,7 @@ fn build_solution(
             .filter(|s| matches!(s.kind, SourceKind::Prepared(_)))
             .count() as u32)
             .min(ps.triangles.len() as u32),
+        nearest: Default::default(),
     }
 }
 

@@ -3,11 +3,13 @@
 //! for display and for the hybrid technique, and its serialisation.
 
 use crate::mesh::{barycentric, element_at};
+use crate::nearest::NearestIndex;
 use chiaro_core::error::CoreError;
 use chiaro_core::scene::Scene;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Write};
+use std::sync::OnceLock;
 
 /// Format version written by [`RadiositySolution::save`].
 pub const FORMAT_VERSION: u32 = 2;
@@ -63,6 +65,26 @@ pub struct RadiositySolution {
     pub(crate) source_first: Vec<u32>,
     /// Number of sources that are prepared-scene triangles (the rest are area lights).
     pub(crate) prepared_triangles: u32,
+    /// The look-up tree of [`Self::find`], built on first use.
+    #[serde(skip)]
+    pub(crate) nearest: NearestCache,
+}
+
+/// [`NearestIndex`] built once, on the first look-up by position. Not part
+/// of a solution's value: equal and cloned as empty.
+#[derive(Debug, Default)]
+pub(crate) struct NearestCache(OnceLock<NearestIndex>);
+
+impl Clone for NearestCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl PartialEq for NearestCache {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// Smallest albedo an element's irradiance is recovered from; below it the
@@ -229,26 +251,11 @@ impl RadiositySolution {
     /// The source triangle of `object` nearest to `p` (on the side `n` faces
     /// if `n` is nonzero), with the barycentrics of `p` in it.
     fn find(&self, object: u32, p: Vec3, n: Vec3) -> Option<(usize, f32, f32)> {
-        let mut best: Option<(f32, usize, f32, f32)> = None;
-        for t in 0..self.prepared_triangles as usize {
-            if self.source_object[t] != object {
-                continue;
-            }
-            let c = self.source_corners[t];
-            let nt = (c[1] - c[0]).cross(c[2] - c[0]).normalize_or_zero();
-            if n != Vec3::ZERO && nt.dot(n) < 0.0 {
-                continue;
-            }
-            let (u, v) = barycentric(&c, p);
-            // Distance outside the triangle (in barycentric units) plus off-plane distance.
-            let out = (-u).max(0.0) + (-v).max(0.0) + (u + v - 1.0).max(0.0);
-            let scale = (c[1] - c[0]).length().max((c[2] - c[0]).length());
-            let d = out * scale + nt.dot(p - c[0]).abs();
-            if best.is_none_or(|b| d < b.0) {
-                best = Some((d, t, u.clamp(0.0, 1.0), v.clamp(0.0, 1.0)));
-            }
-        }
-        best.map(|(_, t, u, v)| (t, u, v))
+        let count = self.prepared_triangles as usize;
+        self.nearest
+            .0
+            .get_or_init(|| NearestIndex::new(&self.source_corners, &self.source_object, count))
+            .nearest(&self.source_corners, object, p, n)
     }
 
     /// Outgoing radiance (W sr^-1 m^-2, emission included) at point `p` on
@@ -257,8 +264,9 @@ impl RadiositySolution {
     /// `n` (pass the geometric normal; `Vec3::ZERO` for either side).
     /// Works for analytic spheres too (the nearest facet of the tessellated
     /// sphere). `None` when the object has no surface in the solution.
-    /// Cost: linear in the object's triangle count; prefer
-    /// [`Self::radiance_at_triangle`] when the triangle is known.
+    /// Cost: about log(triangles of the object), after a tree over the
+    /// solution's triangles is built on the first call (linear in the
+    /// triangle count, once); [`Self::radiance_at_triangle`] is O(1).
     pub fn radiance_at(&self, object: u32, p: Vec3, n: Vec3) -> Option<Vec3> {
         let (t, u, v) = self.find(object, p, n)?;
         self.radiance_at_triangle(t as u32, u, v)

@@ -25,7 +25,7 @@ pub mod shadow;
 pub mod zbuffer;
 
 pub use render::{
-    RasterOptions, dither_threshold, render, render_prepared, render_prepared_into,
-    render_prepared_with, shade_mode_of,
+    RasterOptions, RasterWork, dither_threshold, render, render_counted, render_prepared,
+    render_prepared_into, render_prepared_with, shade_mode_of,
 };
 pub use shadow::VolumeCounting;

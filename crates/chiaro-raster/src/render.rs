@@ -77,7 +77,7 @@ use glam::{Vec2, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 use std::cell::Cell;
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 #[path = "exact.rs"]
@@ -119,6 +119,54 @@ pub fn render(
     }
     let ps = PreparedScene::new(scene, PrepareOptions::default());
     render_prepared(&ps, settings, mode, progress)
+}
+
+/// The work a scan-conversion render did, counted where it is cheap (per
+/// tile), for tests that catch a render whose work grows out of proportion.
+#[derive(Debug, Default)]
+pub struct RasterWork {
+    /// Screen triangles rasterized into tiles (a triangle once per tile it
+    /// was binned to).
+    pub tile_triangles: AtomicU64,
+    /// Samples of the tiles (pixels x samples per pixel) rasterized.
+    pub samples: AtomicU64,
+    /// Transparent fragments kept in front of the opaque surface.
+    pub fragments: AtomicU64,
+    /// Shadow-volume polygons counted into tiles.
+    pub volume_tile_polygons: AtomicU64,
+}
+
+/// [`render`], also counting its work into `work`.
+///
+/// # Errors
+/// As [`render`].
+pub fn render_counted(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    work: &RasterWork,
+) -> Result<Film, CoreError> {
+    let mode = shade_mode_of(settings.technique)?;
+    check_size(settings)?;
+    if scene
+        .validate()
+        .iter()
+        .any(|i| i.severity == Severity::Error)
+    {
+        return render(scene, settings, progress);
+    }
+    let ps = PreparedScene::new(scene, PrepareOptions::default());
+    let mut film = Film::new(settings.width, settings.height);
+    render_work(
+        &ps,
+        settings,
+        mode,
+        &RasterOptions::default(),
+        progress,
+        &mut film,
+        work,
+    )?;
+    Ok(film)
 }
 
 /// The shading mode of a scan-conversion technique.
@@ -990,6 +1038,27 @@ pub fn render_prepared_into(
     progress: &dyn Progress,
     film: &mut Film,
 ) -> Result<(), CoreError> {
+    render_work(
+        ps,
+        settings,
+        mode,
+        options,
+        progress,
+        film,
+        &RasterWork::default(),
+    )
+}
+
+/// [`render_prepared_into`], counting the work into `work`.
+fn render_work(
+    ps: &PreparedScene<'_>,
+    settings: &RenderSettings,
+    mode: ShadeMode,
+    options: &RasterOptions,
+    progress: &dyn Progress,
+    film: &mut Film,
+    work: &RasterWork,
+) -> Result<(), CoreError> {
     check_size(settings)?;
     let n = settings.width as usize * settings.height as usize;
     if film.width != settings.width
@@ -1039,6 +1108,7 @@ pub fn render_prepared_into(
             }
         })
         .collect();
+    progress.advance(1);
 
     // 2. Setup and binning over fixed chunks (deterministic order), into
     // the tiles that meet the crop window.
@@ -1266,6 +1336,12 @@ pub fn render_prepared_into(
                 }
                 (start, list.into_iter().map(|e| (e.2, e.1)).collect())
             };
+            let binned: usize = chunks.iter().map(|c| c.bins[ti].len()).sum();
+            work.tile_triangles
+                .fetch_add(binned as u64, Ordering::Relaxed);
+            work.samples.fetch_add(n as u64, Ordering::Relaxed);
+            work.fragments
+                .fetch_add(frags.len() as u64, Ordering::Relaxed);
             let mut tv = TileVis {
                 rect,
                 window: win,
@@ -1275,6 +1351,8 @@ pub fn render_prepared_into(
                 counts: Vec::new(),
             };
             if let Some(vb) = &vol_bins {
+                work.volume_tile_polygons
+                    .fetch_add(vb.bins[ti].len() as u64, Ordering::Relaxed);
                 count_volumes(&mut tv, key, vb, ti, r, &offsets, nl, counting);
             }
             progress.advance(1);

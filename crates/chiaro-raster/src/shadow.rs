@@ -1040,6 +1040,20 @@ fn extrude(
         out.push([b.extend(1.0), ai, bi]);
     };
     if !closed {
+        // The scene's bounding box: a triangle with all of it on the
+        // light's side of its plane has nothing behind it to shadow.
+        let (lo, hi) = (ps.bounds.min, ps.bounds.max);
+        let eps = 1e-5 * (hi - lo).length();
+        let corners: Vec<Vec3> = (0..8)
+            .map(|k| {
+                Vec3::new(
+                    if k & 1 == 0 { lo.x } else { hi.x },
+                    if k & 2 == 0 { lo.y } else { hi.y },
+                    if k & 4 == 0 { lo.z } else { hi.z },
+                )
+            })
+            .collect();
+        let all_finite = corners.iter().all(|c| c.is_finite());
         for &t in tris {
             let [a, b, c] = tri(t);
             // An edge-on (or degenerate) triangle blocks no light; its
@@ -1050,6 +1064,13 @@ fn extrude(
                 Facing::Away => [a, c, b],
                 Facing::EdgeOn => continue,
             };
+            // A floor under everything: its volume holds no surface, and
+            // its sides would be filled over the whole floor once per
+            // triangle and light.
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            if all_finite && corners.iter().all(|&k| n.dot(k - a) >= -eps) {
+                continue;
+            }
             push_cap_and_back(a, b, c, out);
             side(a, b, out);
             side(b, c, out);

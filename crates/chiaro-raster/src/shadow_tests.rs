@@ -773,3 +773,28 @@ fn shadow_maps_stay_within_their_budget() {
     let f = render_prepared(&ps, &s, ShadeMode::Phong, &NoProgress).expect("render");
     assert!(f.color.iter().all(|c| c.is_finite()));
 }
+
+/// Shadow-volume triangles of `scene`, all lights.
+fn volume_triangles(scene: &Scene) -> usize {
+    let ps = PreparedScene::new(scene, PrepareOptions::default());
+    ShadowVolumes::new(&ps).per_light.iter().map(Vec::len).sum()
+}
+
+#[test]
+fn a_floor_under_everything_casts_no_volume_a_raised_one_does() {
+    let scene = light_only(64);
+    let floor = scene
+        .objects
+        .iter()
+        .position(|o| o.name == "floor")
+        .expect("the test scene has a floor");
+    let mut without = scene.clone();
+    without.objects.remove(floor);
+    assert_eq!(volume_triangles(&scene), volume_triangles(&without));
+    // Raised through the ball and the box: parts of them are behind it.
+    let mut raised = scene.clone();
+    raised.objects[floor].transform.translate.y += 0.3;
+    assert!(volume_triangles(&raised) > volume_triangles(&without));
+    // (Pictures with such floors still match shadow rays: the
+    // `assert_volumes_match_rays` tests above.)
+}
