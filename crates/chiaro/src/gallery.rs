@@ -35,7 +35,7 @@ pub const PATH_SAMPLES: u32 = 64;
 /// Cells whose recorded render time is at most this many seconds are
 /// re-rendered by the check; slower ones (radiosity and hybrid solves of
 /// the larger scenes) are checked by scene hash, settings and PNG only.
-pub const RECHECK_SECONDS: f64 = 3.0;
+pub const RECHECK_SECONDS: f64 = 8.0;
 
 /// The gallery folder, relative to the repository root.
 pub const DIR: &str = "docs/gallery";
