@@ -261,7 +261,7 @@ pub fn render_polling(
 /// `chiaro._chiaro.compare`: see `chiaro.compare` in
 /// python/chiaro/__init__.py. Returns the facade's JSON report as a dict.
 #[pyfunction]
-#[pyo3(signature = (scene, techniques, reference = "path:256", cache_dir = None,
+#[pyo3(signature = (scene, techniques, reference = "path:auto", cache_dir = None,
                     name = "scene", width = None, height = None, samples = None,
                     seed = None, overrides = None, progress = None))]
 pub fn compare<'py>(

@@ -225,3 +225,7 @@ def test_compare_report(root, tmp_path):
     for t in report["techniques"]:
         assert t["rmse"] > 0 and t["seconds"] >= 0
     assert report["reference"]["technique"] == "path" and report["reference"]["spp"] == 4
+    # Four independent batches of one sample: the reference's noise is estimated.
+    noise = report["reference"]["noise"]
+    assert noise["batches"] == 4 and noise["relative_mse"] > 0
+    assert noise["target_relative_mse"] is None

@@ -78,6 +78,33 @@ try {
   check("phong picture is not blank", mean(phong) > 10, `(mean ${mean(phong).toFixed(1)})`);
   await page.screenshot({ path: join(out, "page-phong.png") });
 
+  // Orbiting the single phong view for 3 s: the drafts' frame rate in the
+  // browser (reported, not asserted: the machine may be loaded), then the
+  // refinement when the camera stops.
+  {
+    const b = await page.locator("#canvas-0").boundingBox();
+    const [cx, cy] = [b.x + b.width / 2, b.y + b.height / 2];
+    await page.mouse.move(cx, cy);
+    await page.mouse.down();
+    const t = Date.now();
+    for (let i = 1; Date.now() - t < 3000; i++) {
+      await page.mouse.move(cx + 40 * Math.sin(i / 10), cy + 10 * Math.cos(i / 10));
+      await page.waitForTimeout(16);
+    }
+    const frames = await page.evaluate(() => window.chiaro.framesMoving);
+    const ms = Date.now() - t;
+    await page.mouse.up();
+    check("single-view drafts while orbiting", frames >= 1,
+      `(${frames} phong drafts in ${ms} ms: ${(1000 * frames / ms).toFixed(1)} fps)`);
+    const t1 = Date.now();
+    id = await waitDone(id);
+    const passes = await page.evaluate(() => window.chiaro.pass);
+    check("single view refines when the camera stops", passes === 2,
+      `(full quality ${Date.now() - t1} ms after release, pass ${passes})`);
+    await page.click("#reset-camera");
+    id = await waitDone(id);
+  }
+
   await page.selectOption("#view-a select[name=technique]", "whitted");
   id = await waitDone(id);
   const cap = await page.textContent("#cap-0");

@@ -21,6 +21,7 @@
 //! ```
 
 pub mod compare;
+pub mod gallery;
 pub mod hybrid;
 pub mod limitations;
 pub mod settings;

@@ -548,17 +548,43 @@ pub fn contact_sheet(comparison: &Comparison, title: &str) -> Result<Sheet> {
         } else {
             e.technique.name().to_string()
         };
-        let lines = [
-            (name, TEXT),
-            (format!("{} spp", e.settings.samples), DIM_TEXT),
-            (format!("{:.3} s", e.seconds), TEXT),
-            (format!("relMSE {:.5}", e.relative_mse), TEXT),
-            (format!("FLIP {:.4}", e.flip), TEXT),
-            (format!("PSNRd {} dB", format_psnr(e.display_psnr)), TEXT),
-            (format!("RMSE {:.5}", e.rmse), DIM_TEXT),
-            (format!("PSNR {} dB", format_psnr(e.psnr)), DIM_TEXT),
-            (format!("MRE  {:.4}", e.mean_relative_error), DIM_TEXT),
-        ];
+        let lines = if i == 0 {
+            // The reference against itself is 0 everywhere: show its own
+            // estimated error instead (`~`), where it can be estimated.
+            let n = &comparison.reference_noise;
+            let est =
+                |v: Option<f64>, d: usize| v.map_or_else(|| "-".into(), |v| format!("~{v:.d$}"));
+            [
+                (name, TEXT),
+                (format!("{} spp", e.settings.samples), DIM_TEXT),
+                (format!("{:.3} s", e.seconds), TEXT),
+                (format!("relMSE {}", est(n.relative_mse, 5)), TEXT),
+                ("FLIP -".into(), TEXT),
+                ("PSNRd -".into(), TEXT),
+                (format!("RMSE {}", est(n.rmse, 5)), DIM_TEXT),
+                (
+                    format!(
+                        "PSNR {}",
+                        n.psnr
+                            .map_or_else(|| "-".into(), |p| format!("~{} dB", format_psnr(p)))
+                    ),
+                    DIM_TEXT,
+                ),
+                (format!("MRE  {}", est(n.mean_relative_error, 4)), DIM_TEXT),
+            ]
+        } else {
+            [
+                (name, TEXT),
+                (format!("{} spp", e.settings.samples), DIM_TEXT),
+                (format!("{:.3} s", e.seconds), TEXT),
+                (format!("relMSE {:.5}", e.relative_mse), TEXT),
+                (format!("FLIP {:.4}", e.flip), TEXT),
+                (format!("PSNRd {} dB", format_psnr(e.display_psnr)), TEXT),
+                (format!("RMSE {:.5}", e.rmse), DIM_TEXT),
+                (format!("PSNR {} dB", format_psnr(e.psnr)), DIM_TEXT),
+                (format!("MRE  {:.4}", e.mean_relative_error), DIM_TEXT),
+            ]
+        };
         for (k, (text, color)) in lines.iter().enumerate() {
             draw_text(
                 &mut film,

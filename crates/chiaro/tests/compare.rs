@@ -3,7 +3,7 @@
 //! only by noise, the sheet has the documented size, and the reference
 //! cache is hit on the second run.
 
-use chiaro::compare::{CacheStatus, ReferenceSpec, compare, reference_seed};
+use chiaro::compare::{CacheStatus, ReferenceSamples, ReferenceSpec, compare, reference_seed};
 use chiaro::scene::Technique;
 use chiaro::sheet::{contact_sheet, sheet_size, write_sheet};
 use chiaro::{NoProgress, RenderSettings, Scene};
@@ -23,10 +23,7 @@ fn setup() -> (Scene, RenderSettings) {
 }
 
 fn path16() -> ReferenceSpec {
-    ReferenceSpec {
-        technique: Technique::Path,
-        samples: 16,
-    }
+    ReferenceSpec::fixed(Technique::Path, 16)
 }
 
 /// A fresh, empty directory under the test output directory.
@@ -89,7 +86,8 @@ fn phong_and_whitted_against_path_report_finite_metrics() {
 
     // The Markdown table has a header, a rule, and one line per image.
     let md = c.to_markdown();
-    assert_eq!(md.lines().count(), 2 + 3);
+    assert_eq!(md.lines().take_while(|l| l.starts_with('|')).count(), 2 + 3);
+    assert!(md.contains("Reference: path at 16 spp (fixed)"), "{md}");
     assert!(
         md.lines()
             .nth(2)
@@ -255,10 +253,7 @@ fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominatin
     base.width = 48;
     base.height = 48;
     base.samples = 4;
-    let reference = ReferenceSpec {
-        technique: Technique::Path,
-        samples: 256,
-    };
+    let reference = ReferenceSpec::fixed(Technique::Path, 256);
     let c = compare(
         &scene,
         &base,
@@ -327,4 +322,59 @@ fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominatin
         assert!(shares[0] > 0.5, "{shares:?}");
         assert!(shares[1] < 0.3 && shares[3] < 0.1, "{shares:?}");
     }
+}
+
+#[test]
+fn the_reference_takes_samples_until_its_own_noise_is_below_the_target() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/cornell-box.toml");
+    let scene = chiaro::io::load_scene(path.as_ref()).expect("loads").scene;
+    let mut base = scene.render.clone();
+    base.width = 24;
+    base.height = 24;
+    base.samples = 4;
+    let cap = 1 << 14;
+    let run = |samples| {
+        let spec = ReferenceSpec {
+            technique: Technique::Path,
+            samples,
+        };
+        compare(&scene, &base, &[Technique::Phong], &spec, None, &NoProgress).expect("compares")
+    };
+    let mut chosen = Vec::new();
+    let mut finest = None;
+    for fraction in [0.1, 0.02] {
+        let c = run(ReferenceSamples::Auto { fraction, cap });
+        let n = &c.reference_noise;
+        let estimate = n.relative_mse.expect("estimated");
+        let judged = c.entries[0].relative_mse;
+        assert!(
+            estimate <= fraction * judged,
+            "reference relMSE {estimate} above {fraction} x {judged}"
+        );
+        assert_eq!(n.target_relative_mse, Some(fraction * judged));
+        let spp = c.reference.settings.samples;
+        assert!(spp < cap, "stopped by the cap, not the target");
+        assert!(
+            c.reference_sentence()
+                .contains("chosen from its own variance"),
+            "{}",
+            c.reference_sentence()
+        );
+        chosen.push(spp);
+        finest = Some((c.reference, estimate));
+    }
+    assert!(chosen[1] > chosen[0], "spp {chosen:?} for a falling target");
+
+    // The estimate is honest: a fixed 64-spp reference's measured relMSE
+    // against the finest one is the sum of their estimated noises (both
+    // unbiased, independent), within the spread of an 8-batch estimate.
+    let (finest, finest_estimate) = finest.expect("rendered");
+    let coarse = run(ReferenceSamples::Fixed(64));
+    let measured =
+        chiaro::film::metrics::relative_mse(&coarse.reference.film, &finest.film).expect("sizes");
+    let predicted = coarse.reference_noise.relative_mse.expect("estimated") + finest_estimate;
+    assert!(
+        measured > 0.5 * predicted && measured < 2.0 * predicted,
+        "measured relMSE {measured}, estimated {predicted}"
+    );
 }

@@ -388,7 +388,7 @@ def compare(
     scene: Scene,
     techniques: Sequence[str],
     *,
-    reference: str = "path:256",
+    reference: str = "path:auto",
     cache_dir: Optional[PathLike] = None,
     name: str = "scene",
     width: Optional[int] = None,
@@ -400,10 +400,14 @@ def compare(
     **kwargs: Any,
 ) -> dict:
     """Renders ``scene`` with each of ``techniques`` and measures each
-    against a reference (``"TECHNIQUE:SPP"``, default the path tracer at 256
-    samples per pixel), like ``chiaro compare``. Returns the report as a
-    dict: ``scene`` (``name``), ``width``, ``height``, ``psnr_convention``,
-    ``reference`` and one entry per technique in ``techniques`` with
+    against a reference, like ``chiaro compare``: ``"TECHNIQUE:SPP"``
+    (``"path:1024"``) or ``"TECHNIQUE:auto[:CAP]"``, the default, the path
+    tracer with samples added until its own estimated relMSE is below a
+    tenth of the smallest it judges (at most CAP, default 4096). Returns the
+    report as a dict: ``scene`` (``name``), ``width``, ``height``,
+    ``psnr_convention``, ``reference`` (with ``spp`` and ``noise``: its own
+    estimated ``relative_mse``, ``rmse``, ``psnr``, ``mean_relative_error``,
+    the ``target_relative_mse`` and the number of ``batches``) and one entry per technique in ``techniques`` with
     ``relative_mse`` and ``flip`` (the measures to rank by: errors relative
     to each pixel's brightness, and NVIDIA's perceptual FLIP of the
     displayed images), ``display_psnr`` (dB of the clamped sRGB images),
