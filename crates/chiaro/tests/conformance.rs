@@ -124,6 +124,12 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
         "as teapot: the map's bias and filter reach beyond two pixels of the edge",
     ),
     (
+        "shadow methods agree",
+        "DamagedHelmet",
+        "map",
+        "as teapot: one pixel beyond two pixels of the edge",
+    ),
+    (
         "radiosity = path (diffuse)",
         "mitsuba-cbox",
         "radiosity, path",
@@ -131,13 +137,28 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
     ),
 ];
 
-/// Cells not run at all, by (rule, case) and the measured reason; shown in
-/// the table as "not run".
-const NOT_RUN: &[(&str, &str, &str)] = &[(
-    "shadow methods agree",
-    "DamagedHelmet",
-    "the test process was killed (out of memory, 23 GiB machine) inside this rule at 48x36; which method not isolated yet",
-)];
+/// Cells not run at all, by (rule, case, technique) and the measured
+/// reason; shown in the table as "not run".
+const NOT_RUN: &[(&str, &str, &str, &str)] = &[
+    (
+        "shadow methods agree",
+        "DamagedHelmet",
+        "volume",
+        "shadow volumes of its open 15k-triangle mesh under its emissive light ask for more than 6 GB at 48x36 (allocation failure under ulimit -v 6000000; killed for memory without it)",
+    ),
+    (
+        "shadow methods agree",
+        "DamagedHelmet",
+        "object",
+        "object-precision shadows did not finish in 10 minutes at 48x36",
+    ),
+    (
+        "shadow methods agree",
+        "DamagedHelmet",
+        "scanline",
+        "not run: the same per-receiver light pass as object-precision shadows, which did not finish in 10 minutes",
+    ),
+];
 
 #[derive(Default)]
 struct Matrix {
@@ -673,16 +694,6 @@ fn rule_phong_equals_whitted(m: &mut Matrix, case: &Case) {
 /// pixels within two pixels of a shadow edge.
 fn rule_shadow_methods_agree(m: &mut Matrix, case: &Case, ids: &Ids) {
     let rule = "shadow methods agree";
-    if let Some(n) = NOT_RUN.iter().find(|n| n.0 == rule && n.1 == case.name) {
-        m.skip(
-            rule,
-            &case.name,
-            "volume, object, scanline, map",
-            Verdict::NotRun,
-            n.2,
-        );
-        return;
-    }
     let emitters = case
         .scene
         .materials
@@ -735,6 +746,16 @@ fn rule_shadow_methods_agree(m: &mut Matrix, case: &Case, ids: &Ids) {
         ShadowMethod::Map,
     ] {
         let name = format!("{method:?}").to_lowercase();
+        // CHIARO_CONFORMANCE_RUN_ALL=1 runs the cells of NOT_RUN too.
+        if let Some(n) = NOT_RUN
+            .iter()
+            .find(|n| n.0 == rule && n.1 == case.name && n.2 == name)
+            && std::env::var_os("CHIARO_CONFORMANCE_RUN_ALL").is_none()
+        {
+            m.skip(rule, &case.name, &name, Verdict::NotRun, n.3);
+            continue;
+        }
+        eprintln!("  {name} ...");
         let start = std::time::Instant::now();
         s.shadows = method;
         let f = match chiaro::render(&case.scene, &s, &NoProgress) {
