@@ -339,8 +339,9 @@ pub(crate) struct Casters {
 impl Casters {
     /// The casters of `ps`.
     pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
+        let opaque = opaque_casters(ps);
         let points: Vec<Option<[DVec3; 3]>> = (0..ps.triangles.len())
-            .map(|t| tri_points(ps, t).filter(|_| casts(ps, t)))
+            .map(|t| tri_points(ps, t).filter(|_| opaque[t]))
             .collect();
         let boxes: Vec<Aabb> = points
             .iter()
@@ -573,12 +574,15 @@ pub(crate) fn tri_points(ps: &PreparedScene<'_>, t: usize) -> Option<[DVec3; 3]>
     Some(out)
 }
 
-/// Whether triangle `t`'s object casts shadows.
-pub(crate) fn casts(ps: &PreparedScene<'_>, t: usize) -> bool {
-    ps.tri_object
-        .get(t)
-        .and_then(|&o| ps.scene.objects.get(o as usize))
-        .is_none_or(|o| o.casts_shadows)
+/// Per triangle, whether it is an opaque caster by the shared shadow rule
+/// ([`chiaro_core::shadow::ShadowCasters`]): transparent casters are left to
+/// shadow rays that see only them (their tint is a colour, not a polygon),
+/// and objects with `casts_shadows = false` cast nothing.
+pub(crate) fn opaque_casters(ps: &PreparedScene<'_>) -> Vec<bool> {
+    crate::shadow::blockers(ps)
+        .into_iter()
+        .map(|b| b == crate::shadow::Blocker::Opaque)
+        .collect()
 }
 
 impl ObjectShadows {

@@ -452,6 +452,12 @@ impl Ctx<'_, '_> {
         s: &LightSample,
         counts: Option<&[i32]>,
     ) -> Vec3 {
+        // An exact method's opaque-caster visibility times the tint of the
+        // transparent casters, by shadow rays that see only them.
+        let tinted = |lit: f32, transparent: &Option<RayShadows>| match transparent {
+            Some(r) if lit > 0.0 => lit * r.visibility(sp.p, sp.ng, s),
+            _ => Vec3::splat(lit),
+        };
         match &self.shadows {
             Shadows::None => Vec3::ONE,
             Shadows::Ray(r) => r.visibility(sp.p, sp.ng, s),
@@ -473,23 +479,35 @@ impl Ctx<'_, '_> {
                     .as_ref()
                     .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s)),
             },
-            Shadows::Object(lights) => match lights.get(li) {
-                Some(Some(o)) => Vec3::splat(o.lit_fraction(tri, sp.p)),
-                _ => Vec3::ONE,
-            },
-            Shadows::Scanline { lines, fallback } => {
+            Shadows::Object {
+                lights,
+                transparent,
+            } => {
+                let lit = match lights.get(li) {
+                    Some(Some(o)) => o.lit_fraction(tri, sp.p),
+                    _ => 1.0,
+                };
+                tinted(lit, transparent)
+            }
+            Shadows::Scanline {
+                lines,
+                fallback,
+                transparent,
+            } => {
                 // The scan-line pass classified pixel centres; other points
                 // (sub-samples, vertices) use the exact lit fragments.
-                if let (Some((x, y)), Some(Some(l))) = (pixel, lines.get(li)) {
-                    let k = (y * l.width + x) as usize;
-                    if l.visible.get(k) == Some(&tri) {
-                        return Vec3::splat(l.lit[k]);
+                let centre = match (pixel, lines.get(li)) {
+                    (Some((x, y)), Some(Some(l))) => {
+                        let k = (y * l.width + x) as usize;
+                        (l.visible.get(k) == Some(&tri)).then(|| l.lit[k])
                     }
-                }
-                match fallback.get(li) {
-                    Some(Some(o)) => Vec3::splat(o.lit_fraction(tri, sp.p)),
-                    _ => Vec3::ONE,
-                }
+                    _ => None,
+                };
+                let lit = centre.unwrap_or_else(|| match fallback.get(li) {
+                    Some(Some(o)) => o.lit_fraction(tri, sp.p),
+                    _ => 1.0,
+                });
+                tinted(lit, transparent)
             }
         }
     }

@@ -58,18 +58,27 @@ pub(crate) enum Shadows {
     /// the renderer's tiles. Transparent casters (a count cannot carry a
     /// colour) tint by shadow rays that see only them, when there are any.
     Volume(Option<RayShadows>),
-    /// Atherton-Weiler-Greenberg object-precision shadows: the lit fragments
-    /// of every triangle, one set per light (`None` for ambient lights).
-    Object(Vec<Option<crate::object_shadows::ObjectShadows>>),
-    /// Bouknight-Kelley scan-line shadows: per light, the lit/shadowed
-    /// classification of every pixel centre from the scan-line pass, with
-    /// object-precision fragments for samples that are not pixel centres
-    /// (supersampling, vertices) — both exact, so they agree.
+    /// Atherton-Weiler-Greenberg object-precision shadows of the opaque
+    /// casters: the lit fragments of every triangle, one set per light
+    /// (`None` for ambient lights). Transparent casters tint as in `Volume`.
+    Object {
+        /// Per light (`None` for ambient lights).
+        lights: Vec<Option<crate::object_shadows::ObjectShadows>>,
+        /// Shadow rays that see only the transparent casters, if any.
+        transparent: Option<RayShadows>,
+    },
+    /// Bouknight-Kelley scan-line shadows of the opaque casters: per light,
+    /// the lit/shadowed classification of every pixel centre from the
+    /// scan-line pass, with object-precision fragments for samples that are
+    /// not pixel centres (supersampling, vertices) — both exact, so they
+    /// agree. Transparent casters tint as in `Volume`.
     Scanline {
         /// Per light (`None` for ambient lights).
         lines: Vec<Option<crate::scanline_shadows::ScanlineShadows>>,
         /// Per light (`None` for ambient lights).
         fallback: Vec<Option<ExactFallback>>,
+        /// Shadow rays that see only the transparent casters, if any.
+        transparent: Option<RayShadows>,
     },
 }
 
@@ -151,14 +160,10 @@ fn scanline_fallbacks(
             .collect());
     }
     let bvh = std::sync::Arc::new(SceneBvh::new(ps));
+    let opaque = crate::object_shadows::opaque_casters(ps);
     let tris = std::sync::Arc::new(
         (0..ps.triangles.len())
-            .map(|t| {
-                (
-                    crate::object_shadows::casts(ps, t),
-                    ps.face_normal(t as u32),
-                )
-            })
+            .map(|t| (opaque[t], ps.face_normal(t as u32)))
             .collect::<Vec<_>>(),
     );
     ps.lights
@@ -222,7 +227,10 @@ impl Shadows {
                 Shadows::Map(maps)
             }
             ShadowMethod::Volume => Shadows::Volume(RayShadows::transparent_only(ps)),
-            ShadowMethod::Object => Shadows::Object(object_shadows_per_light(ps)?),
+            ShadowMethod::Object => Shadows::Object {
+                lights: object_shadows_per_light(ps)?,
+                transparent: RayShadows::transparent_only(ps),
+            },
             ShadowMethod::Scanline => Shadows::Scanline {
                 lines: ps
                     .lights
@@ -241,6 +249,7 @@ impl Shadows {
                     })
                     .collect::<Result<Vec<_>, _>>()?,
                 fallback: scanline_fallbacks(ps, settings)?,
+                transparent: RayShadows::transparent_only(ps),
             },
         })
     }

@@ -332,8 +332,10 @@ fn screen_door_coverage_equals_one_minus_kt() {
 }
 
 #[test]
-fn transparent_casters_tint_shadow_maps_and_rays_alike() {
-    // A blue-filtering quad between a point light and the floor.
+fn transparent_casters_tint_alike_in_every_shadow_method() {
+    // A blue-filtering quad between a point light and the floor: every
+    // method tints by its transmit colour (the exact methods through shadow
+    // rays that see only transparent casters).
     let mut scene = Scene::default();
     let floor = scene.add_material(Material::diffuse("floor", Vec3::splat(0.8)));
     let glass = scene.add_material(Material {
@@ -374,7 +376,13 @@ fn transparent_casters_tint_shadow_maps_and_rays_alike() {
     s_none.transparency = Some(TransparencyMode::ScreenDoor);
     let none = render_with(&scene, &s_none, VolumeCounting::ZFail);
     let centre = (16 * w + 16) as usize;
-    for method in [ShadowMethod::Ray, ShadowMethod::Map] {
+    for method in [
+        ShadowMethod::Ray,
+        ShadowMethod::Map,
+        ShadowMethod::Volume,
+        ShadowMethod::Object,
+        ShadowMethod::Scanline,
+    ] {
         let mut s = settings(method, w, h);
         s.transparency = Some(TransparencyMode::ScreenDoor);
         // Screen-door with kt ~ 0.5: look at a sample where the floor shows.
