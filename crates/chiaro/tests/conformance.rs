@@ -64,8 +64,6 @@ enum Verdict {
     Fails,
     /// The rule does not apply (the reason says why).
     NotApplicable,
-    /// The rule waits for work on another branch.
-    Pending,
     /// Listed in [`NOT_RUN`].
     NotRun,
 }
@@ -235,8 +233,6 @@ impl Matrix {
                     "holds".into()
                 } else if has(Verdict::NotRun) {
                     "not run".into()
-                } else if has(Verdict::Pending) {
-                    "pending".into()
                 } else {
                     "n/a".into()
                 };
@@ -250,7 +246,7 @@ impl Matrix {
             .filter(|r| {
                 matches!(
                     r.verdict,
-                    Verdict::Exception | Verdict::Fails | Verdict::Pending | Verdict::NotRun
+                    Verdict::Exception | Verdict::Fails | Verdict::NotRun
                 )
             })
             .collect();
@@ -999,32 +995,69 @@ fn rule_radiosity_matches_path(m: &mut Matrix, case: &Case, ids: &Ids) {
     );
 }
 
-/// Radiosity keeps textures (display-time texture modulation): implemented
-/// on another branch; the lead enables this rule at merge by setting
-/// `RADIOSITY_KEEPS_TEXTURES` and filling in the check below.
-const RADIOSITY_KEEPS_TEXTURES: bool = false;
-
-fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case) {
+/// Radiosity keeps textures (display-time texture modulation): on the
+/// pixels of textured surfaces, what the texture does to radiosity's
+/// picture (textured over untextured, per pixel) follows what it does to
+/// Phong's (Pearson correlation of the two ratios at least 0.9). A patch
+/// that averaged its texture would give a ratio nearly constant per patch.
+fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
     let rule = "radiosity keeps textures";
-    if !case.scene.materials.iter().any(|mat| mat.texture.is_some()) {
+    let textured = |k: Option<usize>| k.is_some_and(|k| case.scene.materials[k].texture.is_some());
+    let px: Vec<usize> = (0..ids.id.len())
+        .filter(|&i| textured(ids.material[i]) && !ids.silhouette(i))
+        .collect();
+    if px.len() < 20 {
         m.skip(
             rule,
             &case.name,
             "radiosity",
             Verdict::NotApplicable,
-            "no texture",
+            "fewer than 20 textured interior pixels",
         );
         return;
     }
-    if !RADIOSITY_KEEPS_TEXTURES {
-        m.skip(
-            rule,
-            &case.name,
-            "radiosity",
-            Verdict::Pending,
-            "waits for display-time texture modulation (branch honest)",
-        );
+    let mut plain = case.scene.clone();
+    for mat in &mut plain.materials {
+        mat.texture = None;
     }
+    let pair = |tech: Technique| {
+        let s = settings(&case.scene, Tech::Facade(tech));
+        (film(&case.scene, &s), film(&plain, &s))
+    };
+    let (rad, rad_plain) = pair(Technique::Radiosity);
+    let (ph, ph_plain) = pair(Technique::Phong);
+    let lum = |f: &Film, i: usize| f.color[i].dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    for &i in &px {
+        let (a, b) = (lum(&rad_plain, i), lum(&ph_plain, i));
+        if a > 1e-3 && b > 1e-3 {
+            xs.push(lum(&rad, i) / a);
+            ys.push(lum(&ph, i) / b);
+        }
+    }
+    let n = xs.len() as f32;
+    let (mx, my) = (xs.iter().sum::<f32>() / n, ys.iter().sum::<f32>() / n);
+    let (mut sxy, mut sxx, mut syy) = (0.0f32, 0.0f32, 0.0f32);
+    for (x, y) in xs.iter().zip(&ys) {
+        sxy += (x - mx) * (y - my);
+        sxx += (x - mx) * (x - mx);
+        syy += (y - my) * (y - my);
+    }
+    let corr = if sxx > 0.0 && syy > 0.0 {
+        sxy / (sxx * syy).sqrt()
+    } else {
+        0.0
+    };
+    m.check(
+        rule,
+        &case.name,
+        "radiosity",
+        xs.len() >= 20 && corr >= 0.9,
+        format!(
+            "correlation {corr:.3} of radiosity's and phong's texture ratios over {} pixels",
+            xs.len()
+        ),
+    );
 }
 
 // ---------------------------------------------------------------- matrix
@@ -1096,7 +1129,7 @@ fn conformance_matrix() {
         rule_fast_path_is_reference(&mut m, case);
         lap("radiosity = path", &case.name);
         rule_radiosity_matches_path(&mut m, case, &ids);
-        rule_radiosity_keeps_textures(&mut m, case);
+        rule_radiosity_keeps_textures(&mut m, case, &ids);
         lap("done", &case.name);
     }
     let names: Vec<String> = cases.iter().map(|c| c.name.clone()).collect();
