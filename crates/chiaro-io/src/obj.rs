@@ -52,7 +52,7 @@ pub fn load_obj_meshes(path: &Path) -> Result<Imported> {
     let (text, skipped) = without_points_and_lines(&String::from_utf8_lossy(&bytes));
     let dir = path.parent().unwrap_or_else(|| Path::new("."));
     let loaded = tobj::load_obj_buf(&mut Cursor::new(text.as_bytes()), &options(), |mtl| {
-        tobj::load_mtl(dir.join(mtl))
+        mtl_or_error(|| tobj::load_mtl(dir.join(mtl)))
     });
     let mut out = build(loaded, Some(dir), path)?;
     note_skipped(&mut out, skipped, path);
@@ -70,7 +70,7 @@ pub fn load_obj_str(obj: &str, mtl: Option<&str>, name: &str) -> Result<Imported
         &mut Cursor::new(text.as_bytes()),
         &options(),
         |_| match mtl {
-            Some(text) => tobj::load_mtl_buf(&mut Cursor::new(text.as_bytes())),
+            Some(text) => mtl_or_error(|| tobj::load_mtl_buf(&mut Cursor::new(text.as_bytes()))),
             None => Err(tobj::LoadError::OpenFileFailed),
         },
     );
@@ -79,6 +79,15 @@ pub fn load_obj_str(obj: &str, mtl: Option<&str>, name: &str) -> Result<Imported
     note_skipped(&mut out, skipped, path);
     note_undefined(&mut out, &text, path);
     Ok(out)
+}
+
+/// Reads a material library through `load`, turning a panic into a parse
+/// error: tobj 4.0 panics on a colour with fewer than three numbers
+/// (`Kd 1`), found by fuzzing. The OBJ then loads with the default material
+/// and a warning.
+fn mtl_or_error(load: impl FnOnce() -> tobj::MTLLoadResult) -> tobj::MTLLoadResult {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(load))
+        .unwrap_or(Err(tobj::LoadError::MaterialParseError))
 }
 
 /// Drops `p` (point) and `l` (polyline) statements: tobj reads a polyline
