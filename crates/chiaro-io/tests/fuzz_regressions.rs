@@ -10,7 +10,7 @@ fn data(name: &str) -> PathBuf {
 }
 
 #[test]
-fn a_colour_with_one_number_in_an_mtl_is_a_warning() {
+fn a_colour_with_one_number_in_an_mtl_is_a_grey() {
     // The crash input as it was: its mangled `v` line is a clean parse error
     // after the library (read first) no longer panics.
     let path = data("short-kd.obj");
@@ -21,8 +21,8 @@ fn a_colour_with_one_number_in_an_mtl_is_a_warning() {
         msg.contains("short-kd.obj") && msg.contains("position parse error"),
         "{msg}"
     );
-    // Its library under a valid OBJ: the geometry loads with the default
-    // material and a warning, from a file and from memory.
+    // Its library under a valid OBJ: `Kd 000000` is the MTL format's grey
+    // (one number for all three), `Ks 0 al` is dropped; the materials load.
     let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fuzz-short-kd");
     std::fs::create_dir_all(&d).expect("dir");
     let obj = "mtllib short-kd.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl white\nf 1 2 3\n";
@@ -30,18 +30,21 @@ fn a_colour_with_one_number_in_an_mtl_is_a_warning() {
     std::fs::copy(data("short-kd.mtl"), d.join("short-kd.mtl")).expect("mtl");
     let loaded = chiaro_io::load_scene(&d.join("tri.obj")).expect("the triangle loads");
     assert_eq!(loaded.scene.triangle_count(), 1);
-    let w = loaded.warnings.join("\n");
-    assert!(w.contains("material library could not be read"), "{w}");
+    assert!(
+        loaded.scene.materials.iter().any(|m| m.name == "white"),
+        "{:?}",
+        loaded.warnings
+    );
     let mtl = std::fs::read_to_string(data("short-kd.mtl")).expect("mtl");
     let imported = chiaro_io::obj::load_obj_str(obj, Some(&mtl), "tri.obj").expect("loads");
-    assert!(
-        imported
-            .warnings
-            .join("\n")
-            .contains("material library could not be read"),
-        "{:?}",
-        imported.warnings
-    );
+    assert!(imported.materials.iter().any(|m| m.name == "white"));
+    // One number is a grey: the same material as three equal numbers.
+    let tri = "mtllib g.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl g\nf 1 2 3\n";
+    let one = chiaro_io::obj::load_obj_str(tri, Some("newmtl g\nKd 0.25\n"), "g.obj").expect("one");
+    let three = chiaro_io::obj::load_obj_str(tri, Some("newmtl g\nKd 0.25 0.25 0.25\n"), "g.obj")
+        .expect("three");
+    assert_eq!(one.materials, three.materials);
+    assert!(one.warnings.is_empty(), "{:?}", one.warnings);
 }
 
 #[test]
