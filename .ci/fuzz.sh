@@ -2,11 +2,11 @@
 # CI fuzz stage: builds the cargo-fuzz targets in fuzz/ and runs each from
 # its checked-in corpus for a bounded time (FUZZING.md). A crash fails the
 # stage and leaves its input under fuzz/artifacts/<target>/.
-# FUZZ_SECONDS (default 20) bounds each target's run.
+# FUZZ_SECONDS (default 10) bounds each target's run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
-seconds="${FUZZ_SECONDS:-20}"
+seconds="${FUZZ_SECONDS:-10}"
 
 skip() {
   echo "SKIP fuzz: $*"
