@@ -112,6 +112,10 @@ pub struct MemoryBudget {
     pub limit: ByteSize,
 }
 
+/// The most a job's shadow maps take, however large its budget: past it,
+/// building the maps costs more time than the shadow rays that replace them.
+const SHADOW_MAP_CAP_BYTES: u64 = 512 << 20;
+
 /// The process-wide limit set by [`MemoryBudget::set_process`]; 0 = not set.
 static PROCESS_LIMIT: AtomicU64 = AtomicU64::new(0);
 
@@ -147,6 +151,14 @@ impl MemoryBudget {
     /// Sets the budget that [`Self::process`] returns from now on.
     pub fn set_process(limit: ByteSize) {
         PROCESS_LIMIT.store(limit.0.max(1), Ordering::Relaxed);
+    }
+
+    /// The bytes a job's shadow maps may take: a quarter of the budget (the
+    /// rest holds geometry, textures and films), at most 512 MiB. Lights
+    /// whose maps do not fit use shadow rays (the documented cheaper path),
+    /// so the estimate counts shadow maps only up to this.
+    pub fn shadow_map_bytes(&self) -> u64 {
+        (self.limit.0 / 4).min(SHADOW_MAP_CAP_BYTES)
     }
 
     /// `Ok` when `bytes` fit; otherwise a message naming `what`, its size and
@@ -263,6 +275,14 @@ mod tests {
         assert_eq!(mem_total_bytes(text), Some(16318284 * 1024));
         assert_eq!(mem_total_bytes("nothing"), None);
         assert!(MemoryBudget::machine_default().limit.0 > 0);
+    }
+
+    #[test]
+    fn shadow_maps_get_a_quarter_of_the_budget_up_to_the_cap() {
+        assert_eq!(MemoryBudget::new(64 << 20).shadow_map_bytes(), 16 << 20);
+        assert_eq!(MemoryBudget::new(2 << 30).shadow_map_bytes(), 512 << 20);
+        assert_eq!(MemoryBudget::new(64 << 30).shadow_map_bytes(), 512 << 20);
+        assert_eq!(MemoryBudget::new(3).shadow_map_bytes(), 0);
     }
 
     #[test]

@@ -27,6 +27,8 @@ pub mod film;
 pub mod geometry;
 pub mod prepared;
 pub mod progress;
+#[cfg(test)]
+mod proptests;
 pub mod sampling;
 pub mod scene;
 pub mod shading;

@@ -983,6 +983,15 @@ impl Builder<'_> {
         image: &gltf::Image,
         srgb: bool,
     ) -> std::result::Result<ImageTexture, String> {
+        // The gltf crate's `source()` unwraps these (found by fuzzing).
+        if let Some(json) = self.doc.as_json().images.get(image.index()) {
+            if json.buffer_view.is_some() && json.mime_type.is_none() {
+                return Err("an image in a buffer view needs a mimeType".into());
+            }
+            if json.buffer_view.is_none() && json.uri.is_none() {
+                return Err("an image needs a uri or a bufferView".into());
+            }
+        }
         let (bytes, source): (Vec<u8>, String) = match image.source() {
             gltf::image::Source::View { view, .. } => {
                 let data = self
@@ -1019,7 +1028,8 @@ impl Builder<'_> {
                 }
             }
         };
-        crate::images::load_texture_bytes(&bytes, &source, srgb).map_err(|e| e.to_string())
+        crate::images::load_texture_bytes_within(&bytes, &source, srgb, self.budget)
+            .map_err(|e| e.to_string())
     }
 }
 

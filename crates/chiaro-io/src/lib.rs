@@ -278,9 +278,14 @@ impl Imported {
     }
 }
 
-/// Builds a whole scene from one mesh file: its objects, its lights or
-/// default ones, its first camera or one framing the bounds.
-fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
+/// Builds a whole scene from one mesh file, as [`load_scene`] does: its
+/// objects, its lights or default ones, its first camera or one framing the
+/// bounds. `path` names the file in messages.
+///
+/// # Errors
+/// [`IoError::Format`] when the file has no triangles (saying what was
+/// skipped) or the scene does not validate.
+pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
     if imported.meshes.iter().all(|m| m.indices.is_empty()) {
         let skipped = if imported.warnings.is_empty() {
             String::new()

@@ -52,7 +52,11 @@ pub fn load_obj_meshes(path: &Path) -> Result<Imported> {
     let (text, skipped) = without_points_and_lines(&String::from_utf8_lossy(&bytes));
     let dir = path.parent().unwrap_or_else(|| Path::new("."));
     let loaded = tobj::load_obj_buf(&mut Cursor::new(text.as_bytes()), &options(), |mtl| {
-        tobj::load_mtl(dir.join(mtl))
+        mtl_or_error(|| {
+            let text = std::fs::read_to_string(dir.join(mtl))
+                .map_err(|_| tobj::LoadError::OpenFileFailed)?;
+            tobj::load_mtl_buf(&mut Cursor::new(mtl_colours(&text).as_bytes()))
+        })
     });
     let mut out = build(loaded, Some(dir), path)?;
     note_skipped(&mut out, skipped, path);
@@ -70,7 +74,9 @@ pub fn load_obj_str(obj: &str, mtl: Option<&str>, name: &str) -> Result<Imported
         &mut Cursor::new(text.as_bytes()),
         &options(),
         |_| match mtl {
-            Some(text) => tobj::load_mtl_buf(&mut Cursor::new(text.as_bytes())),
+            Some(text) => {
+                mtl_or_error(|| tobj::load_mtl_buf(&mut Cursor::new(mtl_colours(text).as_bytes())))
+            }
             None => Err(tobj::LoadError::OpenFileFailed),
         },
     );
@@ -79,6 +85,39 @@ pub fn load_obj_str(obj: &str, mtl: Option<&str>, name: &str) -> Result<Imported
     note_skipped(&mut out, skipped, path);
     note_undefined(&mut out, &text, path);
     Ok(out)
+}
+
+/// MTL text with its `Ka`/`Kd`/`Ks`/`Ke` colours in the three-number form
+/// tobj 4.0 reads (it panics on fewer, found by fuzzing): one number is a
+/// grey (`Kd 0.5` = `Kd 0.5 0.5 0.5`, as the MTL format defines it); a
+/// colour with none or two numbers is dropped (its default stays).
+fn mtl_colours(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines() {
+        let mut words = line.split_whitespace();
+        let key = words.next();
+        let values: Vec<&str> = words.collect();
+        match (key, values.as_slice()) {
+            (Some(k @ ("Ka" | "Kd" | "Ks" | "Ke")), [v]) if v.parse::<f32>().is_ok() => {
+                out.push_str(&format!("{k} {v} {v} {v}"));
+            }
+            (Some("Ka" | "Kd" | "Ks" | "Ke"), [] | [_, _]) => {
+                out.push('#');
+                out.push_str(line);
+            }
+            _ => out.push_str(line),
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Reads a material library through `load`, turning a panic into a parse
+/// error (the OBJ then loads with the default material and a warning): a
+/// guard for tobj panics [`mtl_colours`] does not foresee.
+fn mtl_or_error(load: impl FnOnce() -> tobj::MTLLoadResult) -> tobj::MTLLoadResult {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(load))
+        .unwrap_or(Err(tobj::LoadError::MaterialParseError))
 }
 
 /// Drops `p` (point) and `l` (polyline) statements: tobj reads a polyline

@@ -17,8 +17,10 @@
 //!   ([`ShadowVolumes`]) and counted per visible sample by the renderer;
 //!   transparent casters tint by shadow rays that see only them.
 //!
-//! Shadow maps are sized against [`SHADOW_MAP_BUDGET`] before anything is
-//! allocated; lights past it use shadow rays, and a warning says which.
+//! Shadow maps are sized against the job's shadow-map share
+//! ([`chiaro_core::budget::MemoryBudget::shadow_map_bytes`] of
+//! [`RenderSettings::memory_budget`]) before anything is allocated; lights
+//! past it use shadow rays, and a warning says which.
 //!
 //! Objects with `casts_shadows = false` cast no shadow in any method.
 
@@ -215,7 +217,7 @@ impl Shadows {
                     ps,
                     &settings.shadow_map,
                     settings.light_samples.max(1),
-                    SHADOW_MAP_BUDGET,
+                    settings.memory_budget().shadow_map_bytes(),
                 );
                 progress.message(&format!(
                     "shadow maps: {} MiB",
@@ -570,11 +572,6 @@ pub(crate) struct ShadowMaps {
     pub(crate) warning: Option<String>,
 }
 
-/// The most memory the shadow maps of one render may take, in bytes
-/// (estimated before anything is allocated: texels times bytes per texel).
-/// Lights whose maps do not fit in what is left use shadow rays.
-pub(crate) const SHADOW_MAP_BUDGET: u64 = 512 << 20;
-
 /// Which lights get their shadow maps within `budget` bytes: `needs[i]` is
 /// light `i`'s bytes (`None`: it has no maps). Lights are taken in order,
 /// each if it fits in what is left. Returns per light whether it falls
@@ -791,7 +788,7 @@ impl ShadowMaps {
             let names: Vec<String> = refused.iter().map(|(li, _)| li.to_string()).collect();
             let largest = refused.iter().map(|r| r.1).max().unwrap_or(0);
             format!(
-                "shadow maps: light{} {} use{} shadow rays: their maps ({} MiB for the largest, at {res} texels per side) do not fit in the {} MiB shadow-map budget after the {} MiB of the lights before them",
+                "shadow maps: light{} {} use{} shadow rays: their maps ({} MiB for the largest, at {res} texels per side) do not fit in the {} MiB shadow-map budget (a quarter of the memory limit, at most 512 MiB) after the {} MiB of the lights before them",
                 if refused.len() > 1 { "s" } else { "" },
                 names.join(", "),
                 if refused.len() > 1 { "" } else { "s" },

@@ -737,13 +737,15 @@ fn many_point_lights(count: usize) -> Scene {
 
 #[test]
 fn shadow_maps_stay_within_their_budget() {
-    use crate::shadow::{SHADOW_MAP_BUDGET, ShadowMaps};
+    use crate::shadow::ShadowMaps;
+    // A 2 GiB job's shadow-map share: 512 MiB.
+    let share = chiaro_core::budget::MemoryBudget::new(2 << 30).shadow_map_bytes();
     // The case, planned without allocating: 40 point lights at the
     // default 2048 texels, a cube of 6 x 2048^2 f32 each (96 MiB): five fit
     // in 512 MiB, the other 35 use shadow rays.
     let cube = 6 * 2048 * 2048 * 4u64;
-    let (by_ray, bytes) = crate::shadow::plan_budget(&vec![Some(cube); 40], SHADOW_MAP_BUDGET);
-    assert!(bytes <= SHADOW_MAP_BUDGET);
+    let (by_ray, bytes) = crate::shadow::plan_budget(&vec![Some(cube); 40], share);
+    assert!(bytes <= share);
     assert_eq!(by_ray.iter().filter(|&&r| !r).count(), 5);
     assert!(by_ray[5..].iter().all(|&r| r));
     // Built for real with a small budget: the maps kept stay within it, a

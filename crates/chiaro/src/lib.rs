@@ -128,7 +128,8 @@ fn accelerator(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
 /// What rendering `scene` with `settings` will allocate, by consumer, in
 /// bytes: the prepared triangles and vertices (with the spheres the scan
 /// converter and radiosity tessellate), texture mip levels, the film and
-/// the scan converter's supersamples, shadow maps, and a dense radiosity
+/// the scan converter's supersamples, shadow maps (up to their share of the
+/// budget, [`chiaro_core::budget::MemoryBudget::shadow_map_bytes`]), and a dense radiosity
 /// matrix. The per-item sizes are the constants of
 /// [`chiaro_core::budget`]; the sum is an estimate of the peak, made
 /// without allocating anything.
@@ -202,10 +203,16 @@ pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> chiaro_core:
         );
     }
     if settings.shadows == ShadowMethod::Map {
-        // Up to six depth faces of f32 per light.
+        // Up to six depth faces of f32 per light; lights past the shadow-map
+        // share of the budget use shadow rays instead, so no more than it.
         let r = u64::from(settings.shadow_map.resolution);
         let lights = scene.lights.len() as u64;
-        e.add("shadow maps", bytes_of(r * r * 6, 4).saturating_mul(lights));
+        e.add(
+            "shadow maps",
+            bytes_of(r * r * 6, 4)
+                .saturating_mul(lights)
+                .min(settings.memory_budget().shadow_map_bytes()),
+        );
     }
     if matches!(settings.technique, Technique::Radiosity | Technique::Hybrid) {
         let RadiositySettings { solver, .. } = &settings.radiosity;

@@ -79,11 +79,11 @@ pub fn vertex_normals(
 
 /// Comparisons made by [`vertex_normals`], for tests that bound its work.
 #[derive(Debug, Default, Clone, Copy)]
-struct Work {
+pub(crate) struct Work {
     /// Point-to-representative distance tests in the weld.
-    weld_tests: usize,
+    pub(crate) weld_tests: usize,
     /// Normal-to-normal dot products in the crease pass.
-    crease_tests: usize,
+    pub(crate) crease_tests: usize,
 }
 
 /// Welded vertices with at most this many corners average exactly the faces
@@ -252,7 +252,7 @@ pub fn weld_tolerance(positions: &[Vec3], indices: &[[u32; 3]]) -> f32 {
 /// expected. Points too far out for a cell index, or any point when
 /// `tol` is 0, weld only with equal points, which is all the tolerance would
 /// allow there (their spacing in `f32` exceeds `tol`).
-fn weld(positions: &[Vec3], tol: f32, work: &mut Work) -> Vec<u32> {
+pub(crate) fn weld(positions: &[Vec3], tol: f32, work: &mut Work) -> Vec<u32> {
     #[derive(Hash, PartialEq, Eq, Clone, Copy)]
     enum Key {
         Cell([i64; 3]),

@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# CI fuzz stage: builds the cargo-fuzz targets in fuzz/ and runs each from
+# its checked-in corpus for a bounded time (FUZZING.md). A crash fails the
+# stage and leaves its input under fuzz/artifacts/<target>/.
+# FUZZ_SECONDS (default 10) bounds each target's run.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export CARGO_TERM_COLOR=never
+seconds="${FUZZ_SECONDS:-10}"
+
+skip() {
+  echo "SKIP fuzz: $*"
+  exit 0
+}
+
+# cargo-fuzz needs a nightly compiler (libFuzzer's coverage flags).
+if ! cargo +nightly --version >/dev/null 2>&1; then
+  rustup toolchain install nightly --profile minimal ||
+    skip "no nightly toolchain could be installed (rustup toolchain install nightly failed)"
+fi
+if ! cargo fuzz --version >/dev/null 2>&1; then
+  cargo install cargo-fuzz --locked ||
+    skip "cargo-fuzz could not be installed (cargo install cargo-fuzz failed)"
+fi
+cargo +nightly --version
+cargo fuzz --version
+
+# No sanitizer: chiaro forbids unsafe code, and without AddressSanitizer the
+# build is about half as long and runs twice as fast; debug assertions and
+# overflow checks stay on (cargo fuzz's default release build).
+cd fuzz
+targets=$(cargo fuzz list)
+start=$(date +%s)
+cargo +nightly fuzz build --sanitizer none
+echo "built in $(($(date +%s) - start)) s"
+
+for t in $targets; do
+  mkdir -p "corpus/$t"
+  # Fuzz into a scratch copy so that CI never grows the checked-in corpus.
+  work=$(mktemp -d)
+  cp -r "corpus/$t/." "$work/"
+  echo "== fuzz $t (${seconds} s)"
+  log="$work.log"
+  set +e
+  cargo +nightly fuzz run --sanitizer none "$t" "$work" -- \
+    -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=262144 \
+    -print_final_stats=1 >"$log" 2>&1
+  status=$?
+  set -e
+  grep -E "^(#[0-9]+ +DONE|stat::number_of_executed_units|stat::peak_rss_mb|SUMMARY|Test unit written)" "$log" || true
+  if [ "$status" -ne 0 ]; then
+    tail -n 40 "$log"
+  fi
+  rm -rf "$work" "$log"
+  if [ "$status" -ne 0 ]; then
+    echo "fuzz target $t failed: its input is in fuzz/artifacts/$t/"
+    exit 1
+  fi
+done
+echo "fuzz stage: $(($(date +%s) - start)) s"

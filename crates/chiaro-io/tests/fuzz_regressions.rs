@@ -1,0 +1,60 @@
+//! Inputs the fuzz targets (`fuzz/`) once crashed on, each loaded through
+//! the public loaders and expected to end cleanly (`tests/data/fuzz/README.md`).
+
+use std::path::{Path, PathBuf};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/fuzz")
+        .join(name)
+}
+
+#[test]
+fn a_colour_with_one_number_in_an_mtl_is_a_grey() {
+    // The crash input as it was: its mangled `v` line is a clean parse error
+    // after the library (read first) no longer panics.
+    let path = data("short-kd.obj");
+    let msg = chiaro_io::load_scene(&path)
+        .expect_err("a bad vertex")
+        .to_string();
+    assert!(
+        msg.contains("short-kd.obj") && msg.contains("position parse error"),
+        "{msg}"
+    );
+    // Its library under a valid OBJ: `Kd 000000` is the MTL format's grey
+    // (one number for all three), `Ks 0 al` is dropped; the materials load.
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fuzz-short-kd");
+    std::fs::create_dir_all(&d).expect("dir");
+    let obj = "mtllib short-kd.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl white\nf 1 2 3\n";
+    std::fs::write(d.join("tri.obj"), obj).expect("obj");
+    std::fs::copy(data("short-kd.mtl"), d.join("short-kd.mtl")).expect("mtl");
+    let loaded = chiaro_io::load_scene(&d.join("tri.obj")).expect("the triangle loads");
+    assert_eq!(loaded.scene.triangle_count(), 1);
+    assert!(
+        loaded.scene.materials.iter().any(|m| m.name == "white"),
+        "{:?}",
+        loaded.warnings
+    );
+    let mtl = std::fs::read_to_string(data("short-kd.mtl")).expect("mtl");
+    let imported = chiaro_io::obj::load_obj_str(obj, Some(&mtl), "tri.obj").expect("loads");
+    assert!(imported.materials.iter().any(|m| m.name == "white"));
+    // One number is a grey: the same material as three equal numbers.
+    let tri = "mtllib g.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl g\nf 1 2 3\n";
+    let one = chiaro_io::obj::load_obj_str(tri, Some("newmtl g\nKd 0.25\n"), "g.obj").expect("one");
+    let three = chiaro_io::obj::load_obj_str(tri, Some("newmtl g\nKd 0.25 0.25 0.25\n"), "g.obj")
+        .expect("three");
+    assert_eq!(one.materials, three.materials);
+    assert!(one.warnings.is_empty(), "{:?}", one.warnings);
+}
+
+#[test]
+fn a_buffer_view_image_without_a_mime_type_is_ignored_with_a_warning() {
+    let path = data("image-without-mime-type.glb");
+    let loaded = chiaro_io::load_scene(&path).expect("the meshes load");
+    assert!(loaded.scene.triangle_count() > 0);
+    let w = loaded.warnings.join("\n");
+    assert!(
+        w.contains("needs a mimeType") && w.contains("texture ignored"),
+        "{w}"
+    );
+}

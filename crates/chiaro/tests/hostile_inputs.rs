@@ -1,0 +1,326 @@
+//! The small hostile inputs of the reliability review, each through the
+//! path the CLI takes (`chiaro::io::load_scene`, then `chiaro::render`),
+//! ending in a clear refusal or a correct render, quickly and in bounded
+//! memory. The 5,000 tessellated spheres are in `memory_budget.rs`, the
+//! 4096-subdivision plane in chiaro-io's `import_toml.rs` and the CLI's
+//! tests.
+
+use chiaro::budget::{ByteSize, MemoryBudget};
+use chiaro::scene::{Light, Material, Object, Scene, ShadowMethod, Technique};
+use chiaro::{NoProgress, Progress, Vec3};
+use chiaro_core::geometry::primitives;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+/// A fresh directory under the target folder for one test's files.
+fn dir(name: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("hostile-{name}"));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// The loaders' process budget of these tests: 1 GiB, as `--memory-limit 1G`.
+fn limit_1g() {
+    MemoryBudget::set_process(ByteSize(1 << 30));
+}
+
+/// CRC-32 (ISO 3309, as PNG uses), bit by bit.
+fn crc32(data: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in data {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 == 1 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A PNG whose header says 16384 x 16384 grey: what a 261 KB valid file of
+/// zeros opens with. Its refusal reads nothing past the header.
+fn huge_png() -> Vec<u8> {
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend(16384u32.to_be_bytes());
+    ihdr.extend(16384u32.to_be_bytes());
+    ihdr.extend([8, 0, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend(13u32.to_be_bytes());
+    png.extend(&ihdr);
+    png.extend(crc32(&ihdr).to_be_bytes());
+    // An empty IDAT and IEND: the header is all the check reads.
+    for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
+        png.extend(0u32.to_be_bytes());
+        png.extend(chunk);
+        png.extend(crc32(chunk).to_be_bytes());
+    }
+    png
+}
+
+/// Standard base64 with padding.
+fn base64(bytes: &[u8]) -> String {
+    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::new();
+    for c in bytes.chunks(3) {
+        let n = (u32::from(c[0]) << 16)
+            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
+            | u32::from(*c.get(2).unwrap_or(&0));
+        for i in 0..4 {
+            if i <= c.len() {
+                out.push(A[(n >> (18 - 6 * i) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_sparse_accessor_of_2_31_elements_is_refused() {
+    limit_1g();
+    let d = dir("sparse");
+    let path = d.join("sparse.gltf");
+    std::fs::write(
+        &path,
+        r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [{"componentType": 5126, "count": 2147483648, "type": "VEC3",
+          "min": [0, 0, 0], "max": [1, 2, 3],
+          "sparse": {"count": 1, "indices": {"bufferView": 0, "componentType": 5125},
+            "values": {"bufferView": 1}}}],
+        "bufferViews": [{"buffer": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 4, "byteLength": 12}],
+        "buffers": [{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}]}"#,
+    )
+    .expect("write");
+    let msg = chiaro::io::load_scene(&path)
+        .expect_err("24 GiB of zeros")
+        .to_string();
+    assert!(
+        msg.contains("sparse.gltf")
+            && msg.contains("2147483648 elements")
+            && msg.contains("memory limit is 1.0 GiB"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_16384_square_png_is_refused_as_texture_environment_and_data_uri() {
+    limit_1g();
+    let d = dir("png");
+    std::fs::write(d.join("big.png"), huge_png()).expect("write");
+    let expect_refusal = |msg: &str| {
+        assert!(
+            msg.contains("big.png") && msg.contains("16384x16384") && msg.contains("1.0 GiB"),
+            "{msg}"
+        );
+    };
+    // As a material's texture and as the environment of a TOML scene.
+    for (i, text) in [
+        "[material.m]\ntexture = \"big.png\"\n[[object]]\nprimitive = \"sphere\"\nmaterial = \"m\"\n",
+        "[environment]\ntexture = \"big.png\"\n[[object]]\nprimitive = \"sphere\"\n",
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let scene = d.join(format!("s{i}.toml"));
+        std::fs::write(&scene, text).expect("write");
+        expect_refusal(&chiaro::io::load_scene(&scene).expect_err("refused").to_string());
+    }
+    // As a data: URI in a glTF file: the texture is dropped with a warning
+    // naming the refusal, and the triangle still loads.
+    let gltf = format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+        "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_0": 1}}, "material": 0}}]}}],
+        "materials": [{{"pbrMetallicRoughness": {{"baseColorTexture": {{"index": 0}}}}}}],
+        "textures": [{{"source": 0}}],
+        "images": [{{"uri": "data:image/png;base64,{}"}}],
+        "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
+          {{"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}}],
+        "bufferViews": [{{"buffer": 0, "byteLength": 36}}, {{"buffer": 0, "byteOffset": 36, "byteLength": 24}}],
+        "buffers": [{{"byteLength": 60, "uri": "data:application/octet-stream;base64,{}"}}]}}"#,
+        base64(&huge_png()),
+        base64(
+            &[
+                0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0,
+            ]
+            .iter()
+            .flat_map(|f| f.to_le_bytes())
+            .collect::<Vec<u8>>()
+        ),
+    );
+    let path = d.join("big.gltf");
+    std::fs::write(&path, gltf).expect("write");
+    let loaded = chiaro::io::load_scene(&path).expect("the triangle loads");
+    assert_eq!(loaded.scene.triangle_count(), 1);
+    assert!(loaded.scene.textures.is_empty());
+    let w = loaded.warnings.join("\n");
+    assert!(
+        w.contains("images[0]") && w.contains("16384x16384") && w.contains("texture ignored"),
+        "{w}"
+    );
+}
+
+/// Collects warnings.
+#[derive(Debug, Default)]
+struct Warnings(Mutex<Vec<String>>);
+
+impl Progress for Warnings {
+    fn begin(&self, _stage: &str, _total: u64) {}
+    fn advance(&self, _n: u64) {}
+    fn warning(&self, text: &str) {
+        self.0.lock().expect("lock").push(text.to_string());
+    }
+}
+
+/// A floor and a box on it under `n` point lights in a row.
+fn lit_box(n: usize) -> Scene {
+    let mut scene = Scene::default();
+    let m = scene.add_material(Material::diffuse("white", Vec3::splat(0.8)));
+    let floor = scene.add_mesh(primitives::plane(4.0, 1));
+    let cube = scene.add_mesh(primitives::box_mesh(Vec3::splat(0.5)));
+    for (mesh, y) in [(floor, 0.0), (cube, 0.5)] {
+        let mut o = Object {
+            geometry: chiaro::scene::Geometry::Mesh(mesh),
+            material: m,
+            ..Default::default()
+        };
+        o.transform.translate = Vec3::new(0.0, y, 0.0);
+        scene.objects.push(o);
+    }
+    scene.lights = (0..n)
+        .map(|i| Light::Point {
+            position: Vec3::new(-2.0 + 4.0 * i as f32 / n as f32, 3.0, 0.5),
+            color: Vec3::ONE,
+            intensity: 20.0 / n as f32,
+            attenuation: chiaro::scene::Attenuation::InverseSquare,
+        })
+        .collect();
+    scene.camera.eye = Vec3::new(0.0, 4.0, 6.0);
+    scene.camera.look_at = Vec3::ZERO;
+    scene
+}
+
+#[test]
+fn forty_shadow_mapped_lights_degrade_to_shadow_rays_within_the_budget() {
+    let scene = lit_box(40);
+    let mut s = scene.render.clone();
+    s.technique = Technique::Phong;
+    s.width = 48;
+    s.height = 36;
+    s.samples = 1;
+    s.shadows = ShadowMethod::Map;
+    s.shadow_map.resolution = 512;
+    // 64 MiB of maps (a quarter of 256 MiB): ten 6 MiB cubes, then rays.
+    s.memory_limit = Some(ByteSize(256 << 20));
+    let e = chiaro::memory_estimate(&scene, &s);
+    assert!(e.check(s.memory_budget()).is_ok(), "{e:?}");
+    let warnings = Warnings::default();
+    let mapped = chiaro::render(&scene, &s, &warnings).expect("renders");
+    assert!(mapped.is_clean());
+    let w = warnings.0.lock().expect("lock").join("\n");
+    assert!(
+        w.contains("lights 10, 11,") && w.contains("39 use shadow rays") && w.contains("64 MiB"),
+        "{w}"
+    );
+    // The same picture as shadow rays for every light, up to the maps'
+    // bias at the shadow edges.
+    s.shadows = ShadowMethod::Ray;
+    let rays = chiaro::render(&scene, &s, &NoProgress).expect("renders");
+    let diff: f32 = mapped
+        .color
+        .iter()
+        .zip(&rays.color)
+        .map(|(a, b)| (*a - *b).abs().element_sum())
+        .sum();
+    let total: f32 = rays.color.iter().map(|c| c.element_sum()).sum();
+    assert!(total > 0.0 && diff / total < 0.03, "{diff} / {total}");
+}
+
+#[test]
+fn huge_shadow_maps_are_refused_or_replaced_by_rays() {
+    let scene = lit_box(3);
+    let mut s = scene.render.clone();
+    s.technique = Technique::Gouraud;
+    s.width = 32;
+    s.height = 24;
+    s.shadows = ShadowMethod::Map;
+    s.shadow_map.resolution = 16384;
+    let msg = chiaro::render(&scene, &s, &NoProgress)
+        .expect_err("refused")
+        .to_string();
+    assert!(msg.contains("render.shadow_map.resolution"), "{msg}");
+    // The largest allowed: 1.5 GiB a light, past the 512 MiB share at most.
+    s.shadow_map.resolution = 8192;
+    let warnings = Warnings::default();
+    let film = chiaro::render(&scene, &s, &warnings).expect("renders");
+    assert!(film.is_clean());
+    let w = warnings.0.lock().expect("lock").join("\n");
+    assert!(w.contains("lights 0, 1, 2 use shadow rays"), "{w}");
+}
+
+/// Loads an OBJ the way `chiaro render file.obj` does and renders it small
+/// (`visible`: something in the frame is lit).
+fn load_and_render(name: &str, obj: &str, visible: bool) -> chiaro::io::Loaded {
+    limit_1g();
+    let path = dir(name).join(format!("{name}.obj"));
+    std::fs::write(&path, obj).expect("write");
+    let loaded = chiaro::io::load_scene(&path).expect("loads");
+    let mut s = loaded.scene.render.clone();
+    s.technique = Technique::Gouraud;
+    s.width = 24;
+    s.height = 16;
+    s.samples = 1;
+    let film = chiaro::render(&loaded.scene, &s, &NoProgress).expect("renders");
+    assert!(film.is_clean());
+    if visible {
+        assert!(
+            film.color.iter().any(|c| c.element_sum() > 0.0),
+            "{name}: black"
+        );
+    }
+    loaded
+}
+
+#[test]
+fn thirty_thousand_identical_faces_load_and_render() {
+    let mut obj = String::from("v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    obj += &"f 1 2 3\n".repeat(30_000);
+    let loaded = load_and_render("repeated", &obj, true);
+    assert_eq!(loaded.scene.triangle_count(), 30_000);
+}
+
+#[test]
+fn a_grid_with_one_far_triangle_loads_and_renders() {
+    let n = 100;
+    let mut obj = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            obj += &format!("v {} {} 0\n", i as f32 / n as f32, j as f32 / n as f32);
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i + 1;
+            obj += &format!(
+                "f {a} {} {}\nf {a} {} {}\n",
+                a + 1,
+                a + n + 2,
+                a + n + 2,
+                a + n + 1
+            );
+        }
+    }
+    obj += "v 1e12 1e12 1e12\nv 1.000001e12 1e12 1e12\nv 1e12 1.000001e12 1e12\n";
+    let far = (n + 1) * (n + 1);
+    obj += &format!("f {} {} {}\n", far + 1, far + 2, far + 3);
+    // Framed to include the far triangle, the grid is below a pixel.
+    let loaded = load_and_render("far", &obj, false);
+    assert_eq!(loaded.scene.triangle_count(), 20_001);
+    let b = chiaro::scene_bounds(&loaded.scene);
+    assert!(b.max.x >= 1e12 && b.min.x == 0.0, "{b:?}");
+}
