@@ -34,11 +34,13 @@ diffuse = [0.8, 0.2, 0.1]
 specular = 0.3
 
 [[object]]
-primitive = { sphere = { radius = 1 } }
+primitive = "sphere"
+radius = 1
 material = "red"
 
 [[object]]
-primitive = { plane = { size = 8 } }
+primitive = "plane"
+size = 8
 transform = { translate = [0, -1, 0] }
 "#;
 
