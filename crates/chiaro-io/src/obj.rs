@@ -206,6 +206,7 @@ fn parse_obj(text: &str, path: &Path, warnings: &mut Vec<String>) -> Result<Pars
     let mut skipped = 0usize;
     let mut polygon: Vec<u32> = Vec::new();
     let mut short_faces = 0usize;
+    let mut dropped = 0usize;
     for (line_no, line) in text.lines().enumerate() {
         // A `#` starts a comment, also after a statement.
         let line = line.split('#').next().unwrap_or("");
@@ -299,8 +300,8 @@ fn parse_obj(text: &str, path: &Path, warnings: &mut Vec<String>) -> Result<Pars
             "f" => {
                 polygon.clear();
                 for (at, w) in ws {
-                    let key =
-                        face_vertex(w, &p).map_err(|m| error_at(path, line_no, line, at, m))?;
+                    let key = face_vertex(w, &p, &mut dropped)
+                        .map_err(|m| error_at(path, line_no, line, at, m))?;
                     let next = run.keys.len() as u32;
                     let id = *run.map.entry(key).or_insert(next);
                     if id == next {
@@ -366,6 +367,13 @@ fn parse_obj(text: &str, path: &Path, warnings: &mut Vec<String>) -> Result<Pars
             path.display()
         ));
     }
+    if dropped > 0 {
+        warnings.push(format!(
+            "{}: {dropped} texture coordinate or normal index(es) out of bounds: \
+             those vertices are read without them",
+            path.display()
+        ));
+    }
     if short_faces > 0 {
         warnings.push(format!(
             "{}: {short_faces} face(s) with fewer than 3 vertices skipped",
@@ -376,8 +384,13 @@ fn parse_obj(text: &str, path: &Path, warnings: &mut Vec<String>) -> Result<Pars
 }
 
 /// One `v`, `v/vt`, `v//vn` or `v/vt/vn` face vertex as 0-based indices
-/// ([`NONE`] where absent), or what is wrong with it.
-fn face_vertex(word: &str, p: &ParsedObj) -> std::result::Result<[u32; 3], String> {
+/// ([`NONE`] where absent), or what is wrong with it. A `vt` or `vn` index
+/// out of bounds is dropped and counted in `dropped`.
+fn face_vertex(
+    word: &str,
+    p: &ParsedObj,
+    dropped: &mut usize,
+) -> std::result::Result<[u32; 3], String> {
     let mut key = [NONE; 3];
     let counts = [p.positions.len(), p.uvs.len(), p.normals.len()];
     let kinds = ["vertex", "texture coordinate", "normal"];
@@ -399,6 +412,11 @@ fn face_vertex(word: &str, p: &ParsedObj) -> std::result::Result<[u32; 3], Strin
                 "f: {} index 0 in {word:?} (OBJ indices start at 1)",
                 kinds[slot]
             ));
+        }
+        if slot > 0 && !(0..n).contains(&index) {
+            // tobj read such faces without the attribute; so do we, with a warning.
+            *dropped += 1;
+            continue;
         }
         if !(0..n).contains(&index) {
             return Err(format!(
@@ -595,7 +613,7 @@ fn build(
                 .iter()
                 .map(|k| parsed.normals[k[2] as usize].normalize_or_zero())
                 .collect();
-            if mesh.normals.iter().any(|v| *v == Vec3::ZERO) {
+            if mesh.normals.contains(&Vec3::ZERO) {
                 out.warnings.push(format!(
                     "{}: object {name:?} has zero or invalid normals: they will be recomputed",
                     path.display()

@@ -226,18 +226,18 @@ mod tests {
             parse_point("--eye", "1,-2, 3.5"),
             Ok(Vec3::new(1.0, -2.0, 3.5))
         );
-        let e = parse_point("--eye", "1,2").unwrap_err();
+        let e = parse_point("--eye", "1,2").expect_err("an error");
         assert_eq!(e.0, "--eye needs three numbers like 1,2,3, got \"1,2\"");
         assert!(
             parse_point("--look-at", "1,2,nan")
-                .unwrap_err()
+                .expect_err("an error")
                 .0
                 .starts_with("--look-at needs")
         );
         assert!(parse_point("--eye", "1,2,3,4").is_err());
         assert!(
             parse_fov("--fov", "180")
-                .unwrap_err()
+                .expect_err("an error")
                 .0
                 .starts_with("--fov needs")
         );
@@ -245,7 +245,7 @@ mod tests {
         assert_eq!(parse_up("--up", "Z"), Ok(UpAxis::Z));
         assert!(
             parse_up("--up", "x")
-                .unwrap_err()
+                .expect_err("an error")
                 .0
                 .contains("--up needs y or z")
         );
@@ -266,7 +266,7 @@ mod tests {
             name: Some("side".into()),
             ..Default::default()
         };
-        let e = apply_camera(&mut s, &choice, 1.0).unwrap_err();
+        let e = apply_camera(&mut s, &choice, 1.0).expect_err("an error");
         assert!(e.0.contains("\"side\"") && e.0.contains("top"), "{e}");
         assert_eq!(s, before);
         let by_index = CameraChoice {
@@ -286,7 +286,7 @@ mod tests {
         };
         assert!(
             apply_camera(&mut s, &same, 1.0)
-                .unwrap_err()
+                .expect_err("an error")
                 .0
                 .contains("same point")
         );
@@ -297,7 +297,7 @@ mod tests {
         };
         assert!(
             apply_camera(&mut s, &parallel, 1.0)
-                .unwrap_err()
+                .expect_err("an error")
                 .0
                 .starts_with("--up z")
         );
