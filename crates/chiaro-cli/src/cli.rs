@@ -39,6 +39,9 @@ pub enum Command {
         /// IP address to listen on; 0.0.0.0 exposes the viewer to the network.
         #[arg(long, default_value = "127.0.0.1")]
         host: String,
+        /// The starting camera.
+        #[command(flatten)]
+        camera: CameraFlags,
     },
     /// Describe a scene: objects, triangles, lights, materials, textures, bounds, warnings.
     Info {
@@ -95,6 +98,44 @@ pub struct RenderOptions {
     /// Override any render setting, e.g. `--set shadows=map --set whitted.max_depth=3`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// The camera.
+    #[command(flatten)]
+    pub camera: CameraFlags,
+}
+
+/// Camera flags shared by render, compare and serve (rules in `chiaro::camera`).
+#[derive(Debug, Args, Clone, Default)]
+pub struct CameraFlags {
+    /// One of the scene's cameras by name (a glTF camera or a TOML
+    /// `[cameras.NAME]`), or by index.
+    #[arg(long = "camera", value_name = "NAME")]
+    pub name: Option<String>,
+    /// The eye position, e.g. `--eye 0,1.5,4`.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub eye: Option<String>,
+    /// The point looked at, e.g. `--look-at 0,1,0`.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub look_at: Option<String>,
+    /// Vertical field of view in degrees.
+    #[arg(long, value_name = "DEG")]
+    pub fov: Option<String>,
+    /// The up axis, y or z; alone it frames the model again with that axis
+    /// up (a Z-up OBJ stands upright with `--up z`).
+    #[arg(long, value_name = "y|z")]
+    pub up: Option<String>,
+}
+
+impl CameraFlags {
+    /// The flags as a camera request, or an error naming the bad flag.
+    pub fn choice(&self) -> Result<chiaro::camera::CameraChoice, chiaro::camera::CameraError> {
+        chiaro::camera::CameraChoice::from_flags(
+            self.name.as_deref(),
+            self.eye.as_deref(),
+            self.look_at.as_deref(),
+            self.fov.as_deref(),
+            self.up.as_deref(),
+        )
+    }
 }
 
 /// `chiaro render`.

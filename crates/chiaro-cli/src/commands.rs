@@ -16,6 +16,13 @@ fn load(path: &Path) -> Result<Scene> {
     Ok(loaded.scene)
 }
 
+/// Applies the camera flags of `opts` for images of the size in `settings`.
+fn place_camera(scene: &mut Scene, opts: &RenderOptions, settings: &RenderSettings) -> Result<()> {
+    let choice = opts.camera.choice()?;
+    chiaro::camera::apply_camera(scene, &choice, settings.aspect())?;
+    Ok(())
+}
+
 /// A technique named on the command line (any case), or an error with a
 /// "did you mean" and the list.
 fn parse_technique(flag: &str, name: &str) -> Result<Technique> {
@@ -119,8 +126,9 @@ fn check_output_options(args: &RenderArgs, format: ImageFormat) -> Result<()> {
 pub fn render(args: RenderArgs) -> Result<()> {
     let format = check_output(&args.output)?;
     check_output_options(&args, format)?;
-    let scene = load(&args.scene)?;
+    let mut scene = load(&args.scene)?;
     let mut settings = settings_from(&scene, &args.opts)?;
+    place_camera(&mut scene, &args.opts, &settings)?;
     if let Some(t) = args.tonemap {
         settings.tonemap = match t {
             ToneMapArg::Clamp => ToneMap::Clamp,
@@ -363,8 +371,9 @@ pub fn compare(args: CompareArgs) -> Result<()> {
     if let Some(report) = &args.report {
         check_output_dir(report)?;
     }
-    let scene = load(&args.scene)?;
+    let mut scene = load(&args.scene)?;
     let settings = settings_from(&scene, &args.opts)?;
+    place_camera(&mut scene, &args.opts, &settings)?;
     if let Some(n) = args.opts.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n.max(1))

@@ -23,15 +23,26 @@ fn main() -> ExitCode {
     let result = match args.command {
         cli::Command::Render(r) => commands::render(r),
         cli::Command::Info { scene } => commands::info(&scene),
-        cli::Command::Serve { scene, port, host } => chiaro_serve::serve(
-            &scene,
-            chiaro_serve::ServeOptions {
-                host,
-                port,
-                ..Default::default()
-            },
-        )
-        .map_err(anyhow::Error::from),
+        cli::Command::Serve {
+            scene,
+            port,
+            host,
+            camera,
+        } => camera
+            .choice()
+            .map_err(anyhow::Error::from)
+            .and_then(|camera| {
+                chiaro_serve::serve(
+                    &scene,
+                    chiaro_serve::ServeOptions {
+                        host,
+                        port,
+                        camera,
+                        ..Default::default()
+                    },
+                )
+                .map_err(anyhow::Error::from)
+            }),
         cli::Command::Compare(c) => commands::compare(c),
     };
     match result {

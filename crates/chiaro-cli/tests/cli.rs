@@ -240,3 +240,50 @@ fn memory_limit_and_output_path_are_checked_before_rendering() {
     ]);
     assert_one_line_error(&o, "does not exist");
 }
+
+#[test]
+fn camera_flags_move_the_camera_and_bad_values_name_the_flag() {
+    let dir = fresh_dir("camera-flags");
+    let out = dir.join("moved.png");
+    let out = out.to_str().expect("utf-8 path");
+    let base = [
+        "render",
+        &cornell(),
+        "--technique",
+        "preview",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "-o",
+        out,
+    ];
+    let run = |extra: &[&str]| chiaro(&[&base[..], extra].concat());
+    // A negative coordinate is a value, not a flag.
+    let o = run(&[
+        "--eye",
+        "-0.5,0.5,2",
+        "--look-at",
+        "0,0.2,-1",
+        "--fov",
+        "50",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_one_line_error(
+        &run(&["--eye", "1,2"]),
+        "--eye needs three numbers like 1,2,3, got \"1,2\"",
+    );
+    assert_one_line_error(
+        &run(&["--look-at", "a,b,c"]),
+        "--look-at needs three numbers",
+    );
+    assert_one_line_error(
+        &run(&["--fov", "0"]),
+        "--fov needs degrees between 0 and 180",
+    );
+    assert_one_line_error(&run(&["--up", "x"]), "--up needs y or z, got \"x\"");
+    assert_one_line_error(
+        &run(&["--camera", "top"]),
+        "--camera: no camera named \"top\" (the scene has no named cameras)",
+    );
+}

@@ -24,6 +24,7 @@ pub mod accel;
 pub mod budget;
 pub mod error;
 pub mod film;
+pub mod framing;
 pub mod geometry;
 pub mod prepared;
 pub mod progress;

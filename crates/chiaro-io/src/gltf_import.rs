@@ -49,7 +49,7 @@
 use crate::{Imported, ImportedObject, IoError, Result};
 use chiaro_core::budget::MemoryBudget;
 use chiaro_core::scene::{
-    AlphaMode, Camera, Filter, Light, Material, Mesh, MetallicRoughness, Occlusion,
+    AlphaMode, Camera, Filter, Light, Material, Mesh, MetallicRoughness, NamedCamera, Occlusion,
     ReflectanceModel, SpotLight, Texture, TextureId, TransparencyMode, UvTransform, WrapMode,
 };
 use chiaro_core::scene::{Attenuation, ImageTexture};
@@ -396,13 +396,21 @@ impl Builder<'_> {
                                 .zfar()
                                 .filter(|f| f.is_finite() && *f > near)
                                 .unwrap_or(near * 1.0e7);
-                            self.out.cameras.push(Camera {
-                                eye,
-                                look_at: eye + f,
-                                up: u,
-                                fov_y_degrees: fov,
-                                near,
-                                far,
+                            // Named after the camera, else its node, else its index.
+                            let name = cam
+                                .name()
+                                .or(node.name())
+                                .map_or_else(|| format!("camera{}", cam.index()), str::to_owned);
+                            self.out.cameras.push(NamedCamera {
+                                name,
+                                camera: Camera {
+                                    eye,
+                                    look_at: eye + f,
+                                    up: u,
+                                    fov_y_degrees: fov,
+                                    near,
+                                    far,
+                                },
                             });
                         }
                         _ => self.note("a camera with a degenerate transform or fov was skipped"),
@@ -1193,7 +1201,8 @@ mod tests {
             (o.matrix.transform_point3(Vec3::ZERO) - Vec3::new(0.0, 0.0, -2.0)).length() < 1e-6
         );
         // yfov in radians becomes degrees; the camera looks down -z from z = 3.
-        let c = imp.cameras[0];
+        assert_eq!(imp.cameras[0].name, "camera0");
+        let c = imp.cameras[0].camera;
         assert!((c.fov_y_degrees - 0.5f32.to_degrees()).abs() < 1e-4);
         assert!((c.eye - Vec3::new(0.0, 0.0, 3.0)).length() < 1e-6);
         assert!((c.look_at - c.eye - Vec3::NEG_Z).length() < 1e-6);

@@ -2,7 +2,7 @@
 //!
 //! - [`scene_toml`]: the `.toml` scene format (README.md, "The scene format"), with
 //!   `file:line:col` errors and unknown keys rejected.
-//! - [`obj`]: Wavefront OBJ + MTL through tobj.
+//! - [`obj`]: Wavefront OBJ + MTL, read by our own parser (positions in errors).
 //! - [`gltf_import`]: glTF 2.0 (`.gltf`, `.glb`, embedded) through the gltf crate.
 //! - [`ply`]: Stanford PLY (ASCII and binary) through ply-rs-bw.
 //! - [`images`]: decoding image textures (PNG, JPEG, HDR, EXR) to linear texels.
@@ -31,10 +31,11 @@ pub mod scene_toml;
 
 pub use error::{IoError, Result};
 
-use chiaro_core::geometry::Aabb;
+pub use chiaro_core::framing::world_bounds;
+use chiaro_core::framing::{self, Framing, UpAxis};
 use chiaro_core::scene::{
-    Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, Object, Scene, Severity, Texture,
-    TextureId, Transform,
+    Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, NamedCamera, Object, Scene,
+    Severity, Texture, TextureId, Transform,
 };
 use chiaro_core::{Mat4, Vec3};
 use std::path::{Path, PathBuf};
@@ -139,8 +140,8 @@ pub struct Imported {
     pub objects: Vec<ImportedObject>,
     /// Lights, in the file's world space.
     pub lights: Vec<Light>,
-    /// Cameras, in the file's world space (the first is the default view).
-    pub cameras: Vec<Camera>,
+    /// Cameras, in the file's world space, named (the first is the default view).
+    pub cameras: Vec<NamedCamera>,
     /// Warnings met while reading, each naming the file.
     pub warnings: Vec<String>,
 }
@@ -301,16 +302,19 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
     let template = Object::default();
     imported.merge_into(&mut scene, Mat4::IDENTITY, None, &template);
     let mut warnings = imported.warnings.clone();
-    let bounds = world_bounds(&scene);
-    scene.camera = match imported.cameras.first() {
-        Some(c) => *c,
-        None => framing_camera(bounds, scene.render.aspect()),
+    scene.cameras = imported.cameras.clone();
+    let framed = match imported.cameras.first() {
+        Some(c) => Framing {
+            camera: c.camera,
+            inside: None,
+        },
+        None => framing::frame_scene(&scene, UpAxis::Y, scene.render.aspect(), None),
     };
-    // A camera inside the file keeps its clip range only if it is sane for the bounds.
+    scene.camera = framed.camera;
     scene.lights = imported.lights.clone();
     let has_emitters = scene.materials.iter().any(Material::is_emissive);
     if scene.lights.is_empty() {
-        scene.lights = default_lights(&scene.camera);
+        scene.lights = framed_lights(&framed);
         if !has_emitters {
             warnings.push(format!(
                 "{}: the file has no lights: added an ambient light and a directional light",
@@ -321,65 +325,28 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
     finish(scene, warnings, path)
 }
 
-/// The world-space bounds of every object (mesh vertices, sphere boxes).
-pub fn world_bounds(scene: &Scene) -> Aabb {
-    let mut b = Aabb::EMPTY;
-    for o in &scene.objects {
-        let m = o.transform.world_from_object();
-        match o.geometry {
-            Geometry::Mesh(id) => {
-                if let Some(mesh) = scene.meshes.get(id.index()) {
-                    for p in &mesh.positions {
-                        let q = m.transform_point3(*p);
-                        if q.is_finite() {
-                            b = b.grow(q);
-                        }
-                    }
-                }
-            }
-            Geometry::Sphere { radius } => {
-                for corner in 0..8 {
-                    let s = Vec3::new(
-                        if corner & 1 == 0 { -radius } else { radius },
-                        if corner & 2 == 0 { -radius } else { radius },
-                        if corner & 4 == 0 { -radius } else { radius },
-                    );
-                    let q = m.transform_point3(s);
-                    if q.is_finite() {
-                        b = b.grow(q);
-                    }
-                }
-            }
-        }
-    }
-    b
-}
-
-/// A camera on the +z side of `bounds` looking at its centre, far enough
-/// that the bounding sphere fits the vertical field of view (and the
-/// horizontal one for `aspect` < 1), slightly raised. An empty box gives the
-/// default camera.
-pub fn framing_camera(bounds: Aabb, aspect: f32) -> Camera {
-    if bounds.is_empty() {
-        return Camera::default();
-    }
-    let center = bounds.center();
-    let radius = (0.5 * bounds.diagonal()).max(1e-3);
-    let base = Camera::default();
-    let half_fov = (0.5 * base.fov_y_degrees).to_radians();
-    // The sphere fits where sin(half_fov) = radius / distance; for a narrow
-    // image the horizontal half-angle atan(aspect tan(half_fov)) is smaller.
-    let half_h = (aspect.clamp(0.05, 20.0) * half_fov.tan()).atan();
-    let distance = 1.1 * radius / half_fov.min(half_h).sin();
-    let dir = Vec3::new(0.0, 0.25, 1.0).normalize();
-    Camera {
-        eye: center + dir * distance,
-        look_at: center,
-        up: Vec3::Y,
-        near: (distance - radius).max(distance * 1e-3) * 0.5,
-        far: (distance + radius) * 2.0,
-        ..base
-    }
+/// The lights added to a file that has none, for the camera `framed`:
+/// [`default_lights`] outside; inside an interior (where a directional
+/// light would be shut out by the walls), ambient 0.1 and a point light at
+/// the open point the interior test passed, of intensity `d^2` for the
+/// mean distance `d` to the walls (so they receive about what a
+/// directional light of intensity 1 gives).
+pub fn framed_lights(framed: &Framing) -> Vec<Light> {
+    let Some(inside) = framed.inside else {
+        return default_lights(&framed.camera);
+    };
+    vec![
+        Light::Ambient {
+            color: Vec3::ONE,
+            intensity: 0.1,
+        },
+        Light::Point {
+            position: inside.point,
+            color: Vec3::ONE,
+            intensity: inside.mean_distance.powi(2),
+            attenuation: Default::default(),
+        },
+    ]
 }
 
 /// The lights added to a file that has none: ambient 0.1 and a white

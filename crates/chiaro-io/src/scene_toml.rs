@@ -14,6 +14,7 @@
 //! | --- | --- |
 //! | `[render]` | `technique` (`preview`, `flat`, `gouraud`, `phong`, `whitted`, `radiosity`, `hybrid`, `path`), `width`, `height` (1..=16384, at most 64 Mpixel), `samples`, `seed`, `shadows` (`none`, `map`, `volume`, `ray`, `object`, `scanline`), `transparency`, `aa` (`supersample`, `adaptive`, `post`), `filter` (`box`, `tent`: the reconstruction of the scan converter's supersamples), `light_samples`, `tonemap` (`clamp`, `reinhard`, `filmic`), `exposure`, `cull_backfaces`, `memory_limit` (`"8G"`, `"512M"` or bytes: the memory this scene may use; by default half the machine's); sub-tables `shadow_map` {`resolution`, `bias`, `slope_bias`, `pcf_radius`}, `whitted` {`max_depth`, `min_weight`, `adaptive_threshold`, `adaptive_max_depth`}, `path` {`max_depth`, `rr_depth`}, `radiosity` {`solver` (`jacobi`, `gauss-seidel`, `progressive`, `hierarchical`), `formfactor` (`hemicube`, `raycast`, `analytic`), `patch_size`, `hemicube_resolution`, `tolerance`, `max_iterations`}, `depth_cue` {`color`, `near`, `far`, `max_scale`, `min_scale`} |
 //! | `[camera]` | `eye`, `look_at`, `up`, `fov` (vertical, 0..180), `near`, `far` |
+//! | `[cameras.NAME]` | further cameras with the keys of `[camera]`, chosen with `chiaro render --camera NAME` |
 //! | `[[light]]` | `type` = `ambient` {`color`, `intensity`}; `point` {+ `position`, `attenuation`}; `directional` {`direction`, the way the light travels}; `spot` {`position`, `direction` or `look_at`, `attenuation`, `exponent` (Warn's n, default 1), `cone` (half-angle, default 90), `cone_softness`, `flaps` = [{`axis`, `min`, `max`}]}; `area` {`shape` = `quad` {`corner`, `edge_u`, `edge_v`} / `disk` {`center`, `normal`, `radius`} / `sphere` {`center`, `radius`}, `two_sided`} |
 //! | `[material.NAME]` | `ambient` (ka, relative to kd), `diffuse`, `specular`, `shininess`, `model` (`phong`, `blinn`, `torrance-sparrow`), `roughness`, `distribution` (`ggx`, `beckmann`), `reflect`, `transmit`, `ior`, `absorption`, `fresnel`, `transparency` (`interpolated`, `screen-door`, `filtered`), `texture`, `bump`, `normal_map`, `emission`, `emission_texture`, `two_sided` |
 //! | `[[object]]` | `name`, `mesh` (`.obj`, `.gltf`, `.glb`) or `primitive`, `material`, `transform`, `smooth`, `crease_angle`, `shade` (`flat`, `gouraud`, `phong`), `casts_shadows` |
@@ -121,9 +122,9 @@ use chiaro_core::geometry::primitives::MeshSize;
 use chiaro_core::glam::Mat4;
 use chiaro_core::scene::{
     AreaShape, Attenuation, Bump, Camera, DepthCue, Environment, Flap, Geometry, Light,
-    MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, Material, MaterialId, Mesh, Object, Procedural,
-    ProceduralKind, RadiositySettings, RenderSettings, Scene, Severity, ShadowMapSettings,
-    SpotLight, Texture, TextureId, Transform, WrapMode,
+    MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, Material, MaterialId, Mesh, NamedCamera, Object,
+    Procedural, ProceduralKind, RadiositySettings, RenderSettings, Scene, Severity,
+    ShadowMapSettings, SpotLight, Texture, TextureId, Transform, WrapMode,
 };
 use raw::{
     AttenuationSpec, Opt, RawCamera, RawLight, RawMaterial, RawObject, RawRender, RawScene,
@@ -349,6 +350,15 @@ impl Ctx<'_> {
         if let Some(cam) = raw.camera {
             self.spans.camera = Some(cam.span());
             scene.camera = self.camera(cam)?;
+        }
+        // Named cameras in file order (the map is sorted by name).
+        let mut cameras: Vec<_> = raw.cameras.into_iter().collect();
+        cameras.sort_by_key(|(k, _)| k.span().start);
+        for (name, cam) in cameras {
+            scene.cameras.push(NamedCamera {
+                name: name.into_inner(),
+                camera: self.camera(cam)?,
+            });
         }
         if let Some(bg) = &raw.background {
             scene.background = self.non_negative3(bg, "background")?;

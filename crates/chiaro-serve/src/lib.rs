@@ -78,6 +78,9 @@ pub enum ServeError {
     /// The scene could not be loaded.
     #[error(transparent)]
     Scene(#[from] chiaro::Error),
+    /// The camera flags could not be met.
+    #[error(transparent)]
+    Camera(#[from] chiaro::camera::CameraError),
     /// The host is not an IP address.
     #[error("--host must be an IP address such as 127.0.0.1 or 0.0.0.0, not `{0}`")]
     BadHost(String),
@@ -112,6 +115,9 @@ pub struct ServeOptions {
     /// A WebSocket with no message from the page and no render running for
     /// this long is closed.
     pub idle_timeout: Duration,
+    /// The starting camera (`--camera`, `--eye`, ...), applied to a scene
+    /// loaded by [`Server::bind`].
+    pub camera: chiaro::camera::CameraChoice,
 }
 
 impl Default for ServeOptions {
@@ -124,6 +130,7 @@ impl Default for ServeOptions {
             max_per_address: 32,
             head_timeout: Duration::from_secs(10),
             idle_timeout: Duration::from_secs(300),
+            camera: chiaro::camera::CameraChoice::default(),
         }
     }
 }
@@ -340,10 +347,12 @@ impl Server {
     /// [`ServeError::Scene`] if the scene does not load,
     /// [`ServeError::BadHost`] or [`ServeError::Bind`].
     pub fn bind(scene_path: &Path, opts: &ServeOptions) -> Result<Self, ServeError> {
-        let loaded = chiaro::io::load_scene(scene_path).map_err(chiaro::Error::from)?;
+        let mut loaded = chiaro::io::load_scene(scene_path).map_err(chiaro::Error::from)?;
         for w in &loaded.warnings {
             eprintln!("warning: {w}");
         }
+        let aspect = loaded.scene.render.aspect();
+        chiaro::camera::apply_camera(&mut loaded.scene, &opts.camera, aspect)?;
         let name = scene_path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())

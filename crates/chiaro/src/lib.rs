@@ -20,6 +20,7 @@
 //! assert!(film.get(8, 8).x > 0.5);
 //! ```
 
+pub mod camera;
 pub mod compare;
 pub mod gallery;
 pub mod hybrid;

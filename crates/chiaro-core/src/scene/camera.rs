@@ -35,6 +35,17 @@ impl Default for Camera {
     }
 }
 
+/// A camera the scene offers by name (a glTF camera, a TOML
+/// `[cameras.NAME]` table), chosen with `--camera NAME`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NamedCamera {
+    /// The name it is chosen by.
+    pub name: String,
+    /// The camera.
+    pub camera: Camera,
+}
+
 /// Camera frame: right, up and forward (the viewing direction) unit vectors.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraFrame {

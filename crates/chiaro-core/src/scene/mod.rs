@@ -13,7 +13,7 @@ mod settings;
 mod texture;
 mod validate;
 
-pub use camera::Camera;
+pub use camera::{Camera, NamedCamera};
 pub use light::{AreaShape, Attenuation, Flap, Light, SpotLight};
 pub use material::{
     AlphaMode, Bump, Distribution, Material, MetallicRoughness, Occlusion, ReflectanceModel,
@@ -70,6 +70,10 @@ typed_id!(
 pub struct Scene {
     /// The camera every technique renders from.
     pub camera: Camera,
+    /// Further cameras the file offers by name (glTF cameras, TOML
+    /// `[cameras.NAME]`); `camera` is what renders.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub cameras: Vec<NamedCamera>,
     /// Triangle meshes in object space, shared by instances.
     pub meshes: Vec<Mesh>,
     /// Materials, named; `Object::material` and `Mesh::face_materials` index it.

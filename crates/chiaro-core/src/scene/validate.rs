@@ -140,27 +140,9 @@ impl Scene {
             );
         }
 
-        let cam = &self.camera;
-        c.finite("camera.eye", cam.eye);
-        c.finite("camera.look_at", cam.look_at);
-        c.finite("camera.up", cam.up);
-        if !(cam.fov_y_degrees > 0.0 && cam.fov_y_degrees < 180.0) {
-            c.error(
-                "camera.fov",
-                format!("expected 0 < fov < 180 degrees, got {}", cam.fov_y_degrees),
-            );
-        }
-        if (cam.look_at - cam.eye).length_squared() == 0.0 {
-            c.error("camera", "eye and look_at are the same point");
-        }
-        if !(cam.near > 0.0 && cam.far > cam.near && cam.far.is_finite()) {
-            c.error(
-                "camera",
-                format!(
-                    "expected 0 < near < far, got near {} far {}",
-                    cam.near, cam.far
-                ),
-            );
+        check_camera(&mut c, "camera", &self.camera);
+        for (i, nc) in self.cameras.iter().enumerate() {
+            check_camera(&mut c, &format!("cameras[{i}]"), &nc.camera);
         }
 
         let ntex = self.textures.len();
@@ -402,6 +384,31 @@ impl Scene {
             check_tex(&mut c, "environment".into(), Some(env.texture));
         }
         c.issues
+    }
+}
+
+/// The checks of one camera, reported under `path` (`camera`, `cameras[2]`).
+fn check_camera(c: &mut Checker, path: &str, cam: &super::Camera) {
+    c.finite(&format!("{path}.eye"), cam.eye);
+    c.finite(&format!("{path}.look_at"), cam.look_at);
+    c.finite(&format!("{path}.up"), cam.up);
+    if !(cam.fov_y_degrees > 0.0 && cam.fov_y_degrees < 180.0) {
+        c.error(
+            format!("{path}.fov"),
+            format!("expected 0 < fov < 180 degrees, got {}", cam.fov_y_degrees),
+        );
+    }
+    if (cam.look_at - cam.eye).length_squared() == 0.0 {
+        c.error(path, "eye and look_at are the same point");
+    }
+    if !(cam.near > 0.0 && cam.far > cam.near && cam.far.is_finite()) {
+        c.error(
+            path,
+            format!(
+                "expected 0 < near < far, got near {} far {}",
+                cam.near, cam.far
+            ),
+        );
     }
 }
 

@@ -186,6 +186,8 @@ pub(crate) struct RawScene {
     pub render: Option<RawRender>,
     pub camera: Option<Sp<RawCamera>>,
     #[serde(default)]
+    pub cameras: BTreeMap<Sp<String>, Sp<RawCamera>>,
+    #[serde(default)]
     pub light: Vec<Sp<RawLight>>,
     #[serde(default)]
     pub material: BTreeMap<Sp<String>, Sp<RawMaterial>>,
@@ -253,7 +255,7 @@ pub(crate) struct RawRadiosity {
     pub max_iterations: Option<u32>,
 }
 
-/// `[camera]`.
+/// `[camera]` and each `[cameras.NAME]`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawCamera {
