@@ -12,13 +12,13 @@ fn data(name: &str) -> PathBuf {
 #[test]
 fn a_colour_with_one_number_in_an_mtl_is_a_grey() {
     // The crash input as it was: its mangled `v` line is a clean parse error
-    // after the library (read first) no longer panics.
+    // naming file, line and column.
     let path = data("short-kd.obj");
     let msg = chiaro_io::load_scene(&path)
         .expect_err("a bad vertex")
         .to_string();
     assert!(
-        msg.contains("short-kd.obj") && msg.contains("position parse error"),
+        msg.contains("short-kd.obj:6:21") && msg.contains("expected a finite number"),
         "{msg}"
     );
     // Its library under a valid OBJ: `Kd 000000` is the MTL format's grey

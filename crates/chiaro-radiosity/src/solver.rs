@@ -207,7 +207,8 @@ fn iterate(
 /// the unshot fraction falls below `tol`. Form factors are computed one
 /// column at a time (no matrix), so memory is O(N). The result includes
 /// the paper's ambient correction `rho_j * R * sum_i A_i dL_i / sum_i A_i`,
-/// `R = 1 / (1 - rho_avg)`, which estimates the light not yet shot.
+/// `R = 1 / (1 - rho_avg)`, which estimates the light not yet shot, scaled
+/// for open scenes by the measured share of shot light that stays in them.
 pub(crate) fn progressive(
     elements: &[Element],
     e: &[Vec3],
@@ -230,6 +231,7 @@ pub(crate) fn progressive(
         return Ok(out);
     }
     let mut col = vec![0.0f32; n];
+    let (mut shot_power, mut landed_power) = (0.0f32, 0.0f32);
     let mut bar = Convergence::begin(progress, "radiosity progressive", tol);
     out.unshot = 1.0;
     for it in 1..=max_iter {
@@ -250,6 +252,16 @@ pub(crate) fn progressive(
             break;
         }
         ff.column(best, &mut col);
+        // The share of the shot power that lands on elements: sum_j F_ij =
+        // sum_j F_ji A_j / A_i (below 1 where light leaves an open scene).
+        let landed: f32 = col
+            .iter()
+            .zip(elements)
+            .map(|(f, el)| f * el.area)
+            .sum::<f32>()
+            / elements[best].area.max(f32::MIN_POSITIVE);
+        shot_power += best_p;
+        landed_power += best_p * landed.clamp(0.0, 1.0);
         let du = unshot[best];
         unshot[best] = Vec3::ZERO;
         l.par_iter_mut()
@@ -271,8 +283,16 @@ pub(crate) fn progressive(
         }
     }
     bar.finish(progress);
-    // Ambient correction (Cohen et al. 1988, section 4).
+    // Ambient correction (Cohen et al. 1988, section 4), for a scene that
+    // keeps the share `c` of shot light measured above (the paper's closed
+    // environment has c = 1): each bounce of the unshot light lands with
+    // share c, so the reflected total is `rho_j c U / (1 - c rho_avg)`.
     let area: f32 = elements.iter().map(|e| e.area).sum();
+    let c = if shot_power > 0.0 {
+        landed_power / shot_power
+    } else {
+        1.0
+    };
     if area > 0.0 {
         let rho_avg: Vec3 = elements.iter().map(|e| e.rho * e.area).sum::<Vec3>() / area;
         let unshot_avg: Vec3 = elements
@@ -281,8 +301,8 @@ pub(crate) fn progressive(
             .map(|(e, u)| *u * e.area)
             .sum::<Vec3>()
             / area;
-        let r = Vec3::ONE / (Vec3::ONE - rho_avg).max(Vec3::splat(1e-3));
-        let ambient = r * unshot_avg;
+        let r = Vec3::ONE / (Vec3::ONE - c * rho_avg).max(Vec3::splat(1e-3));
+        let ambient = c * r * unshot_avg;
         for (lj, el) in l.iter_mut().zip(elements) {
             *lj += el.rho * ambient;
         }

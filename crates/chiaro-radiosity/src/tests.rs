@@ -424,6 +424,35 @@ fn point_light_direct_matches_the_shading_convention() {
 }
 
 #[test]
+fn the_ambient_correction_adds_nothing_where_no_shot_light_lands() {
+    // A lone bright floor under a point light, stopped after one shot: its
+    // unshot light leaves the scene, so the estimate of what is not yet
+    // shot must add nothing (Cohen's closed-room R = 1 / (1 - rho) = 20
+    // would add twenty times the unshot radiance).
+    let mut s = Scene::default();
+    s.add_material(Material::diffuse("m", Vec3::splat(0.95)));
+    add_quad(
+        &mut s,
+        Vec3::new(-1.0, 0.0, -1.0),
+        Vec3::new(0.0, 0.0, 2.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        0,
+    );
+    s.lights.push(Light::Point {
+        position: Vec3::new(0.0, 2.0, 0.0),
+        color: Vec3::ONE,
+        intensity: 8.0,
+        attenuation: Attenuation::InverseSquare,
+    });
+    let mut r = settings("progressive", "raycast", 0.25);
+    r.radiosity.max_iterations = 1;
+    let sol = solve(&s, &r, &NoProgress).expect("solve");
+    let l = sol.radiance_at(0, Vec3::ZERO, Vec3::Y).expect("floor");
+    // rho * Ip / d^2 = 0.95 * 8 / 4 straight below.
+    assert!((l.x - 1.9).abs() < 0.05, "{l}");
+}
+
+#[test]
 fn unknown_settings_are_refused_with_the_valid_names() {
     let s = cornell();
     let err = solve(&s, &settings("magic", "raycast", 0.3), &NoProgress).expect_err("bad solver");

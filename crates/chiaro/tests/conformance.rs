@@ -1016,13 +1016,33 @@ fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
         );
         return;
     }
-    let mut plain = case.scene.clone();
+    // Both copies diffuse only, and textured surfaces not emissive: radiosity
+    // shows no specular term (a glTF metal's base colour is its specular
+    // colour), and emission added to the reflected light dilutes the texture's
+    // ratio by an amount that depends on each technique's lighting.
+    let mut diffuse = case.scene.clone();
+    for mat in &mut diffuse.materials {
+        mat.reflect = Vec3::ZERO;
+        if mat.texture.is_some() {
+            mat.emission = Vec3::ZERO;
+            mat.emission_texture = None;
+        }
+        if let Some(mr) = &mut mat.metallic_roughness {
+            // A dielectric; `diffuse` holds the factors' value (Material's rule).
+            mr.metallic = 0.0;
+            mr.texture = None;
+            mat.diffuse =
+                chiaro::scene::MetallicRoughness::coefficients(mr.base_color, 0.0, mr.roughness).0;
+        }
+        mat.specular = Vec3::ZERO;
+    }
+    let mut plain = diffuse.clone();
     for mat in &mut plain.materials {
         mat.texture = None;
     }
     let pair = |tech: Technique| {
-        let s = settings(&case.scene, Tech::Facade(tech));
-        (film(&case.scene, &s), film(&plain, &s))
+        let s = settings(&diffuse, Tech::Facade(tech));
+        (film(&diffuse, &s), film(&plain, &s))
     };
     let (rad, rad_plain) = pair(Technique::Radiosity);
     let (ph, ph_plain) = pair(Technique::Phong);
