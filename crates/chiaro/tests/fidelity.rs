@@ -484,8 +484,12 @@ fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result1 {
     }
 }
 
-/// One expected row: outcome and reason.
-type Table = BTreeMap<(String, String), (Outcome, String)>;
+/// One expected row: outcome, recorded agreement and reason.
+type Table = BTreeMap<(String, String), (Outcome, Option<f32>, String)>;
+
+/// How far a known-wrong render's agreement may fall below its recorded
+/// figure before it fails as a further regression.
+const WORSE: f32 = 0.03;
 
 fn read_table(path: &Path) -> Table {
     let text = std::fs::read_to_string(path).unwrap_or_default();
@@ -504,7 +508,11 @@ fn read_table(path: &Path) -> Table {
             .unwrap_or_else(|| panic!("{TABLE}:{}: unknown outcome {:?}", n + 1, f[2]));
         t.insert(
             (f[0].to_string(), f[1].to_string()),
-            (outcome, f.get(4).unwrap_or(&"").to_string()),
+            (
+                outcome,
+                f[3].parse().ok(),
+                f.get(4).unwrap_or(&"").to_string(),
+            ),
         );
     }
     t
@@ -542,10 +550,11 @@ fn khronos_files_render_as_their_expected_images() {
         for &tech in &techs {
             let r = run(e, &scene, tech);
             let key = (e.id.clone(), tech.name().to_string());
-            let (want, reason) = expected
-                .get(&key)
-                .cloned()
-                .unwrap_or((Outcome::Pass, String::new()));
+            let (want, recorded, reason) =
+                expected
+                    .get(&key)
+                    .cloned()
+                    .unwrap_or((Outcome::Pass, None, String::new()));
             let error = r
                 .error
                 .replace(&format!("{}/", root.display()), "")
@@ -562,6 +571,15 @@ fn khronos_files_render_as_their_expected_images() {
                     if expected.contains_key(&key) { want.name() } else { "nothing" },
                     if reason.is_empty() { String::new() } else { format!(" ({reason})") },
                 ));
+            }
+            if let (Outcome::KnownWrong, Some(then), Some(now)) = (r.outcome, recorded, r.score) {
+                if r.outcome == want && now < then - WORSE {
+                    failures.push(format!(
+                        "{} ({}): known-wrong and worse: agreement {now:.3}, the table says {then:.3} ({reason})",
+                        e.id,
+                        tech.name()
+                    ));
+                }
             }
             // Hand-written reasons are kept while the outcome holds; refusals
             // and undiagnosed findings are refreshed from this run.
