@@ -253,8 +253,20 @@ fn screenshot_foreground(px: &[[u8; 3]], w: usize, h: usize) -> Vec<bool> {
 
 /// Hue names of the palette classes, for messages.
 const CLASS_NAMES: [&str; CLASSES] = [
-    "grey", "red", "orange", "yellow", "yellow-green", "green", "green-cyan", "cyan", "azure",
-    "blue", "violet", "magenta", "rose", "black",
+    "grey",
+    "red",
+    "orange",
+    "yellow",
+    "yellow-green",
+    "green",
+    "green-cyan",
+    "cyan",
+    "azure",
+    "blue",
+    "violet",
+    "magenta",
+    "rose",
+    "black",
 ];
 
 /// What the measure found on one render.
@@ -313,9 +325,17 @@ fn measure(ours: &[[u8; 3]], fg: &[bool], reference: &[[u8; 3]], same_camera: bo
     }
     let presence = (1..13).find_map(|k| {
         if a[k] >= 0.02 && b[k] < 0.004 {
-            Some(format!("{} in ours only ({:.1} %)", CLASS_NAMES[k], 100.0 * a[k]))
+            Some(format!(
+                "{} in ours only ({:.1} %)",
+                CLASS_NAMES[k],
+                100.0 * a[k]
+            ))
         } else if b[k] >= 0.05 && a[k] < 0.01 {
-            Some(format!("{} missing ({:.1} % of the reference)", CLASS_NAMES[k], 100.0 * b[k]))
+            Some(format!(
+                "{} missing ({:.1} % of the reference)",
+                CLASS_NAMES[k],
+                100.0 * b[k]
+            ))
         } else {
             None
         }
@@ -344,7 +364,11 @@ fn measure(ours: &[[u8; 3]], fg: &[bool], reference: &[[u8; 3]], same_camera: bo
                 }
             }
         }
-        if cells == 0 { 0.0 } else { total / cells as f32 }
+        if cells == 0 {
+            0.0
+        } else {
+            total / cells as f32
+        }
     } else {
         intersection(&a, &b)
     };
@@ -469,7 +493,8 @@ fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result1 {
             ours: Some(ours),
         };
     };
-    let reference = reference_pixels(reference, size(), size()).expect("the reference image decodes");
+    let reference =
+        reference_pixels(reference, size(), size()).expect("the reference image decodes");
     let m = measure(&ours, &fg, &reference, e.camera.is_some());
     let sc = m.agreement;
     Result1 {
@@ -535,7 +560,7 @@ fn khronos_files_render_as_their_expected_images() {
          # file (below ../shared/assets)\ttechnique\toutcome\tscore (palette agreement, pass >= 0.6)\treason\n",
     );
     let mut failures = Vec::new();
-    let mut sheet_rows: Vec<(String, Vec<Option<Vec<[u8; 3]>>>)> = Vec::new();
+    let mut sheet_rows: Vec<SheetRow> = Vec::new();
     let started = std::time::Instant::now();
     // CHIARO_FIDELITY_ONLY=TEXT: only the files whose name contains TEXT
     // (for looking; the table is then not checked for the others).
@@ -572,14 +597,15 @@ fn khronos_files_render_as_their_expected_images() {
                     if reason.is_empty() { String::new() } else { format!(" ({reason})") },
                 ));
             }
-            if let (Outcome::KnownWrong, Some(then), Some(now)) = (r.outcome, recorded, r.score) {
-                if r.outcome == want && now < then - WORSE {
-                    failures.push(format!(
-                        "{} ({}): known-wrong and worse: agreement {now:.3}, the table says {then:.3} ({reason})",
-                        e.id,
-                        tech.name()
-                    ));
-                }
+            if let (Outcome::KnownWrong, Some(then), Some(now)) = (r.outcome, recorded, r.score)
+                && r.outcome == want
+                && now < then - WORSE
+            {
+                failures.push(format!(
+                    "{} ({}): known-wrong and worse: agreement {now:.3}, the table says {then:.3} ({reason})",
+                    e.id,
+                    tech.name()
+                ));
             }
             // Hand-written reasons are kept while the outcome holds; refusals
             // and undiagnosed findings are refreshed from this run.
@@ -631,7 +657,10 @@ fn khronos_files_render_as_their_expected_images() {
         }
     }
     if write {
-        assert!(only.is_empty(), "CHIARO_FIDELITY_TABLE=write runs every file: unset CHIARO_FIDELITY_ONLY");
+        assert!(
+            only.is_empty(),
+            "CHIARO_FIDELITY_TABLE=write runs every file: unset CHIARO_FIDELITY_ONLY"
+        );
         std::fs::write(&table_path, rows).expect("writes the table");
         eprintln!("fidelity: wrote {}", table_path.display());
         return;
@@ -644,10 +673,14 @@ fn khronos_files_render_as_their_expected_images() {
     );
 }
 
+/// One row of a contact sheet: the file and its pictures (phong, path,
+/// expected), `None` where there is none.
+type SheetRow = (String, Vec<Option<Vec<[u8; 3]>>>);
+
 /// Contact sheets of 12 files each: phong | path | expected per row, grey
 /// where a picture is missing; the index of each row's file goes to
 /// `sheets.txt` beside them.
-fn write_sheets(dir: &Path, rows: &[(String, Vec<Option<Vec<[u8; 3]>>>)]) {
+fn write_sheets(dir: &Path, rows: &[SheetRow]) {
     std::fs::create_dir_all(dir).expect("creates the sheet folder");
     let s = size();
     let gap = 2;
