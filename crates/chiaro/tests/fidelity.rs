@@ -409,7 +409,7 @@ impl Outcome {
     }
 }
 
-struct Result1 {
+struct Rendered {
     outcome: Outcome,
     score: Option<f32>,
     /// Why: the error of a refused file, the colour-presence finding.
@@ -442,11 +442,11 @@ fn load(e: &Entry) -> Result<Scene, String> {
     Ok(scene)
 }
 
-fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result1 {
+fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Rendered {
     let scene = match scene {
         Ok(s) => s,
         Err(err) => {
-            return Result1 {
+            return Rendered {
                 outcome: Outcome::Unsupported,
                 score: None,
                 error: err.clone(),
@@ -455,7 +455,7 @@ fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result1 {
         }
     };
     if let Some(v) = &e.must_refuse {
-        return Result1 {
+        return Rendered {
             outcome: Outcome::KnownWrong,
             score: None,
             error: format!("loads, though it requires glTF {v} (asset.minVersion)"),
@@ -469,7 +469,7 @@ fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result1 {
     let film = match chiaro::render(scene, &s, &NoProgress) {
         Ok(f) => f,
         Err(err) => {
-            return Result1 {
+            return Rendered {
                 outcome: Outcome::Unsupported,
                 score: None,
                 error: err.to_string(),
@@ -486,7 +486,7 @@ fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result1 {
     let ours = to_srgb8(&film, s.tonemap, s.exposure);
     let fg: Vec<bool> = film.depth.iter().map(|d| d.is_finite()).collect();
     let Some(reference) = &e.reference else {
-        return Result1 {
+        return Rendered {
             outcome: Outcome::NoReference,
             score: None,
             error: String::new(),
@@ -497,7 +497,7 @@ fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result1 {
         reference_pixels(reference, size(), size()).expect("the reference image decodes");
     let m = measure(&ours, &fg, &reference, e.camera.is_some());
     let sc = m.agreement;
-    Result1 {
+    Rendered {
         outcome: if sc >= PASS && m.presence.is_none() {
             Outcome::Pass
         } else {
