@@ -544,8 +544,7 @@ impl Ctx<'_, '_> {
     /// diffuse texture is applied per pixel by flat and Gouraud shading.
     fn untextured_material(&self, hit: &SurfaceHit) -> SurfaceMaterial {
         let m = self.ps.material(hit.material);
-        let mut sm = SurfaceMaterial::from_material(m);
-        sm.kd *= hit.color;
+        let mut sm = SurfaceMaterial::with_vertex_color(m, hit.color);
         if let Some(t) = m.emission_texture {
             let tc = PreparedScene::tex_coord(hit, Vec2::ZERO, Vec2::ZERO);
             sm.emission *= self.ps.eval_texture(t, &tc).truncate();

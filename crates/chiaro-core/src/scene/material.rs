@@ -235,11 +235,15 @@ impl Material {
     }
 
     /// True if the material is evaluated per point from textures (its
-    /// coefficients vary over the surface).
+    /// coefficients vary over the surface), or is a glTF metal (its vertex
+    /// colours reach F0, which the scan converter's per-vertex-colour
+    /// shortcuts do not apply).
     pub fn is_textured(&self) -> bool {
         self.texture.is_some()
             || self.emission_texture.is_some()
-            || self.metallic_roughness.is_some_and(|m| m.texture.is_some())
+            || self
+                .metallic_roughness
+                .is_some_and(|m| m.texture.is_some() || m.metallic > 0.0)
             || self.occlusion.is_some()
     }
 

@@ -3,7 +3,7 @@
 
 use super::fresnel::{fresnel_schlick, reflect};
 use super::microfacet;
-use crate::scene::{Distribution, Material, ReflectanceModel};
+use crate::scene::{Distribution, Material, MetallicRoughness, ReflectanceModel};
 use glam::Vec3;
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -57,6 +57,25 @@ impl SurfaceMaterial {
             ior: m.ior,
             emission: m.emission,
         }
+    }
+
+    /// The untextured parameters of `m` at a point whose vertex colour is
+    /// `color`: the colour multiplies the diffuse colour, or for glTF
+    /// metallic-roughness the base colour, so it reaches a metal's F0 too
+    /// (as in the surface layer's textured evaluation).
+    pub fn with_vertex_color(m: &Material, color: Vec3) -> Self {
+        let mut sm = Self::from_material(m);
+        match m.metallic_roughness {
+            Some(mr) => {
+                (sm.kd, sm.ks, sm.roughness) = MetallicRoughness::coefficients(
+                    mr.base_color * color,
+                    mr.metallic,
+                    mr.roughness,
+                );
+            }
+            None => sm.kd *= color,
+        }
+        sm
     }
 
     /// True when the specular lobe contributes.
@@ -153,6 +172,29 @@ pub fn albedo_estimate(m: &SurfaceMaterial, n: Vec3, wo: Vec3, samples: u32) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_vertex_colour_reaches_a_metals_f0_and_a_classic_diffuse_colour() {
+        let red = Vec3::new(1.0, 0.0, 0.0);
+        let mut metal = Material {
+            metallic_roughness: Some(MetallicRoughness {
+                base_color: Vec3::splat(0.8),
+                metallic: 1.0,
+                roughness: 0.5,
+                texture: None,
+            }),
+            ..Material::default()
+        };
+        let sm = SurfaceMaterial::with_vertex_color(&metal, red);
+        assert_eq!(sm.kd, Vec3::ZERO);
+        assert_eq!(sm.ks, Vec3::new(0.8, 0.0, 0.0));
+        assert_eq!(sm.roughness, 0.25);
+        metal.metallic_roughness = None;
+        metal.diffuse = Vec3::splat(0.5);
+        let sm = SurfaceMaterial::with_vertex_color(&metal, red);
+        assert_eq!(sm.kd, Vec3::new(0.5, 0.0, 0.0));
+        assert_eq!(sm.ks, metal.specular);
+    }
 
     fn spec(model: ReflectanceModel, n: f32) -> SurfaceMaterial {
         SurfaceMaterial {
