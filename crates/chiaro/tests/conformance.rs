@@ -81,18 +81,6 @@ struct Row {
 const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
     (
         "phong = whitted at depth 0",
-        "cornell-box",
-        "phong, whitted",
-        "under the emissive light (a light group sampled per shading point) the two differ by up to about 1e-2; cause not found yet",
-    ),
-    (
-        "phong = whitted at depth 0",
-        "mitsuba-cbox",
-        "phong, whitted",
-        "as cornell-box: emissive light group, cause not found yet",
-    ),
-    (
-        "phong = whitted at depth 0",
         "NormalTangentTest",
         "phong, whitted",
         "one textured, normal-mapped pixel at 96x72 (surface_layer.rs holds at 128x128); cause not found yet",
