@@ -532,7 +532,11 @@ fn inside_convex(p: &[DVec2], q: DVec2, tol: f64) -> bool {
     (0..n).all(|i| {
         let (a, b) = (p[i], p[(i + 1) % n]);
         let e = b - a;
-        cross2(e, q - a) >= -tol * e.length()
+        let len = e.length();
+        // Two corners that are one point up to rounding (the clipper makes
+        // such pairs) give an edge of arbitrary direction: skip it, its
+        // neighbours bound the polygon there.
+        len <= 1e-3 * tol || cross2(e, q - a) >= -tol * len
     })
 }
 
@@ -833,6 +837,27 @@ mod tests {
         *state ^= *state >> 7;
         *state ^= *state << 17;
         (*state >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+
+    /// A fragment whose clipped corner came out twice, one rounding apart
+    /// (as on mitsuba-cbox's back wall), still contains its inside: the
+    /// tiny edge between the two copies points anywhere and must not cut
+    /// the polygon (before the fix the whole square tested outside).
+    #[test]
+    fn inside_convex_ignores_an_edge_between_two_copies_of_a_corner() {
+        let square = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(1.0 + 1e-12, 1.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        for q in [(0.5, 0.5), (0.1, 0.9), (0.9, 0.1)] {
+            assert!(inside_convex(&square, DVec2::new(q.0, q.1), 1e-6), "{q:?}");
+        }
+        for q in [(1.1, 0.5), (0.5, 1.1), (-0.1, 0.5)] {
+            assert!(!inside_convex(&square, DVec2::new(q.0, q.1), 1e-6), "{q:?}");
+        }
     }
 
     /// The frustum cull is exact where it matters: every occluder it

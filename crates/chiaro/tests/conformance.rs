@@ -93,12 +93,6 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
     ),
     (
         "shadow methods agree",
-        "mitsuba-cbox",
-        "object",
-        "object-precision speckles on the walls",
-    ),
-    (
-        "shadow methods agree",
         "teapot",
         "map",
         "the map's depth bias darkens pixels more than two pixels from the ray-traced shadow edge",
