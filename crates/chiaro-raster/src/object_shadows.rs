@@ -540,6 +540,27 @@ fn inside_convex(p: &[DVec2], q: DVec2, tol: f64) -> bool {
     })
 }
 
+/// `q` itself when it lies in the counter-clockwise triangle `tri` (within
+/// `tol`), else the nearest point of the triangle's edges.
+fn nearest_in_triangle(tri: &[DVec2; 3], q: DVec2, tol: f64) -> DVec2 {
+    if inside_convex(tri, q, tol) {
+        return q;
+    }
+    let dot = |a: DVec2, b: DVec2| a.x * b.x + a.y * b.y;
+    let mut best = (f64::INFINITY, q);
+    for i in 0..3 {
+        let (a, b) = (tri[i], tri[(i + 1) % 3]);
+        let e = b - a;
+        let t = (dot(q - a, e) / dot(e, e).max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+        let c = a + e * t;
+        let d = (q - c).length();
+        if d < best.0 {
+            best = (d, c);
+        }
+    }
+    best.1
+}
+
 /// Lit fragments of one triangle.
 #[derive(Debug, Clone)]
 struct TriFragments {
@@ -688,8 +709,10 @@ impl ObjectShadows {
         let Some(f) = &t.frame else {
             return 1.0;
         };
-        let q = f.plane_2d(p.into());
         let tol = self.tol;
+        // The rasterizer's snapped edges give a sample near a shared edge to
+        // either triangle; shade it as the nearest point of the one it got.
+        let q = nearest_in_triangle(&f.tri, f.plane_2d(p.into()), tol);
         let hit = t.polys.iter().any(|(poly, b)| {
             q.x >= b[0].x - tol
                 && q.x <= b[1].x + tol

@@ -87,12 +87,6 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
     ),
     (
         "shadow methods agree",
-        "spotlights",
-        "object",
-        "object-precision speckles: isolated fully shadowed pixels inside lit regions",
-    ),
-    (
-        "shadow methods agree",
         "teapot",
         "map",
         "the map's depth bias darkens pixels more than two pixels from the ray-traced shadow edge",
