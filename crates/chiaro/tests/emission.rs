@@ -43,10 +43,8 @@ fn emissive_quad_gltf(strength: f32) -> String {
 }
 
 fn load(strength: f32) -> Scene {
-    let dir = std::env::temp_dir().join(format!(
-        "chiaro-emission-{}-{strength}",
-        std::process::id()
-    ));
+    let dir =
+        std::env::temp_dir().join(format!("chiaro-emission-{}-{strength}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let path = dir.join("quad.gltf");
     std::fs::write(&path, emissive_quad_gltf(strength)).expect("writes");
@@ -75,15 +73,17 @@ fn render(scene: &Scene, technique: Technique, kernel: Option<Kernel>) -> Film {
     s.samples = if technique == Technique::Path { 16 } else { 1 };
     match kernel {
         None => chiaro::render(scene, &s, &NoProgress).expect("renders"),
-        Some(k) => chiaro_ray::path::render_with_kernel(
-            scene,
-            &s,
-            &NoProgress,
-            &chiaro_core::accel::instanced::build_accelerator,
-            k,
-        )
-        .expect("renders")
-        .0,
+        Some(k) => {
+            chiaro_ray::path::render_with_kernel(
+                scene,
+                &s,
+                &NoProgress,
+                &chiaro_core::accel::instanced::build_accelerator,
+                k,
+            )
+            .expect("renders")
+            .0
+        }
     }
 }
 
