@@ -808,3 +808,38 @@ fn a_floor_under_everything_casts_no_volume_a_raised_one_does() {
     // (Pictures with such floors still match shadow rays: the
     // `assert_volumes_match_rays` tests above.)
 }
+
+/// A sample the rasterizer gives to a triangle may lie a little outside it
+/// (snapped edges; on spotlights.toml 2.4e-4 across a floor edge): the
+/// object-precision lookup shades it as the triangle's nearest point, so an
+/// unshadowed floor stays lit there (before, such samples fell outside every
+/// lit fragment and showed isolated shadowed pixels).
+#[test]
+fn object_precision_lookup_just_outside_a_triangle_is_lit() {
+    let mut scene = Scene::default();
+    let m = scene.add_material(Material::diffuse("floor", Vec3::splat(0.8)));
+    let plane = scene.add_mesh(primitives::plane(2.0, 4));
+    scene.objects.push(Object {
+        geometry: Geometry::Mesh(plane),
+        material: m,
+        ..Object::default()
+    });
+    scene.lights.push(Light::Point {
+        position: Vec3::new(0.3, 2.0, 0.2),
+        color: Vec3::ONE,
+        intensity: 1.0,
+        attenuation: Default::default(),
+    });
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let o = crate::object_shadows::ObjectShadows::build(&ps, 0).expect("builds");
+    for (t, tri) in ps.triangles.iter().enumerate() {
+        let v = tri.map(|i| ps.positions[i as usize]);
+        let centre = (v[0] + v[1] + v[2]) / 3.0;
+        for k in 0..3 {
+            // The middle of edge k, pushed 2.4e-4 away from the centre.
+            let mid = (v[k] + v[(k + 1) % 3]) * 0.5;
+            let p = mid + (mid - centre).normalize() * 2.4e-4;
+            assert_eq!(o.lit_fraction(t as u32, p), 1.0, "triangle {t} edge {k}");
+        }
+    }
+}

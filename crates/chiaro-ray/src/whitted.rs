@@ -21,8 +21,9 @@
 //! `settings.whitted.min_weight`.
 //!
 //! Pixels are sampled either by stratified supersampling (`AaMode::Supersample`:
-//! one ray through the pixel centre for one sample, N-rooks stratified jitter
-//! otherwise) or by Whitted's adaptive supersampling (`AaMode::Adaptive`:
+//! one ray through the pixel centre for one sample, with area lights sampled
+//! at their strata centres as the scan converter samples them; N-rooks
+//! stratified jitter and jittered light samples otherwise) or by Whitted's adaptive supersampling (`AaMode::Adaptive`:
 //! rays at the pixel corners, squares subdivided where corner colours differ
 //! by more than `adaptive_threshold`, down to `adaptive_max_depth`). Every
 //! random number comes from [`pixel_rng`] seeded by (scene seed, pixel or
@@ -159,6 +160,10 @@ pub struct Tracer<'s> {
     casters: ShadowCasters,
     /// The emissive triangles sampled as one light, when there are many.
     emitters: Option<EmitterGroup>,
+    /// One sample per pixel (the pixel-centre ray): light samples at their
+    /// strata centres, as the scan converter takes them, so that both
+    /// techniques estimate direct light with the same samples.
+    centre_light_samples: bool,
 }
 
 impl std::fmt::Debug for Tracer<'_> {
@@ -196,6 +201,7 @@ impl<'s> Tracer<'s> {
             indirect: None,
             casters,
             emitters,
+            centre_light_samples: settings.aa == AaMode::Supersample && settings.samples <= 1,
         }
     }
 
@@ -310,7 +316,13 @@ impl<'s> Tracer<'s> {
             &sm,
             &sp,
             &lighting,
-            |_, _| uniform2(rng),
+            |_, _| {
+                if self.centre_light_samples {
+                    Vec2::splat(0.5)
+                } else {
+                    uniform2(rng)
+                }
+            },
             |_, s| self.light_visibility_counted(sp.p, sp.ng, s, rays),
         );
         if let Some(indirect) = &self.indirect {

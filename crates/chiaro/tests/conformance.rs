@@ -81,33 +81,15 @@ struct Row {
 const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
     (
         "phong = whitted at depth 0",
-        "cornell-box",
-        "phong, whitted",
-        "under the emissive light (a light group sampled per shading point) the two differ by up to about 1e-2; cause not found yet",
-    ),
-    (
-        "phong = whitted at depth 0",
-        "mitsuba-cbox",
-        "phong, whitted",
-        "as cornell-box: emissive light group, cause not found yet",
-    ),
-    (
-        "phong = whitted at depth 0",
         "NormalTangentTest",
         "phong, whitted",
         "one textured, normal-mapped pixel at 96x72 (surface_layer.rs holds at 128x128); cause not found yet",
     ),
     (
-        "shadow methods agree",
-        "spotlights",
-        "object",
-        "object-precision speckles: isolated fully shadowed pixels inside lit regions",
-    ),
-    (
-        "shadow methods agree",
-        "mitsuba-cbox",
-        "object",
-        "object-precision speckles on the walls",
+        "phong = whitted at depth 0",
+        "DamagedHelmet",
+        "phong, whitted",
+        "as NormalTangentTest: one textured, normal-mapped pixel (1.8e-3); failed at 4242bb6 too (5 px up to 5.5e-2 with Whitted's jittered light samples); cause not found yet",
     ),
     (
         "shadow methods agree",
@@ -126,6 +108,12 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
         "DamagedHelmet",
         "map",
         "as teapot: one pixel beyond two pixels of the edge",
+    ),
+    (
+        "radiosity keeps textures",
+        "DamagedHelmet",
+        "radiosity",
+        "correlation 0.709 (bound 0.9) over 300 pixels; fails at 4242bb6 too (the rule's runs had no shared assets); not looked into",
     ),
     (
         "radiosity = path (diffuse)",

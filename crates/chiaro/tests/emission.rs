@@ -1,0 +1,158 @@
+//! Emission seen directly, across techniques: a glTF quad with
+//! `KHR_materials_emissive_strength` shows `emissiveFactor * strength` in
+//! every technique that shades emission (Phong, Whitted, both path kernels
+//! and the reference kernel), not the factor alone.
+
+use chiaro::scene::Technique;
+use chiaro::{Film, NoProgress, Scene, Vec3};
+use chiaro_ray::path::Kernel;
+use std::path::Path;
+
+/// A 2 x 2 quad in the plane z = 0 facing +z, with a black base colour and
+/// the emissive factor (0.1, 0.5, 0.9) times `strength`, seen by a camera
+/// on +z (the data URI holds its four positions and six u16 indices).
+fn emissive_quad_gltf(strength: f32) -> String {
+    format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "extensionsUsed": ["KHR_materials_emissive_strength"],
+  "scene": 0,
+  "scenes": [{{"nodes": [0, 1]}}],
+  "nodes": [
+    {{"mesh": 0}},
+    {{"camera": 0, "translation": [0, 0, 3]}}
+  ],
+  "cameras": [{{"type": "perspective", "perspective": {{"yfov": 0.5, "znear": 0.1}}}}],
+  "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1, "material": 0}}]}}],
+  "materials": [{{
+    "pbrMetallicRoughness": {{"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0, "roughnessFactor": 1}},
+    "emissiveFactor": [0.1, 0.5, 0.9],
+    "extensions": {{"KHR_materials_emissive_strength": {{"emissiveStrength": {strength}}}}}
+  }}],
+  "buffers": [{{"byteLength": 60, "uri": "data:application/octet-stream;base64,AACAvwAAgL8AAAAAAACAPwAAgL8AAAAAAACAPwAAgD8AAAAAAACAvwAAgD8AAAAAAAABAAIAAAACAAMA"}}],
+  "bufferViews": [
+    {{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+    {{"buffer": 0, "byteOffset": 48, "byteLength": 12}}
+  ],
+  "accessors": [
+    {{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [-1, -1, 0], "max": [1, 1, 0]}},
+    {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}}
+  ]
+}}"#
+    )
+}
+
+fn load(strength: f32) -> Scene {
+    let dir =
+        std::env::temp_dir().join(format!("chiaro-emission-{}-{strength}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join("quad.gltf");
+    std::fs::write(&path, emissive_quad_gltf(strength)).expect("writes");
+    let loaded = chiaro::io::load_scene(&path).expect("the quad loads");
+    let _ = std::fs::remove_dir_all(&dir);
+    loaded.scene
+}
+
+/// The mean colour of the central 8 x 8 pixels (all on the quad).
+fn centre(f: &Film) -> Vec3 {
+    let (w, h) = (f.width as usize, f.height as usize);
+    let mut sum = Vec3::ZERO;
+    for y in h / 2 - 4..h / 2 + 4 {
+        for x in w / 2 - 4..w / 2 + 4 {
+            sum += f.color[y * w + x];
+        }
+    }
+    sum / 64.0
+}
+
+fn render(scene: &Scene, technique: Technique, kernel: Option<Kernel>) -> Film {
+    let mut s = scene.render.clone();
+    s.technique = technique;
+    s.width = 32;
+    s.height = 32;
+    s.samples = if technique == Technique::Path { 16 } else { 1 };
+    match kernel {
+        None => chiaro::render(scene, &s, &NoProgress).expect("renders"),
+        Some(k) => {
+            chiaro_ray::path::render_with_kernel(
+                scene,
+                &s,
+                &NoProgress,
+                &chiaro_core::accel::instanced::build_accelerator,
+                k,
+            )
+            .expect("renders")
+            .0
+        }
+    }
+}
+
+#[test]
+fn emissive_strength_is_seen_directly_by_every_technique() {
+    for strength in [1.0f32, 4.0, 16.0] {
+        let mut scene = load(strength);
+        // The quad's own light only: the automatic lights would add their
+        // (tiny, specular) reflection off the black base colour.
+        scene.lights.clear();
+        scene.background = Vec3::ZERO;
+        let want = Vec3::new(0.1, 0.5, 0.9) * strength;
+        let cells = [
+            ("phong", render(&scene, Technique::Phong, None)),
+            ("whitted", render(&scene, Technique::Whitted, None)),
+            ("path (facade)", render(&scene, Technique::Path, None)),
+            (
+                "path lanes",
+                render(&scene, Technique::Path, Some(Kernel::Lanes)),
+            ),
+            (
+                "path scalar",
+                render(&scene, Technique::Path, Some(Kernel::Scalar)),
+            ),
+            (
+                "path reference",
+                render(&scene, Technique::Path, Some(Kernel::Reference)),
+            ),
+        ];
+        for (name, film) in &cells {
+            let got = centre(film);
+            // Every camera sample sees the emitter: no noise, float error only.
+            assert!(
+                (got - want).abs().max_element() <= 1e-4 * strength,
+                "{name}, emissive strength {strength}: centre {got}, want {want}"
+            );
+        }
+    }
+}
+
+/// The gallery's model: its five cubes emit the same colour at 1, 2, 4, 8
+/// and 16 times; a camera ray on a cube face sees that much in every
+/// technique (read in place from the shared assets, skipped without them).
+#[test]
+fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
+    let Some(root) = chiaro_testkit::shared_assets() else {
+        eprintln!("skipped: the shared assets folder is absent (CI has it)");
+        return;
+    };
+    let path = root.join(
+        "khronos-gltf-sample-assets/EmissiveStrengthTest/glTF-Binary/EmissiveStrengthTest.glb",
+    );
+    if !Path::new(&path).is_file() {
+        eprintln!("skipped: {} is absent", path.display());
+        return;
+    }
+    let scene = chiaro::io::load_scene(&path).expect("loads").scene;
+    let strengths: Vec<f32> = scene
+        .materials
+        .iter()
+        .filter(|m| m.emission != Vec3::ZERO)
+        .map(|m| m.emission.x / 0.1)
+        .collect();
+    let mut sorted = strengths.clone();
+    sorted.sort_by(f32::total_cmp);
+    for (s, want) in sorted.iter().zip([1.0, 2.0, 4.0, 8.0, 16.0]) {
+        assert!(
+            (s - want).abs() < 1e-3,
+            "emission strengths {strengths:?}, want 1, 2, 4, 8 and 16"
+        );
+    }
+}
