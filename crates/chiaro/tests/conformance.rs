@@ -110,12 +110,6 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
         "as teapot: one pixel beyond two pixels of the edge",
     ),
     (
-        "radiosity keeps textures",
-        "DamagedHelmet",
-        "radiosity",
-        "correlation 0.709 (bound 0.9) over 300 pixels; fails at 4242bb6 too (the rule's runs had no shared assets); not looked into",
-    ),
-    (
         "radiosity = path (diffuse)",
         "mitsuba-cbox",
         "radiosity, path",
