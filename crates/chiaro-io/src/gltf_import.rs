@@ -25,8 +25,9 @@
 //! `baseColorFactor * baseColorTexture * COLOR_0`, metallic and roughness =
 //! factors times the B and G of `metallicRoughnessTexture`, then `kd =
 //! base (1 - metallic)`, F0 `= mix(0.04, base, metallic)`, alpha =
-//! roughness^2. `occlusionTexture` (R, with `strength`) scales the ambient
-//! term; `normalTexture` -> `normal_map`; `emissiveFactor *
+//! roughness^2, `ka = 1` (the ambient term is `Ia ka (kd + F0)`, what a
+//! uniform environment of radiance `Ia` gives). `occlusionTexture` (R, with
+//! `strength`) scales the ambient term; `normalTexture` -> `normal_map`; `emissiveFactor *
 //! KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
 //! `emission_texture`; `KHR_materials_unlit` -> emission = base colour, no
 //! reflection; `doubleSided` -> `two_sided`; `alphaMode`/`alphaCutoff` ->
@@ -838,6 +839,9 @@ impl Builder<'_> {
             specular,
             model: ReflectanceModel::TorranceSparrow,
             roughness,
+            // Physically based: uniform ambient radiance Ia is reflected as
+            // Ia kd (and Ia F0 off the specular lobe), not a tenth of it.
+            ambient: Vec3::ONE,
             emission: Vec3::from(gm.emissive_factor()).max(Vec3::ZERO) * strength,
             two_sided: gm.double_sided(),
             metallic_roughness: Some(mr),
