@@ -4,8 +4,8 @@
 //!
 //! `cargo run -p chiaro-io --example downsample_hdr -- IN.hdr OUT.hdr`
 
-use image::codecs::hdr::HdrEncoder;
 use image::Rgb;
+use image::codecs::hdr::HdrEncoder;
 use std::fs::File;
 use std::io::BufWriter;
 

@@ -221,7 +221,9 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         }
     }
     let json_bytes = if is_glb {
-        gltf::Glb::from_slice(bytes).map(|g| g.json.into_owned()).unwrap_or_default()
+        gltf::Glb::from_slice(bytes)
+            .map(|g| g.json.into_owned())
+            .unwrap_or_default()
     } else {
         bytes.to_vec()
     };
@@ -1152,7 +1154,8 @@ fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
     use serde_json::Value;
     // (feature, pointers), in the order first met.
     let mut found: Vec<(String, Vec<String>)> = Vec::new();
-    let mut add = |feature: String, pointer: String| match found.iter_mut().find(|f| f.0 == feature) {
+    let mut add = |feature: String, pointer: String| match found.iter_mut().find(|f| f.0 == feature)
+    {
         Some(f) => f.1.push(pointer),
         None => found.push((feature, vec![pointer])),
     };
@@ -1185,7 +1188,12 @@ fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
     fn escape(k: &str) -> String {
         k.replace('~', "~0").replace('/', "~1")
     }
-    let array = |key: &str| json.get(key).and_then(Value::as_array).cloned().unwrap_or_default();
+    let array = |key: &str| {
+        json.get(key)
+            .and_then(Value::as_array)
+            .cloned()
+            .unwrap_or_default()
+    };
     walk(json, "", &mut add);
     for (i, ext) in array("extensionsUsed").iter().enumerate() {
         if let Some(ext) = ext.as_str() {
@@ -1198,7 +1206,10 @@ fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
         }
     }
     for (i, _) in array("skins").iter().enumerate() {
-        add("skins are not applied (the bind pose is loaded)".into(), format!("/skins/{i}"));
+        add(
+            "skins are not applied (the bind pose is loaded)".into(),
+            format!("/skins/{i}"),
+        );
     }
     for (i, _) in array("animations").iter().enumerate() {
         add("animations are ignored".into(), format!("/animations/{i}"));
@@ -1223,7 +1234,10 @@ fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
     }
     for (c, cam) in array("cameras").iter().enumerate() {
         if cam.get("type").and_then(Value::as_str) == Some("orthographic") {
-            add("orthographic cameras are skipped".into(), format!("/cameras/{c}"));
+            add(
+                "orthographic cameras are skipped".into(),
+                format!("/cameras/{c}"),
+            );
         }
     }
     let lights = json
@@ -1394,7 +1408,8 @@ mod tests {
             .collect();
         assert_eq!(w.len(), 1, "{:#?}", imp.warnings);
         assert!(
-            w[0].starts_with("s.gltf: ") && w[0].contains("at /materials/0/extensions/KHR_materials_clearcoat"),
+            w[0].starts_with("s.gltf: ")
+                && w[0].contains("at /materials/0/extensions/KHR_materials_clearcoat"),
             "{}",
             w[0]
         );

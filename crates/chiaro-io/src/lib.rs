@@ -37,10 +37,10 @@ use chiaro_core::scene::{
     Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, NamedCamera, Object, Scene,
     Severity, Texture, TextureId, Transform,
 };
-use chiaro_core::{Mat4, Vec3};
 use chiaro_core::scene::{Environment, ImageTexture};
 use chiaro_core::shading::bsdf::luminance;
 use chiaro_core::shading::texture::environment_mean_radiance;
+use chiaro_core::{Mat4, Vec3};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -376,23 +376,28 @@ pub const STUDIO_MEAN_LUMINANCE: f32 = 0.5;
 fn studio() -> &'static (ImageTexture, f32, Vec3) {
     static STUDIO: OnceLock<(ImageTexture, f32, Vec3)> = OnceLock::new();
     STUDIO.get_or_init(|| {
-        let texture = match images::load_texture_bytes(STUDIO_HDR, "studio_small_03_256x128.hdr", false) {
-            Ok(t) => t,
-            // Embedded and tested (`studio_environment_decodes`): not reached.
-            Err(_) => ImageTexture {
-                source: "studio (constant)".into(),
-                width: 1,
-                height: 1,
-                texels: vec![[1.0; 4]],
-                ..ImageTexture::default()
-            },
-        };
+        let texture =
+            match images::load_texture_bytes(STUDIO_HDR, "studio_small_03_256x128.hdr", false) {
+                Ok(t) => t,
+                // Embedded and tested (`studio_environment_decodes`): not reached.
+                Err(_) => ImageTexture {
+                    source: "studio (constant)".into(),
+                    width: 1,
+                    height: 1,
+                    texels: vec![[1.0; 4]],
+                    ..ImageTexture::default()
+                },
+            };
         let mut scene = Scene::default();
         let id = scene.add_texture(Texture::Image(texture.clone()));
         scene.environment = Some(studio_env(id, 1.0));
         let raw = environment_mean_radiance(&scene);
         let lum = luminance(raw);
-        let intensity = if lum > 0.0 { STUDIO_MEAN_LUMINANCE / lum } else { 1.0 };
+        let intensity = if lum > 0.0 {
+            STUDIO_MEAN_LUMINANCE / lum
+        } else {
+            1.0
+        };
         (texture, intensity, raw * intensity)
     })
 }
@@ -577,9 +582,17 @@ mod studio_tests {
     fn studio_environment_decodes() {
         let (t, intensity, mean) = studio();
         assert_eq!((t.width, t.height), (256, 128));
-        assert!(t.texels.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+        assert!(
+            t.texels
+                .iter()
+                .flatten()
+                .all(|v| v.is_finite() && *v >= 0.0)
+        );
         assert!(intensity.is_finite() && *intensity > 0.0);
-        assert!((luminance(*mean) - STUDIO_MEAN_LUMINANCE).abs() < 1e-3, "{mean}");
+        assert!(
+            (luminance(*mean) - STUDIO_MEAN_LUMINANCE).abs() < 1e-3,
+            "{mean}"
+        );
         let lights = default_lights(&Camera::default());
         assert!(matches!(lights[0], Light::Ambient { color, .. } if color == *mean));
         let mut scene = Scene::default();
@@ -587,6 +600,9 @@ mod studio_tests {
         let env = scene.environment.clone().expect("environment");
         assert!(!env.as_background);
         let again = environment_mean_radiance(&scene);
-        assert!((again - *mean).abs().max_element() < 1e-4, "{again} vs {mean}");
+        assert!(
+            (again - *mean).abs().max_element() < 1e-4,
+            "{again} vs {mean}"
+        );
     }
 }

@@ -1016,16 +1016,25 @@ fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
         );
         return;
     }
-    let mut plain = case.scene.clone();
-    for mat in &mut plain.materials {
-        mat.texture = None;
-    }
-    let pair = |tech: Technique| {
-        let s = settings(&case.scene, Tech::Facade(tech));
-        (film(&case.scene, &s), film(&plain, &s))
+    // Phong is compared under the light radiosity draws: without ambient
+    // lights and the environment (radiosity's listed limitations; a
+    // model's automatic lighting has both, and phong's ambient term also
+    // carries the specular lobe's F0 texture, `ks_ambient`).
+    let mut direct = case.scene.clone();
+    direct
+        .lights
+        .retain(|l| !matches!(l, Light::Ambient { .. }));
+    direct.environment = None;
+    let pair = |scene: &Scene, tech: Technique| {
+        let mut plain = scene.clone();
+        for mat in &mut plain.materials {
+            mat.texture = None;
+        }
+        let s = settings(scene, Tech::Facade(tech));
+        (film(scene, &s), film(&plain, &s))
     };
-    let (rad, rad_plain) = pair(Technique::Radiosity);
-    let (ph, ph_plain) = pair(Technique::Phong);
+    let (rad, rad_plain) = pair(&case.scene, Technique::Radiosity);
+    let (ph, ph_plain) = pair(&direct, Technique::Phong);
     let lum = |f: &Film, i: usize| f.color[i].dot(Vec3::new(0.2126, 0.7152, 0.0722));
     let (mut xs, mut ys) = (Vec::new(), Vec::new());
     for &i in &px {

@@ -242,7 +242,10 @@ fn the_automatic_light_lights_path_and_phong_alike() {
     // The path tracer ignores ambient light by design and phong does not
     // integrate the studio map; compare direct light (the environment is
     // checked by `the_studio_environment_lights_a_metal_in_every_technique`).
-    assert!(scene.environment.is_some(), "the studio environment is added");
+    assert!(
+        scene.environment.is_some(),
+        "the studio environment is added"
+    );
     scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
     scene.environment = None;
     let mut s = scene.render.clone();
@@ -350,7 +353,10 @@ fn the_studio_environment_lights_a_metal_in_every_technique() {
     let key_only = surface_mean(&render(&key, &settings));
     eprintln!("metal mean luminance: {means:?}, key light alone {key_only}");
     for &(t, m) in &means {
-        assert!(m > 2.0 * key_only, "{t:?}: {m} vs key light alone {key_only}");
+        assert!(
+            m > 2.0 * key_only,
+            "{t:?}: {m} vs key light alone {key_only}"
+        );
         for &(u, n) in &means {
             assert!(m <= 1.5 * n, "{t:?} {m} vs {u:?} {n}");
         }
