@@ -1196,13 +1196,11 @@ fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
     };
     walk(json, "", &mut add);
     for (i, ext) in array("extensionsUsed").iter().enumerate() {
-        if let Some(ext) = ext.as_str() {
-            if !SUPPORTED.contains(&ext) {
-                add(
-                    format!("extension {ext} is not supported and is ignored"),
-                    format!("/extensionsUsed/{i}"),
-                );
-            }
+        if let Some(ext) = ext.as_str().filter(|e| !SUPPORTED.contains(e)) {
+            add(
+                format!("extension {ext} is not supported and is ignored"),
+                format!("/extensionsUsed/{i}"),
+            );
         }
     }
     for (i, _) in array("skins").iter().enumerate() {
