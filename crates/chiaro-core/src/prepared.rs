@@ -502,6 +502,9 @@ impl<'s> PreparedScene<'s> {
                     mr.metallic * metallic,
                     mr.roughness * rough,
                 );
+                // Uniform light reflects off the specular lobe too (about
+                // F0 of it): metals are not black under ambient light.
+                sm.ks_ambient = sm.ks;
             }
             None => {
                 sm.kd *= hit.color;

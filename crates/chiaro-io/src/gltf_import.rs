@@ -25,8 +25,9 @@
 //! `baseColorFactor * baseColorTexture * COLOR_0`, metallic and roughness =
 //! factors times the B and G of `metallicRoughnessTexture`, then `kd =
 //! base (1 - metallic)`, F0 `= mix(0.04, base, metallic)`, alpha =
-//! roughness^2. `occlusionTexture` (R, with `strength`) scales the ambient
-//! term; `normalTexture` -> `normal_map`; `emissiveFactor *
+//! roughness^2, `ka = 1` (the ambient term is `Ia ka (kd + F0)`, what a
+//! uniform environment of radiance `Ia` gives). `occlusionTexture` (R, with
+//! `strength`) scales the ambient term; `normalTexture` -> `normal_map`; `emissiveFactor *
 //! KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
 //! `emission_texture`; `KHR_materials_unlit` -> emission = base colour, no
 //! reflection; `doubleSided` -> `two_sided`; `alphaMode`/`alphaCutoff` ->
@@ -219,15 +220,16 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
             return Err(in_err(path, p.to_string(), format!("{e}{more}")));
         }
     }
-    let mut warnings = Vec::new();
-    for ext in doc.extensions_used() {
-        if !SUPPORTED.contains(&ext) {
-            warnings.push(format!(
-                "{}: extension {ext} is not supported and is ignored",
-                path.display()
-            ));
-        }
-    }
+    let json_bytes = if is_glb {
+        gltf::Glb::from_slice(bytes)
+            .map(|g| g.json.into_owned())
+            .unwrap_or_default()
+    } else {
+        bytes.to_vec()
+    };
+    let warnings = serde_json::from_slice::<serde_json::Value>(&json_bytes)
+        .map(|json| unsupported_features(&json, path))
+        .unwrap_or_default();
 
     let buffers = load_buffers(doc, base, gltf.blob.clone(), path)?;
     let mut b = Builder {
@@ -243,12 +245,6 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         budget,
     };
     b.out.warnings = warnings;
-    if doc.skins().len() > 0 {
-        b.note("skins are not applied: the bind pose is loaded");
-    }
-    if doc.animations().len() > 0 {
-        b.note("animations are ignored");
-    }
     // The default scene, else the first, else every root node.
     let scene = doc.default_scene().or_else(|| doc.scenes().next());
     let roots: Vec<gltf::Node> = match scene {
@@ -416,16 +412,12 @@ impl Builder<'_> {
                         _ => self.note("a camera with a degenerate transform or fov was skipped"),
                     }
                 }
-                gltf::camera::Projection::Orthographic(_) => {
-                    self.note("orthographic cameras are not supported and were skipped");
-                }
+                // Warned about once, by `unsupported_features`.
+                gltf::camera::Projection::Orthographic(_) => {}
             }
         }
         if let Some(light) = node.light() {
             self.light(&light, world);
-        }
-        if node.weights().is_some() {
-            self.note("morph target weights are ignored: the base shape is loaded");
         }
         let Some(mesh) = node.mesh() else {
             return Ok(());
@@ -465,9 +457,6 @@ impl Builder<'_> {
         if !(color.is_finite() && intensity.is_finite() && intensity >= 0.0) {
             self.note("a light with invalid colour or intensity was skipped");
             return;
-        }
-        if light.range().is_some() {
-            self.note("light `range` is ignored (inverse-square fall-off everywhere)");
         }
         let position = world.transform_point3(Vec3::ZERO);
         let direction = world.transform_vector3(Vec3::NEG_Z).try_normalize();
@@ -632,9 +621,6 @@ impl Builder<'_> {
             ));
             return Ok(None);
         }
-        if prim.morph_targets().len() > 0 {
-            self.note("morph targets are ignored: the base shape is loaded");
-        }
         let Some(pos_acc) = prim.get(&gltf::Semantic::Positions) else {
             self.note(format!("{loc}: no POSITION attribute: skipped"));
             return Ok(None);
@@ -709,14 +695,8 @@ impl Builder<'_> {
         }
         // The one uv set the material's textures use (chiaro meshes carry one).
         let set = prim.material().index().map_or(0, |_| {
-            let (set, mixed) = uv_set(&prim.material());
-            if mixed {
-                self.note(format!(
-                    "{loc}: the material's textures use different TEXCOORD sets: \
-                     TEXCOORD_{set} is used for all"
-                ));
-            }
-            set
+            // Mixed sets are warned about once, by `unsupported_features`.
+            uv_set(&prim.material()).0
         });
         if let Some(acc) = prim.get(&gltf::Semantic::TexCoords(set)) {
             self.check_accessor(
@@ -838,6 +818,9 @@ impl Builder<'_> {
             specular,
             model: ReflectanceModel::TorranceSparrow,
             roughness,
+            // Physically based: uniform ambient radiance Ia is reflected as
+            // Ia kd (and Ia F0 off the specular lobe), not a tenth of it.
+            ambient: Vec3::ONE,
             emission: Vec3::from(gm.emissive_factor()).max(Vec3::ZERO) * strength,
             two_sided: gm.double_sided(),
             metallic_roughness: Some(mr),
@@ -1157,6 +1140,167 @@ fn decode_base64(s: &str) -> std::result::Result<Vec<u8>, String> {
     Ok(out)
 }
 
+// ---------------------------------------------------------------------------
+// Unsupported features: one warning each, naming the file and a JSON pointer.
+
+/// The features of the glTF JSON `json` that chiaro ignores or drops, one
+/// warning per feature naming `path`, the JSON pointer of its first
+/// occurrence and how many more there are: extensions chiaro does not
+/// implement (wherever an `extensions` object names one, else their place
+/// in `extensionsUsed`), skins, animations, morph targets and weights,
+/// orthographic cameras, a light's `range`, scenes other than the one
+/// loaded, and materials whose textures use different `texCoord` sets.
+fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
+    use serde_json::Value;
+    // (feature, pointers), in the order first met.
+    let mut found: Vec<(String, Vec<String>)> = Vec::new();
+    let mut add = |feature: String, pointer: String| match found.iter_mut().find(|f| f.0 == feature)
+    {
+        Some(f) => f.1.push(pointer),
+        None => found.push((feature, vec![pointer])),
+    };
+    fn walk(v: &Value, ptr: &str, add: &mut dyn FnMut(String, String)) {
+        match v {
+            Value::Object(map) => {
+                if let Some(Value::Object(exts)) = map.get("extensions") {
+                    for k in exts.keys() {
+                        if !SUPPORTED.contains(&k.as_str()) {
+                            add(
+                                format!("extension {k} is not supported and is ignored"),
+                                format!("{ptr}/extensions/{}", escape(k)),
+                            );
+                        }
+                    }
+                }
+                for (k, child) in map {
+                    walk(child, &format!("{ptr}/{}", escape(k)), add);
+                }
+            }
+            Value::Array(items) => {
+                for (i, child) in items.iter().enumerate() {
+                    walk(child, &format!("{ptr}/{i}"), add);
+                }
+            }
+            _ => {}
+        }
+    }
+    /// RFC 6901 escaping of one pointer token.
+    fn escape(k: &str) -> String {
+        k.replace('~', "~0").replace('/', "~1")
+    }
+    let array = |key: &str| {
+        json.get(key)
+            .and_then(Value::as_array)
+            .cloned()
+            .unwrap_or_default()
+    };
+    walk(json, "", &mut add);
+    for (i, ext) in array("extensionsUsed").iter().enumerate() {
+        if let Some(ext) = ext.as_str().filter(|e| !SUPPORTED.contains(e)) {
+            add(
+                format!("extension {ext} is not supported and is ignored"),
+                format!("/extensionsUsed/{i}"),
+            );
+        }
+    }
+    for (i, _) in array("skins").iter().enumerate() {
+        add(
+            "skins are not applied (the bind pose is loaded)".into(),
+            format!("/skins/{i}"),
+        );
+    }
+    for (i, _) in array("animations").iter().enumerate() {
+        add("animations are ignored".into(), format!("/animations/{i}"));
+    }
+    let morph = "morph targets are ignored (the base shape is loaded)";
+    for (m, mesh) in array("meshes").iter().enumerate() {
+        if let Some(prims) = mesh.get("primitives").and_then(Value::as_array) {
+            for (p, prim) in prims.iter().enumerate() {
+                if prim.get("targets").is_some() {
+                    add(morph.into(), format!("/meshes/{m}/primitives/{p}/targets"));
+                }
+            }
+        }
+        if mesh.get("weights").is_some() {
+            add(morph.into(), format!("/meshes/{m}/weights"));
+        }
+    }
+    for (n, node) in array("nodes").iter().enumerate() {
+        if node.get("weights").is_some() {
+            add(morph.into(), format!("/nodes/{n}/weights"));
+        }
+    }
+    for (c, cam) in array("cameras").iter().enumerate() {
+        if cam.get("type").and_then(Value::as_str) == Some("orthographic") {
+            add(
+                "orthographic cameras are skipped".into(),
+                format!("/cameras/{c}"),
+            );
+        }
+    }
+    let lights = json
+        .pointer("/extensions/KHR_lights_punctual/lights")
+        .and_then(Value::as_array);
+    for (l, light) in lights.into_iter().flatten().enumerate() {
+        if light.get("range").is_some() {
+            add(
+                "light `range` is ignored (inverse-square fall-off everywhere)".into(),
+                format!("/extensions/KHR_lights_punctual/lights/{l}/range"),
+            );
+        }
+    }
+    let loaded = json.get("scene").and_then(Value::as_u64).unwrap_or(0) as usize;
+    for (s, _) in array("scenes").iter().enumerate() {
+        if s != loaded {
+            add(
+                "scenes other than the default one are not loaded".into(),
+                format!("/scenes/{s}"),
+            );
+        }
+    }
+    // texCoord of each textureInfo (KHR_texture_transform's override first).
+    let slots = [
+        "/pbrMetallicRoughness/baseColorTexture",
+        "/pbrMetallicRoughness/metallicRoughnessTexture",
+        "/emissiveTexture",
+        "/normalTexture",
+        "/occlusionTexture",
+    ];
+    for (m, mat) in array("materials").iter().enumerate() {
+        let mut first: Option<u64> = None;
+        for slot in slots {
+            let Some(info) = mat.pointer(slot) else {
+                continue;
+            };
+            let (set, at) = match info.pointer("/extensions/KHR_texture_transform/texCoord") {
+                Some(v) => (v.as_u64(), "/extensions/KHR_texture_transform/texCoord"),
+                None => (info.get("texCoord").and_then(Value::as_u64), "/texCoord"),
+            };
+            let set = set.unwrap_or(0);
+            match first {
+                None => first = Some(set),
+                Some(f) if f != set => add(
+                    "textures of one material on different texCoord sets \
+                     (the first texture's set is used for all)"
+                        .into(),
+                    format!("/materials/{m}{slot}{at}"),
+                ),
+                Some(_) => {}
+            }
+        }
+    }
+    found
+        .into_iter()
+        .map(|(feature, ptrs)| {
+            let more = match ptrs.len() {
+                1 => String::new(),
+                n => format!(" (and {} more)", n - 1),
+            };
+            format!("{}: {feature}: at {}{more}", path.display(), ptrs[0])
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1190,6 +1334,84 @@ mod tests {
       "buffers": [{"byteLength": 36,
         "uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}]
     }"#;
+
+    /// Each unsupported feature is one warning naming the file and the JSON
+    /// pointer of its first occurrence, with the count of the others.
+    #[test]
+    fn unsupported_features_are_one_warning_each_with_a_json_pointer() {
+        let json: serde_json::Value = serde_json::from_str(
+            r#"{
+              "extensionsUsed": ["KHR_materials_clearcoat", "KHR_texture_transform", "EXT_foo"],
+              "scene": 1,
+              "scenes": [{"nodes": []}, {"nodes": [0]}],
+              "nodes": [{"mesh": 0, "skin": 0, "weights": [0.5]}],
+              "skins": [{"joints": [0]}],
+              "animations": [{"channels": [], "samplers": []}],
+              "cameras": [{"type": "orthographic"}],
+              "materials": [
+                {"name": "a"},
+                {"extensions": {"KHR_materials_clearcoat": {}}},
+                {"extensions": {"KHR_materials_clearcoat": {}, "KHR_materials_sheen": {}},
+                 "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
+                   "metallicRoughnessTexture": {"index": 0, "texCoord": 1}}}
+              ],
+              "meshes": [{"primitives": [{"attributes": {}, "targets": [{}]},
+                                         {"attributes": {}, "targets": [{}]}]}],
+              "extensions": {"KHR_lights_punctual": {"lights": [{"type": "point", "range": 2}]}}
+            }"#,
+        )
+        .expect("json");
+        let w = unsupported_features(&json, Path::new("m.gltf"));
+        let has = |s: &str| w.iter().filter(|x| x.contains(s)).count();
+        for expected in [
+            "m.gltf: extension KHR_materials_clearcoat is not supported and is ignored: \
+             at /materials/1/extensions/KHR_materials_clearcoat (and 2 more)",
+            "m.gltf: extension KHR_materials_sheen is not supported and is ignored: \
+             at /materials/2/extensions/KHR_materials_sheen",
+            "m.gltf: extension EXT_foo is not supported and is ignored: at /extensionsUsed/2",
+            "m.gltf: skins are not applied (the bind pose is loaded): at /skins/0",
+            "m.gltf: animations are ignored: at /animations/0",
+            "m.gltf: morph targets are ignored (the base shape is loaded): \
+             at /meshes/0/primitives/0/targets (and 2 more)",
+            "m.gltf: orthographic cameras are skipped: at /cameras/0",
+            "m.gltf: light `range` is ignored (inverse-square fall-off everywhere): \
+             at /extensions/KHR_lights_punctual/lights/0/range",
+            "m.gltf: scenes other than the default one are not loaded: at /scenes/0",
+            "/materials/2/pbrMetallicRoughness/metallicRoughnessTexture/texCoord",
+        ] {
+            assert_eq!(has(expected), 1, "{expected} in {w:#?}");
+        }
+        // Supported extensions are not warned about; nothing else is.
+        assert_eq!(has("KHR_texture_transform"), 0, "{w:#?}");
+        assert_eq!(w.len(), 10, "{w:#?}");
+    }
+
+    /// Through the loader: the warning reaches `Imported::warnings` once.
+    #[test]
+    fn an_unsupported_material_extension_is_warned_about_with_its_path() {
+        let file = SCENE
+            .replace(
+                r#""extensionsUsed": ["KHR_lights_punctual"],"#,
+                r#""extensionsUsed": ["KHR_lights_punctual", "KHR_materials_clearcoat"],"#,
+            )
+            .replace(
+                r#""doubleSided": true}"#,
+                r#""doubleSided": true, "extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1}}}"#,
+            );
+        let imp = load_gltf_slice(file.as_bytes(), None, Path::new("s.gltf")).expect("loads");
+        let w: Vec<_> = imp
+            .warnings
+            .iter()
+            .filter(|w| w.contains("KHR_materials_clearcoat"))
+            .collect();
+        assert_eq!(w.len(), 1, "{:#?}", imp.warnings);
+        assert!(
+            w[0].starts_with("s.gltf: ")
+                && w[0].contains("at /materials/0/extensions/KHR_materials_clearcoat"),
+            "{}",
+            w[0]
+        );
+    }
 
     #[test]
     fn cameras_lights_and_materials_convert() {

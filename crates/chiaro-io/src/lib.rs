@@ -37,8 +37,12 @@ use chiaro_core::scene::{
     Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, NamedCamera, Object, Scene,
     Severity, Texture, TextureId, Transform,
 };
+use chiaro_core::scene::{Environment, ImageTexture};
+use chiaro_core::shading::bsdf::luminance;
+use chiaro_core::shading::texture::environment_mean_radiance;
 use chiaro_core::{Mat4, Vec3};
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 /// A scene read from a file, with the warnings met on the way (unsupported
 /// optional features, missing material libraries, `Scene::validate`
@@ -315,9 +319,18 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
     let has_emitters = scene.materials.iter().any(Material::is_emissive);
     if scene.lights.is_empty() {
         scene.lights = framed_lights(&framed);
+        if framed.inside.is_none() {
+            add_studio_environment(&mut scene);
+        }
         if !has_emitters {
+            let added = if framed.inside.is_none() {
+                "the studio environment (lighting only, not the background), \
+                 its mean radiance as an ambient light, and a directional light"
+            } else {
+                "an ambient light and a point light"
+            };
             warnings.push(format!(
-                "{}: the file has no lights: added an ambient light and a directional light",
+                "{}: the file has no lights: added {added}",
                 path.display()
             ));
         }
@@ -349,9 +362,79 @@ pub fn framed_lights(framed: &Framing) -> Vec<Light> {
     ]
 }
 
-/// The lights added to a file that has none: ambient 0.1 and a white
-/// directional light of intensity 1 shining from above the camera's right
-/// shoulder.
+/// The studio HDR that lights a model without lights (see
+/// `assets/README.md`: Poly Haven's CC0 "Studio Small 03", 256x128).
+const STUDIO_HDR: &[u8] = include_bytes!("../assets/studio_small_03_256x128.hdr");
+
+/// The mean radiance (luminance) the studio environment is scaled to: a
+/// white Lambertian surface reflects about half of what the key light
+/// (intensity 1, head-on) gives it.
+pub const STUDIO_MEAN_LUMINANCE: f32 = 0.5;
+
+/// The decoded studio map, its intensity and its mean radiance at that
+/// intensity ([`environment_mean_radiance`]), computed once.
+fn studio() -> &'static (ImageTexture, f32, Vec3) {
+    static STUDIO: OnceLock<(ImageTexture, f32, Vec3)> = OnceLock::new();
+    STUDIO.get_or_init(|| {
+        let texture =
+            match images::load_texture_bytes(STUDIO_HDR, "studio_small_03_256x128.hdr", false) {
+                Ok(t) => t,
+                // Embedded and tested (`studio_environment_decodes`): not reached.
+                Err(_) => ImageTexture {
+                    source: "studio (constant)".into(),
+                    width: 1,
+                    height: 1,
+                    texels: vec![[1.0; 4]],
+                    ..ImageTexture::default()
+                },
+            };
+        let mut scene = Scene::default();
+        let id = scene.add_texture(Texture::Image(texture.clone()));
+        scene.environment = Some(studio_env(id, 1.0));
+        let raw = environment_mean_radiance(&scene);
+        let lum = luminance(raw);
+        let intensity = if lum > 0.0 {
+            STUDIO_MEAN_LUMINANCE / lum
+        } else {
+            1.0
+        };
+        (texture, intensity, raw * intensity)
+    })
+}
+
+/// The studio environment with texture `id`: lighting and reflections only,
+/// the camera keeps seeing `scene.background` (a model is shown against its
+/// usual plain background; `background = true` in a TOML scene shows a map).
+fn studio_env(texture: TextureId, intensity: f32) -> Environment {
+    Environment {
+        texture,
+        intensity,
+        rotate_y_degrees: 0.0,
+        as_background: false,
+    }
+}
+
+/// Adds the studio environment to `scene` (its texture and
+/// `scene.environment`), as the automatic lighting of a model without
+/// lights does; [`default_lights`] holds its mean radiance as the ambient
+/// light for the techniques that do not integrate the map.
+pub fn add_studio_environment(scene: &mut Scene) {
+    let (texture, intensity, _) = studio();
+    let id = scene.add_texture(Texture::Image(texture.clone()));
+    scene.environment = Some(studio_env(id, *intensity));
+}
+
+/// The mean radiance of the studio environment as added by
+/// [`add_studio_environment`]: the ambient light of [`default_lights`].
+pub fn studio_ambient() -> Vec3 {
+    studio().2
+}
+
+/// The lights added to a file that has none: an ambient light of the
+/// studio environment's mean radiance ([`studio_ambient`]: what the local
+/// techniques use in place of the map's diffuse light, the path tracer
+/// integrating the map itself and ignoring it) and a white directional
+/// light of intensity 1 shining from above the camera's right shoulder.
 pub fn default_lights(camera: &Camera) -> Vec<Light> {
     let f = camera.frame();
     let direction = (f.forward - 0.5 * f.up - 0.3 * f.right).normalize_or_zero();
@@ -362,8 +445,8 @@ pub fn default_lights(camera: &Camera) -> Vec<Light> {
     };
     vec![
         Light::Ambient {
-            color: Vec3::ONE,
-            intensity: 0.1,
+            color: studio_ambient(),
+            intensity: 1.0,
         },
         Light::Directional {
             direction,
@@ -486,5 +569,40 @@ pub fn transform_light(light: &Light, m: Mat4) -> Light {
                 two_sided,
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod studio_tests {
+    use super::*;
+
+    /// The embedded map decodes (not the constant stand-in), is finite and
+    /// is scaled to the stated mean luminance; `default_lights` carries it.
+    #[test]
+    fn studio_environment_decodes() {
+        let (t, intensity, mean) = studio();
+        assert_eq!((t.width, t.height), (256, 128));
+        assert!(
+            t.texels
+                .iter()
+                .flatten()
+                .all(|v| v.is_finite() && *v >= 0.0)
+        );
+        assert!(intensity.is_finite() && *intensity > 0.0);
+        assert!(
+            (luminance(*mean) - STUDIO_MEAN_LUMINANCE).abs() < 1e-3,
+            "{mean}"
+        );
+        let lights = default_lights(&Camera::default());
+        assert!(matches!(lights[0], Light::Ambient { color, .. } if color == *mean));
+        let mut scene = Scene::default();
+        add_studio_environment(&mut scene);
+        let env = scene.environment.clone().expect("environment");
+        assert!(!env.as_background);
+        let again = environment_mean_radiance(&scene);
+        assert!(
+            (again - *mean).abs().max_element() < 1e-4,
+            "{again} vs {mean}"
+        );
     }
 }

@@ -1001,8 +1001,14 @@ fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
     // Both copies diffuse only, and textured surfaces not emissive: radiosity
     // shows no specular term (a glTF metal's base colour is its specular
     // colour), and emission added to the reflected light dilutes the texture's
-    // ratio by an amount that depends on each technique's lighting.
+    // ratio by an amount that depends on each technique's lighting. Both are
+    // lit as radiosity draws: without ambient lights and the environment
+    // (radiosity's listed limitations; phong's ambient term also carries F0).
     let mut diffuse = case.scene.clone();
+    diffuse
+        .lights
+        .retain(|l| !matches!(l, Light::Ambient { .. }));
+    diffuse.environment = None;
     for mat in &mut diffuse.materials {
         mat.reflect = Vec3::ZERO;
         if mat.texture.is_some() {

@@ -239,8 +239,15 @@ fn the_automatic_light_lights_path_and_phong_alike() {
         "{:?}",
         scene.lights
     );
-    // The path tracer ignores ambient light by design; compare direct light.
+    // The path tracer ignores ambient light by design and phong does not
+    // integrate the studio map; compare direct light (the environment is
+    // checked by `the_studio_environment_lights_a_metal_in_every_technique`).
+    assert!(
+        scene.environment.is_some(),
+        "the studio environment is added"
+    );
     scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    scene.environment = None;
     let mut s = scene.render.clone();
     s.width = 96;
     s.height = 72;
@@ -280,4 +287,78 @@ fn the_automatic_light_lights_path_and_phong_alike() {
         );
     }
     assert!(compared > 200 && lit > 150, "{compared} {lit}");
+}
+
+/// Mean luminance of the pixels whose centre sees a surface.
+fn surface_mean(f: &Film) -> f32 {
+    let (mut sum, mut n) = (0.0, 0);
+    for (c, d) in f.color.iter().zip(&f.depth) {
+        if d.is_finite() {
+            sum += chiaro_core::shading::bsdf::luminance(*c);
+            n += 1;
+        }
+    }
+    assert!(n > 100, "{n} surface pixels");
+    sum / n as f32
+}
+
+/// A glTF-style gold metal (kd = 0, F0 = base colour) under the automatic
+/// lighting of a model without lights (`default_lights` plus the studio
+/// environment): phong and whitted (through the ambient light of the map's
+/// mean radiance and `ks_ambient`) and path (through the map itself) agree
+/// within a factor of 1.5 in mean luminance, and each is at least twice
+/// what the key light alone gives. Fails if a technique loses the
+/// environment or the ambient stand-in.
+#[test]
+fn the_studio_environment_lights_a_metal_in_every_technique() {
+    use chiaro::scene::{MetallicRoughness, ReflectanceModel};
+    let mr = MetallicRoughness {
+        base_color: Vec3::new(1.0, 0.78, 0.34),
+        metallic: 1.0,
+        roughness: 0.5,
+        texture: None,
+    };
+    let (diffuse, specular, roughness) =
+        MetallicRoughness::coefficients(mr.base_color, mr.metallic, mr.roughness);
+    let mut s = Scene::default();
+    s.add_material(Material {
+        diffuse,
+        specular,
+        roughness,
+        model: ReflectanceModel::TorranceSparrow,
+        metallic_roughness: Some(mr),
+        ambient: Vec3::ONE, // as the glTF importer sets it
+        ..Material::default()
+    });
+    s.objects.push(Object {
+        geometry: Geometry::Sphere { radius: 1.0 },
+        ..Default::default()
+    });
+    s.lights = chiaro::io::default_lights(&s.camera);
+    chiaro::io::add_studio_environment(&mut s);
+    let mut settings = s.render.clone();
+    settings.width = 48;
+    settings.height = 48;
+    settings.samples = 64;
+    let mut means = Vec::new();
+    for t in [Technique::Phong, Technique::Whitted, Technique::Path] {
+        settings.technique = t;
+        means.push((t, surface_mean(&render(&s, &settings))));
+    }
+    // The key light alone, in phong: no ambient, no environment.
+    let mut key = s.clone();
+    key.environment = None;
+    key.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    settings.technique = Technique::Phong;
+    let key_only = surface_mean(&render(&key, &settings));
+    eprintln!("metal mean luminance: {means:?}, key light alone {key_only}");
+    for &(t, m) in &means {
+        assert!(
+            m > 2.0 * key_only,
+            "{t:?}: {m} vs key light alone {key_only}"
+        );
+        for &(u, n) in &means {
+            assert!(m <= 1.5 * n, "{t:?} {m} vs {u:?} {n}");
+        }
+    }
 }

@@ -33,6 +33,11 @@ pub struct SurfaceMaterial {
     pub ior: f32,
     /// Emitted radiance.
     pub emission: Vec3,
+    /// The specular lobe's reflectance of uniform (ambient) light, added to
+    /// `kd` in the ambient term: F0 for glTF metallic-roughness materials
+    /// (so a metal, `kd = 0`, is not black under ambient or environment
+    /// light), zero for classic materials (`Ia ka kd` unchanged).
+    pub ks_ambient: Vec3,
 }
 
 impl Default for SurfaceMaterial {
@@ -56,6 +61,11 @@ impl SurfaceMaterial {
             kt: m.transmit,
             ior: m.ior,
             emission: m.emission,
+            ks_ambient: if m.metallic_roughness.is_some() {
+                m.specular
+            } else {
+                Vec3::ZERO
+            },
         }
     }
 

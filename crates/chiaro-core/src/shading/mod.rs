@@ -71,10 +71,11 @@ pub fn direct_from_sample(
 }
 
 /// The textbook ambient term `Ia * ka * kd` (ka is relative to the diffuse
-/// colour, see [`crate::scene::Material::ambient`]).
+/// colour, see [`crate::scene::Material::ambient`]), with the specular
+/// lobe's share `ks_ambient` (zero for classic materials) added to `kd`.
 #[inline]
 pub fn ambient_term(m: &SurfaceMaterial, ia: Vec3) -> Vec3 {
-    ia * m.ka * m.kd
+    ia * m.ka * (m.kd + m.ks_ambient)
 }
 
 /// Sum of all ambient lights' `color * intensity`.
@@ -202,7 +203,12 @@ fn local_model<const SPLIT: bool>(
     for (li, light) in singles {
         if let Light::Ambient { .. } = light {
             if env.ambient {
-                out += ambient_term(m, light.power_rgb());
+                let ia = light.power_rgb();
+                out += ambient_term(m, ia);
+                if SPLIT {
+                    // The specular share does not scale with kd.
+                    rest += ia * m.ka * m.ks_ambient;
+                }
             }
             continue;
         }

@@ -106,6 +106,7 @@ impl PointLighting {
         sp: &ShadingPoint,
     ) -> [Vec3; 2] {
         let (ka, ks) = (Vec3A::from(m.ka), Vec3A::from(m.ks));
+        let ks_ambient = Vec3A::from(m.ks_ambient);
         let (p, n, wo) = (Vec3A::from(sp.p), Vec3A::from(sp.n), Vec3A::from(sp.wo));
         let mut out = Vec3A::from(m.emission);
         let mut rest = out;
@@ -116,8 +117,13 @@ impl PointLighting {
         let r = 2.0 * n.dot(wo) * n - wo;
         for src in &self.sources {
             match *src {
-                // ambient_term: ia * ka * kd.
-                Source::Ambient(power) => out += power * ka * kd,
+                // ambient_term: ia * ka * (kd + ks_ambient).
+                Source::Ambient(power) => {
+                    out += power * ka * (kd + ks_ambient);
+                    if SPLIT {
+                        rest += power * ka * ks_ambient;
+                    }
+                }
                 Source::Point {
                     position,
                     power,

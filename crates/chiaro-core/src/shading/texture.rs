@@ -431,6 +431,42 @@ pub fn environment_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
     bilinear(img, uv).truncate() * env.intensity
 }
 
+/// The environment's irradiance `E(n)` divided by pi, averaged over all
+/// normals `n`: the constant ambient radiance under which a Lambertian
+/// surface reflects, on average over its orientations, what it reflects
+/// under the map. Averaging the cosine-weighted `E(n)` over the sphere
+/// of normals leaves the map's mean radiance over solid angle, integrated
+/// here with [`environment_radiance`] at one direction per texel (at most
+/// 512x256), rows weighted by `sin(theta)`. Zero without an environment.
+pub fn environment_mean_radiance(scene: &Scene) -> Vec3 {
+    let Some(env) = &scene.environment else {
+        return Vec3::ZERO;
+    };
+    let Some(Texture::Image(img)) = scene.textures.get(env.texture.index()) else {
+        return Vec3::ZERO;
+    };
+    let (w, h) = (img.width.clamp(1, 512), img.height.clamp(1, 256));
+    let (mut sum, mut weight) = (Vec3::ZERO, 0.0f64);
+    for row in 0..h {
+        let theta = (row as f32 + 0.5) / h as f32 * std::f32::consts::PI;
+        let (sin_t, cos_t) = theta.sin_cos();
+        let mut row_sum = Vec3::ZERO;
+        for col in 0..w {
+            let phi = (col as f32 + 0.5) / w as f32 * std::f32::consts::TAU;
+            // Any azimuth origin will do: the whole circle is summed.
+            let d = Vec3::new(sin_t * phi.cos(), cos_t, sin_t * phi.sin());
+            row_sum += environment_radiance(scene, d);
+        }
+        sum += row_sum * sin_t;
+        weight += f64::from(sin_t) * f64::from(w);
+    }
+    if weight > 0.0 {
+        sum / weight as f32
+    } else {
+        Vec3::ZERO
+    }
+}
+
 /// What a ray that leaves the scene in direction `dir` sees: a camera ray
 /// (`camera`) sees the environment map only when it is drawn as background
 /// (`Environment::as_background`), else `scene.background`; any other ray
@@ -733,6 +769,34 @@ mod tests {
         assert!((environment_radiance(&scene, Vec3::NEG_X).x - 1.0).abs() < 1e-6);
         assert!(environment_radiance(&scene, Vec3::NEG_Z).x.abs() < 1e-6);
         assert!(environment_radiance(&scene, Vec3::X).x.abs() < 1e-6);
+    }
+
+    /// The mean radiance of a constant map is its value times the
+    /// intensity; a map bright only above the horizon gives half of that
+    /// (the upper hemisphere is half the solid angle); no map gives zero.
+    #[test]
+    fn environment_mean_radiance_closed_forms() {
+        let mut scene = Scene::default();
+        assert_eq!(environment_mean_radiance(&scene), Vec3::ZERO);
+        let t = scene.add_texture(Texture::Image(image(64, 32, |_, _| 2.0)));
+        scene.environment = Some(crate::scene::Environment {
+            texture: t,
+            intensity: 1.5,
+            rotate_y_degrees: 30.0,
+            as_background: false,
+        });
+        let m = environment_mean_radiance(&scene);
+        assert!((m.x - 3.0).abs() < 1e-3, "{m}");
+        let sky = image(64, 32, |_, y| if y < 16 { 1.0 } else { 0.0 });
+        let t = scene.add_texture(Texture::Image(sky));
+        scene.environment = Some(crate::scene::Environment {
+            texture: t,
+            intensity: 1.0,
+            rotate_y_degrees: 0.0,
+            as_background: false,
+        });
+        let m = environment_mean_radiance(&scene);
+        assert!((m.x - 0.5).abs() < 0.02, "{m}");
     }
 
     /// `background = false`: the camera sees `scene.background`, every other
