@@ -82,6 +82,7 @@ impl SurfaceMaterial {
                     mr.metallic,
                     mr.roughness,
                 );
+                sm.ks_ambient = sm.ks;
             }
             None => sm.kd *= color,
         }
@@ -199,6 +200,7 @@ mod tests {
         assert_eq!(sm.kd, Vec3::ZERO);
         assert_eq!(sm.ks, Vec3::new(0.8, 0.0, 0.0));
         assert_eq!(sm.roughness, 0.25);
+        assert_eq!(sm.ks_ambient, sm.ks);
         metal.metallic_roughness = None;
         metal.diffuse = Vec3::splat(0.5);
         let sm = SurfaceMaterial::with_vertex_color(&metal, red);
