@@ -920,6 +920,11 @@ impl<'a> Ctx<'a, '_> {
         } else {
             (ng, Vec3A::ZERO)
         };
+        let color_alpha = if textured {
+            ps.color_alphas[i0] * w + ps.color_alphas[i1] * u + ps.color_alphas[i2] * v
+        } else {
+            1.0
+        };
         let (uv, p_object, tangent) = if textured {
             let tan = ps.tangents[i0] * w + ps.tangents[i1] * u + ps.tangents[i2] * v;
             (
@@ -940,6 +945,7 @@ impl<'a> Ctx<'a, '_> {
             p_object,
             tangent,
             color: color.into(),
+            color_alpha,
             material: td.material_id,
             object: ps.tri_object[td.t as usize],
         }

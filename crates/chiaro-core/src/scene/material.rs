@@ -248,9 +248,16 @@ impl Material {
         self.emission.max_element() > 0.0
     }
 
-    /// True if the surface lets light through.
+    /// True if the surface lets light through: a transmit colour, or
+    /// `alphaMode: BLEND` (whose per-point coverage the surface layer turns
+    /// into straight-through transmission `1 - alpha`).
     pub fn is_transparent(&self) -> bool {
-        self.transmit.max_element() > 0.0
+        self.transmit.max_element() > 0.0 || self.alpha_mode == AlphaMode::Blend
+    }
+
+    /// True if the material is alpha-tested (`alphaMode: MASK`).
+    pub fn is_masked(&self) -> bool {
+        matches!(self.alpha_mode, AlphaMode::Mask { .. })
     }
 
     /// True if the ray tracers should spawn a mirror ray.
