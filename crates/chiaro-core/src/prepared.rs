@@ -508,12 +508,7 @@ impl<'s> PreparedScene<'s> {
         let tc = Self::tex_coord(hit, duv_dx, duv_dy);
         let texel = m.texture.map(|t| self.eval_texture(t, &tc));
         let alpha = alpha_product(m.alpha, texel.map_or(1.0, |c| c.w), hit.color_alpha);
-        if m.alpha_mode == AlphaMode::Blend {
-            // BLEND: the point lets through what it does not cover, straight
-            // through (no refraction), whatever the texture's alpha pattern.
-            sm.kt = Vec3::splat(1.0 - alpha);
-            sm.ior = 1.0;
-        }
+
         let texture = texel.map(|c| c.truncate());
         match m.metallic_roughness {
             // Metallic-roughness: the base colour feeds kd and ks (F0).
@@ -542,6 +537,17 @@ impl<'s> PreparedScene<'s> {
         }
         if let Some(t) = m.emission_texture {
             sm.emission *= self.eval_texture(t, &tc).truncate();
+        }
+        if m.alpha_mode == AlphaMode::Blend {
+            // BLEND: the point covers a fraction alpha (its reflection and
+            // emission premultiplied) and lets `1 - alpha` straight through,
+            // so additive techniques give alpha I_surface + (1 - alpha) I_behind.
+            sm.kd *= alpha;
+            sm.ks *= alpha;
+            sm.kr *= alpha;
+            sm.emission *= alpha;
+            sm.kt = Vec3::splat(1.0 - alpha);
+            sm.ior = 1.0;
         }
         (sm, alpha)
     }

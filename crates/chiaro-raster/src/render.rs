@@ -66,7 +66,8 @@ use chiaro_core::progress::Progress;
 use chiaro_core::scene::{
     Material, RenderSettings, Scene, Severity, ShadeMode, ShadowMethod, Technique, TransparencyMode,
 };
-use chiaro_core::scene::{MaterialId, PixelFilter};
+use chiaro_core::accel::alpha::Coverage;
+use chiaro_core::scene::{AlphaMode, MaterialId, PixelFilter};
 use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
@@ -1220,6 +1221,26 @@ fn render_work(
         .map(|m| Class::of(m, settings))
         .collect();
     let all_opaque = class.iter().all(|&c| c == Class::Opaque);
+    // MASK: a fragment of a masked triangle whose alpha (at the sample's
+    // point of the triangle) is below the cutoff is discarded.
+    let coverage = Coverage::new(ps);
+    let sample_rays = Rays::new(scene, w, h);
+    let sub = crate::raster::SUBPIXEL as f32;
+    let cut_out = |t: u32, x: u32, y: u32, o: &[i32; 2]| {
+        let Some(c) = &coverage else { return false };
+        let dir = sample_rays.dir(x as f32 + o[0] as f32 / sub, y as f32 + o[1] as f32 / sub);
+        let [a, b, d] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+        let ray = chiaro_core::geometry::Ray::new(sample_rays.eye, dir);
+        match chiaro_core::accel::intersect_triangle(&ray, a, b, d) {
+            Some((t_hit, u, v)) => !c.covers(&chiaro_core::accel::Hit {
+                t: t_hit,
+                prim: t,
+                u,
+                v,
+            }),
+            None => false,
+        }
+    };
     let class_of = |t: u32| {
         class
             .get(ps.tri_material[t as usize].index())
@@ -1312,7 +1333,17 @@ fn render_work(
                     } else {
                         class_of(rt.id)
                     };
+                    let masked = coverage.as_ref().is_some_and(|c| c.is_masked(rt.id));
                     match class {
+                        Class::Opaque if masked => {
+                            rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
+                                let i = index(x, y, s);
+                                if k > key[i] && !cut_out(rt.id, x, y, &offsets[s]) {
+                                    key[i] = k;
+                                    ids[i] = rt.id;
+                                }
+                            })
+                        }
                         // The depth test as selects, not a branch (see
                         // rasterize_window_masked).
                         Class::Opaque => {
@@ -1867,6 +1898,9 @@ struct SampleResult {
     /// The part of `color` from specular reflection (and emission), when
     /// asked for: what interpolated transparency keeps unattenuated.
     specular: Vec3,
+    /// A BLEND point's straight-through transmission `1 - alpha` (its
+    /// colour is premultiplied by alpha in the surface layer).
+    coverage_kt: Option<Vec3>,
 }
 
 /// Step 5 for one tile: the box-filtered pixels and, with `keep_samples`,
@@ -1975,6 +2009,7 @@ fn shade_tile<'a>(
                         depth: f32::INFINITY,
                         normal: Vec3::ZERO,
                         specular: Vec3::ZERO,
+                        coverage_kt: None,
                     }
                 } else {
                     let td = ctx.tri_data(id, cache, poly);
@@ -1996,7 +2031,11 @@ fn shade_tile<'a>(
                     let front =
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);
-                    r.color = if interpolated {
+                    r.color = if let Some(kt) = front.coverage_kt {
+                        // BLEND: I = alpha I_surface + (1 - alpha) I_behind, the
+                        // first term already premultiplied.
+                        front.color + kt * behind
+                    } else if interpolated {
                         // Foley et al. 16.5.1: I = (1 - kt) I_front + kt I_behind,
                         // with the front surface's specular highlight kept whole.
                         (Vec3::ONE - kt) * (front.color - front.specular)
@@ -2089,6 +2128,7 @@ fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
         depth,
         normal: normal.into(),
         specular: Vec3::ZERO,
+        coverage_kt: None,
     }
 }
 
@@ -2146,6 +2186,7 @@ fn shade_sample(
     let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
     let sign = if flip { -1.0 } else { 1.0 };
     let mut specular = Vec3::ZERO;
+    let mut coverage_kt = None;
     let (color, n, kr) = match td.mode {
         ShadeMode::Phong if !needs_footprint && !want_specular && ctx.point_lighting.is_some() => {
             // The common case without copying the material: untextured (so
@@ -2187,6 +2228,9 @@ fn shade_sample(
                 // The surface layer: textures, normal and bump maps.
                 let (dpdu, dpdv) = ps.triangle_dpduv(t);
                 let ss = ps.shading_surface_at(hit, dpdu, dpdv, duv_dx, duv_dy);
+                if material.alpha_mode == AlphaMode::Blend {
+                    coverage_kt = Some(ss.material.kt);
+                }
                 (ss.material, ss.ns)
             } else {
                 // The layer without textures or maps: the vertex colour only.
@@ -2279,6 +2323,7 @@ fn shade_sample(
         depth,
         normal: n,
         specular,
+        coverage_kt,
     }
 }
 

@@ -235,9 +235,11 @@ impl Material {
     }
 
     /// True if the material is evaluated per point from textures (its
-    /// coefficients vary over the surface).
+    /// coefficients vary over the surface), or is BLEND (its coverage,
+    /// factor x texture x vertex alpha, scales them per point).
     pub fn is_textured(&self) -> bool {
         self.texture.is_some()
+            || self.alpha_mode == AlphaMode::Blend
             || self.emission_texture.is_some()
             || self.metallic_roughness.is_some_and(|m| m.texture.is_some())
             || self.occlusion.is_some()
