@@ -178,3 +178,119 @@ impl Accelerator for AlphaTested {
             .for_each_hit(ray, &mut |h| self.coverage.covers(h) && visit(h))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::bvh::SceneBvh;
+    use crate::prepared::PrepareOptions;
+    use crate::scene::{Filter, ImageTexture, Material, Mesh, Object, Scene};
+
+    /// A quad `z = 0` (x, y in [-1, 1], u = (x + 1) / 2) masked by a 2x1
+    /// texture whose left texel has alpha `left` and right texel alpha 1,
+    /// in front of an opaque quad `z = -1`; vertex alphas `va` on the mask.
+    pub(crate) fn masked_scene(mode: AlphaMode, left: f32, va: &[f32]) -> Scene {
+        let mut s = Scene::default();
+        let mut img = ImageTexture::new(
+            "mask".into(),
+            2,
+            1,
+            vec![[1.0, 1.0, 1.0, left], [1.0, 1.0, 1.0, 1.0]],
+        );
+        img.mag_filter = Filter::Nearest;
+        let tex = s.add_texture(Texture::Image(img));
+        let front = s.add_material(Material {
+            texture: Some(tex),
+            alpha_mode: mode,
+            ..Material::diffuse("front", Vec3::ONE)
+        });
+        let back = s.add_material(Material::diffuse("back", Vec3::new(1.0, 0.0, 0.0)));
+        for (z, m) in [(0.0, front), (-1.0, back)] {
+            let mesh = s.add_mesh(Mesh {
+                positions: vec![
+                    Vec3::new(-1.0, -1.0, z),
+                    Vec3::new(1.0, -1.0, z),
+                    Vec3::new(1.0, 1.0, z),
+                    Vec3::new(-1.0, 1.0, z),
+                ],
+                uvs: vec![
+                    Vec2::new(0.0, 0.0),
+                    Vec2::new(1.0, 0.0),
+                    Vec2::new(1.0, 1.0),
+                    Vec2::new(0.0, 1.0),
+                ],
+                color_alphas: if z == 0.0 { va.to_vec() } else { Vec::new() },
+                indices: vec![[0, 1, 2], [0, 2, 3]],
+                ..Mesh::default()
+            });
+            s.objects.push(Object {
+                geometry: crate::scene::Geometry::Mesh(mesh),
+                material: m,
+                ..Object::default()
+            });
+        }
+        s
+    }
+
+    #[test]
+    fn alpha_is_the_product_of_factor_texture_and_vertex_alpha() {
+        assert_eq!(alpha_product(0.5, 0.5, 0.5), 0.125);
+        assert_eq!(alpha_product(1.0, 1.0, 1.0), 1.0);
+        assert_eq!(alpha_product(2.0, 1.0, 1.0), 1.0);
+        assert_eq!(alpha_product(f32::NAN, 1.0, 1.0), 1.0);
+        // The surface layer and the coverage query agree.
+        let s = masked_scene(AlphaMode::Mask { cutoff: 0.5 }, 0.2, &[0.5; 4]);
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        let cov = Coverage::new(&ps).expect("masked");
+        for (x, want) in [(-0.5, 0.1), (0.5, 0.5)] {
+            let ray = Ray::new(Vec3::new(x, 0.1, 1.0), Vec3::NEG_Z);
+            let hit = SceneBvh::new(&ps).intersect(&ray).expect("front quad");
+            assert_eq!(hit.prim / 2, 0, "hits the front quad first");
+            let ss = ps.shading_surface(&ray, &hit, None);
+            assert!((ss.alpha - want).abs() < 1e-6, "{x}: {}", ss.alpha);
+            assert!((cov.alpha(hit.prim, hit.u, hit.v) - want).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn rays_pass_through_cut_out_texels_only() {
+        let s = masked_scene(AlphaMode::Mask { cutoff: 0.5 }, 0.0, &[]);
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        let accel = AlphaTested::wrap(&ps, Box::new(SceneBvh::new(&ps)));
+        let plain = SceneBvh::new(&ps);
+        for x in [-0.9f32, -0.3, 0.3, 0.9] {
+            let ray = Ray::new(Vec3::new(x, 0.2, 1.0), Vec3::NEG_Z);
+            let hit = accel.intersect(&ray).expect("a quad");
+            let want_z = if x < 0.0 { -1.0 } else { 0.0 };
+            assert!((ray.at(hit.t).z - want_z).abs() < 1e-6, "x = {x}");
+            // The hit behind is the one an unfiltered ray finds from there.
+            if x < 0.0 {
+                let behind = Ray {
+                    t_min: 1.5,
+                    ..ray
+                };
+                assert_eq!(Some(hit), plain.intersect(&behind));
+            }
+            // A shadow ray between the quads' planes, through the mask only.
+            let seg = Ray::segment(Vec3::new(x, 0.2, 1.0), Vec3::new(x, 0.2, -0.5));
+            assert_eq!(accel.occluded(&seg), x > 0.0, "x = {x}");
+        }
+        // Opaque and BLEND materials build no wrapper (no cost).
+        for mode in [AlphaMode::Opaque, AlphaMode::Blend] {
+            let s = masked_scene(mode, 0.0, &[]);
+            let ps = PreparedScene::new(&s, PrepareOptions::default());
+            assert!(Coverage::new(&ps).is_none());
+        }
+    }
+
+    #[test]
+    fn vertex_alpha_cuts_too() {
+        // Texture alpha 1 everywhere; vertex alpha 0.3 < cutoff 0.5.
+        let s = masked_scene(AlphaMode::Mask { cutoff: 0.5 }, 1.0, &[0.3; 4]);
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        let accel = AlphaTested::wrap(&ps, Box::new(SceneBvh::new(&ps)));
+        let ray = Ray::new(Vec3::new(0.5, 0.0, 1.0), Vec3::NEG_Z);
+        let hit = accel.intersect(&ray).expect("back quad");
+        assert!((ray.at(hit.t).z + 1.0).abs() < 1e-6);
+    }
+}
