@@ -25,6 +25,8 @@
 //! Objects with `casts_shadows = false` cast no shadow in any method.
 
 use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize};
+use chiaro_core::accel::Accelerator;
+use chiaro_core::accel::alpha::AlphaTested;
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::prepared::PreparedScene;
@@ -259,14 +261,20 @@ impl Shadows {
 
 /// Shadow rays against a BVH of the scene's triangles.
 pub(crate) struct RayShadows {
-    bvh: SceneBvh,
+    /// The BVH, alpha-tested when the scene has masked materials.
+    bvh: Box<dyn Accelerator>,
     casters: ShadowCasters,
+}
+
+/// The scene's BVH; shadow rays pass through cut-out texels of masked materials.
+fn shadow_bvh(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+    AlphaTested::wrap(ps, Box::new(SceneBvh::new(ps)))
 }
 
 impl RayShadows {
     pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
         Self {
-            bvh: SceneBvh::new(ps),
+            bvh: shadow_bvh(ps),
             casters: ShadowCasters::new(ps),
         }
     }
@@ -276,7 +284,7 @@ impl RayShadows {
     fn transparent_only(ps: &PreparedScene<'_>) -> Option<Self> {
         let casters = ShadowCasters::new(ps).transparent_only()?;
         Some(Self {
-            bvh: SceneBvh::new(ps),
+            bvh: shadow_bvh(ps),
             casters,
         })
     }
@@ -287,7 +295,7 @@ impl RayShadows {
     /// colours of the transparent surfaces crossed otherwise.
     pub(crate) fn visibility(&self, p: Vec3, ng: Vec3, s: &LightSample) -> Vec3 {
         self.casters
-            .light_transmittance(&self.bvh, p, ng, s, &mut 0)
+            .light_transmittance(&*self.bvh, p, ng, s, &mut 0)
     }
 }
 
