@@ -59,15 +59,15 @@ use crate::raster::{
     DepthKey, RasterTri, Rect, Viewport, rasterize_window, rasterize_window_masked, sample_offsets,
 };
 use crate::shadow::{RayShadows, ShadowVolumes, Shadows, VolumeCounting};
+use chiaro_core::accel::alpha::Coverage;
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
+use chiaro_core::scene::{AlphaMode, MaterialId, PixelFilter};
 use chiaro_core::scene::{
     Material, RenderSettings, Scene, Severity, ShadeMode, ShadowMethod, Technique, TransparencyMode,
 };
-use chiaro_core::accel::alpha::Coverage;
-use chiaro_core::scene::{AlphaMode, MaterialId, PixelFilter};
 use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{

@@ -45,8 +45,8 @@ pub enum Feature {
     VolumeShadows,
     /// Alpha-masked surfaces (glTF `alphaMode: MASK`): cut-out texels.
     AlphaMask,
-    /// Alpha-masked shadow casters under `shadows` = map, volume, object or
-    /// scanline (polygon and depth-map shadows that do not cut texels).
+    /// Alpha-masked shadow casters under `shadows` = volume, object or
+    /// scanline (polygon shadows that do not cut texels).
     AlphaMaskShadows,
 }
 
@@ -200,17 +200,17 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Flat,
         Feature::AlphaMaskShadows,
-        "shadows of alpha-masked cut-outs with `shadows` = map, volume, object or scanline: masked surfaces cast whole shadows (`shadows = \"ray\"` cuts them)",
+        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
     ),
     (
         Technique::Gouraud,
         Feature::AlphaMaskShadows,
-        "shadows of alpha-masked cut-outs with `shadows` = map, volume, object or scanline: masked surfaces cast whole shadows (`shadows = \"ray\"` cuts them)",
+        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
     ),
     (
         Technique::Phong,
         Feature::AlphaMaskShadows,
-        "shadows of alpha-masked cut-outs with `shadows` = map, volume, object or scanline: masked surfaces cast whole shadows (`shadows = \"ray\"` cuts them)",
+        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
     ),
     (
         Technique::Hybrid,
@@ -509,8 +509,7 @@ fn present(
         Feature::AlphaMaskShadows => {
             if matches!(
                 settings.shadows,
-                ShadowMethod::Map
-                    | ShadowMethod::Volume
+                ShadowMethod::Volume
                     | ShadowMethod::Object
                     | ShadowMethod::Scanline
             ) {

@@ -75,7 +75,10 @@ fn render(s: &Scene, technique: Technique, shadows: ShadowMethod) -> Film {
 
 /// The colour at film position `(x, y)` in `[0, 1]`.
 fn at(f: &Film, x: f32, y: f32) -> Vec3 {
-    let (px, py) = ((x * f.width as f32) as usize, (y * f.height as f32) as usize);
+    let (px, py) = (
+        (x * f.width as f32) as usize,
+        (y * f.height as f32) as usize,
+    );
     Vec3::from(f.color[py * f.width as usize + px])
 }
 
@@ -102,6 +105,7 @@ fn masked_quad_shows_the_quad_behind_in_every_technique() {
         (Technique::Gouraud, ShadowMethod::Ray),
         (Technique::Phong, ShadowMethod::Ray),
         (Technique::Phong, ShadowMethod::None),
+        (Technique::Phong, ShadowMethod::Map),
         (Technique::Whitted, ShadowMethod::Ray),
         (Technique::Path, ShadowMethod::Ray),
     ] {

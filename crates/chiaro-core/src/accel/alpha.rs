@@ -170,7 +170,8 @@ impl Accelerator for AlphaTested {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        self.inner.for_each_hit(ray, &mut |h| self.coverage.covers(h))
+        self.inner
+            .for_each_hit(ray, &mut |h| self.coverage.covers(h))
     }
 
     fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool {
@@ -265,10 +266,7 @@ mod tests {
             assert!((ray.at(hit.t).z - want_z).abs() < 1e-6, "x = {x}");
             // The hit behind is the one an unfiltered ray finds from there.
             if x < 0.0 {
-                let behind = Ray {
-                    t_min: 1.5,
-                    ..ray
-                };
+                let behind = Ray { t_min: 1.5, ..ray };
                 assert_eq!(Some(hit), plain.intersect(&behind));
             }
             // A shadow ray between the quads' planes, through the mask only.
