@@ -79,7 +79,7 @@ fn at(f: &Film, x: f32, y: f32) -> Vec3 {
         (x * f.width as f32) as usize,
         (y * f.height as f32) as usize,
     );
-    Vec3::from(f.color[py * f.width as usize + px])
+    f.color[py * f.width as usize + px]
 }
 
 /// Left of the front quad: red (lit); right: white-ish (green > 0.3).
