@@ -7,7 +7,7 @@ use crate::geometry::normals::{tangents, vertex_normals};
 use crate::geometry::{Aabb, Ray, face_normal, primitives};
 use crate::scene::TextureId;
 use crate::scene::{
-    AreaShape, Geometry, Light, Material, MaterialId, MetallicRoughness, Scene, Texture,
+    AlphaMode, AreaShape, Geometry, Light, Material, MaterialId, MetallicRoughness, Scene, Texture,
 };
 use crate::shading::SurfaceMaterial;
 use crate::shading::texture::{
@@ -68,6 +68,8 @@ pub struct PreparedScene<'s> {
     pub tangents: Vec<Vec4>,
     /// Vertex colours (one when the mesh has none).
     pub colors: Vec<Vec3>,
+    /// Per-vertex alpha of the vertex colours (1 where a mesh has none).
+    pub color_alphas: Vec<f32>,
     /// Triangles (counter-clockwise front).
     pub triangles: Vec<[u32; 3]>,
     /// Material of each triangle.
@@ -90,6 +92,16 @@ pub struct PreparedScene<'s> {
     pub mip_maps: OnceLock<Vec<Option<MipMap>>>,
 }
 
+/// The alpha (coverage) of a surface point: the base colour factor's alpha
+/// times the base-colour texture's alpha times the vertex colour's alpha
+/// (glTF 2.0, section 3.9.2), clamped to `[0, 1]` (NaN counts as 1: a bad
+/// value never makes geometry vanish).
+#[inline]
+pub fn alpha_product(factor: f32, texture: f32, vertex: f32) -> f32 {
+    let a = factor * texture * vertex;
+    if a.is_nan() { 1.0 } else { a.clamp(0.0, 1.0) }
+}
+
 /// A surface point found by a ray, with everything shading needs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SurfaceHit {
@@ -107,6 +119,8 @@ pub struct SurfaceHit {
     pub tangent: Vec4,
     /// Vertex colour.
     pub color: Vec3,
+    /// Vertex colour's alpha (1 without one).
+    pub color_alpha: f32,
     /// Material.
     pub material: MaterialId,
     /// Object index.
@@ -125,6 +139,7 @@ impl<'s> PreparedScene<'s> {
             uvs: Vec::new(),
             tangents: Vec::new(),
             colors: Vec::new(),
+            color_alphas: Vec::new(),
             triangles: Vec::new(),
             tri_material: Vec::new(),
             tri_object: Vec::new(),
@@ -287,6 +302,8 @@ impl<'s> PreparedScene<'s> {
                 .push(mesh.uvs.get(v).copied().unwrap_or(Vec2::ZERO));
             self.colors
                 .push(mesh.colors.get(v).copied().unwrap_or(Vec3::ONE));
+            self.color_alphas
+                .push(mesh.color_alphas.get(v).copied().unwrap_or(1.0));
             self.bounds = self.bounds.grow(world[v]);
         }
         self.normals.extend(normals.iter().copied());
@@ -364,6 +381,7 @@ impl<'s> PreparedScene<'s> {
                 p_object: po,
                 tangent,
                 color: Vec3::ONE,
+                color_alpha: 1.0,
                 material: s.material,
                 object: s.object,
             }
@@ -394,6 +412,9 @@ impl<'s> PreparedScene<'s> {
                 1.0
             }),
             color: lerp3(&self.colors),
+            color_alpha: self.color_alphas[i0] * w
+                + self.color_alphas[i1] * u
+                + self.color_alphas[i2] * v,
             material: self.tri_material[t as usize],
             object: self.tri_object[t as usize],
         }
@@ -475,7 +496,7 @@ impl<'s> PreparedScene<'s> {
     }
 
     /// [`PreparedScene::surface_material_lod`] and the coverage (alpha) at
-    /// the point: the alpha factor times the diffuse texture's alpha.
+    /// the point ([`alpha_product`]).
     fn textured_material(
         &self,
         hit: &SurfaceHit,
@@ -486,8 +507,8 @@ impl<'s> PreparedScene<'s> {
         let mut sm = SurfaceMaterial::from_material(m);
         let tc = Self::tex_coord(hit, duv_dx, duv_dy);
         let texel = m.texture.map(|t| self.eval_texture(t, &tc));
-        // Coverage: the base colour's alpha factor times the texture's alpha.
-        let alpha = m.alpha * texel.map_or(1.0, |c| c.w);
+        let alpha = alpha_product(m.alpha, texel.map_or(1.0, |c| c.w), hit.color_alpha);
+
         let texture = texel.map(|c| c.truncate());
         match m.metallic_roughness {
             // Metallic-roughness: the base colour feeds kd and ks (F0).
@@ -519,6 +540,17 @@ impl<'s> PreparedScene<'s> {
         }
         if let Some(t) = m.emission_texture {
             sm.emission *= self.eval_texture(t, &tc).truncate();
+        }
+        if m.alpha_mode == AlphaMode::Blend {
+            // BLEND: the point covers a fraction alpha (its reflection and
+            // emission premultiplied) and lets `1 - alpha` straight through,
+            // so additive techniques give alpha I_surface + (1 - alpha) I_behind.
+            sm.kd *= alpha;
+            sm.ks *= alpha;
+            sm.kr *= alpha;
+            sm.emission *= alpha;
+            sm.kt = Vec3::splat(1.0 - alpha);
+            sm.ior = 1.0;
         }
         (sm, alpha)
     }
@@ -749,7 +781,7 @@ pub struct ShadingSurface {
     pub dpdv: Vec3,
     /// Material parameters with textures and vertex colours applied.
     pub material: SurfaceMaterial,
-    /// Coverage in `[0, 1]`: the alpha factor times the diffuse texture's alpha.
+    /// Coverage in `[0, 1]` ([`alpha_product`]).
     pub alpha: f32,
     /// The material is shaded on both sides.
     pub two_sided: bool,

@@ -724,9 +724,13 @@ impl Builder<'_> {
                 &[DataType::F32, DataType::U8, DataType::U16],
             )?;
             if let Some(it) = reader.read_colors(0) {
-                let v: Vec<Vec3> = it.into_rgb_f32().map(Vec3::from).collect();
+                let v: Vec<Vec4> = it.into_rgba_f32().map(Vec4::from).collect();
                 if v.len() == n && v.iter().all(|x| x.is_finite()) {
-                    m.colors = v;
+                    m.colors = v.iter().map(|c| c.truncate()).collect();
+                    // The alpha is kept only where it is not all 1 (RGB colours read as 1).
+                    if v.iter().any(|c| c.w < 1.0) {
+                        m.color_alphas = v.iter().map(|c| c.w).collect();
+                    }
                 }
             }
         }
@@ -861,8 +865,9 @@ impl Builder<'_> {
             },
             gltf::material::AlphaMode::Blend => AlphaMode::Blend,
         };
-        if mat.alpha_mode == AlphaMode::Blend && mat.alpha < 1.0 {
-            // The techniques draw the factor's alpha as straight-through transmission.
+        if mat.alpha_mode == AlphaMode::Blend {
+            // The techniques draw the coverage as straight-through transmission
+            // (per point in the surface layer: factor x texture x vertex alpha).
             mat.transmit = Vec3::splat(1.0 - mat.alpha);
             mat.ior = 1.0;
             mat.transparency = TransparencyMode::Interpolated;

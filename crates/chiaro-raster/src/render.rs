@@ -59,14 +59,15 @@ use crate::raster::{
     DepthKey, RasterTri, Rect, Viewport, rasterize_window, rasterize_window_masked, sample_offsets,
 };
 use crate::shadow::{RayShadows, ShadowVolumes, Shadows, VolumeCounting};
+use chiaro_core::accel::alpha::Coverage;
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
+use chiaro_core::scene::{AlphaMode, MaterialId, PixelFilter};
 use chiaro_core::scene::{
     Material, RenderSettings, Scene, Severity, ShadeMode, ShadowMethod, Technique, TransparencyMode,
 };
-use chiaro_core::scene::{MaterialId, PixelFilter};
 use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
@@ -919,6 +920,11 @@ impl<'a> Ctx<'a, '_> {
         } else {
             (ng, Vec3A::ZERO)
         };
+        let color_alpha = if textured {
+            ps.color_alphas[i0] * w + ps.color_alphas[i1] * u + ps.color_alphas[i2] * v
+        } else {
+            1.0
+        };
         let (uv, p_object, tangent) = if textured {
             let tan = ps.tangents[i0] * w + ps.tangents[i1] * u + ps.tangents[i2] * v;
             (
@@ -939,6 +945,7 @@ impl<'a> Ctx<'a, '_> {
             p_object,
             tangent,
             color: color.into(),
+            color_alpha,
             material: td.material_id,
             object: ps.tri_object[td.t as usize],
         }
@@ -1213,6 +1220,26 @@ fn render_work(
         .map(|m| Class::of(m, settings))
         .collect();
     let all_opaque = class.iter().all(|&c| c == Class::Opaque);
+    // MASK: a fragment of a masked triangle whose alpha (at the sample's
+    // point of the triangle) is below the cutoff is discarded.
+    let coverage = Coverage::new(ps);
+    let sample_rays = Rays::new(scene, w, h);
+    let sub = crate::raster::SUBPIXEL as f32;
+    let cut_out = |t: u32, x: u32, y: u32, o: &[i32; 2]| {
+        let Some(c) = &coverage else { return false };
+        let dir = sample_rays.dir(x as f32 + o[0] as f32 / sub, y as f32 + o[1] as f32 / sub);
+        let [a, b, d] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+        let ray = chiaro_core::geometry::Ray::new(sample_rays.eye, dir);
+        match chiaro_core::accel::intersect_triangle(&ray, a, b, d) {
+            Some((t_hit, u, v)) => !c.covers(&chiaro_core::accel::Hit {
+                t: t_hit,
+                prim: t,
+                u,
+                v,
+            }),
+            None => false,
+        }
+    };
     let class_of = |t: u32| {
         class
             .get(ps.tri_material[t as usize].index())
@@ -1305,7 +1332,17 @@ fn render_work(
                     } else {
                         class_of(rt.id)
                     };
+                    let masked = coverage.as_ref().is_some_and(|c| c.is_masked(rt.id));
                     match class {
+                        Class::Opaque if masked => {
+                            rasterize_window(rt, r, win, &offsets, |x, y, s, k| {
+                                let i = index(x, y, s);
+                                if k > key[i] && !cut_out(rt.id, x, y, &offsets[s]) {
+                                    key[i] = k;
+                                    ids[i] = rt.id;
+                                }
+                            })
+                        }
                         // The depth test as selects, not a branch (see
                         // rasterize_window_masked).
                         Class::Opaque => {
@@ -1860,6 +1897,9 @@ struct SampleResult {
     /// The part of `color` from specular reflection (and emission), when
     /// asked for: what interpolated transparency keeps unattenuated.
     specular: Vec3,
+    /// A BLEND point's straight-through transmission `1 - alpha` (its
+    /// colour is premultiplied by alpha in the surface layer).
+    coverage_kt: Option<Vec3>,
 }
 
 /// Step 5 for one tile: the box-filtered pixels and, with `keep_samples`,
@@ -1968,6 +2008,7 @@ fn shade_tile<'a>(
                         depth: f32::INFINITY,
                         normal: Vec3::ZERO,
                         specular: Vec3::ZERO,
+                        coverage_kt: None,
                     }
                 } else {
                     let td = ctx.tri_data(id, cache, poly);
@@ -1989,7 +2030,11 @@ fn shade_tile<'a>(
                     let front =
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
                     let behind = sanitize(r.color);
-                    r.color = if interpolated {
+                    r.color = if let Some(kt) = front.coverage_kt {
+                        // BLEND: I = alpha I_surface + (1 - alpha) I_behind, the
+                        // first term already premultiplied.
+                        front.color + kt * behind
+                    } else if interpolated {
                         // Foley et al. 16.5.1: I = (1 - kt) I_front + kt I_behind,
                         // with the front surface's specular highlight kept whole.
                         (Vec3::ONE - kt) * (front.color - front.specular)
@@ -2082,6 +2127,7 @@ fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
         depth,
         normal: normal.into(),
         specular: Vec3::ZERO,
+        coverage_kt: None,
     }
 }
 
@@ -2139,6 +2185,7 @@ fn shade_sample(
     let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
     let sign = if flip { -1.0 } else { 1.0 };
     let mut specular = Vec3::ZERO;
+    let mut coverage_kt = None;
     let (color, n, kr) = match td.mode {
         ShadeMode::Phong if !needs_footprint && !want_specular && ctx.point_lighting.is_some() => {
             // The common case without copying the material: untextured (so
@@ -2180,6 +2227,9 @@ fn shade_sample(
                 // The surface layer: textures, normal and bump maps.
                 let (dpdu, dpdv) = ps.triangle_dpduv(t);
                 let ss = ps.shading_surface_at(hit, dpdu, dpdv, duv_dx, duv_dy);
+                if material.alpha_mode == AlphaMode::Blend {
+                    coverage_kt = Some(ss.material.kt);
+                }
                 (ss.material, ss.ns)
             } else {
                 // The layer without textures or maps: the vertex colour only.
@@ -2272,6 +2322,7 @@ fn shade_sample(
         depth,
         normal: n,
         specular,
+        coverage_kt,
     }
 }
 

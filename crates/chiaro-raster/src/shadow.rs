@@ -25,7 +25,10 @@
 //! Objects with `casts_shadows = false` cast no shadow in any method.
 
 use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize};
+use chiaro_core::accel::Accelerator;
+use chiaro_core::accel::alpha::{AlphaTested, Coverage};
 use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::accel::{Hit, intersect_triangle};
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::{
@@ -259,14 +262,20 @@ impl Shadows {
 
 /// Shadow rays against a BVH of the scene's triangles.
 pub(crate) struct RayShadows {
-    bvh: SceneBvh,
+    /// The BVH, alpha-tested when the scene has masked materials.
+    bvh: Box<dyn Accelerator>,
     casters: ShadowCasters,
+}
+
+/// The scene's BVH; shadow rays pass through cut-out texels of masked materials.
+fn shadow_bvh(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+    AlphaTested::wrap(ps, Box::new(SceneBvh::new(ps)))
 }
 
 impl RayShadows {
     pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
         Self {
-            bvh: SceneBvh::new(ps),
+            bvh: shadow_bvh(ps),
             casters: ShadowCasters::new(ps),
         }
     }
@@ -276,7 +285,7 @@ impl RayShadows {
     fn transparent_only(ps: &PreparedScene<'_>) -> Option<Self> {
         let casters = ShadowCasters::new(ps).transparent_only()?;
         Some(Self {
-            bvh: SceneBvh::new(ps),
+            bvh: shadow_bvh(ps),
             casters,
         })
     }
@@ -287,7 +296,7 @@ impl RayShadows {
     /// colours of the transparent surfaces crossed otherwise.
     pub(crate) fn visibility(&self, p: Vec3, ng: Vec3, s: &LightSample) -> Vec3 {
         self.casters
-            .light_transmittance(&self.bvh, p, ng, s, &mut 0)
+            .light_transmittance(&*self.bvh, p, ng, s, &mut 0)
     }
 }
 
@@ -395,6 +404,29 @@ impl MapView {
         let mut scratch = Vec::new();
         let mut tris: Vec<RasterTri> = Vec::new();
         let mut filters: Vec<(u32, Vec3)> = Vec::new();
+        // MASK: a texel whose centre ray meets a masked caster on a cut-out
+        // point is not covered by it (the same `Coverage` as the ray tracers).
+        let coverage = Coverage::new(ps);
+        let clip_to_world = m.inverse();
+        let cut_out = |c: &Coverage, t: u32, x: u32, y: u32| {
+            let nx = 2.0 * (x as f32 + 0.5) / res as f32 - 1.0;
+            let ny = 1.0 - 2.0 * (y as f32 + 0.5) / res as f32;
+            let a = clip_to_world * Vec4::new(nx, ny, 0.25, 1.0);
+            let b = clip_to_world * Vec4::new(nx, ny, 0.75, 1.0);
+            let (a, b) = (a.truncate() / a.w, b.truncate() / b.w);
+            let mut ray = Ray::new(a, b - a);
+            ray.t_min = f32::NEG_INFINITY;
+            ray.t_max = f32::INFINITY;
+            let [p0, p1, p2] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+            intersect_triangle(&ray, p0, p1, p2).is_some_and(|(th, u, v)| {
+                !c.covers(&Hit {
+                    t: th,
+                    prim: t,
+                    u,
+                    v,
+                })
+            })
+        };
         for (t, tri) in ps.triangles.iter().enumerate() {
             let b = blockers[t];
             if b == Blocker::Ignore {
@@ -405,8 +437,12 @@ impl MapView {
             vp.setup(c, t as u32, &mut scratch, &mut tris);
             match b {
                 Blocker::Opaque => {
+                    let masked = coverage.as_ref().filter(|c| c.is_masked(t as u32));
                     for rt in &tris {
                         rasterize(rt, rect, &centre, |x, y, _, k| {
+                            if masked.is_some_and(|c| cut_out(c, t as u32, x, y)) {
+                                return;
+                            }
                             let i = (y * res + x) as usize;
                             if k > key[i] {
                                 key[i] = k;

@@ -43,6 +43,11 @@ pub enum Feature {
     DepthCue,
     /// Shadows with `shadows = "volume"` (the volumes exist per sample).
     VolumeShadows,
+    /// Alpha-masked surfaces (glTF `alphaMode: MASK`): cut-out texels.
+    AlphaMask,
+    /// Alpha-masked shadow casters under `shadows` = volume, object or
+    /// scanline (polygon shadows that do not cut texels).
+    AlphaMaskShadows,
 }
 
 /// What each technique cannot show, in words: `(technique, feature, what
@@ -183,9 +188,34 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     ),
     (Technique::Radiosity, Feature::DepthCue, "depth cueing"),
     (
+        Technique::Radiosity,
+        Feature::AlphaMask,
+        "cut-outs of alpha-masked (glTF MASK) surfaces: patches are drawn whole",
+    ),
+    (
         Technique::Hybrid,
         Feature::SpecularIndirect,
         "light that mirrors and glass send onto other surfaces (caustics): the radiosity pass sees them as matte and opaque",
+    ),
+    (
+        Technique::Flat,
+        Feature::AlphaMaskShadows,
+        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
+    ),
+    (
+        Technique::Gouraud,
+        Feature::AlphaMaskShadows,
+        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
+    ),
+    (
+        Technique::Phong,
+        Feature::AlphaMaskShadows,
+        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
+    ),
+    (
+        Technique::Hybrid,
+        Feature::AlphaMask,
+        "cut-outs of alpha-masked (glTF MASK) surfaces in the indirect light: the radiosity pass sees them whole",
     ),
     (
         Technique::Hybrid,
@@ -475,6 +505,19 @@ fn present(
         })),
         Feature::DepthCue => (settings.depth_cue.is_some(), Vec::new()),
         Feature::VolumeShadows => (settings.shadows == ShadowMethod::Volume, Vec::new()),
+        Feature::AlphaMask => named(objects.with(Material::is_masked)),
+        Feature::AlphaMaskShadows => {
+            if matches!(
+                settings.shadows,
+                ShadowMethod::Volume
+                    | ShadowMethod::Object
+                    | ShadowMethod::Scanline
+            ) {
+                named(objects.with(Material::is_masked))
+            } else {
+                (false, Vec::new())
+            }
+        }
     }
 }
 

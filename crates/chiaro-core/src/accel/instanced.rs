@@ -249,14 +249,17 @@ fn duplicated(ps: &PreparedScene<'_>, shared: &[(MeshId, Vec<Candidate>)]) -> us
 /// least [`MIN_DUPLICATED_TRIANGLES`] triangles ([`duplicated_triangles`]),
 /// the flat [`SceneBvh`] otherwise. Both give the same answers up to
 /// rounding; the choice only trades memory and build time against the
-/// per-instance cost of a ray transform.
+/// per-instance cost of a ray transform. Wrapped in
+/// [`super::alpha::AlphaTested`] when the scene has masked materials.
 pub fn build_accelerator(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
     let shared = shared_instances(ps);
-    if duplicated(ps, &shared) >= MIN_DUPLICATED_TRIANGLES {
+    let inner: Box<dyn Accelerator> = if duplicated(ps, &shared) >= MIN_DUPLICATED_TRIANGLES {
         Box::new(InstancedBvh::with_shared(ps, &shared))
     } else {
         Box::new(SceneBvh::new(ps))
-    }
+    };
+    // Masked (alpha-tested) materials: every ray skips cut-out texels.
+    super::alpha::AlphaTested::wrap(ps, inner)
 }
 
 /// A [`SceneBvh`] over triangles `tris` of `positions` (indices in range)

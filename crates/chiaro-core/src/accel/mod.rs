@@ -3,6 +3,7 @@
 //! scene-level [`bvh::SceneBvh`]), whose large arrays live in
 //! huge-page-advised memory ([`pages::HugeArray`]).
 
+pub mod alpha;
 pub mod bvh;
 pub mod instanced;
 pub mod list;

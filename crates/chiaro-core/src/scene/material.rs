@@ -235,11 +235,13 @@ impl Material {
     }
 
     /// True if the material is evaluated per point from textures (its
-    /// coefficients vary over the surface), or is a glTF metal (its vertex
-    /// colours reach F0, which the scan converter's per-vertex-colour
-    /// shortcuts do not apply).
+    /// coefficients vary over the surface), is BLEND (its coverage, factor
+    /// x texture x vertex alpha, scales them per point), or is a glTF metal
+    /// (its vertex colours reach F0, which the scan converter's
+    /// per-vertex-colour shortcuts do not apply).
     pub fn is_textured(&self) -> bool {
         self.texture.is_some()
+            || self.alpha_mode == AlphaMode::Blend
             || self.emission_texture.is_some()
             || self
                 .metallic_roughness
@@ -252,9 +254,16 @@ impl Material {
         self.emission.max_element() > 0.0
     }
 
-    /// True if the surface lets light through.
+    /// True if the surface lets light through: a transmit colour, or
+    /// `alphaMode: BLEND` (whose per-point coverage the surface layer turns
+    /// into straight-through transmission `1 - alpha`).
     pub fn is_transparent(&self) -> bool {
-        self.transmit.max_element() > 0.0
+        self.transmit.max_element() > 0.0 || self.alpha_mode == AlphaMode::Blend
+    }
+
+    /// True if the material is alpha-tested (`alphaMode: MASK`).
+    pub fn is_masked(&self) -> bool {
+        matches!(self.alpha_mode, AlphaMode::Mask { .. })
     }
 
     /// True if the ray tracers should spawn a mirror ray.

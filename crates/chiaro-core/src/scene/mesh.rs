@@ -21,6 +21,8 @@ pub struct Mesh {
     pub tangents: Vec<Vec4>,
     /// Linear RGB vertex colours multiplying the diffuse colour, or empty.
     pub colors: Vec<Vec3>,
+    /// Alpha of the vertex colours (glTF `COLOR_0` as RGBA), or empty for 1.
+    pub color_alphas: Vec<f32>,
     /// Triangles as vertex indices, counter-clockwise seen from the front.
     pub indices: Vec<[u32; 3]>,
     /// Per-triangle material, or empty to use the object's material.
