@@ -1,8 +1,8 @@
-//! Regenerates `assets/studio_small_03_256x128.hdr` (the default studio
+//! Regenerates `assets/studio_small_03_16x8.hdr` (the default studio
 //! environment) from Poly Haven's CC0 `studio_small_03_1k.hdr`: a box
-//! filter over whole source texels down to 256x128.
+//! filter over whole source texels down to 16x8 (or `W H`).
 //!
-//! `cargo run -p chiaro-io --example downsample_hdr -- IN.hdr OUT.hdr`
+//! `cargo run -p chiaro-io --example downsample_hdr -- IN.hdr OUT.hdr [W H]`
 
 use image::Rgb;
 use image::codecs::hdr::HdrEncoder;
@@ -11,15 +11,15 @@ use std::io::BufWriter;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let (input, output) = match args.as_slice() {
-        [_, i, o] => (i, o),
-        _ => return Err("usage: downsample_hdr IN.hdr OUT.hdr".into()),
+    let (input, output, w, h) = match args.as_slice() {
+        [_, i, o] => (i, o, 16u32, 8u32),
+        [_, i, o, w, h] => (i, o, w.parse()?, h.parse()?),
+        _ => return Err("usage: downsample_hdr IN.hdr OUT.hdr [W H]".into()),
     };
     let src = image::open(input)?.to_rgb32f();
-    let (w, h) = (256u32, 128u32);
-    let (fx, fy) = (src.width() / w, src.height() / h);
+    let (fx, fy) = (src.width() / w.max(1), src.height() / h.max(1));
     if fx == 0 || fy == 0 {
-        return Err("the input is smaller than 256x128".into());
+        return Err(format!("the input is smaller than {w}x{h}").into());
     }
     let mut out = Vec::with_capacity((w * h) as usize);
     for y in 0..h {
