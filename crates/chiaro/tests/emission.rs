@@ -91,9 +91,11 @@ fn render(scene: &Scene, technique: Technique, kernel: Option<Kernel>) -> Film {
 fn emissive_strength_is_seen_directly_by_every_technique() {
     for strength in [1.0f32, 4.0, 16.0] {
         let mut scene = load(strength);
-        // The quad's own light only: the automatic lights would add their
-        // (tiny, specular) reflection off the black base colour.
+        // The quad's own light only: the automatic lights and the studio
+        // environment would add their (small, specular) reflection off the
+        // black base colour.
         scene.lights.clear();
+        scene.environment = None;
         scene.background = Vec3::ZERO;
         let want = Vec3::new(0.1, 0.5, 0.9) * strength;
         let cells = [
