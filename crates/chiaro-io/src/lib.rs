@@ -581,7 +581,7 @@ mod studio_tests {
     #[test]
     fn studio_environment_decodes() {
         let (t, intensity, mean) = studio();
-        assert_eq!((t.width, t.height), (256, 128));
+        assert_eq!((t.width, t.height), (16, 8));
         assert!(
             t.texels
                 .iter()
