@@ -2,11 +2,14 @@
 # CI fuzz stage: builds the cargo-fuzz targets in fuzz/ and runs each from
 # its checked-in corpus for a bounded time (FUZZING.md). A crash fails the
 # stage and leaves its input under fuzz/artifacts/<target>/.
-# FUZZ_SECONDS (default 10) bounds each target's run.
+# FUZZ_SECONDS (default 10) bounds each target's run; FUZZ_SEED (default 1)
+# fixes libFuzzer's random choices, so a commit's CI run explores the same
+# inputs each time (a crash is the code's, not the dice's).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TERM_COLOR=never
 seconds="${FUZZ_SECONDS:-10}"
+seed="${FUZZ_SEED:-1}"
 
 skip() {
   echo "SKIP fuzz: $*"
@@ -43,7 +46,7 @@ for t in $targets; do
   log="$work.log"
   set +e
   cargo +nightly fuzz run --sanitizer none "$t" "$work" -- \
-    -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -max_len=262144 \
+    -max_total_time="$seconds" -seed="$seed" -timeout=10 -rss_limit_mb=2048 -max_len=262144 \
     -print_final_stats=1 >"$log" 2>&1
   status=$?
   set -e

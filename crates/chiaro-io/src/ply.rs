@@ -16,6 +16,68 @@ use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{DefaultElement, Property};
 use std::path::Path;
 
+/// Checks every `element NAME COUNT` of the header against the bytes after
+/// it, before the parser sizes anything by a count (found by fuzzing: a
+/// count of 5e15 in a 1 KB file aborted on allocation). Each element needs
+/// at least one byte per property in binary (the list's length for a list)
+/// and two in ASCII (a digit and a separator), and at least one byte.
+/// Headers the check cannot read are left to the parser's own errors.
+fn check_counts(bytes: &[u8]) -> std::result::Result<(), String> {
+    let Some(end) = bytes.windows(10).position(|w| w == b"end_header") else {
+        return Ok(());
+    };
+    let body = bytes[end..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map_or(0, |nl| bytes.len() - (end + nl + 1));
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let ascii = header.lines().any(|l| l.trim() == "format ascii 1.0");
+    let mut elements: Vec<(String, u128, u128)> = Vec::new();
+    for line in header.lines() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["element", name, count] => {
+                let Ok(count) = count.parse::<u128>() else {
+                    return Ok(());
+                };
+                elements.push(((*name).to_owned(), count, 0));
+            }
+            ["property", "list", count_type, ..] => {
+                if let Some(e) = elements.last_mut() {
+                    e.2 += if ascii { 2 } else { type_bytes(count_type) };
+                }
+            }
+            ["property", ty, _] => {
+                if let Some(e) = elements.last_mut() {
+                    e.2 += if ascii { 2 } else { type_bytes(ty) };
+                }
+            }
+            _ => {}
+        }
+    }
+    let mut need = 0u128;
+    for (name, count, per) in &elements {
+        need = need.saturating_add(count.saturating_mul((*per).max(1)));
+        if need > body as u128 {
+            return Err(format!(
+                "element `{name}` claims {count} entries, more than the {body} bytes after the header can hold"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Bytes of one binary PLY scalar of type `ty` (1 for an unknown name: the
+/// parser refuses those itself).
+fn type_bytes(ty: &str) -> u128 {
+    match ty {
+        "short" | "ushort" | "int16" | "uint16" => 2,
+        "int" | "uint" | "float" | "int32" | "uint32" | "float32" => 4,
+        "double" | "float64" => 8,
+        _ => 1,
+    }
+}
+
 /// Largest PLY file read (bytes).
 const MAX_FILE_BYTES: u64 = 2 << 30;
 
@@ -32,6 +94,7 @@ pub fn load_ply(path: &Path) -> Result<Imported> {
 
 /// Reads PLY bytes held in memory; `path` names the input in messages.
 pub fn load_ply_slice(bytes: &[u8], path: &Path) -> Result<Imported> {
+    check_counts(bytes).map_err(|m| IoError::format(path, format!("malformed PLY: {m}")))?;
     // The parser is not known to panic; a panic on unforeseen input is still an error.
     let parsed = std::panic::catch_unwind(|| {
         Parser::<DefaultElement>::new().read_ply(&mut std::io::Cursor::new(bytes))

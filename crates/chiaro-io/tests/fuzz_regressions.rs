@@ -58,3 +58,22 @@ fn a_buffer_view_image_without_a_mime_type_is_ignored_with_a_warning() {
         "{w}"
     );
 }
+
+#[test]
+fn a_ply_element_count_larger_than_the_file_is_refused() {
+    let path = data("huge-element-count.ply");
+    let msg = chiaro_io::load_scene(&path)
+        .expect_err("a count no file can back")
+        .to_string();
+    assert!(
+        msg.contains("huge-element-count.ply") && msg.contains("element `vertex` claims"),
+        "{msg}"
+    );
+    // A real file is not touched by the check.
+    let ok = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+               property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+               end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    let imported =
+        chiaro_io::ply::load_ply_slice(ok, std::path::Path::new("tri.ply")).expect("loads");
+    assert_eq!(imported.objects.len(), 1);
+}
