@@ -7,18 +7,11 @@ use chiaro_io::load_scene;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets");
 /// Files above this size are skipped to keep the test fast.
 const MAX_BYTES: u64 = 20 << 20;
 
 fn assets() -> Option<PathBuf> {
-    let p = PathBuf::from(ASSETS);
-    if p.is_dir() {
-        Some(p)
-    } else {
-        println!("skipped: ../shared/assets not present");
-        None
-    }
+    chiaro_testkit::shared_assets()
 }
 
 fn walk(dir: &Path, exts: &[&str], out: &mut Vec<PathBuf>) {

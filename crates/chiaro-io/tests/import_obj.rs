@@ -7,16 +7,8 @@ use chiaro_io::load_scene;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-const ASSETS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets");
-
 fn assets() -> Option<PathBuf> {
-    let p = PathBuf::from(ASSETS);
-    if p.is_dir() {
-        Some(p)
-    } else {
-        println!("skipped: ../shared/assets not present");
-        None
-    }
+    chiaro_testkit::shared_assets()
 }
 
 fn objs_in(dir: &Path) -> Vec<PathBuf> {

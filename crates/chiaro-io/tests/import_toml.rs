@@ -295,14 +295,9 @@ radius = 2
 
 #[test]
 fn obj_and_gltf_as_objects_inside_a_toml_scene() {
-    let assets = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/assets"
-    ));
-    if !assets.is_dir() {
-        println!("skipped: ../shared/assets not present");
+    let Some(assets) = chiaro_testkit::shared_assets() else {
         return;
-    }
+    };
     let text = r#"
 [material.gold]
 diffuse = [0.8, 0.6, 0.2]
@@ -316,7 +311,7 @@ mesh = "khronos-gltf-sample-assets/Duck/glTF-Binary/Duck.glb"
 material = "gold"
 transform = { translate = [0, 1, 0], scale = 0.01 }
 "#;
-    let l = load_scene_str(text, assets, "mixed.toml").expect("loads");
+    let l = load_scene_str(text, &assets, "mixed.toml").expect("loads");
     let s = &l.scene;
     let gold = s.material_by_name("gold").expect("gold");
     let duck: Vec<_> = s

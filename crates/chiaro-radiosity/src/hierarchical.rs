@@ -317,12 +317,9 @@ pub(crate) fn solve(
     // Coarse links between large elements underestimate the transport (the
     // receiver's sub-point average of a form factor that is convex towards
     // a shared edge falls short of its integral), so too loose a threshold
-    // darkens the walls lit only indirectly. On the shipped Cornell box
-    // (patch size 40, ray-cast form factors, 40x40 pixels), wall means
-    // against a 1024-spp path-traced reference at the default tolerance
-    // 0.01: with 0.01 here, floor -0.3 %, ceiling -0.3 %, back -2.7 %;
-    // with 0.03, -1.6 %, -4.3 %, -4.6 % in 40 % of the time. The
-    // full-matrix Jacobi solution of the same mesh: +2.1 %, +2.8 %, -1.5 %.
+    // darkens the walls lit only indirectly; 0.01 keeps the Cornell box's
+    // walls as close to the path tracer as the full-matrix solution
+    // (BENCHMARKS.md, "Radiosity", session 3).
     t.eps = (0.01 * tolerance * max_e).max(f32::MIN_POSITIVE);
     let roots = t.roots.clone();
     for &p in &roots {

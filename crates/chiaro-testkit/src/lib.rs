@@ -109,8 +109,40 @@ pub fn masked_mean(film: &Film, mask: impl Fn(usize) -> bool) -> Vec3 {
     if n == 0 { Vec3::ZERO } else { s / n as f32 }
 }
 
-/// The shared assets folder (`../shared/assets` beside the repository), if present.
+/// The environment variable that names the shared test-asset folder.
+pub const ASSETS_VAR: &str = "CHIARO_ASSETS";
+
+/// The shared test-asset folder (third-party models, textures and scenes
+/// read in place, never copied into the repository): `$CHIARO_ASSETS` when
+/// set (a relative path is taken from the workspace root), else
+/// `../shared/assets` beside the workspace. `None`, after printing a skip
+/// message that names the folder and the variable, when it is absent: the
+/// tests that need it then skip.
 pub fn shared_assets() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets");
-    p.is_dir().then_some(p)
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let p = match std::env::var_os(ASSETS_VAR) {
+        Some(v) if !v.is_empty() => root.join(v),
+        _ => root.join("../shared/assets"),
+    };
+    if p.is_dir() {
+        Some(p)
+    } else {
+        eprintln!(
+            "skipped: the shared assets folder {} is absent (set {ASSETS_VAR} to it)",
+            p.display()
+        );
+        None
+    }
+}
+
+/// One file of the shared assets, `relative` to [`shared_assets`], or
+/// `None` after a skip message when the folder or the file is absent.
+pub fn shared_asset(relative: &str) -> Option<PathBuf> {
+    let p = shared_assets()?.join(relative);
+    if p.is_file() {
+        Some(p)
+    } else {
+        eprintln!("skipped: {} is absent", p.display());
+        None
+    }
 }

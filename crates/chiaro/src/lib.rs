@@ -57,18 +57,10 @@ pub enum Error {
 /// Result with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
-/// The techniques this build can render, in the order they are listed.
+/// The techniques this build can render, in the order they are listed:
+/// every one of [`Technique::ALL`] (the one list; no technique is optional).
 pub fn available_techniques() -> &'static [Technique] {
-    &[
-        Technique::Preview,
-        Technique::Flat,
-        Technique::Gouraud,
-        Technique::Phong,
-        Technique::Whitted,
-        Technique::Radiosity,
-        Technique::Hybrid,
-        Technique::Path,
-    ]
+    &Technique::ALL
 }
 
 /// Statistics of one render.

@@ -6,7 +6,6 @@
 use chiaro::scene::Technique;
 use chiaro::{Film, NoProgress, Scene, Vec3};
 use chiaro_ray::path::Kernel;
-use std::path::Path;
 
 /// A 2 x 2 quad in the plane z = 0 facing +z, with a black base colour and
 /// the emissive factor (0.1, 0.5, 0.9) times `strength`, seen by a camera
@@ -131,17 +130,11 @@ fn emissive_strength_is_seen_directly_by_every_technique() {
 /// technique (read in place from the shared assets, skipped without them).
 #[test]
 fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
-    let Some(root) = chiaro_testkit::shared_assets() else {
-        eprintln!("skipped: the shared assets folder is absent (CI has it)");
+    let Some(path) = chiaro_testkit::shared_asset(
+        "khronos-gltf-sample-assets/EmissiveStrengthTest/glTF-Binary/EmissiveStrengthTest.glb",
+    ) else {
         return;
     };
-    let path = root.join(
-        "khronos-gltf-sample-assets/EmissiveStrengthTest/glTF-Binary/EmissiveStrengthTest.glb",
-    );
-    if !Path::new(&path).is_file() {
-        eprintln!("skipped: {} is absent", path.display());
-        return;
-    }
     let scene = chiaro::io::load_scene(&path).expect("loads").scene;
     let strengths: Vec<f32> = scene
         .materials

@@ -1,5 +1,5 @@
 //! The fidelity suite (ARCHITECTURE.md, "Fidelity suite"): every Khronos
-//! sample model and asset-generator file in `../shared/assets` is rendered
+//! sample model and asset-generator file in the shared assets is rendered
 //! small with phong and path and compared with its expected image or
 //! screenshot by the hue-palette agreement described there. The expected
 //! outcome of every (file, technique) is a row of `tests/data/fidelity.tsv`;
@@ -41,7 +41,7 @@ const TABLE: &str = "tests/data/fidelity.tsv";
 
 /// One file of the suite.
 struct Entry {
-    /// Stable name: the path below `../shared/assets`.
+    /// Stable name: the path below the shared assets folder.
     id: String,
     path: PathBuf,
     reference: Option<PathBuf>,
@@ -546,7 +546,6 @@ fn read_table(path: &Path) -> Table {
 #[test]
 fn khronos_files_render_as_their_expected_images() {
     let Some(root) = chiaro_testkit::shared_assets() else {
-        eprintln!("fidelity: skipped: the shared assets folder is absent (CI has it)");
         return;
     };
     let table_path = Path::new(env!("CARGO_MANIFEST_DIR")).join(TABLE);
@@ -557,7 +556,7 @@ fn khronos_files_render_as_their_expected_images() {
 
     let mut rows = String::from(
         "# Fidelity suite: expected outcome per file and technique (crates/chiaro/tests/fidelity.rs).\n\
-         # file (below ../shared/assets)\ttechnique\toutcome\tscore (palette agreement, pass >= 0.6)\treason\n",
+         # file (below the shared assets, $CHIARO_ASSETS)\ttechnique\toutcome\tscore (palette agreement, pass >= 0.6)\treason\n",
     );
     let mut failures = Vec::new();
     let mut sheet_rows: Vec<SheetRow> = Vec::new();

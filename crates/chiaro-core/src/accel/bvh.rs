@@ -21,9 +21,8 @@
 //! area that the SAH would split, until it has `WIDTH` children or only
 //! leaves. This is the tree that collapsing the binary tree would give,
 //! built without it. Eight children cut the depth to about a third of the
-//! binary tree's, so a ray waits on fewer dependent node loads (measured
-//! against four: about 10 % more rays per second, the same instruction
-//! count, `bvh_bench`). Large nodes bin and partition in parallel and build
+//! binary tree's, so a ray waits on fewer dependent node loads (eight
+//! against four: BENCHMARKS.md, "Ray tracing"). Large nodes bin and partition in parallel and build
 //! their children with rayon; the result does not depend on the number of
 //! threads.
 //!
@@ -319,9 +318,7 @@ struct Entry {
 
 /// Entries kept in the first fixed part of the stack, cleared for every
 /// ray: a ray through a small scene seldom holds more, and clearing a
-/// large array costs more than the traversal of such a ray (the clearing
-/// stores of a 20-entry array took a sixth of a Cornell-box ray's
-/// closest-hit cycles).
+/// larger array would cost more than such a ray's traversal.
 const STACK_FIRST: usize = 8;
 /// Entries in the second fixed part, set up only when a ray first needs
 /// it. Ordered traversal with pop-culling rarely holds more than a dozen
@@ -414,10 +411,9 @@ pub struct BvhOptions {
     /// a wide node (`traversal_cost / WIDTH`) since it seldom adds a node:
     /// a block of large overlapping primitives (the walls of a room, whose
     /// box is the whole room, met by every ray inside it) is then cut into
-    /// tighter leaves. Larger BVHs skip it: it costs their build about 15 %
-    /// and their rays nothing measurable (`bvh_bench`), while a small
-    /// scene's build is milliseconds and its rays many (the Mitsuba Cornell
-    /// box: -20 % instructions per path-traced sample).
+    /// tighter leaves. Larger BVHs skip it: it lengthens their build and
+    /// does not speed up their rays, while a small scene's build is cheap
+    /// and its rays many (BENCHMARKS.md, "Ray tracing").
     pub fine_leaves_below: usize,
 }
 
@@ -2037,9 +2033,8 @@ impl SceneBvh {
 /// a processor cannot forward such a load from the stores still in flight,
 /// so it waits for them to reach the cache, at the head of the traversal's
 /// chain of dependent steps. `black_box` keeps each component a load of its
-/// own (and one store and reload more), which costs a dozen instructions and
-/// saved 3.5 % of the path tracer's time on Mitsuba's Cornell box (median
-/// per-round ratio of 30 alternations, BENCHMARKS.md, session 8).
+/// own, which the store-to-load forwarding can serve (BENCHMARKS.md, "Path
+/// tracing vs Mitsuba 3", session 8).
 #[inline(always)]
 fn read_ray(ray: &Ray) -> Ray {
     let bb = std::hint::black_box::<f32>;
@@ -2133,15 +2128,16 @@ mod tests {
     use crate::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
     use crate::scene::{Geometry, Material, Mesh, Object, Scene, Transform};
 
-    /// The Stanford bunny from the test-asset folder laid beside the
-    /// repository for developers and CI (read in place, not redistributed).
-    const BUNNY: &str = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/assets/common-3d-test-models/stanford-bunny.obj"
-    );
+    /// The Stanford bunny from the shared test assets (read in place, not
+    /// redistributed), or `None` after a skip message where they are absent.
+    fn bunny() -> Option<Mesh> {
+        read_obj(&chiaro_testkit::shared_asset(
+            "common-3d-test-models/stanford-bunny.obj",
+        )?)
+    }
 
     /// A tiny OBJ reader: `v` and `f` lines only (polygons fanned).
-    fn read_obj(path: &str) -> Option<Mesh> {
+    fn read_obj(path: &std::path::Path) -> Option<Mesh> {
         let text = std::fs::read_to_string(path).ok()?;
         let mut mesh = Mesh::default();
         for line in text.lines() {
@@ -2253,8 +2249,7 @@ mod tests {
 
     #[test]
     fn bunny_closest_and_any_hit_match_brute_force() {
-        let Some(mesh) = read_obj(BUNNY) else {
-            println!("skipped: {BUNNY} not found");
+        let Some(mesh) = bunny() else {
             return;
         };
         assert!(mesh.indices.len() > 60_000);
@@ -2608,8 +2603,7 @@ mod tests {
 
     #[test]
     fn rays_leaving_a_surface_do_not_hit_it_again() {
-        let mesh =
-            read_obj(BUNNY).unwrap_or_else(|| crate::geometry::primitives::uv_sphere(1.0, 64, 32));
+        let mesh = bunny().unwrap_or_else(|| crate::geometry::primitives::uv_sphere(1.0, 64, 32));
         let s = scene_of(mesh, &[(Vec3::new(5.0, 0.0, 0.0), 0.5)]);
         let ps = PreparedScene::new(
             &s,

@@ -51,19 +51,11 @@ use glam::{Affine3A, Mat4, Vec3, Vec4};
 /// [`build_accelerator`] picks the two-level BVH when instancing saves at
 /// least this many triangles (the triangles a flat BVH would hold beyond
 /// one copy of each shared mesh, about 60 bytes each in a [`SceneBvh`], so
-/// about 2 MiB: a core's share of L2 on the 2-core test box).
-///
-/// Measured with `instanced_bench` (N x N instances of a 5120-triangle
-/// icosphere, 1M rays, 2 threads, 8-wide `SceneBvh`, CPU-normalised
-/// Mrays/s flat vs two-level): 4 instances (15k duplicated) camera 14.9 vs
-/// 12.9, random 6.7 vs 6.6; 9 instances (41k) camera 14.2 vs 12.3, random
-/// 4.0 vs 6.6; 16 instances (77k) camera 14.1 vs 11.8, random 4.6 vs 6.5;
-/// 196 instances (1M) camera 8.6 vs 9.0, random 1.6 vs 5.0, with a 0.65 s
-/// build (CPU) against 0.007 s and 63 MiB against 0.4 MiB. Below the
-/// threshold the flat BVH is as fast or faster and small anyway; above it
-/// incoherent rays (the path tracer's), build time and memory favour the
-/// two-level BVH, while coherent camera rays lose up to ~20% until the
-/// flat BVH outgrows the caches.
+/// about 2 MiB: a core's share of L2 on the 2-core test box). Below it the
+/// flat BVH is as fast or faster and small anyway; above it incoherent rays
+/// (the path tracer's), build time and memory favour the two-level BVH,
+/// while coherent camera rays lose a little until the flat BVH outgrows
+/// the caches (`instanced_bench`; BENCHMARKS.md, "Ray tracing").
 pub const MIN_DUPLICATED_TRIANGLES: usize = 32_768;
 
 /// Slots per SoA leaf block of a [`SceneBvh`].

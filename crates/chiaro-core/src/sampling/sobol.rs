@@ -250,8 +250,7 @@ fn second_by_taylor_shift(mut x: u32) -> u32 {
 /// tracer's lock-step batch. Sixteen: an AVX-512 build that allows 512-bit
 /// vectors (`-C target-feature=-prefer-256-bit`; ARCHITECTURE.md, "Target
 /// CPU") runs each lane loop as one instruction; on AVX2 the loops are two
-/// 256-bit halves, and Mitsuba's box took 1.3 % fewer instructions than
-/// with eight lanes, in the same time (BENCHMARKS.md, session 14).
+/// 256-bit halves, no slower than eight lanes (BENCHMARKS.md, session 14).
 pub const LANES: usize = 16;
 
 /// [`shuffled_index`] per lane, with the full reversal (which vectorises;
