@@ -1,5 +1,5 @@
-//! Invariants across techniques (ARCHITECTURE.md, "Goals"): techniques that should
-//! agree do, pixel by pixel, on small images.
+//! Invariants across techniques (ARCHITECTURE.md, "How correctness is
+//! shown"): techniques that should agree do, pixel by pixel, on small images.
 
 use chiaro::scene::{Light, ShadowMethod, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
