@@ -120,10 +120,7 @@ pub const ASSETS_VAR: &str = "CHIARO_ASSETS";
 /// tests that need it then skip.
 pub fn shared_assets() -> Option<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let p = match std::env::var_os(ASSETS_VAR) {
-        Some(v) if !v.is_empty() => root.join(v),
-        _ => root.join("../shared/assets"),
-    };
+    let p = assets_folder(&root, std::env::var_os(ASSETS_VAR));
     if p.is_dir() {
         Some(p)
     } else {
@@ -144,5 +141,40 @@ pub fn shared_asset(relative: &str) -> Option<PathBuf> {
     } else {
         eprintln!("skipped: {} is absent", p.display());
         None
+    }
+}
+
+/// Where [`shared_assets`] looks, given the workspace root and the
+/// variable's value: the value (relative to the root), else the default.
+fn assets_folder(root: &Path, var: Option<std::ffi::OsString>) -> PathBuf {
+    match var {
+        Some(v) if !v.is_empty() => root.join(v),
+        _ => root.join("../shared/assets"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_assets_folder_is_the_variable_else_beside_the_workspace() {
+        let root = Path::new("/ws/chiaro");
+        assert_eq!(
+            assets_folder(root, None),
+            Path::new("/ws/chiaro/../shared/assets")
+        );
+        assert_eq!(
+            assets_folder(root, Some("".into())),
+            Path::new("/ws/chiaro/../shared/assets")
+        );
+        assert_eq!(
+            assets_folder(root, Some("/data/assets".into())),
+            Path::new("/data/assets")
+        );
+        assert_eq!(
+            assets_folder(root, Some("assets".into())),
+            Path::new("/ws/chiaro/assets")
+        );
     }
 }

@@ -22,9 +22,9 @@
 //! leaves. This is the tree that collapsing the binary tree would give,
 //! built without it. Eight children cut the depth to about a third of the
 //! binary tree's, so a ray waits on fewer dependent node loads (eight
-//! against four: BENCHMARKS.md, "Ray tracing"). Large nodes bin and partition in parallel and build
-//! their children with rayon; the result does not depend on the number of
-//! threads.
+//! against four: BENCHMARKS.md, "Ray tracing"). Large nodes bin and
+//! partition in parallel and build their children with rayon; the result
+//! does not depend on the number of threads.
 //!
 //! Layout: 256-byte [`BvhNode`]s (four cache lines, loaded independently)
 //! holding the child boxes in structure-of-arrays form,
