@@ -295,23 +295,23 @@ radius = 2
 
 #[test]
 fn obj_and_gltf_as_objects_inside_a_toml_scene() {
-    let Some(assets) = chiaro_testkit::shared_assets() else {
-        return;
-    };
+    // Both files are in the repository (with their licences), so the test
+    // runs on a fresh clone.
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."));
     let text = r#"
 [material.gold]
 diffuse = [0.8, 0.6, 0.2]
 
 [[object]]
-mesh = "mcguire-archive/CornellBox/CornellBox-Original.obj"
+mesh = "crates/chiaro-io/tests/data/mcguire-cornell/CornellBox-Original.obj"
 
 [[object]]
 name = "duck"
-mesh = "khronos-gltf-sample-assets/Duck/glTF-Binary/Duck.glb"
+mesh = "scenes/gltf/Duck.glb"
 material = "gold"
 transform = { translate = [0, 1, 0], scale = 0.01 }
 "#;
-    let l = load_scene_str(text, &assets, "mixed.toml").expect("loads");
+    let l = load_scene_str(text, root, "mixed.toml").expect("loads");
     let s = &l.scene;
     let gold = s.material_by_name("gold").expect("gold");
     let duck: Vec<_> = s

@@ -127,14 +127,11 @@ fn emissive_strength_is_seen_directly_by_every_technique() {
 
 /// The gallery's model: its five cubes emit the same colour at 1, 2, 4, 8
 /// and 16 times; a camera ray on a cube face sees that much in every
-/// technique (read in place from the shared assets, skipped without them).
+/// technique (the gallery's copy in `scenes/gltf/`, with its licence).
 #[test]
 fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
-    let Some(path) = chiaro_testkit::shared_asset(
-        "khronos-gltf-sample-assets/EmissiveStrengthTest/glTF-Binary/EmissiveStrengthTest.glb",
-    ) else {
-        return;
-    };
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenes/gltf/EmissiveStrengthTest.glb");
     let scene = chiaro::io::load_scene(&path).expect("loads").scene;
     let strengths: Vec<f32> = scene
         .materials
