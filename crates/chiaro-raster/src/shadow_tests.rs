@@ -787,7 +787,12 @@ fn shadow_maps_stay_within_their_budget() {
 /// Shadow-volume triangles of `scene`, all lights.
 fn volume_triangles(scene: &Scene) -> usize {
     let ps = PreparedScene::new(scene, PrepareOptions::default());
-    ShadowVolumes::new(&ps).per_light.iter().map(Vec::len).sum()
+    let lights = vec![true; ps.lights.len()];
+    ShadowVolumes::new(&ps, &lights)
+        .per_light(&ps)
+        .iter()
+        .map(Vec::len)
+        .sum()
 }
 
 #[test]

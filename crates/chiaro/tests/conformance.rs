@@ -120,24 +120,6 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
 /// Cells not run at all, by (rule, case, technique) and the measured
 /// reason; shown in the table as "not run".
 const NOT_RUN: &[(&str, &str, &str, &str)] = &[
-    (
-        "shadow methods agree",
-        "DamagedHelmet",
-        "volume",
-        "shadow volumes of its open 15k-triangle mesh under its emissive light ask for more than 6 GB at 48x36 (allocation failure under ulimit -v 6000000; killed for memory without it)",
-    ),
-    (
-        "shadow methods agree",
-        "DamagedHelmet",
-        "object",
-        "object-precision shadows did not finish in 10 minutes at 48x36",
-    ),
-    (
-        "shadow methods agree",
-        "DamagedHelmet",
-        "scanline",
-        "not run: the same per-receiver light pass as object-precision shadows, which did not finish in 10 minutes",
-    ),
 ];
 
 #[derive(Default)]
