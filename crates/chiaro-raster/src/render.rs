@@ -64,6 +64,8 @@ use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
+#[cfg(test)]
+use chiaro_core::scene::ShadowMethod;
 use chiaro_core::scene::{AlphaMode, MaterialId, PixelFilter};
 use chiaro_core::scene::{
     Material, RenderSettings, Scene, Severity, ShadeMode, Technique, TransparencyMode,
@@ -489,9 +491,12 @@ impl Ctx<'_, '_> {
                 m.visibility(li, i, count, sp.p, sp.ng, s)
             }
             Shadows::Volume(v) => {
-                let count = v.slot.get(li).copied().flatten().and_then(|k| {
-                    counts.and_then(|c| c.get(k as usize))
-                });
+                let count = v
+                    .slot
+                    .get(li)
+                    .copied()
+                    .flatten()
+                    .and_then(|k| counts.and_then(|c| c.get(k as usize)));
                 match count {
                     Some(&c) if c != 0 => Vec3::ZERO,
                     _ => v
@@ -1270,7 +1275,8 @@ fn render_work(
     // (their id is the light's slot among the per-sample counts).
     let (vol_bins, nl) = match &mut shadows {
         Shadows::Volume(v) => {
-            let (bins, slots) = volume_bins(ps, settings, v, &binner, &vp_all, clip_from_world, spp);
+            let (bins, slots) =
+                volume_bins(ps, settings, v, &binner, &vp_all, clip_from_world, spp);
             for w in bins.1.iter().flatten() {
                 progress.warning(w);
             }
@@ -1434,8 +1440,7 @@ fn render_work(
         .map(|o| o.shade_mode.unwrap_or(mode))
         .collect();
     let emitters = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
-    let group_rays = (emitters.is_some()
-        && !matches!(shadows, Shadows::None | Shadows::Ray(_))
+    let group_rays = (emitters.is_some() && !matches!(shadows, Shadows::None | Shadows::Ray(_))
         || matches!(&shadows, Shadows::Volume(v) if v.by_ray.contains(&true)))
     .then(|| RayShadows::new(ps));
     let ctx = Ctx {
@@ -1692,20 +1697,21 @@ fn volume_bins(
     let budget = settings.memory_budget().shadow_map_bytes();
     let (by_ray, bytes) = crate::shadow::plan_budget(&needs, budget);
     let refused: Vec<usize> = (0..nl).filter(|&li| by_ray[li]).collect();
+    let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
     let over = (!refused.is_empty()).then(|| {
         let names: Vec<String> = refused.iter().map(usize::to_string).collect();
         let largest = refused.iter().filter_map(|&li| needs[li]).max().unwrap_or(0);
         format!(
-            "shadow volumes: light{} {} use{} shadow rays: {} volumes ({} MiB for the largest, binned at {}x{}) do not fit in the {} MiB shadow budget (a quarter of the memory limit, at most 512 MiB) after the {} MiB of the lights before them",
+            "shadow volumes: light{} {} use{} shadow rays: {} volumes ({:.1} MiB for the largest, binned at {}x{}) do not fit in the {:.1} MiB shadow budget (a quarter of the memory limit, at most 512 MiB) after the {:.1} MiB of the lights before them",
             if refused.len() > 1 { "s" } else { "" },
             names.join(", "),
             if refused.len() > 1 { "" } else { "s" },
             if refused.len() > 1 { "their" } else { "its" },
-            largest.div_ceil(1 << 20),
+            mib(largest),
             settings.width,
             settings.height,
-            budget >> 20,
-            bytes.div_ceil(1 << 20),
+            mib(budget),
+            mib(bytes),
         )
     });
     let mut slots = 0u32;
@@ -2042,7 +2048,11 @@ fn shade_tile<'a>(
         Shadows::Volume(v) => v.slot.iter().flatten().count(),
         _ => 0,
     };
-    let counts_of = |p: usize| (nl > 0).then(|| tv.counts.get(p * nl..(p + 1) * nl)).flatten();
+    let counts_of = |p: usize| {
+        (nl > 0)
+            .then(|| tv.counts.get(p * nl..(p + 1) * nl))
+            .flatten()
+    };
     let env_background = ctx
         .ps
         .scene

@@ -195,7 +195,9 @@ fn object_shadows_per_light(
     let casters = crate::object_shadows::Casters::new(ps);
     (0..ps.lights.len())
         .map(|li| match exact.get(li) {
-            Some(true) => crate::object_shadows::ObjectShadows::build_with(ps, li, &casters).map(Some),
+            Some(true) => {
+                crate::object_shadows::ObjectShadows::build_with(ps, li, &casters).map(Some)
+            }
             _ => Ok(None),
         })
         .collect()

@@ -119,8 +119,7 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
 
 /// Cells not run at all, by (rule, case, technique) and the measured
 /// reason; shown in the table as "not run".
-const NOT_RUN: &[(&str, &str, &str, &str)] = &[
-];
+const NOT_RUN: &[(&str, &str, &str, &str)] = &[];
 
 #[derive(Default)]
 struct Matrix {
