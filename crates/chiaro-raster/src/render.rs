@@ -70,12 +70,12 @@ use chiaro_core::scene::{AlphaMode, MaterialId, PixelFilter};
 use chiaro_core::scene::{
     Material, RenderSettings, Scene, Severity, ShadeMode, Technique, TransparencyMode,
 };
-use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
     EmitterGroup, LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
     samples_for_light, sanitize, shade_local, shade_local_split,
 };
+use chiaro_core::shading::{PointLighting, SampleKey, group_jitter};
 use glam::{Mat4, Vec2, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 use std::cell::Cell;
@@ -422,13 +422,17 @@ impl Ctx<'_, '_> {
         if let Some(pl) = &self.point_lighting {
             return pl.shade(m, sp);
         }
+        let key = match pixel {
+            Some((x, y)) => SampleKey::Pixel(x, y),
+            None => SampleKey::Point(sp.p),
+        };
         if matches!(self.shadows, Shadows::None) {
             // Every light sample is visible: closures the compiler inlines.
             return shade_local(
                 m,
                 sp,
                 &self.lighting,
-                |_, _| Vec2::splat(0.5),
+                |li, i| self.jitter(key, li, i),
                 |_, _| Vec3::ONE,
             );
         }
@@ -437,12 +441,23 @@ impl Ctx<'_, '_> {
             m,
             sp,
             &self.lighting,
-            |_, i| {
+            |li, i| {
                 current.set(i);
-                Vec2::splat(0.5)
+                self.jitter(key, li, i)
             },
             |li, s| self.visibility(li, current.get(), tri, pixel, sp, s, counts),
         )
+    }
+
+    /// The jitter of sample `i` of light `li` at the shading point `key`:
+    /// area lights at their strata centres, an emitter group's picks from
+    /// the jitter sequence Whitted shares ([`group_jitter`]).
+    #[inline]
+    fn jitter(&self, key: SampleKey, li: usize, i: u32) -> Vec2 {
+        match self.lighting.group {
+            Some(g) if g.contains(li) => group_jitter(self.settings.seed, key, i),
+            _ => Vec2::splat(0.5),
+        }
     }
 
     /// Visibility of sample `i` of light `li` from the shading point.
@@ -554,9 +569,9 @@ impl Ctx<'_, '_> {
             m,
             sp,
             &self.lighting,
-            |_, i| {
+            |li, i| {
                 current.set(i);
-                Vec2::splat(0.5)
+                self.jitter(SampleKey::Point(sp.p), li, i)
             },
             |li, s| self.visibility(li, current.get(), tri, None, sp, s, None),
         );
