@@ -459,7 +459,11 @@ mod tests {
             }
         }
         let n = seen.iter().filter(|&&s| s).count();
-        assert!(n > lights.len() * 99 / 100, "{n} of {} picked", lights.len());
+        assert!(
+            n > lights.len() * 99 / 100,
+            "{n} of {} picked",
+            lights.len()
+        );
     }
 
     #[test]
