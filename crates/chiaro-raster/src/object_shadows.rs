@@ -622,10 +622,18 @@ impl ObjectShadows {
     /// [`CoreError::Unsupported`] for an ambient light, an out-of-range
     /// index or a scene with analytic spheres.
     pub fn build(ps: &PreparedScene<'_>, light_index: usize) -> Result<Self, CoreError> {
+        Self::build_with(ps, light_index, &Casters::new(ps))
+    }
+
+    /// [`Self::build`] with the casters' BVH built once for several lights.
+    pub(crate) fn build_with(
+        ps: &PreparedScene<'_>,
+        light_index: usize,
+        casters: &Casters,
+    ) -> Result<Self, CoreError> {
         let light = LightGeom::of(ps, light_index)?;
         let scale = scene_scale(ps);
         let eps = 1e-5 * scale;
-        let casters = Casters::new(ps);
         let tris = (0..ps.triangles.len())
             .into_par_iter()
             .map_init(Vec::new, |stack, t| {

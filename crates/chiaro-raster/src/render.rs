@@ -64,17 +64,19 @@ use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TilePixels, TileRect, tiles};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene, SurfaceHit};
 use chiaro_core::progress::Progress;
+#[cfg(test)]
+use chiaro_core::scene::ShadowMethod;
 use chiaro_core::scene::{AlphaMode, MaterialId, PixelFilter};
 use chiaro_core::scene::{
-    Material, RenderSettings, Scene, Severity, ShadeMode, ShadowMethod, Technique, TransparencyMode,
+    Material, RenderSettings, Scene, Severity, ShadeMode, Technique, TransparencyMode,
 };
-use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::{background_radiance, environment_radiance};
 use chiaro_core::shading::{
     EmitterGroup, LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect,
     samples_for_light, sanitize, shade_local, shade_local_split,
 };
-use glam::{Vec2, Vec3, Vec3A, Vec4};
+use chiaro_core::shading::{PointLighting, SampleKey, group_jitter};
+use glam::{Mat4, Vec2, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 use std::cell::Cell;
 use std::collections::HashMap;
@@ -318,7 +320,8 @@ struct Ctx<'a, 's> {
     object_mode: Vec<ShadeMode>,
     shadows: Shadows,
     /// Shadow rays for the samples of a grouped emissive mesh under shadow
-    /// maps (its lights get no maps).
+    /// maps and the exact methods (its lights get no maps, volumes or
+    /// fragments), and for lights whose volumes did not fit the budget.
     group_rays: Option<RayShadows>,
     /// Per material: how it is drawn ([`Class`]).
     class: Vec<Class>,
@@ -419,13 +422,17 @@ impl Ctx<'_, '_> {
         if let Some(pl) = &self.point_lighting {
             return pl.shade(m, sp);
         }
+        let key = match pixel {
+            Some((x, y)) => SampleKey::Pixel(x, y),
+            None => SampleKey::Point(sp.p),
+        };
         if matches!(self.shadows, Shadows::None) {
             // Every light sample is visible: closures the compiler inlines.
             return shade_local(
                 m,
                 sp,
                 &self.lighting,
-                |_, _| Vec2::splat(0.5),
+                |li, i| self.jitter(key, li, i),
                 |_, _| Vec3::ONE,
             );
         }
@@ -434,12 +441,23 @@ impl Ctx<'_, '_> {
             m,
             sp,
             &self.lighting,
-            |_, i| {
+            |li, i| {
                 current.set(i);
-                Vec2::splat(0.5)
+                self.jitter(key, li, i)
             },
             |li, s| self.visibility(li, current.get(), tri, pixel, sp, s, counts),
         )
+    }
+
+    /// The jitter of sample `i` of light `li` at the shading point `key`:
+    /// area lights at their strata centres, an emitter group's picks from
+    /// the jitter sequence Whitted shares ([`group_jitter`]).
+    #[inline]
+    fn jitter(&self, key: SampleKey, li: usize, i: u32) -> Vec2 {
+        match self.lighting.group {
+            Some(g) if g.contains(li) => group_jitter(self.settings.seed, key, i),
+            _ => Vec2::splat(0.5),
+        }
     }
 
     /// Visibility of sample `i` of light `li` from the shading point.
@@ -462,10 +480,23 @@ impl Ctx<'_, '_> {
         match &self.shadows {
             Shadows::None => Vec3::ONE,
             Shadows::Ray(r) => r.visibility(sp.p, sp.ng, s),
-            Shadows::Map(_) if self.lighting.group.is_some_and(|g| g.contains(li)) => self
-                .group_rays
-                .as_ref()
-                .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s)),
+            // A group's samples (all but rays) and lights whose volumes did
+            // not fit: shadow rays (see `shadow::exact_lights`).
+            Shadows::Map(_) | Shadows::Object { .. } | Shadows::Scanline { .. }
+                if self.lighting.group.is_some_and(|g| g.contains(li)) =>
+            {
+                self.group_rays
+                    .as_ref()
+                    .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s))
+            }
+            Shadows::Volume(v)
+                if v.by_ray.get(li) == Some(&true)
+                    || self.lighting.group.is_some_and(|g| g.contains(li)) =>
+            {
+                self.group_rays
+                    .as_ref()
+                    .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s))
+            }
             Shadows::Map(m) => {
                 let count = self
                     .ps
@@ -474,12 +505,21 @@ impl Ctx<'_, '_> {
                     .map_or(1, |l| samples_for_light(l, self.lighting.area_samples));
                 m.visibility(li, i, count, sp.p, sp.ng, s)
             }
-            Shadows::Volume(transparent) => match counts.and_then(|c| c.get(li)) {
-                Some(&c) if c != 0 => Vec3::ZERO,
-                _ => transparent
-                    .as_ref()
-                    .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s)),
-            },
+            Shadows::Volume(v) => {
+                let count = v
+                    .slot
+                    .get(li)
+                    .copied()
+                    .flatten()
+                    .and_then(|k| counts.and_then(|c| c.get(k as usize)));
+                match count {
+                    Some(&c) if c != 0 => Vec3::ZERO,
+                    _ => v
+                        .transparent
+                        .as_ref()
+                        .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s)),
+                }
+            }
             Shadows::Object {
                 lights,
                 transparent,
@@ -529,9 +569,9 @@ impl Ctx<'_, '_> {
             m,
             sp,
             &self.lighting,
-            |_, i| {
+            |li, i| {
                 current.set(i);
-                Vec2::splat(0.5)
+                self.jitter(SampleKey::Point(sp.p), li, i)
             },
             |li, s| self.visibility(li, current.get(), tri, None, sp, s, None),
         );
@@ -1092,7 +1132,7 @@ fn render_work(
         *film = Film::new(settings.width, settings.height);
     }
     progress.begin("shadows", 1);
-    let shadows = Shadows::new(ps, settings, progress)?;
+    let mut shadows = Shadows::new(ps, settings, progress)?;
     progress.advance(1);
     let scene = ps.scene;
     let (w, h) = (settings.width, settings.height);
@@ -1247,28 +1287,18 @@ fn render_work(
             .unwrap_or(Class::Opaque)
     };
     // Shadow-volume polygons, clipped and binned like the scene's triangles
-    // (their id is the light index).
-    let nl = ps.lights.len();
-    let vol_bins: Option<Bins> = (settings.shadows == ShadowMethod::Volume).then(|| {
-        let vols = ShadowVolumes::new(ps);
-        if let Some(w) = &vols.warning {
-            progress.warning(w);
-        }
-        let mut out = Vec::new();
-        let mut scratch = Vec::new();
-        let mut bins = binner.empty();
-        for (li, tris) in vols.per_light.iter().enumerate() {
-            for tri in tris {
-                let c = tri.map(|p| clip_from_world * p);
-                out.clear();
-                vp_all.setup_homogeneous(c, tri.map(|p| p.w), li as u32, &mut scratch, &mut out);
-                for rt in &out {
-                    binner.bin(rt, &mut bins);
-                }
+    // (their id is the light's slot among the per-sample counts).
+    let (vol_bins, nl) = match &mut shadows {
+        Shadows::Volume(v) => {
+            let (bins, slots) =
+                volume_bins(ps, settings, v, &binner, &vp_all, clip_from_world, spp);
+            for w in bins.1.iter().flatten() {
+                progress.warning(w);
             }
+            (Some(bins.0), slots)
         }
-        Bins { bins }
-    });
+        _ => (None, 0),
+    };
     let counting = options.volume_counting;
     progress.advance(1);
 
@@ -1425,8 +1455,9 @@ fn render_work(
         .map(|o| o.shade_mode.unwrap_or(mode))
         .collect();
     let emitters = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
-    let group_rays =
-        (emitters.is_some() && matches!(shadows, Shadows::Map(_))).then(|| RayShadows::new(ps));
+    let group_rays = (emitters.is_some() && !matches!(shadows, Shadows::None | Shadows::Ray(_))
+        || matches!(&shadows, Shadows::Volume(v) if v.by_ray.contains(&true)))
+    .then(|| RayShadows::new(ps));
     let ctx = Ctx {
         ps,
         settings,
@@ -1583,17 +1614,36 @@ impl Binner {
 
     /// Appends a copy of `rt` to the bin of every tile whose part of the
     /// crop window the bounding box of `rt` meets.
+    /// The number of bins [`Self::bin`] puts `rt` in.
+    fn copies(&self, rt: &RasterTri) -> u64 {
+        match self.tile_range(rt) {
+            Some([tx0, ty0, tx1, ty1]) => u64::from(tx1 - tx0 + 1) * u64::from(ty1 - ty0 + 1),
+            None => 0,
+        }
+    }
+
+    /// The tiles `[tx0, ty0, tx1, ty1]` (inclusive) whose part of the crop
+    /// window the bounding box of `rt` meets, if any.
     #[inline]
-    fn bin(&self, rt: &RasterTri, bins: &mut [Vec<RasterTri>]) {
+    fn tile_range(&self, rt: &RasterTri) -> Option<[u32; 4]> {
         let b = rt.pixel_bounds();
         let c = self.crop;
         if b[2] < c.x0 as i32 || b[3] < c.y0 as i32 || b[0] >= c.x1 as i32 || b[1] >= c.y1 as i32 {
-            return;
+            return None;
         }
-        let tx0 = (b[0].max(c.x0 as i32) as u32) / TILE_SIZE;
-        let ty0 = (b[1].max(c.y0 as i32) as u32) / TILE_SIZE;
-        let tx1 = (b[2].min(c.x1 as i32 - 1) as u32) / TILE_SIZE;
-        let ty1 = (b[3].min(c.y1 as i32 - 1) as u32) / TILE_SIZE;
+        Some([
+            (b[0].max(c.x0 as i32) as u32) / TILE_SIZE,
+            (b[1].max(c.y0 as i32) as u32) / TILE_SIZE,
+            (b[2].min(c.x1 as i32 - 1) as u32) / TILE_SIZE,
+            (b[3].min(c.y1 as i32 - 1) as u32) / TILE_SIZE,
+        ])
+    }
+
+    #[inline]
+    fn bin(&self, rt: &RasterTri, bins: &mut [Vec<RasterTri>]) {
+        let Some([tx0, ty0, tx1, ty1]) = self.tile_range(rt) else {
+            return;
+        };
         for ty in ty0..=ty1 {
             for tx in tx0..=tx1 {
                 bins[(ty * self.tiles_x + tx) as usize].push(*rt);
@@ -1617,6 +1667,92 @@ struct Bins {
 /// within it of a sample's depth counts as behind the sample, so the front
 /// cap lying on a lit surface does not shadow it.
 const VOLUME_EPS: f32 = 2e-5;
+
+/// The bins of the shadow-volume triangles of the lights of `v` that fit
+/// in the shadow share of the memory budget
+/// ([`chiaro_core::budget::MemoryBudget::shadow_map_bytes`], the share the
+/// shadow maps use), with the warnings to give, and the number of count
+/// slots. Each light's volumes are counted before any is stored: its
+/// binned copies plus one `i32` count per sample of the image; lights in
+/// light order take what is left, and a light that does not fit uses
+/// shadow rays (`v.by_ray`), named in a warning.
+#[allow(clippy::too_many_arguments)]
+fn volume_bins(
+    ps: &PreparedScene<'_>,
+    settings: &RenderSettings,
+    v: &mut crate::shadow::VolumeShadows,
+    binner: &Binner,
+    vp: &Viewport,
+    clip_from_world: Mat4,
+    spp: u32,
+) -> ((Bins, [Option<String>; 2]), usize) {
+    let group = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
+    let exact = crate::shadow::exact_lights(ps, group.as_ref());
+    let vols = ShadowVolumes::new(ps, &exact);
+    let nl = ps.lights.len();
+    let points = u64::from(settings.width) * u64::from(settings.height) * u64::from(spp);
+    // Per light: the binned copies its volumes would take.
+    let needs: Vec<Option<u64>> = (0..nl)
+        .into_par_iter()
+        .map_init(Vec::new, |scratch, li| {
+            if !vols.has_volumes(li) {
+                return None;
+            }
+            let mut copies = 0u64;
+            let mut out = Vec::new();
+            vols.extrude_light(ps, li, &mut |tri| {
+                let c = tri.map(|p| clip_from_world * p);
+                out.clear();
+                vp.setup_homogeneous(c, tri.map(|p| p.w), li as u32, scratch, &mut out);
+                copies += out.iter().map(|rt| binner.copies(rt)).sum::<u64>();
+            });
+            Some(copies * std::mem::size_of::<RasterTri>() as u64 + points * 4)
+        })
+        .collect();
+    let budget = settings.memory_budget().shadow_map_bytes();
+    let (by_ray, bytes) = crate::shadow::plan_budget(&needs, budget);
+    let refused: Vec<usize> = (0..nl).filter(|&li| by_ray[li]).collect();
+    let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
+    let over = (!refused.is_empty()).then(|| {
+        let names: Vec<String> = refused.iter().map(usize::to_string).collect();
+        let largest = refused.iter().filter_map(|&li| needs[li]).max().unwrap_or(0);
+        format!(
+            "shadow volumes: light{} {} use{} shadow rays: {} volumes ({:.1} MiB for the largest, binned at {}x{}) do not fit in the {:.1} MiB shadow budget (a quarter of the memory limit, at most 512 MiB) after the {:.1} MiB of the lights before them",
+            if refused.len() > 1 { "s" } else { "" },
+            names.join(", "),
+            if refused.len() > 1 { "" } else { "s" },
+            if refused.len() > 1 { "their" } else { "its" },
+            mib(largest),
+            settings.width,
+            settings.height,
+            mib(budget),
+            mib(bytes),
+        )
+    });
+    let mut slots = 0u32;
+    for li in 0..nl {
+        v.slot[li] = (needs[li].is_some() && !by_ray[li]).then(|| {
+            slots += 1;
+            slots - 1
+        });
+    }
+    v.by_ray = by_ray;
+    let mut out = Vec::new();
+    let mut scratch = Vec::new();
+    let mut bins = binner.empty();
+    for li in 0..nl {
+        let Some(slot) = v.slot[li] else { continue };
+        vols.extrude_light(ps, li, &mut |tri| {
+            let c = tri.map(|p| clip_from_world * p);
+            out.clear();
+            vp.setup_homogeneous(c, tri.map(|p| p.w), slot, &mut scratch, &mut out);
+            for rt in &out {
+                binner.bin(rt, &mut bins);
+            }
+        });
+    }
+    ((Bins { bins }, [vols.warning, over]), slots as usize)
+}
 
 /// Counts, per point of the tile (opaque samples and transparent
 /// fragments) and per light, the shadow-volume faces between the eye and
@@ -1923,8 +2059,15 @@ fn shade_tile<'a>(
     };
     let inv_spp = 1.0 / spp as f32;
     let sub = crate::raster::SUBPIXEL as f32;
-    let nl = ctx.ps.lights.len();
-    let counts_of = |p: usize| tv.counts.get(p * nl..(p + 1) * nl);
+    let nl = match &ctx.shadows {
+        Shadows::Volume(v) => v.slot.iter().flatten().count(),
+        _ => 0,
+    };
+    let counts_of = |p: usize| {
+        (nl > 0)
+            .then(|| tv.counts.get(p * nl..(p + 1) * nl))
+            .flatten()
+    };
     let env_background = ctx
         .ps
         .scene

@@ -91,12 +91,45 @@ pub fn scanline_visibility(
     height: u32,
     light_index: usize,
 ) -> Result<ScanlineShadows, CoreError> {
+    scanline_visibility_with(ps, camera, width, height, light_index, &Casters::new(ps))
+}
+
+/// [`scanline_visibility`] of every light with `lights[li]` true (`None`
+/// for the others), the casters' BVH built once.
+///
+/// # Errors
+/// As [`scanline_visibility`].
+pub(crate) fn scanline_visibility_per_light(
+    ps: &PreparedScene<'_>,
+    camera: &Camera,
+    width: u32,
+    height: u32,
+    lights: &[bool],
+) -> Result<Vec<Option<ScanlineShadows>>, CoreError> {
+    let casters = Casters::new(ps);
+    (0..ps.lights.len())
+        .map(|li| match lights.get(li) {
+            Some(true) => {
+                scanline_visibility_with(ps, camera, width, height, li, &casters).map(Some)
+            }
+            _ => Ok(None),
+        })
+        .collect()
+}
+
+fn scanline_visibility_with(
+    ps: &PreparedScene<'_>,
+    camera: &Camera,
+    width: u32,
+    height: u32,
+    light_index: usize,
+    casters: &Casters,
+) -> Result<ScanlineShadows, CoreError> {
     let light = LightGeom::of(ps, light_index)?;
     let eps = 1e-5 * scene_scale(ps);
     let nt = ps.triangles.len();
     // 1-2. Candidate occluders of each receiver from its shadow frustum,
     // and their shadow polygons clipped to it, in world space.
-    let casters = Casters::new(ps);
     let per_receiver: Vec<(usize, Vec<Vec<DVec3>>)> = (0..nt)
         .into_par_iter()
         .map_init(

@@ -35,7 +35,7 @@ use chiaro_core::scene::{
     AreaShape, Light, RenderSettings, SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings,
     ShadowMethod,
 };
-use chiaro_core::shading::{LightSample, samples_for_light, stratum};
+use chiaro_core::shading::{EmitterGroup, LightSample, samples_for_light, stratum};
 pub(crate) use chiaro_core::shadow::Blocker;
 use chiaro_core::shadow::ShadowCasters;
 use glam::{Mat4, Vec2, Vec3, Vec4};
@@ -62,7 +62,7 @@ pub(crate) enum Shadows {
     /// Shadow volumes of the opaque casters: the per-sample counts live in
     /// the renderer's tiles. Transparent casters (a count cannot carry a
     /// colour) tint by shadow rays that see only them, when there are any.
-    Volume(Option<RayShadows>),
+    Volume(VolumeShadows),
     /// Atherton-Weiler-Greenberg object-precision shadows of the opaque
     /// casters: the lit fragments of every triangle, one set per light
     /// (`None` for ambient lights). Transparent casters tint as in `Volume`.
@@ -158,8 +158,10 @@ fn scanline_fallbacks(
     ps: &PreparedScene<'_>,
     settings: &RenderSettings,
 ) -> Result<Vec<Option<ExactFallback>>, chiaro_core::error::CoreError> {
+    let group = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
+    let exact = exact_lights(ps, group.as_ref());
     if shades_off_centre(ps, settings) {
-        return Ok(object_shadows_per_light(ps)?
+        return Ok(object_shadows_per_light(ps, &exact)?
             .into_iter()
             .map(|o| o.map(ExactFallback::Fragments))
             .collect());
@@ -171,31 +173,69 @@ fn scanline_fallbacks(
             .map(|t| (opaque[t], ps.face_normal(t as u32)))
             .collect::<Vec<_>>(),
     );
-    ps.lights
-        .iter()
-        .enumerate()
-        .map(|(li, l)| match l {
-            Light::Ambient { .. } => Ok(None),
-            _ => Ok(Some(ExactFallback::Ray {
+    (0..ps.lights.len())
+        .map(|li| match exact.get(li) {
+            Some(true) => Ok(Some(ExactFallback::Ray {
                 bvh: bvh.clone(),
                 tris: tris.clone(),
                 light: crate::object_shadows::LightGeom::of(ps, li)?,
             })),
+            _ => Ok(None),
         })
         .collect()
 }
 
+/// The object-precision fragments of every light an exact method handles
+/// itself ([`exact_lights`]); `None` for the others. The casters' BVH is
+/// built once and shared by the lights.
 fn object_shadows_per_light(
     ps: &PreparedScene<'_>,
+    exact: &[bool],
 ) -> Result<Vec<Option<crate::object_shadows::ObjectShadows>>, chiaro_core::error::CoreError> {
+    let casters = crate::object_shadows::Casters::new(ps);
+    (0..ps.lights.len())
+        .map(|li| match exact.get(li) {
+            Some(true) => {
+                crate::object_shadows::ObjectShadows::build_with(ps, li, &casters).map(Some)
+            }
+            _ => Ok(None),
+        })
+        .collect()
+}
+
+/// Per light, whether an exact polygon method (volumes, object-precision,
+/// scan-line) or a shadow map builds its own structure for it: every light
+/// but ambient lights and the lights of an emitter group
+/// ([`EmitterGroup`]). A group's samples pick their triangles per shading
+/// point, so one structure per triangle would be needed (DamagedHelmet:
+/// 15,452 emissive triangles, over 6 GB of volumes at 48x36); they get
+/// shadow rays instead, which classify a point exactly as those structures
+/// would, and [`group_warning`] says so.
+pub(crate) fn exact_lights(ps: &PreparedScene<'_>, group: Option<&EmitterGroup>) -> Vec<bool> {
     ps.lights
         .iter()
         .enumerate()
-        .map(|(li, l)| match l {
-            chiaro_core::scene::Light::Ambient { .. } => Ok(None),
-            _ => crate::object_shadows::ObjectShadows::build(ps, li).map(Some),
+        .map(|(li, l)| {
+            !matches!(l, Light::Ambient { .. }) && !group.is_some_and(|g| g.contains(li))
         })
         .collect()
+}
+
+/// The warning of a shadow method whose emitter-group samples use shadow
+/// rays (see [`exact_lights`]); `None` without a group or for rays.
+pub(crate) fn group_warning(method: ShadowMethod, group: Option<&EmitterGroup>) -> Option<String> {
+    let g = group?;
+    let what = match method {
+        ShadowMethod::Map => "shadow maps",
+        ShadowMethod::Volume => "shadow volumes",
+        ShadowMethod::Object => "object-precision shadows",
+        ShadowMethod::Scanline => "scan-line shadows",
+        ShadowMethod::None | ShadowMethod::Ray => return None,
+    };
+    let n = g.range.len();
+    Some(format!(
+        "{what}: the {n} emissive triangles sampled as one light (each shading point picks its own) use shadow rays: {what} would need one structure per triangle; the scene's other lights use {what}"
+    ))
 }
 
 impl Shadows {
@@ -212,6 +252,11 @@ impl Shadows {
         settings: &RenderSettings,
         progress: &dyn chiaro_core::progress::Progress,
     ) -> Result<Self, chiaro_core::error::CoreError> {
+        let group = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
+        if let Some(w) = group_warning(settings.shadows, group.as_ref()) {
+            progress.warning(&w);
+        }
+        let exact = exact_lights(ps, group.as_ref());
         Ok(match settings.shadows {
             ShadowMethod::None => Shadows::None,
             ShadowMethod::Ray => Shadows::Ray(RayShadows::new(ps)),
@@ -231,28 +276,23 @@ impl Shadows {
                 }
                 Shadows::Map(maps)
             }
-            ShadowMethod::Volume => Shadows::Volume(RayShadows::transparent_only(ps)),
+            ShadowMethod::Volume => Shadows::Volume(VolumeShadows {
+                slot: vec![None; ps.lights.len()],
+                by_ray: vec![false; ps.lights.len()],
+                transparent: RayShadows::transparent_only(ps),
+            }),
             ShadowMethod::Object => Shadows::Object {
-                lights: object_shadows_per_light(ps)?,
+                lights: object_shadows_per_light(ps, &exact)?,
                 transparent: RayShadows::transparent_only(ps),
             },
             ShadowMethod::Scanline => Shadows::Scanline {
-                lines: ps
-                    .lights
-                    .iter()
-                    .enumerate()
-                    .map(|(li, l)| match l {
-                        chiaro_core::scene::Light::Ambient { .. } => Ok(None),
-                        _ => crate::scanline_shadows::scanline_visibility(
-                            ps,
-                            &ps.scene.camera,
-                            settings.width,
-                            settings.height,
-                            li,
-                        )
-                        .map(Some),
-                    })
-                    .collect::<Result<Vec<_>, _>>()?,
+                lines: crate::scanline_shadows::scanline_visibility_per_light(
+                    ps,
+                    &ps.scene.camera,
+                    settings.width,
+                    settings.height,
+                    &exact,
+                )?,
                 fallback: scanline_fallbacks(ps, settings)?,
                 transparent: RayShadows::transparent_only(ps),
             },
@@ -900,20 +940,39 @@ pub enum VolumeCounting {
     ZFail,
 }
 
-/// The shadow-volume polygons of every light, as triangles with homogeneous
+/// What the renderer needs of shadow volumes while shading: which count
+/// belongs to which light, and which lights use shadow rays instead.
+pub(crate) struct VolumeShadows {
+    /// Per light, its index among the per-sample counts (`None`: no volume).
+    pub(crate) slot: Vec<Option<u32>>,
+    /// Per light, true where its volumes did not fit in the shadow share of
+    /// the memory budget: its samples use shadow rays.
+    pub(crate) by_ray: Vec<bool>,
+    /// Shadow rays that see only the transparent casters, if any.
+    pub(crate) transparent: Option<RayShadows>,
+}
+
+/// The shadow-volume polygons of the lights, as triangles with homogeneous
 /// world vertices (`w = 0` at infinity), outward-facing (counter-clockwise
-/// seen from outside the volume).
+/// seen from outside the volume), extruded light by light on demand so
+/// that they can be counted (and sized against the memory budget) before
+/// any is stored.
 pub(crate) struct ShadowVolumes {
-    /// Per light: the volume triangles (empty for ambient lights).
-    pub(crate) per_light: Vec<Vec<[Vec4; 3]>>,
+    /// Opaque caster triangles per object.
+    by_object: Vec<Vec<u32>>,
+    /// Per object: whether it is a closed mesh.
+    closed: Vec<bool>,
+    /// Per light: its homogeneous position (`w = 0`: a direction towards
+    /// the light), `None` for lights without volumes.
+    from: Vec<Option<Vec4>>,
     /// Objects with opaque triangles that are not closed meshes, which get
     /// one volume per triangle; `None` when every caster is closed.
     pub(crate) warning: Option<String>,
 }
 
 impl ShadowVolumes {
-    /// Builds the capped shadow volumes of every opaque caster for every
-    /// light (area lights from their centre).
+    /// The capped shadow volumes of every opaque caster for the lights with
+    /// `lights[li]` true (area lights from their centre).
     ///
     /// A mesh object whose edges are each shared by exactly two triangles
     /// with opposite orientations is *closed*: only its silhouette edges
@@ -927,7 +986,7 @@ impl ShadowVolumes {
     /// names such objects. Triangles edge-on to the light (the light in
     /// their plane, within rounding) cast no volume. Transparent casters
     /// cast no volume (a count cannot carry a colour).
-    pub(crate) fn new(ps: &PreparedScene<'_>) -> Self {
+    pub(crate) fn new(ps: &PreparedScene<'_>, lights: &[bool]) -> Self {
         let blockers = blockers(ps);
         // Triangles per object, and whether each object is closed.
         let nobj = ps.scene.objects.len().max(1);
@@ -957,27 +1016,64 @@ impl ShadowVolumes {
                 if one { "its" } else { "their" },
             )
         });
-        let per_light = ps
+        let from = ps
             .lights
-            .par_iter()
-            .map(|light| {
-                let from = match light {
-                    Light::Ambient { .. } => return Vec::new(),
-                    Light::Point { position, .. } => position.extend(1.0),
-                    Light::Spot(s) => s.position.extend(1.0),
-                    Light::Directional { direction, .. } => {
-                        (-direction.normalize_or(Vec3::NEG_Y)).extend(0.0)
-                    }
-                    Light::Area { shape, .. } => shape.center().extend(1.0),
-                };
-                let mut out = Vec::new();
-                for (o, tris) in by_object.iter().enumerate() {
-                    extrude(ps, tris, closed[o], from, &mut out);
+            .iter()
+            .enumerate()
+            .map(|(li, light)| {
+                if lights.get(li) != Some(&true) {
+                    return None;
                 }
-                out
+                match light {
+                    Light::Ambient { .. } => None,
+                    Light::Point { position, .. } => Some(position.extend(1.0)),
+                    Light::Spot(s) => Some(s.position.extend(1.0)),
+                    Light::Directional { direction, .. } => {
+                        Some((-direction.normalize_or(Vec3::NEG_Y)).extend(0.0))
+                    }
+                    Light::Area { shape, .. } => Some(shape.center().extend(1.0)),
+                }
             })
             .collect();
-        Self { per_light, warning }
+        Self {
+            by_object,
+            closed,
+            from,
+            warning,
+        }
+    }
+
+    /// Whether light `li` has volumes.
+    pub(crate) fn has_volumes(&self, li: usize) -> bool {
+        self.from.get(li).is_some_and(Option::is_some)
+    }
+
+    /// Calls `sink` with every volume triangle of light `li`, in a fixed
+    /// order (nothing for a light without volumes).
+    pub(crate) fn extrude_light(
+        &self,
+        ps: &PreparedScene<'_>,
+        li: usize,
+        sink: &mut impl FnMut([Vec4; 3]),
+    ) {
+        let Some(Some(from)) = self.from.get(li) else {
+            return;
+        };
+        for (o, tris) in self.by_object.iter().enumerate() {
+            extrude(ps, tris, self.closed[o], *from, sink);
+        }
+    }
+
+    /// Every light's volume triangles, stored (tests).
+    #[cfg(test)]
+    pub(crate) fn per_light(&self, ps: &PreparedScene<'_>) -> Vec<Vec<[Vec4; 3]>> {
+        (0..self.from.len())
+            .map(|li| {
+                let mut out = Vec::new();
+                self.extrude_light(ps, li, &mut |t| out.push(t));
+                out
+            })
+            .collect()
     }
 }
 
@@ -1058,7 +1154,7 @@ fn extrude(
     tris: &[u32],
     closed: bool,
     from: Vec4,
-    out: &mut Vec<[Vec4; 3]>,
+    out: &mut impl FnMut([Vec4; 3]),
 ) {
     let l3 = from.truncate();
     // Direction of extrusion of a point away from the light, as a point at infinity.
@@ -1071,15 +1167,15 @@ fn extrude(
     };
     let facing = |a: Vec3, b: Vec3, c: Vec3| facing_light(a, b, c, from);
     let tri = |t: u32| ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
-    let push_cap_and_back = |a: Vec3, b: Vec3, c: Vec3, out: &mut Vec<[Vec4; 3]>| {
-        out.push([a.extend(1.0), b.extend(1.0), c.extend(1.0)]);
-        out.push([inf(a), inf(c), inf(b)]);
+    let push_cap_and_back = |a: Vec3, b: Vec3, c: Vec3, out: &mut dyn FnMut([Vec4; 3])| {
+        out([a.extend(1.0), b.extend(1.0), c.extend(1.0)]);
+        out([inf(a), inf(c), inf(b)]);
     };
-    let side = |a: Vec3, b: Vec3, out: &mut Vec<[Vec4; 3]>| {
+    let side = |a: Vec3, b: Vec3, out: &mut dyn FnMut([Vec4; 3])| {
         // Edge a -> b of a light-facing triangle: the quad (b, a, a_inf, b_inf).
         let (ai, bi) = (inf(a), inf(b));
-        out.push([b.extend(1.0), a.extend(1.0), ai]);
-        out.push([b.extend(1.0), ai, bi]);
+        out([b.extend(1.0), a.extend(1.0), ai]);
+        out([b.extend(1.0), ai, bi]);
     };
     if !closed {
         // The scene's bounding box: a triangle with all of it on the

@@ -787,7 +787,12 @@ fn shadow_maps_stay_within_their_budget() {
 /// Shadow-volume triangles of `scene`, all lights.
 fn volume_triangles(scene: &Scene) -> usize {
     let ps = PreparedScene::new(scene, PrepareOptions::default());
-    ShadowVolumes::new(&ps).per_light.iter().map(Vec::len).sum()
+    let lights = vec![true; ps.lights.len()];
+    ShadowVolumes::new(&ps, &lights)
+        .per_light(&ps)
+        .iter()
+        .map(Vec::len)
+        .sum()
 }
 
 #[test]
@@ -840,6 +845,96 @@ fn object_precision_lookup_just_outside_a_triangle_is_lit() {
             let mid = (v[k] + v[(k + 1) % 3]) * 0.5;
             let p = mid + (mid - centre).normalize() * 2.4e-4;
             assert_eq!(o.lit_fraction(t as u32, p), 1.0, "triangle {t} edge {k}");
+        }
+    }
+}
+
+#[test]
+fn shadow_volumes_past_their_budget_use_rays_with_a_warning() {
+    // 8 point lights over the shadow test scene with a 2 MiB memory limit
+    // (a 512 KiB shadow share, under 1 MiB of binned volumes a light): the
+    // first lights' volumes fit, the others use shadow rays, a warning names
+    // them, and the image is the rays'.
+    let scene = many_point_lights(8);
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let mut s = settings(ShadowMethod::Volume, 64, 48);
+    s.memory_limit = Some(chiaro_core::budget::ByteSize(2 << 20));
+    let warnings = Warnings::default();
+    let vol = render_prepared(&ps, &s, ShadeMode::Phong, &warnings).expect("render");
+    let w = warnings
+        .0
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let over: Vec<&String> = w.iter().filter(|w| w.contains("do not fit")).collect();
+    assert_eq!(over.len(), 1, "{w:?}");
+    assert!(over[0].contains("use shadow rays"), "{}", over[0]);
+    // Not every light was refused: some volumes were counted.
+    assert!(
+        !over[0].contains("light 0") && !over[0].contains("lights 0,"),
+        "{}",
+        over[0]
+    );
+    s.shadows = ShadowMethod::Ray;
+    let rays = render_prepared(&ps, &s, ShadeMode::Phong, &NoProgress).expect("render");
+    let differ = (0..vol.color.len())
+        .filter(|&i| (vol.color[i] - rays.color[i]).abs().max_element() > 1e-3)
+        .count();
+    assert!(differ <= vol.color.len() / 100, "{differ} pixels differ");
+}
+
+#[test]
+fn an_emitter_group_gets_shadow_rays_under_every_exact_method() {
+    // An emissive 12 x 12 grid of quads (triangle lights grouped at one
+    // sample each) over the shadow test scene: every exact method
+    // builds nothing for the group, says so once, and matches the rays.
+    let mut scene = light_only(32);
+    let glow = scene.add_material(chiaro_core::scene::Material {
+        emission: Vec3::splat(4.0),
+        ..chiaro_core::scene::Material::diffuse("glow", Vec3::ZERO)
+    });
+    let grid = scene.add_mesh(primitives::plane(1.0, 12));
+    scene.objects.push(Object {
+        name: "glow".into(),
+        geometry: Geometry::Mesh(grid),
+        material: glow,
+        // Facing down, over the scene.
+        transform: Transform {
+            translate: Vec3::new(0.0, 3.0, 0.0),
+            rotate_degrees: Vec3::new(180.0, 0.0, 0.0),
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let mut s = settings(ShadowMethod::Ray, 48, 36);
+    s.light_samples = 1;
+    let group = chiaro_core::shading::EmitterGroup::of_scene(&ps, 1).expect("a group");
+    let named = format!("{} emissive triangles", group.range.len());
+    assert!(group.range.len() > 64, "{named}");
+    let rays = render_prepared(&ps, &s, ShadeMode::Phong, &NoProgress).expect("render");
+    for method in [
+        ShadowMethod::Volume,
+        ShadowMethod::Object,
+        ShadowMethod::Scanline,
+        ShadowMethod::Map,
+    ] {
+        s.shadows = method;
+        let warnings = Warnings::default();
+        let f = render_prepared(&ps, &s, ShadeMode::Phong, &warnings).expect("render");
+        let w = warnings
+            .0
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        assert_eq!(
+            w.iter().filter(|w| w.contains(&named)).count(),
+            1,
+            "{method:?}: {w:?}"
+        );
+        if method != ShadowMethod::Map {
+            let d = (0..f.color.len())
+                .map(|i| (f.color[i] - rays.color[i]).abs().max_element())
+                .fold(0.0f32, f32::max);
+            assert!(d < 1e-3, "{method:?}: {d}");
         }
     }
 }

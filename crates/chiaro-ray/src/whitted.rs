@@ -44,8 +44,8 @@ use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, RenderSettings, Scene, ShadowMethod};
 use chiaro_core::shading::texture::miss_radiance;
 use chiaro_core::shading::{
-    EmitterGroup, LightSample, LocalLighting, ShadingPoint, SurfaceMaterial, delta_split,
-    depth_cue, sanitize, shade_local,
+    EmitterGroup, LightSample, LocalLighting, SampleKey, ShadingPoint, SurfaceMaterial,
+    delta_split, depth_cue, group_jitter, sanitize, shade_local,
 };
 use chiaro_core::shadow::ShadowCasters;
 use glam::{Vec2, Vec3};
@@ -82,12 +82,20 @@ pub struct TraceState {
     pub rng: Rng,
     /// Rays traced so far (camera, secondary and shadow rays).
     pub rays: u64,
+    /// The pixel whose centre the camera ray goes through, if it does: its
+    /// primary hit keys the emitter group's picks as the scan converter's
+    /// pixel-centre samples do.
+    pub pixel: Option<(u32, u32)>,
 }
 
 impl TraceState {
     /// A state with a fresh generator and a zero count.
     pub fn new(rng: Rng) -> Self {
-        Self { rng, rays: 0 }
+        Self {
+            rng,
+            rays: 0,
+            pixel: None,
+        }
     }
 }
 
@@ -311,16 +319,23 @@ impl<'s> Tracer<'s> {
             ambient: self.indirect.is_none(),
             group: self.emitters.as_ref(),
         };
-        let TraceState { rng, rays } = state;
+        let TraceState { rng, rays, pixel } = state;
+        let key = match *pixel {
+            Some((x, y)) if depth == 0 => SampleKey::Pixel(x, y),
+            _ => SampleKey::Point(sh.p),
+        };
         let mut color = shade_local(
             &sm,
             &sp,
             &lighting,
-            |_, _| {
-                if self.centre_light_samples {
-                    Vec2::splat(0.5)
-                } else {
+            |li, i| {
+                if !self.centre_light_samples {
                     uniform2(rng)
+                } else if self.emitters.as_ref().is_some_and(|g| g.contains(li)) {
+                    // The scan converter's per-pixel group picks.
+                    group_jitter(self.settings.seed, key, i)
+                } else {
+                    Vec2::splat(0.5)
                 }
             },
             |_, s| self.light_visibility_counted(sp.p, sp.ng, s, rays),
@@ -364,6 +379,10 @@ impl<'s> Tracer<'s> {
             dir_dy: scene.camera.ray_direction(film.x, film.y + 1.0, w, h),
         });
         let mut state = TraceState::new(rng);
+        // A pixel-centre ray names its pixel (the scan converter's rule).
+        if film.x.fract() == 0.5 && film.y.fract() == 0.5 && film.x >= 0.0 && film.y >= 0.0 {
+            state.pixel = Some((film.x as u32, film.y as u32));
+        }
         let (mut color, depth, normal) =
             self.trace_hit(&ray, differentials.as_ref(), 0, Vec3::ONE, &mut state);
         *rays += state.rays;

@@ -89,7 +89,7 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
         "phong = whitted at depth 0",
         "DamagedHelmet",
         "phong, whitted",
-        "as NormalTangentTest: one textured, normal-mapped pixel (1.8e-3); failed at 4242bb6 too (5 px up to 5.5e-2 with Whitted's jittered light samples); cause not found yet",
+        "as NormalTangentTest: a few textured, normal-mapped pixels; failed at 4242bb6 too (5 px up to 5.5e-2 with Whitted's jittered light samples); the same 3 px with the emitter group's picks back at strata centres (the table's 1 px was stale at 1a694fd); cause not found yet",
     ),
     (
         "shadow methods agree",
@@ -119,26 +119,7 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
 
 /// Cells not run at all, by (rule, case, technique) and the measured
 /// reason; shown in the table as "not run".
-const NOT_RUN: &[(&str, &str, &str, &str)] = &[
-    (
-        "shadow methods agree",
-        "DamagedHelmet",
-        "volume",
-        "shadow volumes of its open 15k-triangle mesh under its emissive light ask for more than 6 GB at 48x36 (allocation failure under ulimit -v 6000000; killed for memory without it)",
-    ),
-    (
-        "shadow methods agree",
-        "DamagedHelmet",
-        "object",
-        "object-precision shadows did not finish in 10 minutes at 48x36",
-    ),
-    (
-        "shadow methods agree",
-        "DamagedHelmet",
-        "scanline",
-        "not run: the same per-receiver light pass as object-precision shadows, which did not finish in 10 minutes",
-    ),
-];
+const NOT_RUN: &[(&str, &str, &str, &str)] = &[];
 
 #[derive(Default)]
 struct Matrix {

@@ -148,3 +148,53 @@ fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
         );
     }
 }
+
+/// The scan converter and Whitted (one sample per pixel, depth 0) draw an
+/// emitter group's light samples from one per-pixel sequence
+/// (`chiaro_core::shading::group_jitter`): on the shipped
+/// EmissiveStrengthTest, whose cubes are grouped, they agree to 1e-3 on
+/// every pixel where both see the same point, although each pixel picks
+/// its own triangles (its glow on the panels is noisy at 16 samples).
+#[test]
+fn phong_equals_whitted_at_depth_0_under_an_emitter_group() {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/gltf/EmissiveStrengthTest.glb");
+    let scene = chiaro::io::load_scene(&path).expect("loads").scene;
+    let mut s = scene.render.clone();
+    s.technique = Technique::Phong;
+    s.width = 96;
+    s.height = 72;
+    s.samples = 1;
+    s.shadows = chiaro::scene::ShadowMethod::None;
+    s.whitted.max_depth = 0;
+    let ps = chiaro_core::prepared::PreparedScene::new(&scene, Default::default());
+    assert!(
+        chiaro_core::shading::EmitterGroup::of_scene(&ps, s.light_samples.max(1)).is_some(),
+        "the cubes are sampled as a group"
+    );
+    let phong = chiaro::render(&scene, &s, &NoProgress).expect("renders");
+    s.technique = Technique::Whitted;
+    let whitted = chiaro::render(&scene, &s, &NoProgress).expect("renders");
+    let (mut compared, mut over, mut worst) = (0, 0, 0.0f32);
+    for i in 0..phong.color.len() {
+        let (a, b) = (phong.depth[i], whitted.depth[i]);
+        let same = a.is_finite()
+            && (a - b).abs() <= 1e-3 * a.max(1.0)
+            && phong.normal[i].dot(whitted.normal[i]) > 0.999;
+        if !same {
+            continue;
+        }
+        compared += 1;
+        let d = (phong.color[i] - whitted.color[i]).abs().max_element();
+        worst = worst.max(d);
+        over += usize::from(d > 1e-3);
+    }
+    assert!(
+        compared > phong.color.len() / 4,
+        "{compared} pixels compared"
+    );
+    assert!(
+        over == 0,
+        "{over} of {compared} pixels differ by more than 1e-3 (largest {worst})"
+    );
+}

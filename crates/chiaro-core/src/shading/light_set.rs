@@ -187,6 +187,40 @@ impl EmitterGroup {
     }
 }
 
+/// What an emitter group's light samples are keyed by (see
+/// [`group_jitter`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SampleKey {
+    /// A pixel-centre shading point: the scan converter's and Whitted's
+    /// one sample per pixel, keyed alike so that both pick the same lights.
+    Pixel(u32, u32),
+    /// Any other shading point (a vertex, a polygon centre, a sub-sample, a
+    /// reflected hit), keyed by its position.
+    Point(glam::Vec3),
+}
+
+/// The jitter in `[0,1)^2` of emitter-group sample `i` at the shading point
+/// `key`, for [`EmitterGroup::pick`]: hashed from the render's `seed`, the
+/// key and `i`, so that every pixel picks its own triangles (fixed strata
+/// centres gave every pixel the same picks: blotches) and the scan
+/// converter and Whitted, which both call this, pick the same ones at a
+/// pixel. Deterministic: a vertex gets the same picks whichever triangle
+/// lights it.
+#[inline]
+pub fn group_jitter(seed: u64, key: SampleKey, i: u32) -> glam::Vec2 {
+    // Salts separating these streams from the techniques' own pixel_rng use.
+    let (x, y, salt) = match key {
+        SampleKey::Pixel(x, y) => (x, y, 0x6A09_E667_F3BC_C908u64),
+        SampleKey::Point(p) => (
+            p.x.to_bits() ^ p.z.to_bits().rotate_left(16),
+            p.y.to_bits() ^ p.z.to_bits(),
+            0xBB67_AE85_84CA_A73Bu64,
+        ),
+    };
+    let mut rng = crate::sampling::pixel_rng(seed ^ salt, x, y, i);
+    crate::sampling::uniform2(&mut rng)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -395,6 +429,41 @@ mod tests {
             assert!(c.x > 0.0);
             assert_eq!(queries, samples, "{samples} samples");
         }
+    }
+
+    #[test]
+    fn two_pixels_draw_different_group_picks() {
+        // 16 x 16 cells of two triangles at 16 samples: a group. Sample i of
+        // two neighbouring pixels picks different triangles, the same pixel
+        // picks the same ones again, and over many pixels every cell is
+        // picked (strata centres picked the same 16 everywhere).
+        let lights = emitting_square(1.0, 2.0, 16, |_, _| Vec3::ONE);
+        let g = EmitterGroup::new(&lights, 0..lights.len(), 16).expect("a group");
+        let picks = |key: SampleKey| -> Vec<usize> {
+            (0..16)
+                .map(|i| g.pick(i, 16, group_jitter(7, key, i)).0)
+                .collect()
+        };
+        let a = picks(SampleKey::Pixel(10, 20));
+        let b = picks(SampleKey::Pixel(11, 20));
+        assert_ne!(a, b);
+        assert_eq!(a, picks(SampleKey::Pixel(10, 20)));
+        assert_ne!(
+            picks(SampleKey::Point(Vec3::X)),
+            picks(SampleKey::Point(Vec3::Y))
+        );
+        let mut seen = vec![false; lights.len()];
+        for x in 0..256 {
+            for li in picks(SampleKey::Pixel(x, 0)) {
+                seen[li] = true;
+            }
+        }
+        let n = seen.iter().filter(|&&s| s).count();
+        assert!(
+            n > lights.len() * 99 / 100,
+            "{n} of {} picked",
+            lights.len()
+        );
     }
 
     #[test]

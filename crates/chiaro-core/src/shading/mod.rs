@@ -31,7 +31,7 @@ pub mod texture;
 pub use brdf::{SurfaceMaterial, eval_brdf_cos};
 pub use bsdf::{Bsdf, BsdfSample, DeltaSplit, delta_split, luminance};
 pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract};
-pub use light_set::{AliasTable, EmitterGroup, light_power};
+pub use light_set::{AliasTable, EmitterGroup, SampleKey, group_jitter, light_power};
 pub use lights::{LightSample, sample_light};
 pub use point::PointLighting;
 
