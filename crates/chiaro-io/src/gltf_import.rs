@@ -30,7 +30,8 @@
 //! `strength`) scales the ambient term; `normalTexture` -> `normal_map`; `emissiveFactor *
 //! KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
 //! `emission_texture`; `KHR_materials_unlit` -> emission = base colour, no
-//! reflection; `doubleSided` -> `two_sided`; `alphaMode`/`alphaCutoff` ->
+//! reflection; `doubleSided` -> `two_sided`, and `false` -> `cull_backface`
+//! (the backs invisible to the eye); `alphaMode`/`alphaCutoff` ->
 //! `alpha_mode`, and `BLEND` with a factor alpha below 1 -> `transmit = 1 -
 //! alpha` (ior 1) drawn `interpolated`. Samplers give both wrap axes and
 //! the min/mag/mip filters; `KHR_texture_transform` is applied to the base
@@ -827,6 +828,8 @@ impl Builder<'_> {
             ambient: Vec3::ONE,
             emission: Vec3::from(gm.emissive_factor()).max(Vec3::ZERO) * strength,
             two_sided: gm.double_sided(),
+            // glTF 2.0 3.9.5: a single-sided material's back faces are culled.
+            cull_backface: !gm.double_sided(),
             metallic_roughness: Some(mr),
             ..Material::default()
         };
