@@ -11,7 +11,9 @@
 //! is reported on each). So a closed transparent object, entered and left,
 //! transmits `kt^2` (Whitted weights a refracted ray by `kt` at each of the
 //! two surfaces), and two panes, or two coincident surfaces of different
-//! objects, transmit `kt1 * kt2` (Foley et al. section 16.12).
+//! objects, transmit `kt1 * kt2` (Foley et al. section 16.12). A glTF
+//! `BLEND` surface's `kt` is `1 - alpha` at the crossing (factor x texture
+//! x vertex alpha, the surface layer's per-point value).
 
 use crate::accel::{Accelerator, Hit};
 use crate::geometry::{Ray, offset_ray_origin};
