@@ -11,7 +11,9 @@
 //! is reported on each). So a closed transparent object, entered and left,
 //! transmits `kt^2` (Whitted weights a refracted ray by `kt` at each of the
 //! two surfaces), and two panes, or two coincident surfaces of different
-//! objects, transmit `kt1 * kt2` (Foley et al. section 16.12).
+//! objects, transmit `kt1 * kt2` (Foley et al. section 16.12). A glTF
+//! `BLEND` surface's `kt` is `1 - alpha` at the crossing (factor x texture
+//! x vertex alpha, the surface layer's per-point value).
 
 use crate::accel::{Accelerator, Hit};
 use crate::geometry::{Ray, offset_ray_origin};
@@ -40,6 +42,9 @@ const SAME_CROSSING: f32 = 1e-5;
 #[derive(Debug, Clone)]
 pub struct ShadowCasters {
     blockers: Vec<Blocker>,
+    /// BLEND triangles: a crossing lets through `1 - alpha` at the hit's uv
+    /// (the surface layer's per-point `kt`), not the factor's `transmit`.
+    blend: Option<crate::accel::alpha::Coverage>,
     objects: Vec<u32>,
     all_opaque: bool,
 }
@@ -81,9 +86,11 @@ impl ShadowCasters {
             blockers.push(class(s.material, s.object));
             objects.push(s.object);
         }
-        let all_opaque = blockers.iter().all(|b| *b == Blocker::Opaque);
+        let blend = crate::accel::alpha::Coverage::blend(ps);
+        let all_opaque = blend.is_none() && blockers.iter().all(|b| *b == Blocker::Opaque);
         Self {
             blockers,
+            blend,
             objects,
             all_opaque,
         }
@@ -106,6 +113,7 @@ impl ShadowCasters {
             .any(|b| matches!(b, Blocker::Filter(_)))
             .then(|| Self {
                 blockers,
+                blend: self.blend.clone(),
                 objects: self.objects.clone(),
                 all_opaque: false,
             })
@@ -144,10 +152,22 @@ impl ShadowCasters {
         let mut seen = [(0.0f32, u32::MAX); 16];
         let mut nseen = 0usize;
         let mut more: Vec<(f32, u32)> = Vec::new();
+        // A BLEND caster's transmittance at the hit, `1 - alpha` there.
+        let blend_kt = |h: &Hit| {
+            self.blend
+                .as_ref()
+                .filter(|c| c.is_masked(h.prim))
+                .map(|c| Vec3::splat((1.0 - c.alpha(h.prim, h.u, h.v)).clamp(0.0, 1.0)))
+        };
         let blocked = accel.for_each_hit(ray, &mut |h: &Hit| match self.blocker(h.prim) {
             Blocker::Ignore => false,
-            Blocker::Opaque => true,
-            Blocker::Filter(kt) => {
+            Blocker::Opaque if blend_kt(h).is_none() => true,
+            Blocker::Opaque | Blocker::Filter(_) => {
+                let kt = match (blend_kt(h), self.blocker(h.prim)) {
+                    (Some(kt), _) => kt,
+                    (None, Blocker::Filter(kt)) => kt,
+                    _ => Vec3::ZERO,
+                };
                 let object = self
                     .objects
                     .get(h.prim as usize)

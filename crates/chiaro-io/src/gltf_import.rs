@@ -30,7 +30,8 @@
 //! `strength`) scales the ambient term; `normalTexture` -> `normal_map`; `emissiveFactor *
 //! KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
 //! `emission_texture`; `KHR_materials_unlit` -> emission = base colour, no
-//! reflection; `doubleSided` -> `two_sided`; `alphaMode`/`alphaCutoff` ->
+//! reflection; `doubleSided` -> `two_sided`, and `false` -> `cull_backface`
+//! (the backs invisible to the eye); `alphaMode`/`alphaCutoff` ->
 //! `alpha_mode`, and `BLEND` with a factor alpha below 1 -> `transmit = 1 -
 //! alpha` (ior 1) drawn `interpolated`. Samplers give both wrap axes and
 //! the min/mag/mip filters; `KHR_texture_transform` is applied to the base
@@ -130,6 +131,42 @@ fn in_err(path: &Path, location: impl Into<String>, message: impl Into<String>) 
     }
 }
 
+/// `<major>.<minor>` as numbers (glTF 2.0 section 3.2, `asset.version`).
+fn parse_version(v: &str) -> Option<(u32, u32)> {
+    let (major, minor) = v.split_once('.')?;
+    Some((major.parse().ok()?, minor.parse().ok()?))
+}
+
+/// glTF 2.0 section 5.2: a reader loads any 2.x file (later minor
+/// versions only add what it may ignore) unless `asset.minVersion` asks
+/// for a later version than the one it implements, 2.0.
+fn check_version(asset: &gltf::json::Asset, path: &Path) -> Result<()> {
+    match parse_version(&asset.version) {
+        Some((2, _)) => {}
+        _ => {
+            return Err(in_err(
+                path,
+                "asset.version",
+                format!(
+                    "the file is glTF {:?}; chiaro reads glTF 2.x",
+                    asset.version
+                ),
+            ));
+        }
+    }
+    if let Some(min) = &asset.min_version {
+        let ok = parse_version(min).is_some_and(|v| v <= (2, 0));
+        if !ok {
+            return Err(in_err(
+                path,
+                "asset.minVersion",
+                format!("the file requires glTF {min} or later; chiaro reads glTF 2.0"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) -> Result<Imported> {
     let is_glb = bytes.starts_with(b"glTF");
     // The gltf crate subtracts the 12-byte header from the declared length unchecked.
@@ -163,6 +200,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         other => IoError::format(path, format!("not a readable glTF/GLB file: {other}")),
     })?;
     let doc = &gltf.document;
+    check_version(&doc.as_json().asset, path)?;
     for (i, ext) in doc.extensions_required().enumerate() {
         if !SUPPORTED.contains(&ext) {
             return Err(in_err(
@@ -827,6 +865,8 @@ impl Builder<'_> {
             ambient: Vec3::ONE,
             emission: Vec3::from(gm.emissive_factor()).max(Vec3::ZERO) * strength,
             two_sided: gm.double_sided(),
+            // glTF 2.0 3.9.5: a single-sided material's back faces are culled.
+            cull_backface: !gm.double_sided(),
             metallic_roughness: Some(mr),
             ..Material::default()
         };
@@ -1515,6 +1555,38 @@ mod tests {
             Path::new("h.glb"),
         );
         assert!(e.is_err());
+    }
+
+    /// A later 2.x file loads; one whose minVersion is above 2.0, or that
+    /// is not glTF 2, is refused naming the file and the version.
+    #[test]
+    fn min_version_above_2_0_is_refused() {
+        let with = |asset: &str| SCENE.replace(r#""asset": {"version": "2.0"}"#, asset);
+        for ok in [
+            r#""asset": {"version": "2.1"}"#,
+            r#""asset": {"version": "2.1", "minVersion": "2.0"}"#,
+        ] {
+            load_gltf_slice(with(ok).as_bytes(), None, Path::new("v.gltf")).expect(ok);
+        }
+        for (bad, want) in [
+            (
+                r#""asset": {"version": "2.1", "minVersion": "2.1"}"#,
+                "v.gltf: asset.minVersion: the file requires glTF 2.1 or later",
+            ),
+            (
+                r#""asset": {"version": "3.0", "minVersion": "3.0"}"#,
+                "v.gltf: asset.version",
+            ),
+            (
+                r#""asset": {"version": "2.0", "minVersion": "two"}"#,
+                "asset.minVersion",
+            ),
+        ] {
+            let e = load_gltf_slice(with(bad).as_bytes(), None, Path::new("v.gltf"))
+                .expect_err(bad)
+                .to_string();
+            assert!(e.contains(want), "{bad}: {e}");
+        }
     }
 
     #[test]

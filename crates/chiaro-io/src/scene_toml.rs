@@ -16,7 +16,7 @@
 //! | `[camera]` | `eye`, `look_at`, `up`, `fov` (vertical, 0..180), `near`, `far` |
 //! | `[cameras.NAME]` | further cameras with the keys of `[camera]`, chosen with `chiaro render --camera NAME` |
 //! | `[[light]]` | `type` = `ambient` {`color`, `intensity`}; `point` {+ `position`, `attenuation`}; `directional` {`direction`, the way the light travels}; `spot` {`position`, `direction` or `look_at`, `attenuation`, `exponent` (Warn's n, default 1), `cone` (half-angle, default 90), `cone_softness`, `flaps` = [{`axis`, `min`, `max`}]}; `area` {`shape` = `quad` {`corner`, `edge_u`, `edge_v`} / `disk` {`center`, `normal`, `radius`} / `sphere` {`center`, `radius`}, `two_sided`} |
-//! | `[material.NAME]` | `ambient` (ka, relative to kd), `diffuse`, `specular`, `shininess`, `model` (`phong`, `blinn`, `torrance-sparrow`), `roughness`, `distribution` (`ggx`, `beckmann`), `reflect`, `transmit`, `ior`, `absorption`, `fresnel`, `transparency` (`interpolated`, `screen-door`, `filtered`), `texture`, `bump`, `normal_map`, `emission`, `emission_texture`, `two_sided` |
+//! | `[material.NAME]` | `ambient` (ka, relative to kd), `diffuse`, `specular`, `shininess`, `model` (`phong`, `blinn`, `torrance-sparrow`), `roughness`, `distribution` (`ggx`, `beckmann`), `reflect`, `transmit`, `ior`, `absorption`, `fresnel`, `transparency` (`interpolated`, `screen-door`, `filtered`), `texture`, `bump`, `normal_map`, `emission`, `emission_texture`, `two_sided`, `cull_backface` (invisible from behind to the eye in every technique, as glTF `doubleSided: false`) |
 //! | `[[object]]` | `name`, `mesh` (`.obj`, `.gltf`, `.glb`) or `primitive`, `material`, `transform`, `smooth`, `crease_angle`, `shade` (`flat`, `gouraud`, `phong`), `casts_shadows` |
 //! | `[environment]` | `texture` (lat-long image), `intensity`, `rotate_y` (degrees, right-handed about +y like an object's), `background` (camera rays see it; reflections and lighting use it either way) |
 //! | top level | `background` (colour where nothing is hit) |
@@ -637,6 +637,7 @@ impl Ctx<'_> {
             transparency: m.transparency.unwrap_or(d.transparency),
             emission: rgb(self, &m.emission, "emission", d.emission)?,
             two_sided: m.two_sided.unwrap_or(d.two_sided),
+            cull_backface: m.cull_backface.unwrap_or(d.cull_backface),
             ..d
         };
         if let Some(r) = &m.roughness {

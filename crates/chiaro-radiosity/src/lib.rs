@@ -574,14 +574,6 @@ pub fn render_solution(
     }
     let cam = &scene.camera;
     let clip_from_world = cam.projection_matrix(w as f32 / h as f32) * cam.view_matrix();
-    let buf = chiaro_raster::zbuffer::item_buffer(
-        clip_from_world,
-        sw,
-        sh,
-        &solution.vertices,
-        &solution.elements,
-        &[],
-    );
     let normals: Vec<Vec3> = solution
         .elements
         .iter()
@@ -591,6 +583,34 @@ pub fn render_solution(
         })
         .collect();
     let surfaces = DisplaySurfaces::new(scene, solution);
+    // The eye does not see the backs of single-sided (`cull_backface`)
+    // materials, as in the other techniques: such elements are left out.
+    let culling = scene.materials.iter().any(|m| m.cull_backface);
+    let (kept, ids): (Vec<[u32; 3]>, Vec<u32>) = if culling {
+        let ps = &surfaces.ps;
+        let nt = (solution.prepared_triangles as usize).min(ps.triangles.len());
+        (0..solution.elements.len())
+            .filter(|&e| {
+                let s = surfaces.sources[e] as usize;
+                let back = || {
+                    let c0 = solution.vertices[solution.elements[e][0] as usize];
+                    normals[e].dot(cam.eye - c0) < 0.0
+                };
+                !(s < nt && ps.material(ps.tri_material[s]).cull_backface && back())
+            })
+            .map(|e| (solution.elements[e], e as u32))
+            .unzip()
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let buf = chiaro_raster::zbuffer::item_buffer(
+        clip_from_world,
+        sw,
+        sh,
+        &solution.vertices,
+        if culling { &kept } else { &solution.elements },
+        &ids,
+    );
     let mut film = Film::new(w, h);
     // Only the crop window's pixels are shaded (the others stay black with
     // infinite depth); each pixel depends only on its own samples, so the

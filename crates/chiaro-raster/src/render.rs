@@ -1205,7 +1205,8 @@ fn render_work(
     let cull_material: Vec<bool> = scene
         .materials
         .iter()
-        .map(|m| settings.cull_backfaces && !m.two_sided)
+        // A single-sided glTF material (`cull_backface`) is culled whatever the setting.
+        .map(|m| (settings.cull_backfaces && !m.two_sided) || m.cull_backface)
         .collect();
     let nt = ps.triangles.len();
     let chunk = nt.div_ceil(256).max(4096);

@@ -563,7 +563,12 @@ impl<'a, 's> PathTracer<'a, 's> {
                 Some(hit) => Some(hit),
                 None => {
                     *rays += 1;
-                    self.accel.intersect(&ray)
+                    // Camera rays skip the backs of single-sided materials.
+                    if depth == 0 {
+                        self.accel.intersect_camera(&ray)
+                    } else {
+                        self.accel.intersect(&ray)
+                    }
                 }
             };
             let Some(hit) = hit else {

@@ -92,7 +92,7 @@ pub fn render_with(
                         let dir =
                             cam.ray_direction(px as f32 + offset.x, py as f32 + offset.y, w, h);
                         let ray = Ray::new(cam.eye, dir);
-                        let Some(hit) = accel.intersect(&ray) else {
+                        let Some(hit) = accel.intersect_camera(&ray) else {
                             sum += background_radiance(scene, dir);
                             continue;
                         };

@@ -282,7 +282,13 @@ impl<'s> Tracer<'s> {
         state: &mut TraceState,
     ) -> (Vec3, f32, Vec3) {
         state.rays += 1;
-        let Some(hit) = self.accel.intersect(ray) else {
+        // Camera rays skip the backs of single-sided materials.
+        let hit = if depth == 0 {
+            self.accel.intersect_camera(ray)
+        } else {
+            self.accel.intersect(ray)
+        };
+        let Some(hit) = hit else {
             return (
                 self.miss_radiance(ray.dir, depth),
                 f32::INFINITY,

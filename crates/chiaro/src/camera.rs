@@ -159,6 +159,14 @@ pub fn apply_camera(
             if cam.far < reach {
                 cam.far = 2.0 * reach;
             }
+            // The near plane too: the old one (automatic framing puts it
+            // just short of the model) would clip a model the new eye is
+            // closer to, so the scan converter drew nothing.
+            let gap = (cam.eye.clamp(b.min, b.max) - cam.eye).length();
+            cam.near = cam.near.min((0.5 * gap).max(1e-4 * cam.far));
+            if cam.near.is_nan() || cam.near <= 0.0 {
+                cam.near = old.near.min(0.01);
+            }
         }
     }
     if cam != old {

@@ -169,6 +169,39 @@ fn a_framed_model_fills_most_of_the_frame_and_stands_upright_with_up_z() {
     assert!(differ * 20 > a.len(), "only {differ} pixels differ");
 }
 
+/// An eye placed closer to a framed model than the framing's near plane
+/// (which sits just short of the model) still sees it in the scan
+/// converter: the near plane follows the new eye (it stayed, and clipped
+/// the whole model away).
+#[test]
+fn an_eye_close_to_a_framed_model_is_not_clipped_by_the_old_near_plane() {
+    let aspect = 80.0 / 60.0;
+    let mut s = model(0.0);
+    let frame = CameraChoice {
+        up: Some(UpAxis::Y),
+        ..CameraChoice::default()
+    };
+    apply_camera(&mut s, &frame, aspect).expect("frames");
+    let framed_near = s.camera.near;
+    let centre = chiaro::scene_bounds(&s).center();
+    // Along the framed view, 80 % of the way to the old near plane.
+    let old_eye = s.camera.eye;
+    let eye = old_eye + (centre - old_eye).normalize() * 0.8 * framed_near;
+    let choice = CameraChoice {
+        eye: Some(eye),
+        look_at: Some(centre),
+        ..CameraChoice::default()
+    };
+    apply_camera(&mut s, &choice, aspect).expect("moves");
+    assert!(s.camera.near < 0.5 * framed_near, "near {}", s.camera.near);
+    let film = render(&s, Technique::Phong);
+    let seen = film.color.iter().filter(|c| **c != s.background).count();
+    assert!(
+        seen * 2 > film.color.len(),
+        "phong sees the model in {seen} pixels"
+    );
+}
+
 #[test]
 fn a_room_renders_from_inside_by_default() {
     // A closed 6 x 3 x 8 room, walls facing in, with a table: written as

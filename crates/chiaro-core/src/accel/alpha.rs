@@ -41,10 +41,25 @@ pub struct Coverage {
 impl Coverage {
     /// The masked triangles of `ps`, or `None` when it has none.
     pub fn new(ps: &PreparedScene<'_>) -> Option<Self> {
+        Self::of(ps, |mode| match mode {
+            AlphaMode::Mask { cutoff } => Some(cutoff),
+            _ => None,
+        })
+    }
+
+    /// The triangles of `ps` with `alphaMode: BLEND` (their [`Self::alpha`]
+    /// is the coverage that shadow rays let through as `1 - alpha`), or
+    /// `None` when it has none.
+    pub fn blend(ps: &PreparedScene<'_>) -> Option<Self> {
+        Self::of(ps, |mode| (mode == AlphaMode::Blend).then_some(0.0))
+    }
+
+    /// The triangles whose material's mode `pick` gives a cutoff.
+    fn of(ps: &PreparedScene<'_>, pick: impl Fn(AlphaMode) -> Option<f32>) -> Option<Self> {
         let mut mask_of = vec![NONE; ps.scene.materials.len()];
         let mut masks = Vec::new();
         for (i, m) in ps.scene.materials.iter().enumerate() {
-            if let AlphaMode::Mask { cutoff } = m.alpha_mode {
+            if let Some(cutoff) = pick(m.alpha_mode) {
                 mask_of[i] = masks.len() as u32;
                 masks.push(Mask {
                     cutoff: if cutoff.is_finite() { cutoff } else { 0.5 },
@@ -278,6 +293,25 @@ mod tests {
             let s = masked_scene(mode, 0.0, &[]);
             let ps = PreparedScene::new(&s, PrepareOptions::default());
             assert!(Coverage::new(&ps).is_none());
+        }
+    }
+
+    /// A BLEND caster lets a shadow ray through as `1 - alpha` at the
+    /// crossing (texture x vertex alpha), not by its factor alone (whose
+    /// alpha 1 made the AlphaBlendModeTest label's decal an opaque caster).
+    #[test]
+    fn blend_casters_transmit_one_minus_the_texture_alpha() {
+        let s = masked_scene(AlphaMode::Blend, 0.25, &[0.8; 4]);
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        let casters = crate::shadow::ShadowCasters::new(&ps);
+        let accel = SceneBvh::new(&ps);
+        for (x, want) in [(-0.5f32, 1.0 - 0.25 * 0.8), (0.5, 1.0 - 0.8)] {
+            let seg = Ray::segment(Vec3::new(x, 0.2, 1.0), Vec3::new(x, 0.2, -0.5));
+            let tr = casters.transmittance(&accel, &seg);
+            assert!(
+                (tr - Vec3::splat(want)).abs().max_element() < 1e-6,
+                "x = {x}: {tr}"
+            );
         }
     }
 

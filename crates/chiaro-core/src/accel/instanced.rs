@@ -242,7 +242,8 @@ fn duplicated(ps: &PreparedScene<'_>, shared: &[(MeshId, Vec<Candidate>)]) -> us
 /// the flat [`SceneBvh`] otherwise. Both give the same answers up to
 /// rounding; the choice only trades memory and build time against the
 /// per-instance cost of a ray transform. Wrapped in
-/// [`super::alpha::AlphaTested`] when the scene has masked materials.
+/// [`super::alpha::AlphaTested`] when the scene has masked materials, and in
+/// [`super::cull::Culled`] when it has single-sided (`cull_backface`) ones.
 pub fn build_accelerator(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
     let shared = shared_instances(ps);
     let inner: Box<dyn Accelerator> = if duplicated(ps, &shared) >= MIN_DUPLICATED_TRIANGLES {
@@ -251,7 +252,9 @@ pub fn build_accelerator(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
         Box::new(SceneBvh::new(ps))
     };
     // Masked (alpha-tested) materials: every ray skips cut-out texels.
-    super::alpha::AlphaTested::wrap(ps, inner)
+    let alpha = super::alpha::AlphaTested::wrap(ps, inner);
+    // Single-sided materials: camera rays skip their backs.
+    super::cull::Culled::wrap(ps, alpha)
 }
 
 /// A [`SceneBvh`] over triangles `tris` of `positions` (indices in range)

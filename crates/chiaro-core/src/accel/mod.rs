@@ -5,6 +5,7 @@
 
 pub mod alpha;
 pub mod bvh;
+pub mod cull;
 pub mod instanced;
 pub mod list;
 pub mod pages;
@@ -30,6 +31,12 @@ pub struct Hit {
 pub trait Accelerator: Send + Sync {
     /// The closest hit with `t` in `(ray.t_min, ray.t_max)`.
     fn intersect(&self, ray: &Ray) -> Option<Hit>;
+    /// The closest hit the eye sees along a camera ray: [`Self::intersect`]
+    /// without the backs of single-sided (`cull_backface`) materials
+    /// ([`cull::Culled`]). Every other ray uses `intersect`.
+    fn intersect_camera(&self, ray: &Ray) -> Option<Hit> {
+        self.intersect(ray)
+    }
     /// True if anything is hit with `t` in `(ray.t_min, ray.t_max)`.
     fn occluded(&self, ray: &Ray) -> bool;
     /// Calls `visit(hit)` for every intersection with `t` in

@@ -181,6 +181,11 @@ pub struct Material {
     /// Draw and shade both faces (no back-face culling, normals flipped to
     /// face the viewer).
     pub two_sided: bool,
+    /// Invisible from behind to the eye (glTF `doubleSided: false`): the
+    /// ray techniques skip a camera ray's hit on its back, as the scan
+    /// converter culls it; every other ray sees both sides (ARCHITECTURE.md,
+    /// "Single-sided culling"). Off for TOML materials unless asked for.
+    pub cull_backface: bool,
     /// glTF metallic-roughness: when set, `diffuse`, `specular` and
     /// `roughness` are derived from it at every point (and hold its
     /// untextured values).
@@ -216,6 +221,7 @@ impl Default for Material {
             emission: Vec3::ZERO,
             emission_texture: None,
             two_sided: false,
+            cull_backface: false,
             metallic_roughness: None,
             occlusion: None,
             alpha: 1.0,

@@ -335,6 +335,7 @@ pub(crate) struct RawMaterial {
     pub emission: Opt<Splat3>,
     pub emission_texture: Opt<TextureSpec>,
     pub two_sided: Option<bool>,
+    pub cull_backface: Option<bool>,
 }
 
 /// `transform = { translate, rotate_x, rotate_y, rotate_z | rotate, scale, matrix }`.

@@ -225,7 +225,13 @@ impl PathTracer<'_, '_> {
             for i in set_lanes(&alive) {
                 *rays += 1;
                 let ray = Ray::new(org.get(i), dir.get(i));
-                let Some(hit) = self.accel.intersect(&ray) else {
+                // Camera rays skip the backs of single-sided materials.
+                let hit = if depth == 0 {
+                    self.accel.intersect_camera(&ray)
+                } else {
+                    self.accel.intersect(&ray)
+                };
+                let Some(hit) = hit else {
                     let seen = self.escaped(&ray, depth, prev_pdf[i]);
                     out[i] = l.get(i) + beta.get(i) * seen;
                     alive[i] = false;

@@ -31,7 +31,13 @@ impl PathTracer<'_, '_> {
         for depth in 0..self.max_depth {
             // Find the next vertex, or add what the escaped ray sees.
             *rays += 1;
-            let Some(hit) = self.accel.intersect(&ray) else {
+            // Camera rays skip the backs of single-sided materials.
+            let hit = if depth == 0 {
+                self.accel.intersect_camera(&ray)
+            } else {
+                self.accel.intersect(&ray)
+            };
+            let Some(hit) = hit else {
                 l += beta * self.escaped(&ray, depth, prev_pdf);
                 break;
             };
