@@ -1401,9 +1401,9 @@ mod tests {
 
     #[test]
     fn lock_step_kernel_with_only_an_environment() {
-        // No lights at all (the box's emitter made plain white, the front
-        // open): the environment lights the box through BSDF sampling, and
-        // the kernel still draws each bounce's pairs.
+        // No lights but the environment (the box's emitter made plain
+        // white, the front open): lanes sample it through the scalar
+        // loop's code, and still draw each bounce's pairs.
         let mut s = mitsuba_cbox(12);
         s.render.samples = 8;
         let light = s.material_by_name("light").expect("the light").index();
