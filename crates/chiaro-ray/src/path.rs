@@ -919,7 +919,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         let Some(env) = &self.env else {
             return Vec3::ZERO;
         };
-        if !(pick > 0.0) {
+        if pick <= 0.0 {
             return Vec3::ZERO;
         }
         let Some(s) = env.sample(u) else {

@@ -565,7 +565,7 @@ impl<'s> EnvironmentLight<'s> {
             return 0.0;
         };
         let sin_t = (d.x * d.x + d.z * d.z).sqrt();
-        if !(sin_t > 0.0) {
+        if sin_t <= 0.0 {
             return 0.0;
         }
         self.dist.pdf(environment_uv(self.env, d))
