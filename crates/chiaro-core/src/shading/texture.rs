@@ -496,40 +496,60 @@ impl<'s> EnvironmentLight<'s> {
         } else {
             (img.width.max(1), img.height.max(1))
         };
-        let lum = |x: i64, y: i64| -> f32 {
-            if img.texels.is_empty() {
-                return 1.0;
+        if !img.texels.is_empty() && img.texels.len() != (w as usize) * (h as usize) {
+            return None;
+        }
+        use rayon::prelude::*;
+        // Each texel's luminance (negative and non-finite channels as 0).
+        let lum: Vec<f32> = if img.texels.is_empty() {
+            vec![1.0]
+        } else {
+            img.texels
+                .par_iter()
+                .map(|t| {
+                    let c = |v: f32| if v.is_finite() { v.max(0.0) } else { 0.0 };
+                    0.2126 * c(t[0]) + 0.7152 * c(t[1]) + 0.0722 * c(t[2])
+                })
+                .collect()
+        };
+        let (wrap_u, wrap_v) = img.wrap_uv();
+        let at = |x: i64, y: i64| -> f32 {
+            if lum.len() == 1 {
+                return lum[0];
             }
-            let (wrap_u, wrap_v) = img.wrap_uv();
-            let t = img.texel(
-                wrap_index(x, img.width, wrap_u),
-                wrap_index(y, img.height, wrap_v),
-            );
-            let c = |v: f32| if v.is_finite() { v.max(0.0) } else { 0.0 };
-            0.2126 * c(t[0]) + 0.7152 * c(t[1]) + 0.0722 * c(t[2])
+            let (x, y) = (wrap_index(x, w, wrap_u), wrap_index(y, h, wrap_v));
+            lum[(y * w + x) as usize]
         };
         // The bilinear lookup's mean over texel (x, y): its tent filter's
         // weights over the cell are 3/4 for the texel and 1/8 for each
-        // neighbour per axis.
+        // neighbour per axis. Rows in parallel (a 1k map in a few ms).
         const W: [f32; 3] = [0.125, 0.75, 0.125];
-        let mut func = Vec::with_capacity((w * h) as usize);
-        let (mut sum, mut weight) = (0.0f64, 0.0f64);
-        for y in 0..h {
-            let sin_t = ((y as f32 + 0.5) / h as f32 * std::f32::consts::PI).sin();
-            for x in 0..w {
-                let mut m = 0.0;
-                for (dy, wy) in W.iter().enumerate() {
-                    for (dx, wx) in W.iter().enumerate() {
-                        m += wy
-                            * wx
-                            * lum(i64::from(x) + dx as i64 - 1, i64::from(y) + dy as i64 - 1);
-                    }
-                }
-                func.push(m * sin_t);
-                sum += f64::from(m * sin_t);
-                weight += f64::from(sin_t);
-            }
-        }
+        let rows: Vec<Vec<f32>> = (0..h)
+            .into_par_iter()
+            .map(|y| {
+                let sin_t = ((y as f32 + 0.5) / h as f32 * std::f32::consts::PI).sin();
+                (0..w)
+                    .map(|x| {
+                        let mut m = 0.0;
+                        for (dy, wy) in W.iter().enumerate() {
+                            for (dx, wx) in W.iter().enumerate() {
+                                let (tx, ty) =
+                                    (i64::from(x) + dx as i64 - 1, i64::from(y) + dy as i64 - 1);
+                                m += wy * wx * at(tx, ty);
+                            }
+                        }
+                        m * sin_t
+                    })
+                    .collect()
+            })
+            .collect();
+        let func: Vec<f32> = rows.concat();
+        let sum: f64 = func.iter().map(|&f| f64::from(f)).sum();
+        let weight: f64 = (0..h)
+            .map(|y| {
+                f64::from(((y as f32 + 0.5) / h as f32 * std::f32::consts::PI).sin()) * f64::from(w)
+            })
+            .sum();
         let dist = crate::sampling::PiecewiseConstant2D::new(&func, w as usize)?;
         Some(Self {
             scene,
