@@ -1,6 +1,7 @@
-//! Regenerates `assets/studio_small_03_16x8.hdr` (the default studio
+//! Regenerates `assets/studio_small_03_256x128.hdr` (the default studio
 //! environment) from Poly Haven's CC0 `studio_small_03_1k.hdr`: a box
-//! filter over whole source texels down to 16x8 (or `W H`).
+//! filter over whole source texels down to `W H` (16x8 when not given;
+//! the shipped map is made with `256 128`).
 //!
 //! `cargo run -p chiaro-io --example downsample_hdr -- IN.hdr OUT.hdr [W H]`
 

@@ -363,8 +363,8 @@ pub fn framed_lights(framed: &Framing) -> Vec<Light> {
 }
 
 /// The studio HDR that lights a model without lights (see
-/// `assets/README.md`: Poly Haven's CC0 "Studio Small 03", 16x8).
-const STUDIO_HDR: &[u8] = include_bytes!("../assets/studio_small_03_16x8.hdr");
+/// `assets/README.md`: Poly Haven's CC0 "Studio Small 03", 256x128).
+const STUDIO_HDR: &[u8] = include_bytes!("../assets/studio_small_03_256x128.hdr");
 
 /// The mean radiance (luminance) the studio environment is scaled to: a
 /// white Lambertian surface reflects about half of what the key light
@@ -377,7 +377,7 @@ fn studio() -> &'static (ImageTexture, f32, Vec3) {
     static STUDIO: OnceLock<(ImageTexture, f32, Vec3)> = OnceLock::new();
     STUDIO.get_or_init(|| {
         let texture =
-            match images::load_texture_bytes(STUDIO_HDR, "studio_small_03_16x8.hdr", false) {
+            match images::load_texture_bytes(STUDIO_HDR, "studio_small_03_256x128.hdr", false) {
                 Ok(t) => t,
                 // Embedded and tested (`studio_environment_decodes`): not reached.
                 Err(_) => ImageTexture {
@@ -581,7 +581,7 @@ mod studio_tests {
     #[test]
     fn studio_environment_decodes() {
         let (t, intensity, mean) = studio();
-        assert_eq!((t.width, t.height), (16, 8));
+        assert_eq!((t.width, t.height), (256, 128));
         assert!(
             t.texels
                 .iter()

@@ -3,8 +3,10 @@
 //!
 //! - Next-event estimation at every vertex (one light chosen by power),
 //!   combined with BSDF sampling by multiple importance sampling (power
-//!   heuristic, Veach 1997) for area lights and emissive triangles; delta
-//!   lights (point, spot, directional) by next-event estimation only.
+//!   heuristic, Veach 1997) for area lights, emissive triangles and the
+//!   environment map (one more light, sampled by its luminance through
+//!   `texture::EnvironmentLight`); delta lights (point, spot, directional)
+//!   by next-event estimation only.
 //! - The BSDF is the shading layer's (`chiaro_core::shading::Bsdf`: the
 //!   local model's Lambert plus Phong, Blinn or Torrance-Sparrow, sampled
 //!   lobe by lobe, plus ideal mirror reflection (kr) and transmission (kt):
@@ -26,7 +28,8 @@
 //! Conventions: ambient lights are ignored (indirect light is computed);
 //! `Scene::background` is what camera rays (and chains of mirror/glass
 //! bounces) see where nothing is hit, but it does not light the scene;
-//! an environment map, when present, does light it (found by BSDF sampling).
+//! an environment map, when present, does light it (found by next-event
+//! estimation and by BSDF sampling, combined by MIS).
 //! `Light::Area` lights are not geometry: they are reached by next-event
 //! estimation only and are invisible to the camera; emissive triangles are
 //! geometry and lights both.
@@ -41,6 +44,7 @@ use chiaro_core::sampling::{
     SobolSampler, pixel_rng, power_heuristic, sample_uniform_triangle, uniform2,
 };
 use chiaro_core::scene::{AreaShape, Light, RenderSettings, Scene};
+use chiaro_core::shading::texture::EnvironmentLight;
 use chiaro_core::shading::{Bsdf, BsdfSample, SurfaceMaterial, sample_light, sanitize};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -98,6 +102,20 @@ pub fn render_with_kernel(
     make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
     kernel: Kernel,
 ) -> Result<(Film, PathStats)> {
+    render_impl(scene, settings, progress, make_accel, kernel, true)
+}
+
+/// [`render_with_kernel`], with the environment map sampled by next-event
+/// estimation (`env_sampling`) or reached by BSDF sampling alone (the
+/// tests' baseline for its variance).
+fn render_impl(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
+    kernel: Kernel,
+    env_sampling: bool,
+) -> Result<(Film, PathStats)> {
     if settings.path.max_depth == 0 {
         return Err(CoreError::BadSetting {
             key: "path.max_depth".into(),
@@ -113,7 +131,7 @@ pub fn render_with_kernel(
         },
     );
     let accel = make_accel(&prepared);
-    let tracer = PathTracer::new(&prepared, accel.as_ref(), settings);
+    let tracer = PathTracer::new(&prepared, accel.as_ref(), settings, env_sampling);
     let lanes = kernel == Kernel::Lanes;
     progress.advance(1);
     let rays = AtomicU64::new(0);
@@ -205,12 +223,16 @@ struct PathTracer<'a, 's> {
     accel: &'a dyn Accelerator,
     /// Lights that next-event estimation samples (not ambient).
     lights: Vec<&'a Light>,
-    /// Cumulative selection probabilities of `lights`.
+    /// The environment map as a light: light number `lights.len()`, after
+    /// `lights` (`None` without a map, or when it is black).
+    env: Option<EnvironmentLight<'s>>,
+    /// Cumulative selection probabilities of `lights` and then `env`.
     light_cdf: Vec<f32>,
     /// Selection probability of each light (`light_cdf[i] - light_cdf[i - 1]`).
     light_pick: Vec<f32>,
     /// Sampling data of each light in `lights` that is an emissive triangle
-    /// (`None` for the others, sampled through `sample_light`).
+    /// (`None` for the others, sampled through `sample_light`, and for the
+    /// environment).
     tri_lights: Vec<Option<TriLight>>,
     /// `tri_lights` without the `Option`s when every light is an emissive
     /// triangle and there are at most `lanes::SELECT_LIGHTS` of them (the
@@ -342,6 +364,7 @@ impl<'a, 's> PathTracer<'a, 's> {
         prepared: &'a PreparedScene<'s>,
         accel: &'a dyn Accelerator,
         settings: &RenderSettings,
+        env_sampling: bool,
     ) -> Self {
         let lights: Vec<&Light> = prepared
             .lights
@@ -350,10 +373,19 @@ impl<'a, 's> PathTracer<'a, 's> {
             .collect();
         // Select lights in proportion to a rough power estimate.
         let scene_radius = 0.5 * prepared.bounds.diagonal().max(1e-3);
-        let power: Vec<f32> = lights
+        let mut power: Vec<f32> = lights
             .iter()
             .map(|l| chiaro_core::shading::light_power(l, scene_radius))
             .collect();
+        let env = env_sampling
+            .then(|| EnvironmentLight::new(prepared.scene))
+            .flatten();
+        if let Some(env) = &env {
+            // What enters a sphere of the scene's radius (pbrt-v4's
+            // `ImageInfiniteLight::Phi`): 4 pi^2 r^2 times the mean radiance.
+            power.push(4.0 * PI * PI * scene_radius * scene_radius * env.mean_luminance());
+        }
+        let n_lights = power.len();
         let total: f32 = power.iter().sum();
         let mut acc = 0.0;
         let light_cdf: Vec<f32> = power
@@ -362,7 +394,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 acc += if total > 0.0 {
                     p / total
                 } else {
-                    1.0 / lights.len() as f32
+                    1.0 / n_lights as f32
                 };
                 acc
             })
@@ -373,7 +405,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 light_cdf[i] - prev
             })
             .collect();
-        let tri_lights: Vec<Option<TriLight>> = lights
+        let mut tri_lights: Vec<Option<TriLight>> = lights
             .iter()
             .map(|l| match l {
                 Light::Area {
@@ -396,6 +428,9 @@ impl<'a, 's> PathTracer<'a, 's> {
                 _ => None,
             })
             .collect();
+        if env.is_some() {
+            tri_lights.push(None);
+        }
         // Emissive triangle lights follow the scene's lights in `prepared.lights`,
         // in the order of `prepared.emissive_triangles` (skipping degenerate ones).
         let mut triangle_light = vec![NO_LIGHT; prepared.triangles.len()];
@@ -470,6 +505,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             prepared,
             accel,
             lights,
+            env,
             light_cdf,
             light_pick,
             tri_lights,
@@ -486,12 +522,21 @@ impl<'a, 's> PathTracer<'a, 's> {
         self.light_pick[i]
     }
 
+    /// The light for the number `u`: an index into `lights`, or
+    /// `lights.len()` for the environment.
     fn pick_light(&self, u: f32) -> Option<usize> {
-        if self.lights.is_empty() {
+        if self.light_cdf.is_empty() {
             return None;
         }
         let i = self.light_cdf.partition_point(|&c| c <= u);
-        Some(i.min(self.lights.len() - 1))
+        Some(i.min(self.light_cdf.len() - 1))
+    }
+
+    /// The number of lights next-event estimation chooses from (the
+    /// environment included).
+    #[inline]
+    fn light_count(&self) -> usize {
+        self.light_cdf.len()
     }
 
     /// The vertex at `hit` and its cached material when `hit` is on a plain
@@ -649,13 +694,22 @@ impl<'a, 's> PathTracer<'a, 's> {
     /// Radiance of a ray that escaped at path depth `depth` after a scatter
     /// of pdf `prev_pdf` (0: a delta lobe): `miss_radiance`'s rule (the
     /// camera sees the background, other rays the environment map, which
-    /// lights the scene); without a map the plain background is seen only
-    /// directly (camera or delta chains) and lights nothing.
+    /// lights the scene), MIS-weighted against the environment's next-event
+    /// estimation after a non-delta scatter; without a map the plain
+    /// background is seen only directly (camera or delta chains) and lights
+    /// nothing.
     #[inline]
     fn escaped(&self, ray: &Ray, depth: u32, prev_pdf: f32) -> Vec3 {
         let scene = self.prepared.scene;
         if scene.environment.is_some() || depth == 0 || prev_pdf == 0.0 {
-            chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0)
+            let l = chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0);
+            match &self.env {
+                Some(env) if depth > 0 && prev_pdf > 0.0 => {
+                    let light_pdf = self.light_pick_pdf(self.lights.len()) * env.pdf(ray.dir);
+                    l * power_heuristic(prev_pdf, light_pdf)
+                }
+                _ => l,
+            }
         } else {
             Vec3::ZERO
         }
@@ -754,7 +808,7 @@ impl<'a, 's> PathTracer<'a, 's> {
     ) -> Vec3 {
         // The light choice's number, unless there is only one light (then
         // its pair is skipped, which leaves every later number unchanged).
-        let u_pick = if self.lights.len() > 1 {
+        let u_pick = if self.light_count() > 1 {
             rng.next_1d()
         } else {
             rng.skip(1);
@@ -817,7 +871,9 @@ impl<'a, 's> PathTracer<'a, 's> {
             };
             return f_cos * tl.le * w_over_pdf;
         }
-        let light = self.lights[li];
+        let Some(&light) = self.lights.get(li) else {
+            return self.direct_env(pick, p, &info.bsdf, n, ng, wo, mis, u, rays);
+        };
         let Some(s) = sample_light(light, p, u) else {
             return Vec3::ZERO;
         };
@@ -844,6 +900,58 @@ impl<'a, 's> PathTracer<'a, 's> {
             w = power_heuristic(light_pdf * pick, bsdf_pdf);
         }
         PI * f_cos * s.intensity * (w / pick)
+    }
+
+    /// Next-event estimation of the environment (light `lights.len()`,
+    /// chosen with probability `pick`): a direction by its luminance, a
+    /// shadow ray to infinity, `f cos L / pdf` MIS-weighted (`mis`) against
+    /// BSDF sampling as [`Self::escaped`] weights the other strategy.
+    /// (Not inlined: `direct_from` stays as small where there is no map.)
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn direct_env(
+        &self,
+        pick: f32,
+        p: Vec3,
+        bsdf: &Bsdf,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        mis: bool,
+        u: Vec2,
+        rays: &mut u64,
+    ) -> Vec3 {
+        let Some(env) = &self.env else {
+            return Vec3::ZERO;
+        };
+        if pick <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let Some(s) = env.sample(u) else {
+            return Vec3::ZERO;
+        };
+        if ng.dot(s.wi) <= 0.0 || s.radiance == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        let f_cos = bsdf.eval(n, wo, s.wi);
+        if f_cos == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        *rays += 1;
+        if self
+            .accel
+            .occluded(&Ray::new(offset_ray_origin(p, ng, s.wi), s.wi))
+        {
+            return Vec3::ZERO;
+        }
+        let light_pdf = s.pdf * pick;
+        let w_over_pdf = if mis {
+            let bsdf_pdf = bsdf.pdf(n, wo, s.wi);
+            light_pdf / (light_pdf * light_pdf + bsdf_pdf * bsdf_pdf)
+        } else {
+            1.0 / light_pdf
+        };
+        f_cos * s.radiance * w_over_pdf
     }
 
     /// Samples the next direction through [`Bsdf::sample`], drawing its
@@ -1281,7 +1389,7 @@ mod tests {
             replace_emitter(&mut s, positions, indices);
             let prepared = PreparedScene::new(&s, PrepareOptions::default());
             let accel = bvh(&prepared);
-            let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render);
+            let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render, true);
             assert_eq!(tracer.lights.len(), n as usize, "{n} lights");
             assert_eq!(
                 tracer.select_lights.len(),
@@ -1298,9 +1406,9 @@ mod tests {
 
     #[test]
     fn lock_step_kernel_with_only_an_environment() {
-        // No lights at all (the box's emitter made plain white, the front
-        // open): the environment lights the box through BSDF sampling, and
-        // the kernel still draws each bounce's pairs.
+        // No lights but the environment (the box's emitter made plain
+        // white, the front open): lanes sample it through the scalar
+        // loop's code, and still draw each bounce's pairs.
         let mut s = mitsuba_cbox(12);
         s.render.samples = 8;
         let light = s.material_by_name("light").expect("the light").index();
@@ -1327,6 +1435,211 @@ mod tests {
     }
 
     #[test]
+    fn lock_step_kernel_with_an_environment_and_lights() {
+        // The box's two emitter triangles and the environment: lanes that
+        // pick the environment take the scalar loop's code.
+        let mut s = mitsuba_cbox(12);
+        s.render.samples = 11;
+        s.render.path.max_depth = 5;
+        s.render.path.rr_depth = 2;
+        let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
+            16,
+            8,
+            (5, 3),
+            50.0,
+        )));
+        s.environment = Some(chiaro_core::scene::Environment {
+            texture: env,
+            intensity: 1.0,
+            rotate_y_degrees: 200.0,
+            as_background: false,
+        });
+        let prepared = PreparedScene::new(&s, PrepareOptions::default());
+        let accel = bvh(&prepared);
+        let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render, true);
+        assert_eq!(tracer.light_count(), tracer.lights.len() + 1);
+        assert!(tracer.env.is_some());
+        assert_kernels_agree(&s, "environment and lights");
+    }
+
+    /// A `w x h` lat-long map of 0.05 with the texel `spot` at `value`.
+    fn spot_map(w: u32, h: u32, spot: (u32, u32), value: f32) -> chiaro_core::scene::ImageTexture {
+        chiaro_core::scene::ImageTexture {
+            source: "spot".into(),
+            width: w,
+            height: h,
+            texels: (0..w * h)
+                .map(|i| {
+                    let v = if (i % w, i / w) == spot { value } else { 0.05 };
+                    [v, v, v, 1.0]
+                })
+                .collect(),
+            wrap: chiaro_core::scene::WrapMode::Repeat,
+            ..Default::default()
+        }
+    }
+
+    /// Mean and unbiased variance of channel 0 over the film's pixels.
+    fn mean_and_variance(film: &Film) -> (f32, f32) {
+        let n = film.color.len() as f32;
+        let mean = film.color.iter().map(|c| c.x).sum::<f32>() / n;
+        let var = film.color.iter().map(|c| (c.x - mean).powi(2)).sum::<f32>() / (n - 1.0);
+        (mean, var)
+    }
+
+    #[test]
+    fn diffuse_sphere_under_a_white_environment_reflects_its_albedo() {
+        // Furnace: a convex Lambertian body of albedo rho under a constant
+        // environment L sees L over every outward hemisphere, so it
+        // reflects rho L at any depth. Depth 1 is the environment's
+        // next-event estimation alone; depth 4 its MIS with BSDF sampling.
+        // A faceted mesh sphere (the lock-step kernel) and an analytic one
+        // (the scalar loop), each filling the frame; and the reference.
+        let (rho, le) = (0.6, 1.5);
+        for analytic in [false, true] {
+            let mut s = Scene::default();
+            s.add_material(Material::diffuse("white", Vec3::splat(rho)));
+            let geometry = if analytic {
+                Geometry::Sphere { radius: 1.0 }
+            } else {
+                Geometry::Mesh(s.add_mesh(primitives::uv_sphere(1.0, 24, 12)))
+            };
+            s.objects.push(Object {
+                geometry,
+                smooth: false,
+                ..Default::default()
+            });
+            let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
+                8,
+                4,
+                (0, 0),
+                0.05,
+            )));
+            s.environment = Some(chiaro_core::scene::Environment {
+                texture: env,
+                intensity: le / 0.05,
+                rotate_y_degrees: 10.0,
+                as_background: false,
+            });
+            s.camera = Camera {
+                eye: Vec3::new(0.3, 0.4, -4.0),
+                look_at: Vec3::new(0.0, 0.2, 0.0),
+                fov_y_degrees: 8.0,
+                ..Camera::default()
+            };
+            s.render.width = 16;
+            s.render.height = 16;
+            s.render.samples = 64;
+            s.render.path.rr_depth = 2;
+            for (depth, kernel) in [
+                (1, Kernel::Lanes),
+                (4, Kernel::Lanes),
+                (4, Kernel::Reference),
+            ] {
+                s.render.path.max_depth = depth;
+                let (film, _) =
+                    render_with_kernel(&s, &s.render, &NoProgress, &bvh, kernel).expect("renders");
+                let (mean, var) = mean_and_variance(&film);
+                let stderr = (var / film.color.len() as f32).sqrt();
+                let expect = rho * le;
+                eprintln!(
+                    "analytic {analytic} depth {depth} {kernel:?}: {mean} +- {stderr} vs {expect}"
+                );
+                assert!(
+                    (mean - expect).abs() < 4.0 * stderr + 1e-4,
+                    "analytic {analytic}, depth {depth}, {kernel:?}: mean {mean} stderr {stderr}, expected {expect}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn environment_sampling_cuts_the_variance_of_a_small_bright_spot() {
+        // A diffuse plane under a dim map with one texel 40000 times as
+        // bright (about 48 degrees from the zenith). Its radiance is
+        // rho / pi times the irradiance E = integral L cos over the upper
+        // hemisphere, computed here by quadrature of the lookup. With the
+        // environment sampled and without (BSDF sampling alone) the mean
+        // must be that; at equal samples the variance must be far lower.
+        let rho = 0.5;
+        let mut s = Scene::default();
+        s.add_material(Material::diffuse("grey", Vec3::splat(rho)));
+        let plane = s.add_mesh(primitives::plane(400.0, 1));
+        s.objects.push(Object {
+            geometry: Geometry::Mesh(plane),
+            smooth: false,
+            ..Default::default()
+        });
+        let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
+            64,
+            32,
+            (40, 8),
+            2000.0,
+        )));
+        s.environment = Some(chiaro_core::scene::Environment {
+            texture: env,
+            intensity: 1.0,
+            rotate_y_degrees: 25.0,
+            as_background: false,
+        });
+        s.camera = Camera {
+            eye: Vec3::new(0.0, 1.0, -0.001),
+            look_at: Vec3::ZERO,
+            fov_y_degrees: 30.0,
+            ..Camera::default()
+        };
+        s.render.width = 16;
+        s.render.height = 16;
+        s.render.samples = 64;
+        s.render.path.max_depth = 2;
+        // E by the midpoint rule over the upper hemisphere.
+        let (nt, np) = (1024, 4096);
+        let mut e = 0.0f64;
+        for i in 0..nt {
+            let theta = (i as f32 + 0.5) / nt as f32 * 0.5 * PI;
+            let (st, ct) = theta.sin_cos();
+            let mut row = 0.0f64;
+            for j in 0..np {
+                let phi = (j as f32 + 0.5) / np as f32 * 2.0 * PI;
+                let d = Vec3::new(st * phi.cos(), ct, st * phi.sin());
+                row += f64::from(chiaro_core::shading::texture::environment_radiance(&s, d).x);
+            }
+            e += row * f64::from(st * ct);
+        }
+        let e = e as f32 * (0.5 * PI / nt as f32) * (2.0 * PI / np as f32);
+        let expect = rho / PI * e;
+        let mut variance = [0.0; 2];
+        for (k, env_sampling) in [true, false].into_iter().enumerate() {
+            let (film, _) = render_impl(
+                &s,
+                &s.render,
+                &NoProgress,
+                &bvh,
+                Kernel::Lanes,
+                env_sampling,
+            )
+            .expect("renders");
+            assert!(film.is_clean());
+            let (mean, var) = mean_and_variance(&film);
+            let stderr = (var / film.color.len() as f32).sqrt();
+            eprintln!(
+                "environment sampling {env_sampling}: mean {mean} stderr {stderr} variance {var}, expected {expect}"
+            );
+            assert!(
+                (mean - expect).abs() < 4.0 * stderr + 2e-3 * expect,
+                "environment sampling {env_sampling}: mean {mean} stderr {stderr}, expected {expect}"
+            );
+            variance[k] = var;
+        }
+        assert!(
+            variance[0] * 50.0 < variance[1],
+            "variance with environment sampling {} against {} without",
+            variance[0],
+            variance[1]
+        );
+    }
+
+    #[test]
     fn lanes_pick_the_lights_the_scalar_pick_does() {
         // Counting CDF entries (up to 16 lights) and the binary search
         // (more) against `pick_light`, at and beside every CDF entry.
@@ -1342,7 +1655,7 @@ mod tests {
             }
             let prepared = PreparedScene::new(&s, PrepareOptions::default());
             let accel = SceneBvh::new(&prepared);
-            let tracer = PathTracer::new(&prepared, &accel, &s.render);
+            let tracer = PathTracer::new(&prepared, &accel, &s.render, true);
             let mut us = vec![0.0, 0.5, 0.999_999_94, 1.0];
             for &c in &tracer.light_cdf {
                 us.extend([c.next_down(), c, c.next_up()]);

@@ -220,9 +220,200 @@ pub fn power_heuristic(pdf_f: f32, pdf_g: f32) -> f32 {
     if f + g == 0.0 { 0.0 } else { f / (f + g) }
 }
 
+/// A piecewise-constant density on `[0, 1)` over `n` equal cells (pbrt-v4's
+/// `PiecewiseConstant1D`): cell `i` is drawn with probability
+/// `f_i / sum(f)`, uniformly within it. Negative and non-finite values
+/// count as zero; all zero (or none) is `None`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PiecewiseConstant1D {
+    /// The (cleaned) values.
+    func: Vec<f32>,
+    /// `n + 1` entries from 0 to 1.
+    cdf: Vec<f32>,
+    /// `sum(f) / n`, the function's integral over `[0, 1)`.
+    integral: f32,
+}
+
+impl PiecewiseConstant1D {
+    /// The distribution proportional to `func`.
+    pub fn new(func: &[f32]) -> Option<Self> {
+        let func: Vec<f32> = func
+            .iter()
+            .map(|&f| if f.is_finite() && f > 0.0 { f } else { 0.0 })
+            .collect();
+        let n = func.len();
+        // Accumulated in f64: a 1k-wide row of small values keeps its ratios.
+        let mut acc = 0.0f64;
+        let mut sums = Vec::with_capacity(n + 1);
+        sums.push(0.0f64);
+        for &f in &func {
+            acc += f64::from(f);
+            sums.push(acc);
+        }
+        if !(acc > 0.0 && acc.is_finite()) {
+            return None;
+        }
+        let mut cdf: Vec<f32> = sums.iter().map(|&c| (c / acc) as f32).collect();
+        cdf[n] = 1.0;
+        Some(Self {
+            func,
+            cdf,
+            integral: (acc / n as f64) as f32,
+        })
+    }
+
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.func.len()
+    }
+
+    /// True when there are no cells (never: `new` refuses them).
+    pub fn is_empty(&self) -> bool {
+        self.func.is_empty()
+    }
+
+    /// The integral of the function over `[0, 1)`.
+    pub fn integral(&self) -> f32 {
+        self.integral
+    }
+
+    /// A point for the uniform number `u` in `[0, 1)`: `(x, pdf, cell)`,
+    /// `x` in `[0, 1]`, and its density `f_cell / integral`. The cell found
+    /// is the last one whose cdf is at most `u`, so it has positive
+    /// probability.
+    #[inline]
+    pub fn sample(&self, u: f32) -> (f32, f32, usize) {
+        let n = self.func.len();
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u)
+            .saturating_sub(1)
+            .min(n - 1);
+        let width = self.cdf[i + 1] - self.cdf[i];
+        let du = if width > 0.0 {
+            ((u - self.cdf[i]) / width).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+        let x = ((i as f32 + du) / n as f32).min(1.0);
+        (x, self.func[i] / self.integral, i)
+    }
+
+    /// The density at `x` (`x` outside `[0, 1]` is clamped to its cell).
+    #[inline]
+    pub fn pdf(&self, x: f32) -> f32 {
+        self.func[self.cell(x)] / self.integral
+    }
+
+    /// The cell holding `x`.
+    #[inline]
+    pub fn cell(&self, x: f32) -> usize {
+        let n = self.func.len();
+        let i = (x * n as f32).floor();
+        if i.is_nan() || i < 0.0 {
+            0
+        } else {
+            (i as usize).min(n - 1)
+        }
+    }
+}
+
+/// A piecewise-constant density on `[0, 1)^2` over a `width x height`
+/// grid (pbrt-v4's `PiecewiseConstant2D`): a row by the marginal of the
+/// row sums, then a column by that row's conditional distribution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PiecewiseConstant2D {
+    /// One distribution per row that has positive values (`None` for the others).
+    rows: Vec<Option<PiecewiseConstant1D>>,
+    marginal: PiecewiseConstant1D,
+}
+
+impl PiecewiseConstant2D {
+    /// The distribution proportional to `func` (row-major, `width` values
+    /// per row, `func.len() / width` rows); `None` when nothing is positive.
+    pub fn new(func: &[f32], width: usize) -> Option<Self> {
+        if width == 0 || func.is_empty() || !func.len().is_multiple_of(width) {
+            return None;
+        }
+        let rows: Vec<Option<PiecewiseConstant1D>> = func
+            .chunks_exact(width)
+            .map(PiecewiseConstant1D::new)
+            .collect();
+        let sums: Vec<f32> = rows
+            .iter()
+            .map(|r| r.as_ref().map_or(0.0, PiecewiseConstant1D::integral))
+            .collect();
+        let marginal = PiecewiseConstant1D::new(&sums)?;
+        Some(Self { rows, marginal })
+    }
+
+    /// A point `(x, y)` for the uniform pair `u` and its density on the
+    /// unit square.
+    #[inline]
+    pub fn sample(&self, u: Vec2) -> (Vec2, f32) {
+        let (y, pdf_y, row) = self.marginal.sample(u.y);
+        // (The marginal never picks a row of zeros.)
+        let Some(r) = &self.rows[row] else {
+            return (Vec2::new(u.x, y), 0.0);
+        };
+        let (x, pdf_x, _) = r.sample(u.x);
+        (Vec2::new(x, y), pdf_x * pdf_y)
+    }
+
+    /// The density at `p` on the unit square.
+    #[inline]
+    pub fn pdf(&self, p: Vec2) -> f32 {
+        let row = self.marginal.cell(p.y);
+        match &self.rows[row] {
+            Some(r) => r.pdf(p.x) * self.marginal.pdf(p.y),
+            None => 0.0,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The 1D and 2D piecewise-constant densities integrate to 1, give a
+    /// cell its share, agree between `sample` and `pdf`, and skip zeros.
+    #[test]
+    fn piecewise_constant_densities() {
+        assert!(PiecewiseConstant1D::new(&[0.0, -1.0, f32::NAN]).is_none());
+        let d = PiecewiseConstant1D::new(&[1.0, 0.0, 3.0, 0.0]).expect("positive");
+        assert!((d.integral() - 1.0).abs() < 1e-6);
+        // Cell 2 holds 3/4 of the mass: u in [0.25, 1) lands there.
+        let (x, pdf, i) = d.sample(0.5);
+        assert_eq!(i, 2);
+        assert!((x - (2.0 + 1.0 / 3.0) / 4.0).abs() < 1e-6, "{x}");
+        assert!((pdf - 3.0).abs() < 1e-6 && (d.pdf(x) - pdf).abs() < 1e-6);
+        // u at a cdf step shared by an empty cell skips the empty cell.
+        assert_eq!(d.sample(0.25).2, 2);
+        assert_eq!(d.sample(0.0).2, 0);
+        assert_eq!(d.sample(0.999_999_9).2, 2);
+        let func: Vec<f32> = (0..6 * 4).map(|i| ((i * 7) % 5) as f32).collect();
+        let d2 = PiecewiseConstant2D::new(&func, 6).expect("positive");
+        // The pdf's midpoint integral over the cells, and sample's pdf.
+        let mut total = 0.0;
+        for y in 0..4 {
+            for x in 0..6 {
+                let p = Vec2::new((x as f32 + 0.5) / 6.0, (y as f32 + 0.5) / 4.0);
+                let pdf = d2.pdf(p);
+                total += pdf / 24.0;
+                let sum: f32 = func.iter().sum();
+                assert!((pdf - func[y * 6 + x] * 24.0 / sum).abs() < 1e-5);
+            }
+        }
+        assert!((total - 1.0).abs() < 1e-5, "{total}");
+        let mut rng = pixel_rng(1, 2, 3, 4);
+        for _ in 0..1000 {
+            let (p, pdf) = d2.sample(uniform2(&mut rng));
+            assert!(
+                pdf > 0.0 && (d2.pdf(p) - pdf).abs() <= 1e-4 * pdf,
+                "{p} {pdf}"
+            );
+        }
+    }
 
     #[test]
     fn rng_is_deterministic_per_pixel() {

@@ -17,8 +17,8 @@
 //! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
 //! cosine sampling, Russian roulette. Emissive-triangle lights are sampled
 //! lane-parallel; a lane that picks another light (point, spot,
-//! directional, an area light's quad, disk or sphere) gets it from the
-//! scalar loop's own code ([`PathTracer::direct_from`]).
+//! directional, an area light's quad, disk or sphere, the environment)
+//! gets it from the scalar loop's own code ([`PathTracer::direct_from`]).
 
 // A lane loop indexes a dozen arrays by the lane number: that is the
 // form LLVM vectorises, and clearer than a dozen zipped iterators.
@@ -286,7 +286,7 @@ impl PathTracer<'_, '_> {
             // The light choice's and the light sample's pairs first:
             // independent work while the hit loop's single-lane stores
             // drain before the lane loop below reads them as vectors.
-            let u_pick = if self.lights.len() > 1 {
+            let u_pick = if self.light_count() > 1 {
                 rng.lanes_1d(dim, &rev)
             } else {
                 [0.0; LANES]
@@ -386,11 +386,11 @@ impl PathTracer<'_, '_> {
     pub(super) fn pick_lights(&self, u: &F) -> Option<[u32; LANES]> {
         /// Lights up to which counting beats the search.
         const FEW: usize = 16;
-        let (cdf, n) = (&self.light_cdf, self.lights.len());
+        let (cdf, n) = (&self.light_cdf, self.light_count());
         if n == 0 {
             return None;
         }
-        if n > FEW || cdf.len() != n {
+        if n > FEW {
             return Some(u.map(|u| self.pick_light(u).unwrap_or(0) as u32));
         }
         let mut count = [0u32; LANES];

@@ -4,8 +4,8 @@
 //! BSDF layer ([`Bsdf`]) and the light functions ([`sample_light`]), with
 //! independent PCG numbers (`sampling::pixel_rng`), one path at a time,
 //! no lanes and no per-triangle caches. It shares the fast tracer's light
-//! selection (power CDF, emissive triangle to light index) and its escaped
-//! ray radiance. Tests compare the two statistically, not bit for bit.
+//! selection (power CDF, emissive triangle to light index), its
+//! environment sampling and its escaped ray radiance. Tests compare the two statistically, not bit for bit.
 
 use super::PathTracer;
 use chiaro_core::geometry::{Ray, offset_ray_origin};
@@ -121,7 +121,10 @@ impl PathTracer<'_, '_> {
             return Vec3::ZERO;
         };
         let pick = self.light_pick_pdf(li);
-        let light = self.lights[li];
+        let Some(&light) = self.lights.get(li) else {
+            // The environment (the light after `lights`).
+            return self.direct_env(pick, p, bsdf, n, ng, wo, mis, u, rays);
+        };
         let Some(s) = sample_light(light, p, u) else {
             return Vec3::ZERO;
         };
@@ -246,6 +249,48 @@ mod tests {
             "{what}: black image"
         );
         eprintln!("{what}: largest block difference {worst:.2} standard errors");
+    }
+
+    #[test]
+    fn reference_agrees_with_the_fast_tracer_under_an_environment() {
+        // Mitsuba's box with glossy walls, its light and an environment
+        // with a bright patch, seen through the open front.
+        let mut s = shipped("mitsuba-cbox", 32, 8);
+        for (k, m) in s.materials.iter_mut().enumerate() {
+            if k % 2 == 0 {
+                m.model = ReflectanceModel::TorranceSparrow;
+                m.distribution = Distribution::Ggx;
+                m.roughness = 0.3;
+                m.specular = Vec3::splat(0.4);
+            }
+        }
+        let (w, h) = (16u32, 8u32);
+        let env = s.add_texture(chiaro_core::scene::Texture::Image(
+            chiaro_core::scene::ImageTexture {
+                source: "patch".into(),
+                width: w,
+                height: h,
+                texels: (0..w * h)
+                    .map(|i| {
+                        let (x, y) = (i % w, i / w);
+                        let v = if (7..=9).contains(&x) && (2..=3).contains(&y) {
+                            20.0
+                        } else {
+                            0.2
+                        };
+                        [v, v * 0.8, v * 0.6, 1.0]
+                    })
+                    .collect(),
+                ..Default::default()
+            },
+        ));
+        s.environment = Some(chiaro_core::scene::Environment {
+            texture: env,
+            intensity: 1.0,
+            rotate_y_degrees: 0.0,
+            as_background: true,
+        });
+        assert_tracers_agree(&s, "environment");
     }
 
     #[test]
