@@ -157,8 +157,8 @@ fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
 /// its own triangles (its glow on the panels is noisy at 16 samples).
 #[test]
 fn phong_equals_whitted_at_depth_0_under_an_emitter_group() {
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/gltf/EmissiveStrengthTest.glb");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenes/gltf/EmissiveStrengthTest.glb");
     let scene = chiaro::io::load_scene(&path).expect("loads").scene;
     let mut s = scene.render.clone();
     s.technique = Technique::Phong;
