@@ -109,12 +109,6 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
         "map",
         "as teapot: one pixel beyond two pixels of the edge",
     ),
-    (
-        "radiosity = path (diffuse)",
-        "mitsuba-cbox",
-        "radiosity, path",
-        "the small box's mean is 4.0% off (bound 4%): path noise at 256 samples and the mesh's error not separated",
-    ),
 ];
 
 /// Cells not run at all, by (rule, case, technique) and the measured
@@ -918,7 +912,9 @@ fn rule_radiosity_matches_path(m: &mut Matrix, case: &Case, ids: &Ids) {
     s.radiosity.patch_size = chiaro::scene_bounds(&case.scene).diagonal() / 24.0;
     s.radiosity.solver = "hierarchical".into();
     s.radiosity.formfactor = "raycast".into();
-    s.radiosity.tolerance = 0.01;
+    // Converged: at 0.01 the unshot energy left mitsuba-cbox's small box
+    // 3 % dark against a 4096-spp path reference (0.001: 0.6 % of that).
+    s.radiosity.tolerance = 0.001;
     s.radiosity.max_iterations = chiaro::scene::RadiositySettings::default().max_iterations;
     let rad = film(&case.scene, &s);
     s.technique = Technique::Path;
