@@ -26,7 +26,7 @@ const EXAMPLES: &str = "Examples:
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Render a scene (.toml, .obj, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
+    /// Render a scene (.toml, .obj, .ply, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
     Render(RenderArgs),
     /// Serve a web viewer for SCENE: techniques side by side, orbit camera,
     /// difference images (loopback only unless --host is given).
