@@ -496,8 +496,8 @@ impl PathTracer<'_, '_> {
             cos_i[i] = c_i;
             // `eval_brdf_cos` for these materials (no specular lobe), its
             // expression spelled per component: calling it here keeps the
-            // loop from vectorising (+20 % instructions on Mitsuba's box);
-            // the kernel-vs-scalar tests hold the two to the same bits.
+            // loop from vectorising; the kernel-vs-scalar tests hold the
+            // two to the same bits.
             let kd = vx.kd.at(i);
             let f_cos = kd.map(|k| k * (FRAC_1_PI * c_i));
             // (`&` rather than `&&`: no branches in the lane loop.)
