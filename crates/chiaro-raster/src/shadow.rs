@@ -207,9 +207,9 @@ fn object_shadows_per_light(
 /// scan-line) or a shadow map builds its own structure for it: every light
 /// but ambient lights and the lights of an emitter group
 /// ([`EmitterGroup`]). A group's samples pick their triangles per shading
-/// point, so one structure per triangle would be needed (DamagedHelmet:
-/// 15,452 emissive triangles, over 6 GB of volumes at 48x36); they get
-/// shadow rays instead, which classify a point exactly as those structures
+/// point, so one structure per triangle would be needed (memory quadratic
+/// in the group's size; BENCHMARKS.md, "DamagedHelmet under the exact
+/// shadow methods"); they get shadow rays instead, which classify a point exactly as those structures
 /// would, and [`group_warning`] says so.
 pub(crate) fn exact_lights(ps: &PreparedScene<'_>, group: Option<&EmitterGroup>) -> Vec<bool> {
     ps.lights
