@@ -4,8 +4,10 @@
 //! culled face still casts its shadow (ARCHITECTURE.md, "Single-sided
 //! culling").
 
+mod common;
+
 use chiaro::scene::Technique;
-use chiaro::{Film, NoProgress, Scene, Vec3};
+use chiaro::{Film, Scene, Vec3};
 use chiaro_ray::path::Kernel;
 
 /// A 2 x 2 red quad in the plane z = 0, seen by a camera on +z; its front
@@ -114,20 +116,7 @@ fn render_spp(
         1
     };
     s.radiosity.patch_size = 0.5;
-    match kernel {
-        None => chiaro::render(scene, &s, &NoProgress).expect("renders"),
-        Some(k) => {
-            chiaro_ray::path::render_with_kernel(
-                scene,
-                &s,
-                &NoProgress,
-                &chiaro_core::accel::instanced::build_accelerator,
-                k,
-            )
-            .expect("renders")
-            .0
-        }
-    }
+    common::render_cell(scene, &s, kernel)
 }
 
 #[test]
@@ -307,8 +296,8 @@ fn texture_settings_test_shows_no_red_in_any_technique() {
     let mut failures = Vec::new();
     for (name, technique, kernel) in CELLS {
         let red = red_pixels(&cell(&scene, technique, kernel));
-        // Path: the X's own reflected light on the shaded check (measured
-        // 6 to 8 of the cell's 4,550 pixels; the drawn X gives over 100).
+        // Path: the X's own reflected light tints a few pixels of the
+        // shaded check; a drawn X gives over a hundred.
         let allowed = if technique == Technique::Path { 15 } else { 0 };
         if red.len() > allowed {
             failures.push(format!(

@@ -3,6 +3,8 @@
 //! every technique that shades emission (Phong, Whitted, both path kernels
 //! and the reference kernel), not the factor alone.
 
+mod common;
+
 use chiaro::scene::Technique;
 use chiaro::{Film, NoProgress, Scene, Vec3};
 use chiaro_ray::path::Kernel;
@@ -70,20 +72,7 @@ fn render(scene: &Scene, technique: Technique, kernel: Option<Kernel>) -> Film {
     s.width = 32;
     s.height = 32;
     s.samples = if technique == Technique::Path { 16 } else { 1 };
-    match kernel {
-        None => chiaro::render(scene, &s, &NoProgress).expect("renders"),
-        Some(k) => {
-            chiaro_ray::path::render_with_kernel(
-                scene,
-                &s,
-                &NoProgress,
-                &chiaro_core::accel::instanced::build_accelerator,
-                k,
-            )
-            .expect("renders")
-            .0
-        }
-    }
+    common::render_cell(scene, &s, kernel)
 }
 
 #[test]
