@@ -482,16 +482,8 @@ impl Ctx<'_, '_> {
             Shadows::Ray(r) => r.visibility(sp.p, sp.ng, s),
             // A group's samples (all but rays) and lights whose volumes did
             // not fit: shadow rays (see `shadow::exact_lights`).
-            Shadows::Map(_) | Shadows::Object { .. } | Shadows::Scanline { .. }
-                if self.lighting.group.is_some_and(|g| g.contains(li)) =>
-            {
-                self.group_rays
-                    .as_ref()
-                    .map_or(Vec3::ONE, |r| r.visibility(sp.p, sp.ng, s))
-            }
-            Shadows::Volume(v)
-                if v.by_ray.get(li) == Some(&true)
-                    || self.lighting.group.is_some_and(|g| g.contains(li)) =>
+            _ if self.lighting.group.is_some_and(|g| g.contains(li))
+                || matches!(&self.shadows, Shadows::Volume(v) if v.by_ray.get(li) == Some(&true)) =>
             {
                 self.group_rays
                     .as_ref()
@@ -1613,8 +1605,6 @@ impl Binner {
         vec![Vec::new(); self.ntiles]
     }
 
-    /// Appends a copy of `rt` to the bin of every tile whose part of the
-    /// crop window the bounding box of `rt` meets.
     /// The number of bins [`Self::bin`] puts `rt` in.
     fn copies(&self, rt: &RasterTri) -> u64 {
         match self.tile_range(rt) {
@@ -1640,6 +1630,8 @@ impl Binner {
         ])
     }
 
+    /// Appends a copy of `rt` to the bin of every tile whose part of the
+    /// crop window the bounding box of `rt` meets.
     #[inline]
     fn bin(&self, rt: &RasterTri, bins: &mut [Vec<RasterTri>]) {
         let Some([tx0, ty0, tx1, ty1]) = self.tile_range(rt) else {
