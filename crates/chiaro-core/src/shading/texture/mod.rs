@@ -1,0 +1,75 @@
+//! Texture evaluation, shared by every technique: image textures (bilinear,
+//! and trilinear through [`MipMap`] pyramids), procedural solid textures
+//! (checker, wood, marble, noise, dimples, from Perlin noise and turbulence),
+//! bump mapping by the height gradient, tangent-space normal maps, and the
+//! lat-long environment map.
+
+mod bump;
+mod environment;
+mod image;
+mod mipmap;
+mod procedural;
+#[cfg(test)]
+mod tests;
+
+pub use bump::{bump_normal, normal_map_normal, uv_surface_gradient};
+pub use environment::{
+    EnvironmentLight, EnvironmentSample, background_radiance, environment_mean_radiance,
+    environment_radiance, latlong_uv, miss_radiance,
+};
+use image::filtered;
+pub use image::{bilinear, nearest, wrap_index};
+pub use mipmap::MipMap;
+pub use procedural::{pattern, perlin_noise, procedural_color, procedural_value, turbulence};
+
+use crate::scene::Texture;
+use glam::{Vec2, Vec3, Vec4};
+
+/// Where a texture is looked up: the uv with its screen-space derivatives
+/// (zero for "no footprint": the finest level), and the object-space point.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TexCoord {
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// d(uv)/dx per pixel.
+    pub duv_dx: Vec2,
+    /// d(uv)/dy per pixel.
+    pub duv_dy: Vec2,
+    /// Object-space point (solid textures).
+    pub p_object: Vec3,
+}
+
+/// Evaluates texture `t` at `tc` as linear RGBA: image textures (their uv
+/// transform applied) through the mip-map `mip` when given, with the image's
+/// filters, else its magnification filter on the base image;
+/// procedural textures give their colour with alpha 1.
+pub fn eval_texture(t: &Texture, mip: Option<&MipMap>, tc: &TexCoord) -> Vec4 {
+    match t {
+        Texture::Image(img) => {
+            let tr = &img.uv_transform;
+            let (uv, dx, dy) = if tr.is_identity() {
+                (tc.uv, tc.duv_dx, tc.duv_dy)
+            } else {
+                let l = tr.linear();
+                (tr.apply(tc.uv), l * tc.duv_dx, l * tc.duv_dy)
+            };
+            match mip {
+                Some(m) => m.sample_footprint(uv, dx, dy),
+                None => filtered(img, uv, img.mag_filter),
+            }
+        }
+        Texture::Procedural(p) => procedural_color(p, tc.p_object, tc.uv).extend(1.0),
+    }
+}
+
+/// Scalar height of texture `t` at `tc` in `[0, 1]`: the pattern value of a
+/// procedural texture, the Rec. 709 luminance of an image.
+pub fn eval_height(t: &Texture, mip: Option<&MipMap>, tc: &TexCoord) -> f32 {
+    match t {
+        Texture::Procedural(p) => procedural_value(p, tc.p_object, tc.uv),
+        Texture::Image(_) => {
+            let c = eval_texture(t, mip, tc);
+            0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+        }
+    }
+}

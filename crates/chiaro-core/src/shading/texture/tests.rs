@@ -1,0 +1,448 @@
+//! Tests of texture lookups, noise and patterns, bump and normal maps, and the
+//! environment map and its sampling.
+
+use super::environment::environment_uv;
+use super::*;
+use crate::scene::UvTransform;
+use crate::scene::{Filter, ImageTexture, ProceduralKind, Scene, WrapMode};
+
+#[test]
+fn wrap_modes() {
+    assert_eq!(wrap_index(-1, 4, WrapMode::Repeat), 3);
+    assert_eq!(wrap_index(5, 4, WrapMode::Clamp), 3);
+    assert_eq!(wrap_index(4, 4, WrapMode::Mirror), 3);
+    assert_eq!(wrap_index(-1, 4, WrapMode::Mirror), 0);
+}
+
+fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> f32) -> ImageTexture {
+    ImageTexture {
+        source: "t".into(),
+        width: w,
+        height: h,
+        texels: (0..w * h)
+            .map(|i| {
+                let v = f(i % w, i / w);
+                [v, v, v, 1.0]
+            })
+            .collect(),
+        wrap: WrapMode::Repeat,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn per_axis_wrap_filters_and_uv_transform() {
+    // A 4x4 ramp in x (value x / 4): repeat in u, clamp in v.
+    let mut img = image(4, 4, |x, _| x as f32 / 4.0);
+    img.wrap = WrapMode::Repeat;
+    img.wrap_t = Some(WrapMode::Clamp);
+    img.mag_filter = Filter::Nearest;
+    // u = 1.1 wraps to texel 0; v = 5 clamps to the last row.
+    assert_eq!(nearest(&img, Vec2::new(1.1, 5.0)).x, 0.0);
+    // Clamped in u too: texel 3.
+    img.wrap = WrapMode::Clamp;
+    assert_eq!(nearest(&img, Vec2::new(1.1, 0.5)).x, 0.75);
+    // Nearest picks the containing texel, linear blends the neighbours.
+    assert_eq!(nearest(&img, Vec2::new(0.3, 0.5)).x, 0.25);
+    assert!((bilinear(&img, Vec2::new(0.25, 0.5)).x - 0.125).abs() < 1e-6);
+    // KHR_texture_transform: scale 2 then offset 0.25 maps u = 0.1 to
+    // 0.45 (texel 1); a quarter turn maps (u, v) to (v, -u) (the
+    // extension's matrix), so u = 0.6 at v = 0.6 reads u' = 0.6.
+    let t = UvTransform {
+        offset: Vec2::new(0.25, 0.0),
+        rotation: 0.0,
+        scale: Vec2::splat(2.0),
+    };
+    assert!((t.apply(Vec2::new(0.1, 0.2)) - Vec2::new(0.45, 0.4)).length() < 1e-6);
+    let r = UvTransform {
+        rotation: std::f32::consts::FRAC_PI_2,
+        ..UvTransform::default()
+    };
+    assert!((r.apply(Vec2::new(0.3, 0.6)) - Vec2::new(0.6, -0.3)).length() < 1e-6);
+    img.uv_transform = t;
+    let tc = TexCoord {
+        uv: Vec2::new(0.1, 0.5),
+        ..TexCoord::default()
+    };
+    let v = eval_texture(&Texture::Image(img.clone()), None, &tc);
+    assert_eq!(v.x, 0.25);
+    // Mip filter none: minification stays on level 0 with the min filter.
+    img.uv_transform = UvTransform::default();
+    img.min_filter = Filter::Nearest;
+    img.mip_filter = None;
+    let m = MipMap::new(&img);
+    assert_eq!(m.sample(Vec2::new(0.3, 0.5), 2.0).x, 0.25);
+}
+
+#[test]
+fn mip_pyramid_sizes_means_and_lod() {
+    let img = image(8, 4, |x, y| ((x + y) % 2) as f32);
+    let m = MipMap::new(&img);
+    let sizes: Vec<(u32, u32)> = m.levels.iter().map(|l| (l.width, l.height)).collect();
+    assert_eq!(sizes, vec![(8, 4), (4, 2), (2, 1), (1, 1)]);
+    // Box filtering keeps the mean: a checker becomes uniform grey.
+    assert!((m.levels[1].texel(1, 1)[0] - 0.5).abs() < 1e-6);
+    // One texel per pixel is level 0; four texels per pixel is level 2.
+    assert_eq!(m.lod(Vec2::new(1.0 / 8.0, 0.0), Vec2::ZERO), 0.0);
+    assert!((m.lod(Vec2::new(4.0 / 8.0, 0.0), Vec2::new(0.0, 1.0 / 4.0)) - 2.0).abs() < 1e-6);
+    assert_eq!(m.lod(Vec2::splat(f32::NAN), Vec2::ZERO), 0.0);
+    assert!((m.sample(Vec2::splat(0.3), 3.0).x - 0.5).abs() < 1e-6);
+}
+
+#[test]
+fn perlin_noise_is_bounded_smooth_and_zero_on_the_lattice() {
+    let mut max = 0.0f32;
+    for i in 0..2000 {
+        let p = Vec3::new(
+            i as f32 * 0.173,
+            (i % 37) as f32 * 0.311,
+            (i % 11) as f32 * 0.77,
+        );
+        let n = perlin_noise(p);
+        assert!((-1.0..=1.0).contains(&n));
+        max = max.max(n.abs());
+        // Continuity: a tiny step changes little.
+        assert!((perlin_noise(p + Vec3::splat(1e-4)) - n).abs() < 1e-2);
+    }
+    assert!(max > 0.3, "noise is not flat");
+    assert_eq!(perlin_noise(Vec3::new(3.0, -2.0, 7.0)), 0.0);
+    assert!(turbulence(Vec3::new(0.3, 0.4, 0.5), 4) >= 0.0);
+}
+
+#[test]
+fn patterns_are_in_range_and_checker_alternates() {
+    assert_eq!(
+        pattern(ProceduralKind::Checker, Vec3::new(0.5, 0.5, 0.5)),
+        0.0
+    );
+    assert_eq!(
+        pattern(ProceduralKind::Checker, Vec3::new(1.5, 0.5, 0.5)),
+        1.0
+    );
+    assert_eq!(
+        pattern(ProceduralKind::Checker, Vec3::new(-0.5, 0.5, 0.5)),
+        1.0
+    );
+    assert_eq!(
+        pattern(ProceduralKind::Dimples, Vec3::new(0.5, 0.5, 0.5)),
+        1.0
+    );
+    assert!(pattern(ProceduralKind::Dimples, Vec3::new(1.0, 2.0, 3.0)).abs() < 1e-6);
+    for kind in [
+        ProceduralKind::Wood,
+        ProceduralKind::Marble,
+        ProceduralKind::Noise,
+        ProceduralKind::Dimples,
+    ] {
+        for i in 0..200 {
+            let v = pattern(kind, Vec3::new(i as f32 * 0.37, 0.2, i as f32 * 0.11));
+            assert!((0.0..=1.0).contains(&v), "{kind:?}: {v}");
+        }
+    }
+}
+
+#[test]
+fn bump_and_normal_map_closed_forms() {
+    let n = Vec3::Z;
+    // A linear height h = s x on the plane z = 0: normal (-s, 0, 1)/|..|.
+    let s = 0.5;
+    let g = uv_surface_gradient(n, Vec3::X, Vec3::Y, s, 0.0);
+    let b = bump_normal(n, g);
+    assert!((b - Vec3::new(-s, 0.0, 1.0).normalize()).length() < 1e-6);
+    // The flat normal-map texel leaves the normal unchanged; (1, .5, .5)
+    // tilts it onto the tangent.
+    let t = Vec4::new(1.0, 0.0, 0.0, 1.0);
+    assert!((normal_map_normal(n, t, Vec3::new(0.5, 0.5, 1.0)) - n).length() < 1e-6);
+    assert!((normal_map_normal(n, t, Vec3::new(1.0, 0.5, 0.5)) - Vec3::X).length() < 1e-6);
+    // The bitangent sign flips y.
+    let up = normal_map_normal(n, t, Vec3::new(0.5, 1.0, 0.5));
+    let down = normal_map_normal(n, Vec4::new(1.0, 0.0, 0.0, -1.0), Vec3::new(0.5, 1.0, 0.5));
+    assert!((up + down).length() < 1e-6);
+}
+
+#[test]
+fn latlong_convention() {
+    assert!((latlong_uv(Vec3::NEG_Z) - Vec2::new(0.5, 0.5)).length() < 1e-6);
+    assert!((latlong_uv(Vec3::X) - Vec2::new(0.75, 0.5)).length() < 1e-6);
+    assert!(latlong_uv(Vec3::Y).y.abs() < 1e-6);
+    let mut scene = Scene::default();
+    let t = scene.add_texture(Texture::Image(image(4, 2, |x, _| x as f32)));
+    scene.environment = Some(crate::scene::Environment {
+        texture: t,
+        intensity: 2.0,
+        rotate_y_degrees: 0.0,
+        as_background: true,
+    });
+    // -z is u = 0.5: between texels 1 and 2 (values 1 and 2) -> 1.5, times 2.
+    assert!((environment_radiance(&scene, Vec3::NEG_Z).x - 3.0).abs() < 1e-5);
+    assert_eq!(
+        background_radiance(&scene, Vec3::NEG_Z),
+        environment_radiance(&scene, Vec3::NEG_Z)
+    );
+}
+
+/// One bright texel at the map's `-z` (u = 0.5, on the horizon); after
+/// `rotate_y = a` it must be seen at `R_y(a) (-z) = (-sin a, 0, -cos a)`,
+/// the direction a right-handed rotation of the world by `a` about +y
+/// turns `-z` to (as an object's `rotate_y` does).
+#[test]
+fn rotate_y_turns_the_map_right_handed() {
+    // 8 x 4 texels; texel (3, 1)'s centre is u = 3.5 / 8 = 0.4375,
+    // v = 1.5 / 4 = 0.375. Make it the only bright one.
+    let img = image(8, 4, |x, y| if (x, y) == (3, 1) { 100.0 } else { 0.0 });
+    let mut scene = Scene::default();
+    let t = scene.add_texture(Texture::Image(img));
+    let texel_dir = |rot_deg: f32| {
+        // The texel's direction in the unrotated map, turned by rot_deg.
+        let (u, v) = (0.4375_f32, 0.375_f32);
+        let phi = (u - 0.5) * std::f32::consts::TAU; // azimuth from -z towards +x
+        let theta = v * std::f32::consts::PI; // from +y
+        let d = Vec3::new(
+            theta.sin() * phi.sin(),
+            theta.cos(),
+            -theta.sin() * phi.cos(),
+        );
+        glam::Quat::from_rotation_y(rot_deg.to_radians()) * d
+    };
+    for rot in [0.0_f32, 90.0, -90.0, 180.0, 30.0, 450.0] {
+        scene.environment = Some(crate::scene::Environment {
+            texture: t,
+            intensity: 1.0,
+            rotate_y_degrees: rot,
+            as_background: true,
+        });
+        let d = texel_dir(rot);
+        let seen = environment_radiance(&scene, d).x;
+        assert!((seen - 100.0).abs() < 1e-2, "rotate_y {rot}: {seen} at {d}");
+        // The unrotated direction sees darkness once the turn exceeds the
+        // bilinear footprint (one texel, 45 degrees).
+        if (45.0..=315.0).contains(&rot.rem_euclid(360.0)) {
+            let off = environment_radiance(&scene, texel_dir(0.0)).x;
+            assert!(off < 1e-3, "rotate_y {rot}: {off}");
+        }
+    }
+    // Pinned by hand: rotate_y = 90 takes the map's -z to -x, so a texel
+    // at the map's centre column is seen looking down -x.
+    let centre = image(8, 4, |x, _| if x == 3 || x == 4 { 1.0 } else { 0.0 });
+    let c = scene.add_texture(Texture::Image(centre));
+    scene.environment = Some(crate::scene::Environment {
+        texture: c,
+        intensity: 1.0,
+        rotate_y_degrees: 90.0,
+        as_background: true,
+    });
+    assert!((environment_radiance(&scene, Vec3::NEG_X).x - 1.0).abs() < 1e-6);
+    assert!(environment_radiance(&scene, Vec3::NEG_Z).x.abs() < 1e-6);
+    assert!(environment_radiance(&scene, Vec3::X).x.abs() < 1e-6);
+}
+
+/// The mean radiance of a constant map is its value times the
+/// intensity; a map bright only above the horizon gives half of that
+/// (the upper hemisphere is half the solid angle); no map gives zero.
+#[test]
+fn environment_mean_radiance_closed_forms() {
+    let mut scene = Scene::default();
+    assert_eq!(environment_mean_radiance(&scene), Vec3::ZERO);
+    let t = scene.add_texture(Texture::Image(image(64, 32, |_, _| 2.0)));
+    scene.environment = Some(crate::scene::Environment {
+        texture: t,
+        intensity: 1.5,
+        rotate_y_degrees: 30.0,
+        as_background: false,
+    });
+    let m = environment_mean_radiance(&scene);
+    assert!((m.x - 3.0).abs() < 1e-3, "{m}");
+    let sky = image(64, 32, |_, y| if y < 16 { 1.0 } else { 0.0 });
+    let t = scene.add_texture(Texture::Image(sky));
+    scene.environment = Some(crate::scene::Environment {
+        texture: t,
+        intensity: 1.0,
+        rotate_y_degrees: 0.0,
+        as_background: false,
+    });
+    let m = environment_mean_radiance(&scene);
+    assert!((m.x - 0.5).abs() < 0.02, "{m}");
+}
+
+/// A rotated map with a bright texel, a ramp and three black rows
+/// (the middle one has zero density: the bilinear mean over it is 0).
+fn spot_scene(rot: f32) -> Scene {
+    let img = image(32, 16, |x, y| {
+        if (x, y) == (20, 5) {
+            500.0
+        } else if (11..=13).contains(&y) {
+            0.0
+        } else {
+            0.1 + 0.05 * x as f32
+        }
+    });
+    let mut scene = Scene::default();
+    let t = scene.add_texture(Texture::Image(img));
+    scene.environment = Some(crate::scene::Environment {
+        texture: t,
+        intensity: 2.0,
+        rotate_y_degrees: rot,
+        as_background: true,
+    });
+    scene
+}
+
+/// The environment light's density per solid angle integrates to 1
+/// over the sphere (midpoint rule in theta and phi, so the Jacobian
+/// `2 pi^2 sin(theta)` is tested too), and is positive wherever the
+/// lookup's radiance is (also beside a lone bright texel, which the
+/// bilinear lookup spreads into its neighbours).
+#[test]
+fn environment_light_pdf_integrates_to_one() {
+    use std::f32::consts::{PI, TAU};
+    for rot in [0.0, 30.0, -100.0] {
+        let scene = spot_scene(rot);
+        let light = EnvironmentLight::new(&scene).expect("a light");
+        let (nt, np) = (1024, 2048);
+        let mut total = 0.0f64;
+        for i in 0..nt {
+            let theta = (i as f32 + 0.5) / nt as f32 * PI;
+            let mut row = 0.0f64;
+            for j in 0..np {
+                let phi = (j as f32 + 0.5) / np as f32 * TAU;
+                let d = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                );
+                row += f64::from(light.pdf(d));
+            }
+            total += row * f64::from(theta.sin());
+        }
+        total *= f64::from(PI / nt as f32) * f64::from(TAU / np as f32);
+        assert!((total - 1.0).abs() < 2e-3, "rotate {rot}: {total}");
+    }
+    // Only one texel lit: every direction with radiance has density.
+    let mut scene = Scene::default();
+    let t = scene.add_texture(Texture::Image(image(16, 8, |x, y| {
+        if (x, y) == (5, 2) { 1.0 } else { 0.0 }
+    })));
+    scene.environment = Some(crate::scene::Environment {
+        texture: t,
+        intensity: 1.0,
+        rotate_y_degrees: 45.0,
+        as_background: true,
+    });
+    let light = EnvironmentLight::new(&scene).expect("a light");
+    let mut lit = 0;
+    for i in 0..200 {
+        for j in 0..400 {
+            let theta = (i as f32 + 0.5) / 200.0 * PI;
+            let phi = (j as f32 + 0.5) / 400.0 * TAU;
+            let d = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
+            if environment_radiance(&scene, d).x > 0.0 {
+                lit += 1;
+                assert!(light.pdf(d) > 0.0, "{d}: radiance without density");
+            }
+        }
+    }
+    assert!(lit > 100, "{lit}");
+    // No map, a black map, zero intensity: no light.
+    assert!(EnvironmentLight::new(&Scene::default()).is_none());
+    let mut black = spot_scene(0.0);
+    black.environment.as_mut().expect("env").intensity = 0.0;
+    assert!(EnvironmentLight::new(&black).is_none());
+}
+
+/// `sample` draws texels with the density's probabilities (chi-square
+/// over the texels, those expecting under 5 samples pooled), returns
+/// `pdf()`'s density and the lookup's radiance.
+#[test]
+fn environment_light_sampling_matches_its_pdf() {
+    let scene = spot_scene(30.0);
+    let light = EnvironmentLight::new(&scene).expect("a light");
+    let env = scene.environment.as_ref().expect("env");
+    let (w, h) = (32usize, 16usize);
+    let n = 200_000;
+    let mut counts = vec![0u32; w * h];
+    let mut rng = crate::sampling::pixel_rng(5, 6, 7, 8);
+    for _ in 0..n {
+        let s = light
+            .sample(crate::sampling::uniform2(&mut rng))
+            .expect("not at a pole");
+        assert!((s.wi.length() - 1.0).abs() < 1e-5);
+        let pdf = light.pdf(s.wi);
+        assert!((pdf - s.pdf).abs() <= 2e-3 * s.pdf, "{} vs {pdf}", s.pdf);
+        assert_eq!(s.radiance, environment_radiance(&scene, s.wi));
+        let uv = environment_uv(env, s.wi);
+        let cell = |x: f32, n: usize| ((x * n as f32) as usize).min(n - 1);
+        counts[cell(uv.y, h) * w + cell(uv.x, w)] += 1;
+    }
+    // Each texel's probability: its density on the unit square over w h.
+    let (mut chi2, mut bins) = (0.0f64, 0usize);
+    let (mut pool_e, mut pool_o) = (0.0f64, 0.0f64);
+    for y in 0..h {
+        for x in 0..w {
+            let p = light.dist.pdf(Vec2::new(
+                (x as f32 + 0.5) / w as f32,
+                (y as f32 + 0.5) / h as f32,
+            ));
+            let e = f64::from(p) / (w * h) as f64 * f64::from(n);
+            let o = f64::from(counts[y * w + x]);
+            if e < 5.0 {
+                (pool_e, pool_o) = (pool_e + e, pool_o + o);
+            } else {
+                chi2 += (o - e) * (o - e) / e;
+                bins += 1;
+            }
+        }
+    }
+    if pool_e > 0.0 {
+        chi2 += (pool_o - pool_e) * (pool_o - pool_e) / pool_e.max(1.0);
+        bins += 1;
+    }
+    // Wilson-Hilferty: chi2 / k to a standard normal.
+    let k = (bins - 1) as f64;
+    let z = ((chi2 / k).cbrt() - (1.0 - 2.0 / (9.0 * k))) / (2.0 / (9.0 * k)).sqrt();
+    assert!(
+        z < 4.5,
+        "chi-square {chi2:.1} over {k} degrees of freedom: z = {z:.2}"
+    );
+    // The middle black row is never drawn; the bright texel (500 among
+    // values up to 1.65) takes a third of the samples (its neighbours
+    // share its bilinear spread).
+    assert!(counts[12 * w..13 * w].iter().all(|&c| c == 0));
+    assert!(
+        counts[5 * w + 20] as f32 > 0.25 * n as f32,
+        "{}",
+        counts[5 * w + 20]
+    );
+}
+
+/// `background = false`: the camera sees `scene.background`, every other
+/// ray the environment.
+#[test]
+fn miss_radiance_rule() {
+    let mut scene = Scene {
+        background: Vec3::new(0.25, 0.5, 0.75),
+        ..Scene::default()
+    };
+    assert_eq!(miss_radiance(&scene, Vec3::Z, true), scene.background);
+    assert_eq!(miss_radiance(&scene, Vec3::Z, false), scene.background);
+    let t = scene.add_texture(Texture::Image(image(4, 2, |_, _| 2.0)));
+    for as_background in [true, false] {
+        scene.environment = Some(crate::scene::Environment {
+            texture: t,
+            intensity: 1.5,
+            rotate_y_degrees: 0.0,
+            as_background,
+        });
+        let camera = if as_background {
+            Vec3::splat(3.0)
+        } else {
+            scene.background
+        };
+        assert_eq!(miss_radiance(&scene, Vec3::Z, true), camera);
+        assert_eq!(background_radiance(&scene, Vec3::Z), camera);
+        assert_eq!(miss_radiance(&scene, Vec3::Z, false), Vec3::splat(3.0));
+    }
+}

@@ -1,0 +1,130 @@
+//! The node hierarchy: each node's world transform, its camera, mesh
+//! primitives and `KHR_lights_punctual` light (candela and lux to chiaro's `Ip`).
+
+use super::Builder;
+use crate::{ImportedObject, Result};
+use chiaro_core::scene::{Attenuation, Camera, Light, NamedCamera, SpotLight};
+use chiaro_core::{Mat4, Vec3};
+
+impl Builder<'_> {
+    pub(super) fn node(&mut self, node: &gltf::Node, world: Mat4) -> Result<()> {
+        if let Some(cam) = node.camera() {
+            match cam.projection() {
+                gltf::camera::Projection::Perspective(p) => {
+                    let eye = world.transform_point3(Vec3::ZERO);
+                    let forward = world.transform_vector3(Vec3::NEG_Z).try_normalize();
+                    let up = world.transform_vector3(Vec3::Y).try_normalize();
+                    let fov = p.yfov().to_degrees();
+                    match (forward, up) {
+                        (Some(f), Some(u)) if fov > 0.0 && fov < 180.0 && eye.is_finite() => {
+                            let near = if p.znear() > 0.0 { p.znear() } else { 0.01 };
+                            let far = p
+                                .zfar()
+                                .filter(|f| f.is_finite() && *f > near)
+                                .unwrap_or(near * 1.0e7);
+                            // Named after the camera, else its node, else its index.
+                            let name = cam
+                                .name()
+                                .or(node.name())
+                                .map_or_else(|| format!("camera{}", cam.index()), str::to_owned);
+                            self.out.cameras.push(NamedCamera {
+                                name,
+                                camera: Camera {
+                                    eye,
+                                    look_at: eye + f,
+                                    up: u,
+                                    fov_y_degrees: fov,
+                                    near,
+                                    far,
+                                },
+                            });
+                        }
+                        _ => self.note("a camera with a degenerate transform or fov was skipped"),
+                    }
+                }
+                // Warned about once, by `unsupported_features`.
+                gltf::camera::Projection::Orthographic(_) => {}
+            }
+        }
+        if let Some(light) = node.light() {
+            self.light(&light, world);
+        }
+        let Some(mesh) = node.mesh() else {
+            return Ok(());
+        };
+        for prim in mesh.primitives() {
+            let key = (mesh.index(), prim.index());
+            let entry = match self.mesh_cache.get(&key) {
+                Some(e) => *e,
+                None => {
+                    let e = self.primitive(&mesh, &prim)?;
+                    self.mesh_cache.insert(key, e);
+                    e
+                }
+            };
+            if let Some((mesh_index, material)) = entry {
+                let name = match (node.name(), mesh.name()) {
+                    (Some(n), _) => format!("{n}#{}", prim.index()),
+                    (None, Some(m)) => format!("{m}#{}", prim.index()),
+                    (None, None) => format!("node{}#{}", node.index(), prim.index()),
+                };
+                self.out.objects.push(ImportedObject {
+                    name,
+                    mesh: mesh_index,
+                    matrix: world,
+                    material,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    pub(super) fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: Mat4) {
+        use gltf::khr_lights_punctual::Kind;
+        let color = Vec3::from(light.color());
+        // Candela (or lux) to chiaro's Ip: divide by pi (module docs).
+        let intensity = light.intensity() / std::f32::consts::PI;
+        if !(color.is_finite() && intensity.is_finite() && intensity >= 0.0) {
+            self.note("a light with invalid colour or intensity was skipped");
+            return;
+        }
+        let position = world.transform_point3(Vec3::ZERO);
+        let direction = world.transform_vector3(Vec3::NEG_Z).try_normalize();
+        let Some(direction) = direction else {
+            self.note("a light with a degenerate transform was skipped");
+            return;
+        };
+        let l = match light.kind() {
+            Kind::Directional => Light::Directional {
+                direction,
+                color,
+                intensity,
+            },
+            Kind::Point => Light::Point {
+                position,
+                color,
+                intensity,
+                attenuation: Attenuation::InverseSquare,
+            },
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let outer = outer_cone_angle.to_degrees().clamp(1e-3, 90.0);
+                let inner = inner_cone_angle.to_degrees().clamp(0.0, outer);
+                Light::Spot(SpotLight {
+                    position,
+                    direction,
+                    color,
+                    intensity,
+                    attenuation: Attenuation::InverseSquare,
+                    exponent: 0.0,
+                    cone_degrees: outer,
+                    cone_softness_degrees: outer - inner,
+                    flaps: Vec::new(),
+                })
+            }
+        };
+        self.out.lights.push(l);
+    }
+}
