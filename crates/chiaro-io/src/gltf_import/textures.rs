@@ -1,5 +1,5 @@
-//! Textures and samplers: `textureInfo` with `KHR_texture_transform`, wrap
-//! modes and filters, and images decoded once per colour space.
+//! Textures and samplers: `textureInfo` with `KHR_texture_transform`, wrap modes
+//! and filters, and images read from a buffer view or a URI and decoded.
 
 use super::Builder;
 use super::buffers::{check_uri, decode_base64, percent_decode};

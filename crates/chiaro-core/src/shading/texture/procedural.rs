@@ -1,5 +1,5 @@
 //! Procedural solid textures: Perlin noise (Perlin 2002, "Improving noise"),
-//! turbulence (Perlin 1985), and the checker, wood, marble and dimple patterns.
+//! turbulence (Perlin 1985), and the checker, wood, marble, noise and dimple patterns.
 
 use crate::scene::{Procedural, ProceduralKind};
 use glam::{Vec2, Vec3};
