@@ -20,7 +20,8 @@
 //! # Materials (metallic-roughness to chiaro)
 //!
 //! Every material gets `model = torrance-sparrow` and a
-//! [`MetallicRoughness`] that `PreparedScene::surface_material_lod`
+//! [`MetallicRoughness`](chiaro_core::scene::MetallicRoughness) that
+//! `PreparedScene::surface_material_lod`
 //! evaluates per point (ARCHITECTURE.md, "glTF materials"): base colour =
 //! `baseColorFactor * baseColorTexture * COLOR_0`, metallic and roughness =
 //! factors times the B and G of `metallicRoughnessTexture`, then `kd =

@@ -74,7 +74,7 @@ impl PrimRef {
 }
 
 /// One SAH bin: the box of its references (SIMD corners) and their count.
-/// The children's centroid bounds are gathered by [`partition`], which
+/// The children's centroid bounds are gathered by [`partition`](super::partition::partition), which
 /// computes every centroid anyway, rather than per bin on every axis.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Bin {

@@ -1,6 +1,7 @@
 //! The bounding volume hierarchy: an 8-wide BVH (BVH8) built top-down with
 //! the binned surface-area heuristic, and [`SceneBvh`], the scene-level
-//! [`Accelerator`] over a [`PreparedScene`]'s triangles and analytic
+//! [`Accelerator`](super::Accelerator) over a
+//! [`PreparedScene`](crate::prepared::PreparedScene)'s triangles and analytic
 //! spheres.
 //!
 //! Splits (after Wald 2007, "On fast Construction of SAH-based Bounding

@@ -17,7 +17,7 @@ pub struct BvhNode {
     /// lanes hold an inverted (empty) box.
     pub bounds: [[f32; WIDTH]; 6],
     /// Per lane: the child node's index for an inner child, the first slot
-    /// in [`Bvh::prim_order`] for a leaf.
+    /// in [`Bvh::prim_order`](super::Bvh::prim_order) for a leaf.
     pub child: [u32; WIDTH],
     /// Per lane: 0 for an inner child, the primitive count (>= 1) for a
     /// leaf, [`EMPTY_LANE`] for an unused lane.
@@ -179,9 +179,10 @@ pub(super) fn splat(v: f32) -> Splat {
     Vec4::splat(v)
 }
 
-/// Per-ray constants of the slab test. [`SceneBvh`] builds it once per
-/// ray and derives the triangle test's [`WatertightRay`] from the same
-/// reciprocal direction ([`WatertightRay::with_inverse`]).
+/// Per-ray constants of the slab test. [`SceneBvh`](super::SceneBvh) builds
+/// it once per ray and derives the triangle test's
+/// [`WatertightRay`](crate::accel::WatertightRay) from the same reciprocal
+/// direction ([`WatertightRay::with_inverse`](crate::accel::WatertightRay::with_inverse)).
 pub(super) struct RayPre {
     /// Origin and inverse direction, each component splat over the node
     /// test's lanes.

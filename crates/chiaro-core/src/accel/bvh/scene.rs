@@ -106,7 +106,7 @@ impl TriBlock {
 }
 
 /// Starts loading the triangle block holding slot `first` (a leaf's first
-/// block; see [`prefetch`]).
+/// block; see [`prefetch`](super::traverse::prefetch)).
 #[inline(always)]
 fn prefetch_block(blocks: &[TriBlock], first: u32) {
     #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]

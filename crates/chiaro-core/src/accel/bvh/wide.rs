@@ -106,7 +106,7 @@ pub(super) fn build_tree(refs: &mut [PrimRef], root: Item, opts: &Build) -> Tree
 
 /// A tree (or subtree) being built: its nodes (root first), its slot
 /// order, in which every leaf starts at a multiple of [`BLOCK`] so that a
-/// leaf of up to four primitives is one block of a [`SceneBvh`] (the gaps
+/// leaf of up to four primitives is one block of a [`SceneBvh`](super::SceneBvh) (the gaps
 /// hold [`PAD_SLOT`]), and the subtrees built in parallel below it. Leaves
 /// are placed as they are made, so the order follows the build's
 /// depth-first walk.

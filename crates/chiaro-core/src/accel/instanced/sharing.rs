@@ -131,7 +131,7 @@ pub(super) fn shared_instances(ps: &PreparedScene<'_>) -> Vec<(MeshId, Vec<Candi
 }
 
 /// Triangles a flat BVH holds beyond one copy of each mesh that
-/// [`InstancedBvh`] would share: `sum over shared meshes of (instances - 1)
+/// [`InstancedBvh`](super::InstancedBvh) would share: `sum over shared meshes of (instances - 1)
 /// * triangles`. Zero when no mesh is instanced.
 pub fn duplicated_triangles(ps: &PreparedScene<'_>) -> usize {
     duplicated(ps, &shared_instances(ps))

@@ -20,7 +20,7 @@ pub fn wrap_index(i: i64, size: u32, mode: WrapMode) -> u32 {
 
 /// Bilinear lookup of `img` at `uv` (`v = 0` at the top row, as glTF and
 /// OBJ-with-flip use), returning linear RGBA. The image's uv transform is
-/// not applied here (see [`eval_texture`]).
+/// not applied here (see [`eval_texture`](super::eval_texture)).
 pub fn bilinear(img: &ImageTexture, uv: Vec2) -> Vec4 {
     if img.texels.is_empty() {
         return Vec4::ONE;

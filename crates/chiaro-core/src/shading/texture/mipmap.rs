@@ -15,7 +15,7 @@ pub struct MipMap {
 
 impl MipMap {
     /// Builds the pyramid of `img`. An empty image gives a single empty level
-    /// (which samples as white, like [`bilinear`]).
+    /// (which samples as white, like [`bilinear`](super::bilinear)).
     pub fn new(img: &ImageTexture) -> Self {
         let mut levels = vec![img.clone()];
         while let Some(prev) = levels.last() {
