@@ -1,5 +1,5 @@
-//! Gouraud (1971) vertex lighting for the scan converter: which vertices are lit,
-//! once each, and the vertex illumination cache of the shading pass.
+//! Gouraud (1971) shading's vertex lighting for the scan converter: which
+//! vertices are lit, once each, and the vertex cache the shading pass fills.
 
 use crate::pipeline::NONE;
 use crate::pipeline::shading::Ctx;
@@ -18,6 +18,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Number of entries of the vertex illumination cache of [`TriCache`] (a
 /// power of two): a few tiles' worth of vertices.
+///
+/// [`TriCache`]: crate::pipeline::triangles::TriCache
 pub(crate) const VERTEX_CACHE_SIZE: usize = 4096;
 
 /// Per-triangle results of the visibility pass that flat and Gouraud
@@ -41,6 +43,9 @@ pub(crate) struct PolyShading {
     /// gathering back, a table of every vertex's illumination. A vertex
     /// is only illuminated again where the cache lost it (another shading
     /// thread, or a slot taken by another vertex).
+    ///
+    /// [`lean_sample`]: crate::pipeline::shading::lean_sample
+    /// [`TriCache`]: crate::pipeline::triangles::TriCache
     pub(crate) on_demand: Option<SurfaceMaterial>,
 }
 
@@ -122,6 +127,8 @@ pub(crate) fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMat
 /// is shaded by `shade_sample`), so its vertices are only ever needed on
 /// the front side and can be illuminated on demand
 /// ([`PolyShading::on_demand`]).
+///
+/// [`lean_sample`]: crate::pipeline::shading::lean_sample
 pub(crate) fn on_demand_gouraud(ctx: &Ctx<'_, '_>) -> bool {
     let ps = ctx.ps;
     let Some(t) = (0..ps.triangles.len() as u32).find(|&t| ctx.mode(t) == ShadeMode::Gouraud)

@@ -1,5 +1,5 @@
-//! Step 2: triangle setup and binning of screen triangles into 64x64 tiles
-//! (sort-middle tiling, Molnar et al. 1994).
+//! Step 2: triangle setup and binning of the screen triangles into 64x64
+//! tiles (sort-middle tiling, Molnar et al. 1994).
 
 use crate::pipeline::TILE_SIZE;
 use crate::pipeline::vertex::ScreenVertex;

@@ -33,12 +33,13 @@
 //! [`PreparedScene`] within float noise. The same intersection one pixel to
 //! the right and below gives the screen-space uv derivatives for mip-mapping.
 //!
-//! Illumination is always [`shade_local`], area lights sampled at the strata
-//! centres; the visibility of each light sample comes from the shadow method
-//! ([`crate::shadows`]): shadow rays, shadow maps, or shadow volumes counted
-//! per sample in step 3 (Phong shading; flat and Gouraud shading
-//! evaluate shadow rays and maps at their vertices or polygon centre, and
-//! ignore shadow volumes, which only exist per sample).
+//! Illumination is always
+//! [`shade_local`](chiaro_core::shading::shade_local), area lights sampled
+//! at the strata centres; the visibility of each light sample comes from
+//! the shadow method ([`crate::shadows`]): shadow rays, shadow maps, or
+//! shadow volumes counted per sample in step 3 (Phong shading; flat and
+//! Gouraud shading evaluate shadow rays and maps at their vertices or
+//! polygon centre, and ignore shadow volumes, which only exist per sample).
 //!
 //! Transparency without refraction (the seeds' three models) is chosen per
 //! material (`Material::transparency`, overridden by
@@ -59,13 +60,13 @@
 //! itself stays per polygon or per vertex (like OpenGL's separate specular
 //! colour).
 
-pub(crate) mod binning;
+pub mod binning;
 pub(crate) mod exact;
-pub(crate) mod resolve;
-pub(crate) mod shading;
+pub mod resolve;
+pub mod shading;
 pub(crate) mod triangles;
-pub(crate) mod vertex;
-pub(crate) mod visibility;
+pub mod vertex;
+pub mod visibility;
 
 #[cfg(test)]
 mod tests;

@@ -1,5 +1,5 @@
-//! Step 5: resolving the samples of a crop window into the film with the tent
-//! filter of [`crate::filter`] (the box filter is applied while shading).
+//! Step 5: resolving the samples of the crop window into the film with the
+//! tent filter of [`crate::filter`] (the box filter is applied while shading).
 
 use crate::raster::Rect;
 use chiaro_core::film::{Film, TilePixels, TileRect};
@@ -11,6 +11,8 @@ use glam::Vec3;
 /// of the border outside `out` are reset to black with infinite depth.
 /// `tiles` are the shaded tiles with their sample colours (indexed like
 /// [`TileVis::ids`]).
+///
+/// [`TileVis::ids`]: crate::pipeline::visibility::TileVis::ids
 pub(crate) fn tent_filter(
     film: &mut Film,
     tiles: &[(TileRect, Vec<Vec3>)],

@@ -1,5 +1,5 @@
-//! Step 4: deferred shading of the visible samples per tile: flat (Bouknight 1970),
-//! Gouraud (1971) interpolation and Phong (1975) per-sample normals, box-filtered.
+//! Step 4: deferred shading of the visible samples per tile: flat shading,
+//! Gouraud (1971) interpolation and Phong (1975) normals, box-filtered.
 
 use crate::gouraud::PolyShading;
 use crate::pipeline::NONE;
@@ -728,7 +728,6 @@ impl<'a, 's> Ctx<'a, 's> {
 /// next tile instead of every tile's pixels being alive (and fresh pages)
 /// at once. With `tent`, returns the sample colours of every tile for the
 /// resolve.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn shade_tiles(
     ctx: &Ctx<'_, '_>,
     poly: &PolyShading,

@@ -1,5 +1,5 @@
 //! Per-triangle shading data and its cache, and the perspective-correct
-//! barycentrics of an eye ray on a triangle's plane (Moller and Trumbore 1997).
+//! barycentrics of an eye ray on a triangle's plane (Moller, Trumbore 1997).
 
 use crate::gouraud::PolyShading;
 use crate::pipeline::exact;
@@ -58,6 +58,8 @@ pub(crate) struct TriData<'a> {
     pub(crate) flat: Split,
     /// True when its opaque samples take [`lean_sample`] (set by
     /// [`Ctx::tri_data`]; false elsewhere).
+    ///
+    /// [`lean_sample`]: crate::pipeline::shading::lean_sample
     pub(crate) lean: bool,
     /// Lean Gouraud triangles: the vertex illumination of the three
     /// corners, `[diffuse, rest]` as SSE vectors (zero otherwise).
@@ -261,6 +263,8 @@ impl<'a> Ctx<'a, '_> {
     ///
     /// With `shading` false (flat-shaded samples, which read neither) the
     /// shading normal is the face normal and the vertex colour zero.
+    ///
+    /// [`PreparedScene::triangle_surface`]: chiaro_core::prepared::PreparedScene::triangle_surface
     #[inline(always)]
     pub(crate) fn surface(
         &self,

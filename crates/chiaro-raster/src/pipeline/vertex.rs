@@ -1,5 +1,5 @@
-//! Step 1 of the scan converter: scene vertices to clip space and snapped screen
-//! positions, and the eye rays through the film (the camera of the textbook viewing pipeline).
+//! Step 1: the viewing transformation of the scene's vertices to homogeneous
+//! clip space and snapped screen positions, and the eye rays of the samples.
 
 use crate::clip::outcode;
 use crate::raster::{DepthKey, Viewport};

@@ -105,20 +105,27 @@ pub(crate) fn active_tiles(rects: &[TileRect], crop: Rect) -> Vec<(usize, TileRe
 /// alpha masks, and the binned shadow-volume polygons to count.
 pub(crate) struct Visibility<'a, 's> {
     pub(crate) ps: &'a PreparedScene<'s>,
+    /// The triangles binned by step 2, per chunk.
     pub(crate) chunks: &'a [Bins],
+    /// Per material: how it is drawn.
     pub(crate) class: &'a [Class],
     /// True when every material is [`Class::Opaque`].
     pub(crate) all_opaque: bool,
     /// MASK: a fragment of a masked triangle whose alpha (at the sample's
     /// point of the triangle) is below the cutoff is discarded.
     pub(crate) coverage: Option<Coverage>,
+    /// The eye rays of the samples, for the alpha masks.
     pub(crate) sample_rays: Rays,
+    /// The sample positions in a pixel (see [`crate::raster::sample_offsets`]).
     pub(crate) offsets: &'a [[i32; 2]],
     /// Samples per pixel.
     pub(crate) spp: usize,
+    /// The binned shadow-volume polygons (shadow volumes only) and the
+    /// number of count slots per point.
     pub(crate) vol_bins: Option<Bins>,
     pub(crate) nl: usize,
     pub(crate) counting: VolumeCounting,
+    /// Where the work done is counted.
     pub(crate) work: &'a RasterWork,
 }
 
@@ -128,7 +135,7 @@ impl Visibility<'_, '_> {
     fn cut_out(&self, t: u32, x: u32, y: u32, o: &[i32; 2]) -> bool {
         let (ps, coverage, sample_rays) = (self.ps, &self.coverage, &self.sample_rays);
         let sub = crate::raster::SUBPIXEL as f32;
-        let Some(c) = &coverage else { return false };
+        let Some(c) = coverage else { return false };
         let dir = sample_rays.dir(x as f32 + o[0] as f32 / sub, y as f32 + o[1] as f32 / sub);
         let [a, b, d] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
         let ray = chiaro_core::geometry::Ray::new(sample_rays.eye, dir);
@@ -143,6 +150,7 @@ impl Visibility<'_, '_> {
         }
     }
 
+    /// How triangle `t`'s material is drawn.
     fn class_of(&self, t: u32) -> Class {
         let (ps, class) = (self.ps, self.class);
         class

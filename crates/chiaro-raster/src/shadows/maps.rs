@@ -1,5 +1,5 @@
-//! Williams (1978) shadow z-buffers: a depth image of the scene from each light, and
-//! several over an area light's surface (Heckbert and Herf 1997).
+//! Williams (1978) shadow z-buffers: a depth image of the scene from each
+//! light, and several over an area light's surface (Heckbert and Herf 1997).
 
 use crate::raster::{DepthKey, RasterTri, Rect, Viewport, rasterize};
 use crate::shadows::Blocker;

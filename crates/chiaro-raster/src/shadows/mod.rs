@@ -357,7 +357,7 @@ impl crate::pipeline::shading::Ctx<'_, '_> {
             Shadows::None => Vec3::ONE,
             Shadows::Ray(r) => r.visibility(sp.p, sp.ng, s),
             // A group's samples (all but rays) and lights whose volumes did
-            // not fit: shadow rays (see `shadow::exact_lights`).
+            // not fit: shadow rays (see `exact_lights`).
             _ if self.lighting.group.is_some_and(|g| g.contains(li))
                 || matches!(&self.shadows, Shadows::Volume(v) if v.by_ray.get(li) == Some(&true)) =>
             {

@@ -1,5 +1,5 @@
-//! Shadow rays from the scan converter (Appel 1968, Whitted 1980): a segment to the
-//! light sample against a BVH of the scene.
+//! Shadow rays from the scan converter (Appel 1968, Whitted 1980): a segment
+//! from the point to the light sample against a BVH of the scene.
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::alpha::AlphaTested;

@@ -1,5 +1,5 @@
-//! Crow (1977) shadow volumes: the volumes' polygons, extruded from the silhouette of
-//! each light's casters, binned like the scene and counted per sample (z-pass or z-fail, Carmack 2000).
+//! Crow (1977) shadow volumes: their polygons (from the silhouette edges of
+//! closed casters), binned like the scene and counted per sample.
 
 use crate::pipeline::binning::Binner;
 use crate::pipeline::binning::Bins;
