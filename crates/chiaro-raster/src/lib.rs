@@ -2,6 +2,23 @@
 //! rasterizer with flat, Gouraud and Phong shading, texture, bump and
 //! environment maps, and supersampled anti-aliasing.
 //!
+//! # Where each method lives
+//! - [`pipeline`]: the driver of the five steps, each in its file:
+//!   [`pipeline::vertex`] (clip space, snapping, eye rays),
+//!   [`pipeline::binning`] (setup and tiles), [`pipeline::visibility`]
+//!   (Catmull's z-buffer into an item buffer, screen-door transparency),
+//!   [`pipeline::shading`] (flat, Gouraud and Phong shading per sample) and
+//!   [`pipeline::resolve`] (the tent filter into the film).
+//! - [`gouraud`]: Gouraud's vertex lighting and its cache.
+//! - [`abuffer`]: Carpenter's A-buffer, the sorted transparent fragments.
+//! - [`shadows`]: the shadow methods: [`shadows::rays`] (shadow rays),
+//!   [`shadows::maps`] (Williams' shadow z-buffers), [`shadows::volumes`]
+//!   (Crow's shadow volumes), [`shadows::object_precision`]
+//!   (Atherton-Weiler-Greenberg) and [`shadows::scanline`]
+//!   (Bouknight-Kelley).
+//! - [`raster`], [`clip`], [`zbuffer`], [`filter`]: edge functions and
+//!   triangle setup, clipping, the plain z-buffer and the pixel filters.
+//!
 //! # Glossary
 //! - **clip space**: homogeneous coordinates after `clip_from_world`; the near
 //!   plane is `z >= 0` (Direct3D/Vulkan convention), `w` is the view depth.
@@ -15,17 +32,17 @@
 //! - **tile / bin**: a square of the screen rendered by one thread, and the
 //!   list of triangles overlapping it.
 
+pub mod abuffer;
 pub mod clip;
 pub mod filter;
-pub mod object_shadows;
+pub mod gouraud;
+pub mod pipeline;
 pub mod raster;
-pub mod render;
-pub mod scanline_shadows;
-pub mod shadow;
+pub mod shadows;
 pub mod zbuffer;
 
-pub use render::{
+pub use pipeline::{
     RasterOptions, RasterWork, dither_threshold, render, render_counted, render_prepared,
     render_prepared_into, render_prepared_with, shade_mode_of,
 };
-pub use shadow::VolumeCounting;
+pub use shadows::volumes::VolumeCounting;

@@ -9,8 +9,8 @@ use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::geometry::{Ray, face_normal, offset_ray_origin};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::scene::{Attenuation, Geometry, Light, Material, Mesh, Object, Scene};
-use chiaro_raster::object_shadows::ObjectShadows;
-use chiaro_raster::scanline_shadows::scanline_visibility;
+use chiaro_raster::shadows::object_precision::ObjectShadows;
+use chiaro_raster::shadows::scanline::scanline_visibility;
 use chiaro_raster::zbuffer::NO_ITEM;
 
 /// Ray-traced visibility of light position `l` from `p` on a surface with

@@ -604,9 +604,9 @@ pub(crate) fn tri_points(ps: &PreparedScene<'_>, t: usize) -> Option<[DVec3; 3]>
 /// shadow rays that see only them (their tint is a colour, not a polygon),
 /// and objects with `casts_shadows = false` cast nothing.
 pub(crate) fn opaque_casters(ps: &PreparedScene<'_>) -> Vec<bool> {
-    crate::shadow::blockers(ps)
+    crate::shadows::blockers(ps)
         .into_iter()
-        .map(|b| b == crate::shadow::Blocker::Opaque)
+        .map(|b| b == crate::shadows::Blocker::Opaque)
         .collect()
 }
 

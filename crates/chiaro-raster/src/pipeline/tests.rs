@@ -1,14 +1,31 @@
 //! Tests of the scan-conversion renderer against ray casting and closed forms.
 
 use super::*;
+use crate::gouraud::*;
+use crate::pipeline::shading::*;
+use crate::pipeline::triangles::*;
+use crate::pipeline::vertex::*;
+use crate::pipeline::visibility::*;
+use crate::raster::Rect;
+use crate::shadows::*;
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::list::ListAccel;
+use chiaro_core::error::CoreError;
+use chiaro_core::film::{Film, TileRect};
 use chiaro_core::geometry::{Ray, primitives};
+use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
+use chiaro_core::scene::PixelFilter;
+use chiaro_core::scene::ShadowMethod;
 use chiaro_core::scene::{
     Attenuation, Camera, DepthCue, Environment, Geometry, ImageTexture, Light, Object,
     ReflectanceModel, SpotLight, Texture, Transform, WrapMode,
 };
+use chiaro_core::scene::{Material, RenderSettings, Scene, ShadeMode, Technique};
+use chiaro_core::shading::PointLighting;
+use chiaro_core::shading::texture::environment_radiance;
+use chiaro_core::shading::{LocalLighting, ShadingPoint, SurfaceMaterial, shade_local};
+use glam::{Vec2, Vec3};
 
 fn settings(technique: Technique, w: u32, h: u32) -> RenderSettings {
     RenderSettings {

@@ -13,7 +13,7 @@
 //! 2. **Shadow projections.** For each remaining pair (occluder, receiver)
 //!    the occluder's part between the light and the receiver's plane is
 //!    projected from the light onto that plane and clipped to the receiver:
-//!    a convex *shadow polygon* (see [`crate::object_shadows`] for the
+//!    a convex *shadow polygon* (see [`crate::shadows::object_precision`] for the
 //!    geometry, which is shared).
 //! 3. **Scan-line pass.** Shadow polygons are projected to the screen. On
 //!    each scan line (through pixel centres) every shadow polygon crossing it
@@ -25,7 +25,7 @@
 //! The visible polygon of each pixel comes from the z-buffer's item buffer
 //! ([`crate::zbuffer::item_buffer`]), i.e. the same sampling as the
 //! renderer. Lights, occluders and tolerances are as in
-//! [`crate::object_shadows`]: shadows are hard, and an area light casts the
+//! [`crate::shadows::object_precision`]: shadows are hard, and an area light casts the
 //! shadow of a point light at its centre (no penumbra; use shadow rays or
 //! shadow maps for soft shadows).
 //!
@@ -34,7 +34,7 @@
 //! of spheres over a plane, about 9 million candidate pairs give 414,000
 //! shadow polygons; the sweep itself is `O(rows * active polygons)`.
 
-use crate::object_shadows::{
+use crate::shadows::object_precision::{
     Casters, DVec2, DVec3, LightGeom, ReceiverFrame, intersect2, scene_scale, tri_points,
 };
 use crate::zbuffer::{NO_ITEM, item_buffer};

@@ -3,9 +3,19 @@
 //! shadow volume, order-independent transparency, screen-door coverage.
 
 use super::*;
+use crate::pipeline::*;
+use crate::shadows::maps::*;
+use crate::shadows::volumes::*;
+use chiaro_core::error::CoreError;
+use chiaro_core::film::Film;
 use chiaro_core::geometry::primitives;
+use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
+use chiaro_core::progress::Progress;
+use chiaro_core::scene::ShadowMethod;
 use chiaro_core::scene::{Camera, Geometry, Light, Mesh, Object, Transform};
+use chiaro_core::scene::{Material, RenderSettings, Scene, ShadeMode, Technique, TransparencyMode};
+use glam::{Vec2, Vec3};
 
 fn settings(shadows: ShadowMethod, w: u32, h: u32) -> RenderSettings {
     RenderSettings {
@@ -737,14 +747,14 @@ fn many_point_lights(count: usize) -> Scene {
 
 #[test]
 fn shadow_maps_stay_within_their_budget() {
-    use crate::shadow::ShadowMaps;
+    use crate::shadows::maps::ShadowMaps;
     // A 2 GiB job's shadow-map share: 512 MiB.
     let share = chiaro_core::budget::MemoryBudget::new(2 << 30).shadow_map_bytes();
     // The case, planned without allocating: 40 point lights at the
     // default 2048 texels, a cube of 6 x 2048^2 f32 each (96 MiB): five fit
     // in 512 MiB, the other 35 use shadow rays.
     let cube = 6 * 2048 * 2048 * 4u64;
-    let (by_ray, bytes) = crate::shadow::plan_budget(&vec![Some(cube); 40], share);
+    let (by_ray, bytes) = crate::shadows::plan_budget(&vec![Some(cube); 40], share);
     assert!(bytes <= share);
     assert_eq!(by_ray.iter().filter(|&&r| !r).count(), 5);
     assert!(by_ray[5..].iter().all(|&r| r));
@@ -765,7 +775,7 @@ fn shadow_maps_stay_within_their_budget() {
         warning.contains("lights 10, 11,") && warning.contains("39 use shadow rays"),
         "{warning}"
     );
-    let rays = crate::shadow::RayShadows::new(&ps);
+    let rays = crate::shadows::rays::RayShadows::new(&ps);
     let p = Vec3::new(-0.9, 0.0, 1.5);
     let ng = Vec3::Y;
     let (mut lit, mut dark) = (0, 0);
@@ -836,7 +846,7 @@ fn object_precision_lookup_just_outside_a_triangle_is_lit() {
         attenuation: Default::default(),
     });
     let ps = PreparedScene::new(&scene, PrepareOptions::default());
-    let o = crate::object_shadows::ObjectShadows::build(&ps, 0).expect("builds");
+    let o = crate::shadows::object_precision::ObjectShadows::build(&ps, 0).expect("builds");
     for (t, tri) in ps.triangles.iter().enumerate() {
         let v = tri.map(|i| ps.positions[i as usize]);
         let centre = (v[0] + v[1] + v[2]) / 3.0;
@@ -937,4 +947,81 @@ fn an_emitter_group_gets_shadow_rays_under_every_exact_method() {
             assert!(d < 1e-3, "{method:?}: {d}");
         }
     }
+}
+
+// Tests of the shadow-map views and of the exact methods' shadow-ray fallback.
+
+#[test]
+fn cube_faces_cover_their_directions() {
+    let views = cube_views(Vec3::ZERO, 16);
+    for d in [
+        Vec3::new(1.0, 0.3, -0.2),
+        Vec3::new(-0.2, -1.0, 0.5),
+        Vec3::new(0.1, 0.2, -0.9),
+    ] {
+        let v = &views[cube_face(d)];
+        let c = v.clip_from_world * d.extend(1.0);
+        assert!(c.w > 0.0);
+        assert!(
+            (c.x / c.w).abs() <= 1.0 && (c.y / c.w).abs() <= 1.0,
+            "{d} {c}"
+        );
+    }
+}
+
+/// The shadow-ray fallback of one-sample scan-line renders classifies
+/// points exactly as the object-precision fragments it replaces: on
+/// random points of every triangle of the shadow test scene they agree
+/// except within a hair of a fragment boundary, and both lit and
+/// shadowed points occur.
+#[test]
+fn ray_fallback_classifies_points_like_the_fragments() {
+    use chiaro_core::prepared::PrepareOptions;
+    use chiaro_core::sampling::{pixel_rng, uniform2};
+    let scene = chiaro_testkit::scenes::shadow_test(64);
+    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    let one = RenderSettings {
+        technique: chiaro_core::scene::Technique::Phong,
+        samples: 1,
+        ..RenderSettings::default()
+    };
+    let four = RenderSettings {
+        samples: 4,
+        ..one.clone()
+    };
+    let rays = scanline_fallbacks(&ps, &one).expect("ray fallback");
+    let frags = scanline_fallbacks(&ps, &four).expect("fragments");
+    let (mut agree, mut total, mut lit, mut dark) = (0u32, 0u32, 0u32, 0u32);
+    for (r, f) in rays.iter().zip(&frags) {
+        let (Some(r), Some(f)) = (r, f) else { continue };
+        assert!(matches!(r, ExactFallback::Ray { .. }));
+        assert!(matches!(f, ExactFallback::Fragments(_)));
+        for t in 0..ps.triangles.len() as u32 {
+            let [a, b, c] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+            for k in 0..32 {
+                let mut rng = pixel_rng(7, t, k, 0);
+                let u = uniform2(&mut rng);
+                let (u, v) = if u.x + u.y > 1.0 {
+                    (1.0 - u.x, 1.0 - u.y)
+                } else {
+                    (u.x, u.y)
+                };
+                let p = a + (b - a) * u + (c - a) * v;
+                let (x, y) = (r.lit_fraction(t, p), f.lit_fraction(t, p));
+                total += 1;
+                agree += (x == y) as u32;
+                lit += (y == 1.0) as u32;
+                dark += (y == 0.0) as u32;
+            }
+        }
+    }
+    assert!(
+        lit > total / 10 && dark > total / 20,
+        "lit {lit} dark {dark} of {total}"
+    );
+    assert!(
+        total - agree <= total / 500,
+        "{} of {total} points classified differently",
+        total - agree
+    );
 }

@@ -1,0 +1,362 @@
+//! Gouraud (1971) shading's vertex lighting for the scan converter: which
+//! vertices are lit, once each, and the vertex cache the shading pass fills.
+
+use crate::pipeline::NONE;
+use crate::pipeline::shading::Ctx;
+use crate::pipeline::shading::Split;
+use crate::pipeline::triangles::TriData;
+use crate::pipeline::triangles::needs_footprint;
+use crate::pipeline::visibility::Class;
+use crate::pipeline::visibility::TileVis;
+use glam::Vec3A;
+
+use chiaro_core::scene::ShadeMode;
+use chiaro_core::shading::{ShadingPoint, SurfaceMaterial};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Number of entries of the vertex illumination cache of [`TriCache`] (a
+/// power of two): a few tiles' worth of vertices.
+///
+/// [`TriCache`]: crate::pipeline::triangles::TriCache
+pub(crate) const VERTEX_CACHE_SIZE: usize = 4096;
+
+/// Per-triangle results of the visibility pass that flat and Gouraud
+/// shading need.
+#[derive(Default)]
+pub(crate) struct PolyShading {
+    /// Gouraud: per vertex, front side.
+    pub(crate) vertex_front: Vec<Split>,
+    /// Gouraud: per vertex, back side (two-sided surfaces seen from behind).
+    pub(crate) vertex_back: Vec<Split>,
+    /// Gouraud triangles whose corners could not use shared vertex values
+    /// (a vertex shared by faces of different materials).
+    pub(crate) corners: HashMap<u32, [Split; 3]>,
+    /// When every Gouraud sample is a [`lean_sample`] of one untextured
+    /// material lit by `point_lighting` ([`on_demand_gouraud`]): that
+    /// material, and the tables above stay empty. The shading pass then
+    /// illuminates each vertex when a triangle using it is first fetched
+    /// ([`TriCache`]), the same [`Ctx::vertex_split`] as
+    /// [`uniform_vertex_shading`] gives it; this skips finding the
+    /// visible vertices (a pass over every sample) and writing, then
+    /// gathering back, a table of every vertex's illumination. A vertex
+    /// is only illuminated again where the cache lost it (another shading
+    /// thread, or a slot taken by another vertex).
+    ///
+    /// [`lean_sample`]: crate::pipeline::shading::lean_sample
+    /// [`TriCache`]: crate::pipeline::triangles::TriCache
+    pub(crate) on_demand: Option<SurfaceMaterial>,
+}
+
+impl Ctx<'_, '_> {
+    /// [`Ctx::corner_split`] at vertex `v` of an untextured material whose
+    /// [`SurfaceMaterial`] is `base`, lit by the point-light model,
+    /// for any corner of any triangle with that material at `v`: the
+    /// model reads no geometric normal, and a corner's interpolated position
+    /// and colour (weights 1, 0, 0) are the vertex's own but for the sign of
+    /// a zero component, which changes no non-zero result (and the film's
+    /// sanitising makes every zero positive).
+    /// Requires `point_lighting` (without it the triangle would matter for
+    /// shadows).
+    pub(crate) fn vertex_split(&self, base: &SurfaceMaterial, v: usize, back: bool) -> Split {
+        debug_assert!(self.point_lighting.is_some());
+        let p = self.ps.positions[v];
+        let mut n = self.ps.normals[v];
+        if back {
+            n = -n;
+        }
+        let mut sm = *base;
+        sm.kd *= self.ps.colors[v];
+        let wo = (self.rays.eye - p).normalize_or_zero();
+        // No triangle: point lighting has no visibility to ask about.
+        self.illuminate_split(u32::MAX, &sm, &ShadingPoint { p, n, ng: n, wo })
+    }
+
+    /// Gouraud illumination at corner `k` of triangle `t`, on the front side
+    /// or (for the back of a two-sided surface) the back side.
+    pub(crate) fn corner_split(&self, t: u32, k: usize, back: bool) -> Split {
+        let (u, v) = match k {
+            0 => (0.0, 0.0),
+            1 => (1.0, 0.0),
+            _ => (0.0, 1.0),
+        };
+        let td = self.make_tri_data(t);
+        let hit = self.surface(&td, u, v, td.textured, true);
+        let vi = self.ps.triangles[t as usize][k] as usize;
+        let mut n = self.ps.normals[vi];
+        let mut ng = hit.ng;
+        if back {
+            n = -n;
+            ng = -ng;
+        }
+        let wo = (self.rays.eye - hit.p).normalize_or_zero();
+        let sp = ShadingPoint {
+            p: hit.p,
+            n,
+            ng,
+            wo,
+        };
+        self.illuminate_split(t, &self.untextured_material(&hit), &sp)
+    }
+}
+
+/// With the point-light model, the base material when every Gouraud
+/// triangle has the same material and it has no emission texture (the one
+/// texture vertex illumination reads).
+pub(crate) fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
+    ctx.point_lighting.as_ref()?;
+    let ps = ctx.ps;
+    let is_gouraud = |t: usize| ctx.mode(t as u32) == ShadeMode::Gouraud;
+    let first = (0..ps.triangles.len()).find(|&t| is_gouraud(t))?;
+    let m = ps.tri_material[first];
+    // (No scan when every triangle has the same material.)
+    let uniform = ctx.one_material == Some(m)
+        || ps
+            .tri_material
+            .par_iter()
+            .enumerate()
+            .all(|(t, &mt)| mt == m || !is_gouraud(t));
+    let base = ctx.bases.get(m.index())?;
+    (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
+}
+
+/// With [`uniform_gouraud`]'s material, true when every sample of a
+/// Gouraud triangle takes [`lean_sample`] (see [`Ctx::fetch_tri`]): a lean
+/// frame, and the material untextured, one-sided and opaque (no fragment
+/// is shaded by `shade_sample`), so its vertices are only ever needed on
+/// the front side and can be illuminated on demand
+/// ([`PolyShading::on_demand`]).
+///
+/// [`lean_sample`]: crate::pipeline::shading::lean_sample
+pub(crate) fn on_demand_gouraud(ctx: &Ctx<'_, '_>) -> bool {
+    let ps = ctx.ps;
+    let Some(t) = (0..ps.triangles.len() as u32).find(|&t| ctx.mode(t) == ShadeMode::Gouraud)
+    else {
+        return false;
+    };
+    let id = ps.tri_material[t as usize];
+    let m = ps.material(id);
+    ctx.lean_frame
+        && !needs_footprint(m)
+        && !m.two_sided
+        && !matches!(ctx.class.get(id.index()), Some(Class::Blend(_)))
+}
+
+/// Step 4 when [`uniform_gouraud`] gives the base material: the vertices of
+/// the visible Gouraud triangles, marked straight from the tiles' samples
+/// (once per run of samples on one triangle, every mark a store of `true`
+/// so that their order does not matter), each lit from its own position,
+/// normal and colour ([`Ctx::vertex_split`]), the same values as the
+/// general path of [`poly_shading`] gives them.
+pub(crate) fn uniform_vertex_shading(
+    ctx: &Ctx<'_, '_>,
+    vis: &[TileVis],
+    base: &SurfaceMaterial,
+) -> PolyShading {
+    let ps = ctx.ps;
+    let nv = ps.positions.len();
+    // Without two-sided materials no back is seen (Ctx::flipped).
+    let two_sided = ps.scene.materials.iter().any(|m| m.two_sided);
+    let flags = |n: usize| -> Vec<AtomicBool> { (0..n).map(|_| AtomicBool::new(false)).collect() };
+    let front = flags(nv);
+    let back = if two_sided { flags(nv) } else { Vec::new() };
+    let (any_front, any_back) = vis
+        .par_iter()
+        .map(|tv| {
+            let mut any = [false; 2];
+            let mut mark = |id: u32| {
+                if ctx.mode(id) != ShadeMode::Gouraud {
+                    return;
+                }
+                let flip = two_sided && ctx.flipped(id);
+                let side = if flip { &back } else { &front };
+                for &v in &ps.triangles[id as usize] {
+                    side[v as usize].store(true, Ordering::Relaxed);
+                }
+                any[usize::from(flip)] = true;
+            };
+            // A plain loop over the samples (an iterator chain costs more
+            // per sample), once per run of samples on one triangle, and
+            // not again for a triangle marked lately (its run on the row
+            // above): a direct-mapped table of the last ids marked.
+            let mut last = NONE;
+            let mut recent = [NONE; 256];
+            for &id in &tv.ids {
+                if id != last {
+                    last = id;
+                    let r = &mut recent[id as usize & 255];
+                    if id != NONE && *r != id {
+                        *r = id;
+                        mark(id);
+                    }
+                }
+            }
+            for f in &tv.frags {
+                mark(f.0);
+            }
+            (any[0], any[1])
+        })
+        .reduce(|| (false, false), |a, b| (a.0 | b.0, a.1 | b.1));
+    let shade_side = |need: &[AtomicBool], flip: bool| -> Vec<Split> {
+        need.par_iter()
+            .enumerate()
+            .map(|(v, n)| {
+                if n.load(Ordering::Relaxed) {
+                    ctx.vertex_split(base, v, flip)
+                } else {
+                    Split::default()
+                }
+            })
+            .collect()
+    };
+    let mut out = PolyShading::default();
+    if any_front || any_back {
+        out.vertex_front = shade_side(&front, false);
+    }
+    if any_back {
+        out.vertex_back = shade_side(&back, true);
+    }
+    out
+}
+
+/// Step 4: finds the visible Gouraud triangles and illuminates their
+/// vertices (flat polygons are illuminated with their [`TriData`]).
+pub(crate) fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
+    let ps = ctx.ps;
+    let mut out = PolyShading::default();
+    if ctx.object_mode.iter().all(|&m| m != ShadeMode::Gouraud) {
+        return out;
+    }
+    if let Some(base) = uniform_gouraud(ctx) {
+        if on_demand_gouraud(ctx) {
+            return PolyShading {
+                on_demand: Some(*base),
+                ..PolyShading::default()
+            };
+        }
+        return uniform_vertex_shading(ctx, vis, base);
+    }
+    // Visible triangles, marked in parallel (every mark stores `true`, so
+    // the order of the stores does not matter).
+    let seen: Vec<AtomicBool> = (0..ps.triangles.len())
+        .into_par_iter()
+        .map(|_| AtomicBool::new(false))
+        .collect();
+    vis.par_iter().for_each(|tv| {
+        let ids = tv.ids.iter().copied().filter(|&id| id != NONE);
+        for id in ids.chain(tv.frags.iter().map(|f| f.0)) {
+            seen[id as usize].store(true, Ordering::Relaxed);
+        }
+    });
+    // The visible Gouraud triangles in id order (deterministic) and whether
+    // their back is seen.
+    let nv = ps.positions.len();
+    let gouraud: Vec<(u32, bool)> = (0..ps.triangles.len() as u32)
+        .into_par_iter()
+        .filter(|&t| seen[t as usize].load(Ordering::Relaxed) && ctx.mode(t) == ShadeMode::Gouraud)
+        .map(|t| (t, ctx.flipped(t)))
+        .collect();
+    drop(seen);
+    if gouraud.is_empty() {
+        return out;
+    }
+    let mut need = vec![0u8; nv];
+    for &(t, back) in &gouraud {
+        for &v in &ps.triangles[t as usize] {
+            need[v as usize] |= if back { 2 } else { 1 };
+        }
+    }
+    // A representative (triangle, corner) for each vertex: the first
+    // Gouraud triangle using it, visible or not (so that a vertex's colour
+    // does not depend on what else is on screen, e.g. on the crop window);
+    // vertices shared by Gouraud faces of different materials are shaded
+    // per corner instead.
+    let mut rep = vec![(u32::MAX, 0u8); nv];
+    let mut vmat = vec![u32::MAX; nv];
+    let mut conflict = vec![false; nv];
+    for t in 0..ps.triangles.len() as u32 {
+        if ctx.mode(t) != ShadeMode::Gouraud {
+            continue;
+        }
+        let m = ps.tri_material[t as usize].0;
+        for (k, &v) in ps.triangles[t as usize].iter().enumerate() {
+            let v = v as usize;
+            if rep[v].0 == u32::MAX {
+                rep[v] = (t, k as u8);
+            }
+            if vmat[v] == u32::MAX {
+                vmat[v] = m;
+            } else if vmat[v] != m {
+                conflict[v] = true;
+            }
+        }
+    }
+    let shade_side = |side: u8| -> Vec<Split> {
+        (0..nv)
+            .into_par_iter()
+            .map(|v| {
+                let (t, k) = rep[v];
+                if need[v] & side == 0 || conflict[v] || t == u32::MAX {
+                    Split::default()
+                } else {
+                    ctx.corner_split(t, k as usize, side == 2)
+                }
+            })
+            .collect()
+    };
+    out.vertex_front = shade_side(1);
+    out.vertex_back = if need.iter().any(|&n| n & 2 != 0) {
+        shade_side(2)
+    } else {
+        Vec::new()
+    };
+    out.corners = gouraud
+        .par_iter()
+        .filter(|(t, _)| {
+            ps.triangles[*t as usize]
+                .iter()
+                .any(|&v| conflict[v as usize])
+        })
+        .map(|&(t, back)| (t, [0, 1, 2].map(|k| ctx.corner_split(t, k, back))))
+        .collect();
+    out
+}
+
+impl<'a> Ctx<'a, '_> {
+    /// The Gouraud corners of a lean triangle `d` ([`TriData::corners`]):
+    /// with [`PolyShading::on_demand`] each vertex lit when first met and
+    /// kept in the triangle cache's vertex slots (`vertex_ids`,
+    /// `vertex_splits`), else read from the vertex table of step 4.
+    #[inline]
+    pub(crate) fn lean_corners(
+        &self,
+        d: &mut TriData<'a>,
+        vertex_ids: &mut Vec<u32>,
+        vertex_splits: &mut Vec<[Vec3A; 2]>,
+        poly: &PolyShading,
+    ) {
+        if let Some(base) = &poly.on_demand {
+            if vertex_ids.is_empty() {
+                *vertex_ids = vec![u32::MAX; VERTEX_CACHE_SIZE];
+                *vertex_splits = vec![[Vec3A::ZERO; 2]; VERTEX_CACHE_SIZE];
+            }
+            let mut get = |i: usize| {
+                let slot = i & (VERTEX_CACHE_SIZE - 1);
+                if vertex_ids[slot] != i as u32 {
+                    let s = self.vertex_split(base, i, false);
+                    vertex_ids[slot] = i as u32;
+                    vertex_splits[slot] = [s.diffuse.into(), s.rest.into()];
+                }
+                vertex_splits[slot]
+            };
+            d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+        } else {
+            let get = |i: usize| {
+                let s = poly.vertex_front.get(i).copied().unwrap_or_default();
+                [s.diffuse.into(), s.rest.into()]
+            };
+            d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
+        }
+    }
+}

@@ -1,0 +1,764 @@
+//! Step 4: deferred shading of the visible samples per tile: flat shading,
+//! Gouraud (1971) interpolation and Phong (1975) normals, box-filtered.
+
+use crate::gouraud::PolyShading;
+use crate::pipeline::NONE;
+use crate::pipeline::triangles::TriData;
+use crate::pipeline::vertex::Rays;
+use crate::pipeline::visibility::{Class, TileVis};
+use crate::shadows::Shadows;
+use crate::shadows::rays::RayShadows;
+use chiaro_core::error::CoreError;
+use chiaro_core::film::{Film, TileRect};
+use chiaro_core::progress::Progress;
+use chiaro_core::shading::EmitterGroup;
+use rayon::prelude::*;
+use std::sync::{Mutex, PoisonError};
+
+use crate::pipeline::triangles::TriCache;
+
+use crate::abuffer::composite;
+use crate::pipeline::exact;
+use chiaro_core::film::TilePixels;
+use chiaro_core::prepared::{PreparedScene, SurfaceHit};
+use chiaro_core::scene::{AlphaMode, MaterialId};
+use chiaro_core::scene::{Material, RenderSettings, ShadeMode};
+use chiaro_core::shading::texture::{background_radiance, environment_radiance};
+use chiaro_core::shading::{
+    LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize, shade_local,
+    shade_local_split,
+};
+use chiaro_core::shading::{PointLighting, SampleKey, group_jitter};
+use glam::{Vec2, Vec3, Vec3A};
+use std::cell::Cell;
+
+/// Illumination split into the part proportional to the diffuse colour and
+/// the rest: the colour is `diffuse * texture + rest`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct Split {
+    pub(crate) diffuse: Vec3,
+    pub(crate) rest: Vec3,
+}
+
+impl Split {
+    #[inline]
+    pub(crate) fn lerp3(s: [Split; 3], w: Vec3) -> Split {
+        // On SSE vectors: the same operations lane by lane.
+        let l = |f: fn(&Split) -> Vec3| {
+            let [a, b, c] = [&s[0], &s[1], &s[2]].map(|x| Vec3A::from(f(x)));
+            Vec3::from(a * w.x + b * w.y + c * w.z)
+        };
+        Split {
+            diffuse: l(|x| x.diffuse),
+            rest: l(|x| x.rest),
+        }
+    }
+}
+
+/// Everything the shading passes share.
+pub(crate) struct Ctx<'a, 's> {
+    pub(crate) ps: &'a PreparedScene<'s>,
+    pub(crate) settings: &'a RenderSettings,
+    pub(crate) rays: Rays,
+    pub(crate) lighting: LocalLighting<'a>,
+    pub(crate) object_mode: Vec<ShadeMode>,
+    pub(crate) shadows: Shadows,
+    /// Shadow rays for the samples of a grouped emissive mesh under shadow
+    /// maps and the exact methods (its lights get no maps, volumes or
+    /// fragments), and for lights whose volumes did not fit the budget.
+    pub(crate) group_rays: Option<RayShadows>,
+    /// Per material: how it is drawn ([`Class`]).
+    pub(crate) class: Vec<Class>,
+    /// `lighting` specialised, when there are no shadows and only point
+    /// and ambient lights (bit-identical to `shade_local`).
+    pub(crate) point_lighting: Option<PointLighting>,
+    /// `SurfaceMaterial::from_material` of each scene material, by index.
+    pub(crate) bases: Vec<SurfaceMaterial>,
+    /// True when the frame allows [`lean_sample`]: no environment and no
+    /// depth cueing (Phong samples also need `point_lighting`).
+    pub(crate) lean_frame: bool,
+    /// The shading mode of every object, when they all have the same one,
+    /// and the material of every triangle, when it is the same: per-triangle
+    /// lookups (cache misses) that the triangle cache then skips.
+    pub(crate) one_mode: Option<ShadeMode>,
+    pub(crate) one_material: Option<MaterialId>,
+}
+
+impl Ctx<'_, '_> {
+    pub(crate) fn mode(&self, t: u32) -> ShadeMode {
+        if let Some(m) = self.one_mode {
+            return m;
+        }
+        let o = self.ps.tri_object[t as usize] as usize;
+        self.object_mode.get(o).copied().unwrap_or(ShadeMode::Phong)
+    }
+
+    pub(crate) fn material_of(&self, t: u32) -> &Material {
+        self.ps.material(self.ps.tri_material[t as usize])
+    }
+
+    /// True if the viewer sees the back of a two-sided triangle `t` (its
+    /// normals are then flipped).
+    pub(crate) fn flipped(&self, t: u32) -> bool {
+        if !self.material_of(t).two_sided {
+            return false;
+        }
+        let p0 = self.ps.positions[self.ps.triangles[t as usize][0] as usize];
+        self.ps.face_normal(t).dot(self.rays.eye - p0) < 0.0
+    }
+
+    /// `shade_local` with area lights sampled at the strata centres and the
+    /// visibility of the shadow method; `counts` are the shadow-volume
+    /// counts of this sample, one per light (absent: no volume shadows).
+    #[inline]
+    pub(crate) fn illuminate(
+        &self,
+        tri: u32,
+        pixel: Option<(u32, u32)>,
+        m: &SurfaceMaterial,
+        sp: &ShadingPoint,
+        counts: Option<&[i32]>,
+    ) -> Vec3 {
+        if let Some(pl) = &self.point_lighting {
+            return pl.shade(m, sp);
+        }
+        let key = match pixel {
+            Some((x, y)) => SampleKey::Pixel(x, y),
+            None => SampleKey::Point(sp.p),
+        };
+        if matches!(self.shadows, Shadows::None) {
+            // Every light sample is visible: closures the compiler inlines.
+            return shade_local(
+                m,
+                sp,
+                &self.lighting,
+                |li, i| self.jitter(key, li, i),
+                |_, _| Vec3::ONE,
+            );
+        }
+        let current = Cell::new(0u32);
+        shade_local(
+            m,
+            sp,
+            &self.lighting,
+            |li, i| {
+                current.set(i);
+                self.jitter(key, li, i)
+            },
+            |li, s| self.visibility(li, current.get(), tri, pixel, sp, s, counts),
+        )
+    }
+
+    /// The jitter of sample `i` of light `li` at the shading point `key`:
+    /// area lights at their strata centres, an emitter group's picks from
+    /// the jitter sequence Whitted shares ([`group_jitter`]).
+    #[inline]
+    pub(crate) fn jitter(&self, key: SampleKey, li: usize, i: u32) -> Vec2 {
+        match self.lighting.group {
+            Some(g) if g.contains(li) => group_jitter(self.settings.seed, key, i),
+            _ => Vec2::splat(0.5),
+        }
+    }
+
+    /// The illumination split for flat and Gouraud shading: one evaluation
+    /// of [`shade_local_split`], whose `rest` is exactly the illumination
+    /// with `kd = 0`.
+    pub(crate) fn illuminate_split(
+        &self,
+        tri: u32,
+        m: &SurfaceMaterial,
+        sp: &ShadingPoint,
+    ) -> Split {
+        if let Some(pl) = &self.point_lighting {
+            let [total, rest] = pl.shade_split(m, sp);
+            return Split {
+                diffuse: total - rest,
+                rest,
+            };
+        }
+        let current = Cell::new(0u32);
+        let [total, rest] = shade_local_split(
+            m,
+            sp,
+            &self.lighting,
+            |li, i| {
+                current.set(i);
+                self.jitter(SampleKey::Point(sp.p), li, i)
+            },
+            |li, s| self.visibility(li, current.get(), tri, None, sp, s, None),
+        );
+        Split {
+            diffuse: total - rest,
+            rest,
+        }
+    }
+
+    /// Untextured material (vertex colour applied) at a surface point: the
+    /// diffuse texture is applied per pixel by flat and Gouraud shading.
+    pub(crate) fn untextured_material(&self, hit: &SurfaceHit) -> SurfaceMaterial {
+        let m = self.ps.material(hit.material);
+        let mut sm = SurfaceMaterial::with_vertex_color(m, hit.color);
+        if let Some(t) = m.emission_texture {
+            let tc = PreparedScene::tex_coord(hit, Vec2::ZERO, Vec2::ZERO);
+            sm.emission *= self.ps.eval_texture(t, &tc).truncate();
+        }
+        sm
+    }
+
+    /// `SurfaceMaterial::from_material` of the triangle's material.
+    #[inline]
+    pub(crate) fn base(&self, td: &TriData<'_>) -> SurfaceMaterial {
+        match self.bases.get(td.material_id.index()) {
+            Some(b) => *b,
+            None => SurfaceMaterial::from_material(td.material),
+        }
+    }
+
+    /// Flat shading of triangle `td`: once, at the centroid, with the face
+    /// normal. The same values as `surface` at the centroid, `flipped` and
+    /// `untextured_material` give, from the cached triangle.
+    pub(crate) fn flat_split(&self, td: &TriData<'_>) -> Split {
+        let t = td.t;
+        let third = 1.0 / 3.0;
+        let (p, sm) = if td.textured {
+            let hit = self.surface(td, third, third, true, true);
+            (hit.p, self.untextured_material(&hit))
+        } else {
+            // surface(): w = 1 - u - v, then the same interpolations.
+            let w = 1.0 - third - third;
+            let mut sm = self.base(td);
+            sm.kd *= Vec3::from(td.c[0] * w + td.c[1] * third + td.c[2] * third);
+            (
+                Vec3::from(td.p[0] * w + td.p[1] * third + td.p[2] * third),
+                sm,
+            )
+        };
+        let mut n = Vec3::from(td.ng);
+        // flipped(t), with the cached face normal (PreparedScene::face_normal).
+        if td.material.two_sided && td.ng.dot(Vec3A::from(self.rays.eye) - td.p[0]) < 0.0 {
+            n = -n;
+        }
+        let wo = (self.rays.eye - p).normalize_or_zero();
+        let sp = ShadingPoint { p, n, ng: n, wo };
+        self.illuminate_split(t, &sm, &sp)
+    }
+}
+
+/// What shading one sample produced.
+#[derive(Clone, Copy)]
+pub(crate) struct SampleResult {
+    pub(crate) color: Vec3,
+    pub(crate) depth: f32,
+    pub(crate) normal: Vec3,
+    /// The part of `color` from specular reflection (and emission), when
+    /// asked for: what interpolated transparency keeps unattenuated.
+    pub(crate) specular: Vec3,
+    /// A BLEND point's straight-through transmission `1 - alpha` (its
+    /// colour is premultiplied by alpha in the surface layer).
+    pub(crate) coverage_kt: Option<Vec3>,
+}
+
+/// Step 5 for one tile: the box-filtered pixels and, with `keep_samples`,
+/// the colour of every sample of the window (indexed like `tv.ids`; empty
+/// otherwise) for the tent filter.
+pub(crate) fn shade_tile<'a>(
+    ctx: &Ctx<'a, '_>,
+    poly: &PolyShading,
+    tv: &TileVis,
+    offsets: &[[i32; 2]],
+    keep_samples: bool,
+    cache: &mut TriCache<'a>,
+) -> (TilePixels, Vec<Vec3>) {
+    let rect = tv.rect;
+    let mut out = TilePixels::new(rect);
+    let spp = offsets.len();
+    let mut kept = if keep_samples {
+        vec![Vec3::ZERO; tv.ids.len()]
+    } else {
+        Vec::new()
+    };
+    let inv_spp = 1.0 / spp as f32;
+    let sub = crate::raster::SUBPIXEL as f32;
+    let nl = match &ctx.shadows {
+        Shadows::Volume(v) => v.slot.iter().flatten().count(),
+        _ => 0,
+    };
+    let counts_of = |p: usize| {
+        (nl > 0)
+            .then(|| tv.counts.get(p * nl..(p + 1) * nl))
+            .flatten()
+    };
+    let env_background = ctx
+        .ps
+        .scene
+        .environment
+        .as_ref()
+        .is_some_and(|e| e.as_background);
+    let win = tv.window;
+    // The row- and column-only parts of the sample directions (Rays::dir),
+    // per window column (or row) and sample.
+    let sample_x = |px: u32, o: &[i32; 2]| (rect.x + px) as f32 + o[0] as f32 / sub;
+    let sample_y = |py: u32, o: &[i32; 2]| (rect.y + py) as f32 + o[1] as f32 / sub;
+    let (wx0, wy0) = (win.x0 - rect.x, win.y0 - rect.y);
+    let columns: Vec<Vec3A> = (wx0..win.x1 - rect.x)
+        .flat_map(|px| {
+            offsets
+                .iter()
+                .map(move |o| ctx.rays.column(sample_x(px, o)))
+        })
+        .collect();
+    let rows: Vec<Vec3A> = (wy0..win.y1 - rect.y)
+        .flat_map(|py| offsets.iter().map(move |o| ctx.rays.row(sample_y(py, o))))
+        .collect();
+    if spp == 1 && !keep_samples && tv.start.is_empty() {
+        // One opaque sample per pixel, none kept: the loop below with its
+        // sum and nearest-depth choice folded (the sanitised colour c is
+        // 0 + c times 1; the sample is nearest when its depth is below
+        // infinity), and the direction made only where it is read.
+        let background = sanitize(ctx.ps.scene.background);
+        let tw = rect.width as usize;
+        let o = &offsets[0];
+        for (py, &row) in (wy0..win.y1 - rect.y).zip(&rows) {
+            let line = py as usize * tw;
+            for (px, &column) in (wx0..win.x1 - rect.x).zip(&columns) {
+                let pi = line + px as usize;
+                let id = tv.ids[pi];
+                if id == NONE {
+                    out.color[pi] = if env_background {
+                        let dir = Rays::dir_from(column, row);
+                        sanitize(background_radiance(ctx.ps.scene, dir.into()))
+                    } else {
+                        background
+                    };
+                    continue;
+                }
+                let dir = Rays::dir_from(column, row);
+                let td = ctx.tri_data(id, cache, poly);
+                let r = if td.lean {
+                    lean_sample(ctx, td, dir)
+                } else {
+                    let (sx, sy) = (sample_x(px, o), sample_y(py, o));
+                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(pi), false)
+                };
+                out.color[pi] = sanitize(r.color);
+                if r.depth < f32::INFINITY {
+                    out.depth[pi] = r.depth;
+                    out.normal[pi] = r.normal;
+                }
+            }
+        }
+        return (out, kept);
+    }
+    for (py, rows) in (wy0..win.y1 - rect.y).zip(rows.chunks_exact(spp)) {
+        for (px, columns) in (wx0..win.x1 - rect.x).zip(columns.chunks_exact(spp)) {
+            let pi = (py * rect.width + px) as usize;
+            let mut sum = Vec3::ZERO;
+            let mut best_depth = f32::INFINITY;
+            let mut best_normal = Vec3::ZERO;
+            for (s, ((o, &column), &row)) in offsets.iter().zip(columns).zip(rows).enumerate() {
+                let sx = sample_x(px, o);
+                let sy = sample_y(py, o);
+                let dir = Rays::dir_from(column, row);
+                let i = pi * spp + s;
+                let id = tv.ids[i];
+                let mut r = if id == NONE {
+                    SampleResult {
+                        color: if env_background {
+                            background_radiance(ctx.ps.scene, dir.into())
+                        } else {
+                            ctx.ps.scene.background
+                        },
+                        depth: f32::INFINITY,
+                        normal: Vec3::ZERO,
+                        specular: Vec3::ZERO,
+                        coverage_kt: None,
+                    }
+                } else {
+                    let td = ctx.tri_data(id, cache, poly);
+                    if td.lean {
+                        lean_sample(ctx, td, dir)
+                    } else {
+                        shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
+                    }
+                };
+                // Transparent fragments, composited back to front.
+                composite(ctx, poly, tv, i, sx, sy, dir, &mut r, cache, counts_of);
+                let c = sanitize(r.color);
+                if keep_samples {
+                    kept[i] = c;
+                }
+                sum += c;
+                if r.depth < best_depth {
+                    best_depth = r.depth;
+                    best_normal = r.normal;
+                }
+            }
+            out.color[pi] = sum * inv_spp;
+            out.depth[pi] = best_depth;
+            out.normal[pi] = best_normal;
+        }
+    }
+    (out, kept)
+}
+
+/// [`shade_sample`] of an opaque sample (no specular part asked for) of a
+/// [`TriData::lean`] triangle: untextured, one-sided, without reflection
+/// map or depth cueing, and for Phong lit by `point_lighting` (flat and
+/// Gouraud samples only interpolate what was lit with any lights and
+/// shadows). The same
+/// floating-point operations in the same order as `shade_sample` for that
+/// case, without what it does not read (uv footprint, the view direction
+/// of flat and Gouraud samples, per-corner lookups).
+#[inline(always)]
+pub(crate) fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
+    let b = td.bary(dir).unwrap_or(Vec2::splat(1.0 / 3.0));
+    let (u, v) = (b.x, b.y);
+    // Ctx::surface: w = 1 - u - v and the same interpolations.
+    let w = 1.0 - u - v;
+    let p = td.p[0] * w + td.p[1] * u + td.p[2] * v;
+    let eye = Vec3A::from(ctx.rays.eye);
+    let depth = (p - eye).length();
+    let ng = td.ng;
+    let ns = || {
+        let ns = exact::try_normalize(td.n[0] * w + td.n[1] * u + td.n[2] * v).unwrap_or(ng);
+        if ns.dot(ng) < 0.0 { ng } else { ns }
+    };
+    let (color, normal) = match td.mode {
+        ShadeMode::Phong => {
+            let ns = ns();
+            let color = td.c[0] * w + td.c[1] * u + td.c[2] * v;
+            // exact::normalize_or_zero(eye - p): |eye - p| is `depth`, bit
+            // for bit (the same squares summed in the same order).
+            let rcp = 1.0 / depth;
+            let wo = if rcp.is_finite() && rcp > 0.0 {
+                (eye - p) * rcp
+            } else {
+                Vec3A::ZERO
+            };
+            let sp = ShadingPoint {
+                p: p.into(),
+                n: ns.into(),
+                ng: ng.into(),
+                wo: wo.into(),
+            };
+            let c = match (&ctx.point_lighting, ctx.bases.get(td.material_id.index())) {
+                (Some(pl), Some(base)) => pl.shade_kd(base, base.kd * Vec3::from(color), &sp),
+                // Not reached: TriData::lean checked both.
+                _ => Vec3::ZERO,
+            };
+            (c, ns)
+        }
+        ShadeMode::Gouraud => {
+            // Split::lerp3 and `diffuse * 1 + rest` on the corners' SSE
+            // vectors: the same operations lane by lane.
+            let [a, b, c] = td.corners;
+            let diffuse = a[0] * w + b[0] * u + c[0] * v;
+            let rest = a[1] * w + b[1] * u + c[1] * v;
+            ((diffuse * Vec3A::ONE + rest).into(), ns())
+        }
+        ShadeMode::Flat => (td.flat.diffuse * Vec3::ONE + td.flat.rest, ng),
+    };
+    SampleResult {
+        color,
+        depth,
+        normal: normal.into(),
+        specular: Vec3::ZERO,
+        coverage_kt: None,
+    }
+}
+
+/// Shades the sample at film position `(sx, sy)` (direction `dir`) where
+/// triangle `t` is visible, by the triangle's shading mode. `counts` are the
+/// point's shadow-volume counts per light; with `want_specular` the result
+/// also holds its non-diffuse part.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn shade_sample(
+    ctx: &Ctx<'_, '_>,
+    poly: &PolyShading,
+    td: &TriData,
+    sx: f32,
+    sy: f32,
+    dir: Vec3A,
+    counts: Option<&[i32]>,
+    want_specular: bool,
+) -> SampleResult {
+    let ps = ctx.ps;
+    let eye = ctx.rays.eye;
+    let t = td.t;
+    let [i0, i1, i2] = td.idx;
+    // Perspective-correct barycentrics of the sample and of its neighbours.
+    let third = Vec2::splat(1.0 / 3.0);
+    let b = td.bary(dir).unwrap_or(third);
+    let material = td.material;
+    let needs_footprint = td.textured;
+    let hit = ctx.surface(td, b.x, b.y, needs_footprint, td.mode != ShadeMode::Flat);
+    let (duv_dx, duv_dy) = if needs_footprint {
+        let uv_at = |x: f32, y: f32| {
+            let bb = td.bary(ctx.rays.dir(x, y).into()).unwrap_or(b);
+            ps.uvs[i0] * (1.0 - bb.x - bb.y) + ps.uvs[i1] * bb.x + ps.uvs[i2] * bb.y
+        };
+        let dx = uv_at(sx + 1.0, sy) - hit.uv;
+        let dy = uv_at(sx, sy + 1.0) - hit.uv;
+        if dx.is_finite() && dy.is_finite() {
+            (dx, dy)
+        } else {
+            (Vec2::ZERO, Vec2::ZERO)
+        }
+    } else {
+        (Vec2::ZERO, Vec2::ZERO)
+    };
+    let (eye_a, p_a) = (Vec3A::from(eye), Vec3A::from(hit.p));
+    // Flat and Gouraud samples read the view direction only to tell the
+    // back of a two-sided surface and for the reflection map.
+    let wo = if td.mode == ShadeMode::Phong
+        || material.two_sided
+        || ctx.ps.scene.environment.is_some()
+    {
+        Vec3::from(exact::normalize_or_zero(eye_a - p_a))
+    } else {
+        Vec3::ZERO
+    };
+    let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
+    let sign = if flip { -1.0 } else { 1.0 };
+    let mut specular = Vec3::ZERO;
+    let mut coverage_kt = None;
+    let (color, n, kr) = match td.mode {
+        ShadeMode::Phong if !needs_footprint && !want_specular && ctx.point_lighting.is_some() => {
+            // The common case without copying the material: untextured (so
+            // no bump or normal map), the point-light model, no pixel index.
+            let base = ctx.bases.get(td.material_id.index());
+            let owned;
+            let base = match base {
+                Some(b) => b,
+                None => {
+                    owned = ctx.base(td);
+                    &owned
+                }
+            };
+            let n = hit.ns * sign;
+            let sp = ShadingPoint {
+                p: hit.p,
+                n,
+                ng: hit.ng * sign,
+                wo,
+            };
+            let c = match &ctx.point_lighting {
+                Some(pl) => pl.shade_kd(base, base.kd * hit.color, &sp),
+                // Not reached: the arm's guard checked `point_lighting`.
+                None => ctx.illuminate(
+                    t,
+                    None,
+                    &SurfaceMaterial {
+                        kd: base.kd * hit.color,
+                        ..*base
+                    },
+                    &sp,
+                    counts,
+                ),
+            };
+            (c, n, base.kr)
+        }
+        ShadeMode::Phong => {
+            let (sm, n) = if needs_footprint {
+                // The surface layer: textures, normal and bump maps.
+                let (dpdu, dpdv) = ps.triangle_dpduv(t);
+                let ss = ps.shading_surface_at(hit, dpdu, dpdv, duv_dx, duv_dy);
+                if material.alpha_mode == AlphaMode::Blend {
+                    coverage_kt = Some(ss.material.kt);
+                }
+                (ss.material, ss.ns)
+            } else {
+                // The layer without textures or maps: the vertex colour only.
+                let mut sm = ctx.base(td);
+                sm.kd *= hit.color;
+                (sm, hit.ns)
+            };
+            let n = n * sign;
+            let sp = ShadingPoint {
+                p: hit.p,
+                n,
+                ng: hit.ng * sign,
+                wo,
+            };
+            // A sample at a pixel centre (one sample per pixel) names its pixel.
+            let pixel = (sx.fract() == 0.5 && sy.fract() == 0.5 && sx >= 0.0 && sy >= 0.0)
+                .then_some((sx as u32, sy as u32));
+            let c = ctx.illuminate(t, pixel, &sm, &sp, counts);
+            if want_specular {
+                let diffuse_only = SurfaceMaterial {
+                    ks: Vec3::ZERO,
+                    emission: Vec3::ZERO,
+                    ..sm
+                };
+                specular = c - ctx.illuminate(t, pixel, &diffuse_only, &sp, counts);
+            }
+            (c, n, sm.kr)
+        }
+        ShadeMode::Gouraud => {
+            let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
+            // (No hashing when no triangle needed per-corner values.)
+            let corners = if poly.corners.is_empty() {
+                None
+            } else {
+                poly.corners.get(&t)
+            };
+            let split = match corners {
+                Some(c) => Split::lerp3(*c, w),
+                None => {
+                    let table = if flip {
+                        &poly.vertex_back
+                    } else {
+                        &poly.vertex_front
+                    };
+                    let get = |i: usize| table.get(i).copied().unwrap_or_default();
+                    Split::lerp3([get(i0), get(i1), get(i2)], w)
+                }
+            };
+            // diffuse_texture_factor: one without a texture.
+            let tex = if material.texture.is_some() {
+                let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
+                ps.diffuse_texture_factor(hit.material, &tc)
+            } else {
+                Vec3::ONE
+            };
+            specular = split.rest;
+            (
+                split.diffuse * tex + split.rest,
+                hit.ns * sign,
+                material.reflect,
+            )
+        }
+        ShadeMode::Flat => {
+            let split = td.flat;
+            let tex = if material.texture.is_some() {
+                let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
+                ps.diffuse_texture_factor(hit.material, &tc)
+            } else {
+                Vec3::ONE
+            };
+            specular = split.rest;
+            (
+                split.diffuse * tex + split.rest,
+                hit.ng * sign,
+                material.reflect,
+            )
+        }
+    };
+    let mut color = color;
+    // Reflection map: the environment in the mirror direction, weighted by kr.
+    if ctx.ps.scene.environment.is_some() && kr.max_element() > 0.0 {
+        color += kr * environment_radiance(ctx.ps.scene, reflect(wo, n));
+    }
+    let depth = (p_a - eye_a).length();
+    if let Some(cue) = &ctx.settings.depth_cue {
+        color = depth_cue(color, depth, cue);
+    }
+    SampleResult {
+        color,
+        depth,
+        normal: n,
+        specular,
+        coverage_kt,
+    }
+}
+
+impl<'a, 's> Ctx<'a, 's> {
+    /// The shading context of a frame: `mode` is the default shading mode,
+    /// `emitters` the grouped emissive meshes, `class` how each material is
+    /// drawn.
+    pub(crate) fn new(
+        ps: &'a PreparedScene<'s>,
+        settings: &'a RenderSettings,
+        mode: ShadeMode,
+        emitters: &'a Option<EmitterGroup>,
+        shadows: Shadows,
+        class: Vec<Class>,
+    ) -> Self {
+        let scene = ps.scene;
+        let (w, h) = (settings.width, settings.height);
+        let object_mode: Vec<ShadeMode> = scene
+            .objects
+            .iter()
+            .map(|o| o.shade_mode.unwrap_or(mode))
+            .collect();
+        let group_rays = (emitters.is_some()
+            && !matches!(shadows, Shadows::None | Shadows::Ray(_))
+            || matches!(&shadows, Shadows::Volume(v) if v.by_ray.contains(&true)))
+        .then(|| RayShadows::new(ps));
+        Ctx {
+            ps,
+            settings,
+            rays: Rays::new(scene, w, h),
+            lighting: LocalLighting {
+                lights: &ps.lights,
+                area_samples: settings.light_samples.max(1),
+                ambient: true,
+                group: emitters.as_ref(),
+            },
+            group_rays,
+            one_mode: object_mode
+                .first()
+                .copied()
+                .filter(|&m| object_mode.iter().all(|&o| o == m)),
+            object_mode,
+            point_lighting: if matches!(shadows, Shadows::None) {
+                PointLighting::new(&ps.lights, true)
+            } else {
+                None
+            },
+            bases: ps
+                .scene
+                .materials
+                .iter()
+                .map(SurfaceMaterial::from_material)
+                .collect(),
+            lean_frame: scene.environment.is_none() && settings.depth_cue.is_none(),
+            one_material: ps.tri_material.first().copied().filter(|&m| {
+                // Parallel, and stops at the first other material.
+                ps.tri_material.par_iter().all(|&mt| mt == m)
+            }),
+            shadows,
+            class,
+        }
+    }
+}
+
+/// Step 4 over the tiles of `vis`: each tile is written into the film as
+/// soon as it is shaded, so that its buffers are freed and reused by the
+/// next tile instead of every tile's pixels being alive (and fresh pages)
+/// at once. With `tent`, returns the sample colours of every tile for the
+/// resolve.
+pub(crate) fn shade_tiles(
+    ctx: &Ctx<'_, '_>,
+    poly: &PolyShading,
+    vis: &[TileVis],
+    offsets: &[[i32; 2]],
+    tent: bool,
+    film: &mut Film,
+    progress: &dyn Progress,
+) -> Result<Vec<(TileRect, Vec<Vec3>)>, CoreError> {
+    let film = Mutex::new(film);
+    let kept: Mutex<Vec<(TileRect, Vec<Vec3>)>> = Mutex::new(Vec::new());
+    // One triangle cache per shading job, kept from tile to tile.
+    let finished = vis
+        .par_iter()
+        .try_for_each_init(TriCache::new, |cache, tv| {
+            if progress.cancelled() {
+                return Err(CoreError::Cancelled);
+            }
+            let (pixels, samples) = shade_tile(ctx, poly, tv, offsets, tent, cache);
+            film.lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .write_tile(&pixels);
+            if tent {
+                kept.lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push((pixels.rect, samples));
+            }
+            progress.advance(1);
+            Ok(())
+        });
+    finished?;
+    let kept = kept.into_inner().unwrap_or_else(PoisonError::into_inner);
+    Ok(kept)
+}

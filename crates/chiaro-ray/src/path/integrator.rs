@@ -1,0 +1,507 @@
+//! The scalar path integrator: one path at a time, the unidirectional path
+//! tracer of Kajiya (1986) with Russian roulette (Arvo and Kirk 1990).
+
+use super::lanes;
+use super::lights::{NO_LIGHT, TriLight};
+use chiaro_core::accel::{Accelerator, Hit};
+use chiaro_core::geometry::{Ray, offset_ray_origin};
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::sampling::{SobolSampler, power_heuristic};
+use chiaro_core::scene::{AreaShape, Light, RenderSettings};
+use chiaro_core::shading::texture::EnvironmentLight;
+use chiaro_core::shading::{Bsdf, BsdfSample, SurfaceMaterial};
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// The path tracer over one prepared scene.
+pub(super) struct PathTracer<'a, 's> {
+    pub(super) prepared: &'a PreparedScene<'s>,
+    pub(super) accel: &'a dyn Accelerator,
+    /// Lights that next-event estimation samples (not ambient).
+    pub(super) lights: Vec<&'a Light>,
+    /// The environment map as a light: light number `lights.len()`, after
+    /// `lights` (`None` without a map, or when it is black).
+    pub(super) env: Option<EnvironmentLight<'s>>,
+    /// Cumulative selection probabilities of `lights` and then `env`.
+    pub(super) light_cdf: Vec<f32>,
+    /// Selection probability of each light (`light_cdf[i] - light_cdf[i - 1]`).
+    pub(super) light_pick: Vec<f32>,
+    /// Sampling data of each light in `lights` that is an emissive triangle
+    /// (`None` for the others, sampled through `sample_light`, and for the
+    /// environment).
+    pub(super) tri_lights: Vec<Option<TriLight>>,
+    /// `tri_lights` without the `Option`s when every light is an emissive
+    /// triangle and there are at most `lanes::SELECT_LIGHTS` of them (the
+    /// lock-step kernel then gathers each lane's light by selects over
+    /// this list); empty otherwise.
+    pub(super) select_lights: Vec<TriLight>,
+    /// Light index (in `lights`) of each triangle, `NO_LIGHT` when it does not emit.
+    pub(super) triangle_light: Vec<u32>,
+    /// Per-triangle geometry cached for the common untextured case.
+    tris: Vec<TriInfo>,
+    /// Per-material constants, by material id.
+    pub(super) materials: Vec<MaterialInfo>,
+    pub(super) max_depth: u32,
+    pub(super) rr_depth: u32,
+}
+
+/// Largest difference in any coordinate between the unit vertex normals of
+/// a triangle whose shading normal is taken as constant (16 float ulps at
+/// 1: far below any intended smoothing, far above rounding).
+const FLAT_NORMAL_TOLERANCE: f32 = 1e-6;
+
+/// What shading needs of a triangle whose material has no texture and whose
+/// vertices have no colours (`plain`): the surface is then its position,
+/// normals and the material's constants.
+#[derive(Clone, Copy)]
+struct TriInfo {
+    ng: Vec3,
+    /// The shading normal when the three vertex normals are equal (within
+    /// `FLAT_NORMAL_TOLERANCE`).
+    flat_ns: Option<Vec3>,
+    plain: bool,
+}
+
+/// A material's parameters and the constants derived from them: per
+/// material for the untextured case, per hit point otherwise.
+pub(super) struct MaterialInfo {
+    /// The parameters and their lobe choice.
+    pub(super) bsdf: Bsdf,
+    pub(super) two_sided: bool,
+    /// True when the emission is positive in some channel.
+    pub(super) emissive: bool,
+    /// True when textures, a bump map or a normal map change the
+    /// parameters or the shading normal per point.
+    pub(super) textured: bool,
+    /// True when the only lobe is Lambert's (no glossy, mirror or
+    /// transmission lobe), chosen with probability 1 and weighted by `kd`:
+    /// the vertices that [`lanes`] shades.
+    pub(super) lambert: bool,
+}
+
+impl MaterialInfo {
+    fn new(surface: SurfaceMaterial, m: &chiaro_core::scene::Material) -> Self {
+        let bsdf = Bsdf::new(surface, m.fresnel);
+        let lobes = &bsdf.lobes;
+        let [wd, ws, wr, wt] = lobes.weights;
+        // (The lone lobe's probability is wd / wd = 1 and its weight kd / 1
+        // = kd exactly; the kernel relies on both.)
+        let lambert = wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular;
+        Self {
+            lambert: lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd,
+            emissive: surface.emission.max_element() > 0.0,
+            bsdf,
+            two_sided: m.two_sided,
+            textured: m.is_textured() || m.bump.is_some() || m.normal_map.is_some(),
+        }
+    }
+}
+
+/// The geometry of a path vertex.
+#[derive(Clone, Copy)]
+pub(super) struct Vertex {
+    /// Position, world space.
+    pub(super) p: Vec3,
+    /// Unit geometric normal (front side).
+    pub(super) ng: Vec3,
+    /// Unit shading normal (front side).
+    pub(super) ns: Vec3,
+}
+
+/// A path between two bounces: what the scalar loop carries from one
+/// vertex to the next.
+#[derive(Clone, Copy)]
+pub(super) struct PathState {
+    /// The ray to trace next.
+    pub(super) ray: Ray,
+    /// Its segment number (0 = the camera ray).
+    pub(super) depth: u32,
+    /// Throughput.
+    pub(super) beta: Vec3,
+    /// Radiance gathered so far.
+    pub(super) l: Vec3,
+    /// MIS state of the previous bounce: its pdf (0 = delta or camera).
+    pub(super) prev_pdf: f32,
+    /// The previous vertex (the camera for a camera ray).
+    pub(super) prev_p: Vec3,
+}
+
+impl PathState {
+    fn camera(ray: Ray) -> Self {
+        Self {
+            ray,
+            depth: 0,
+            beta: Vec3::ONE,
+            l: Vec3::ZERO,
+            prev_pdf: 0.0,
+            prev_p: ray.origin,
+        }
+    }
+}
+
+impl<'a, 's> PathTracer<'a, 's> {
+    pub(super) fn new(
+        prepared: &'a PreparedScene<'s>,
+        accel: &'a dyn Accelerator,
+        settings: &RenderSettings,
+        env_sampling: bool,
+    ) -> Self {
+        let lights: Vec<&Light> = prepared
+            .lights
+            .iter()
+            .filter(|l| !matches!(l, Light::Ambient { .. }))
+            .collect();
+        // Select lights in proportion to a rough power estimate.
+        let scene_radius = 0.5 * prepared.bounds.diagonal().max(1e-3);
+        let mut power: Vec<f32> = lights
+            .iter()
+            .map(|l| chiaro_core::shading::light_power(l, scene_radius))
+            .collect();
+        let env = env_sampling
+            .then(|| EnvironmentLight::new(prepared.scene))
+            .flatten();
+        if let Some(env) = &env {
+            // What enters a sphere of the scene's radius (pbrt-v4's
+            // `ImageInfiniteLight::Phi`): 4 pi^2 r^2 times the mean radiance.
+            power.push(4.0 * PI * PI * scene_radius * scene_radius * env.mean_luminance());
+        }
+        let n_lights = power.len();
+        let total: f32 = power.iter().sum();
+        let mut acc = 0.0;
+        let light_cdf: Vec<f32> = power
+            .iter()
+            .map(|&p| {
+                acc += if total > 0.0 {
+                    p / total
+                } else {
+                    1.0 / n_lights as f32
+                };
+                acc
+            })
+            .collect();
+        let light_pick = (0..light_cdf.len())
+            .map(|i| {
+                let prev = if i == 0 { 0.0 } else { light_cdf[i - 1] };
+                light_cdf[i] - prev
+            })
+            .collect();
+        let mut tri_lights: Vec<Option<TriLight>> = lights
+            .iter()
+            .map(|l| match l {
+                Light::Area {
+                    shape: AreaShape::Triangle { a, b, c },
+                    two_sided,
+                    ..
+                } => {
+                    let cr = (*b - *a).cross(*c - *a);
+                    let len = cr.length();
+                    (len > 0.0).then(|| TriLight {
+                        a: *a,
+                        b: *b,
+                        c: *c,
+                        n: cr / len,
+                        area: 0.5 * len,
+                        le: l.power_rgb(),
+                        two_sided: *two_sided,
+                    })
+                }
+                _ => None,
+            })
+            .collect();
+        if env.is_some() {
+            tri_lights.push(None);
+        }
+        // Emissive triangle lights follow the scene's lights in `prepared.lights`,
+        // in the order of `prepared.emissive_triangles` (skipping degenerate ones).
+        let mut triangle_light = vec![NO_LIGHT; prepared.triangles.len()];
+        let first_tri_light = lights.iter().position(|l| {
+            matches!(
+                l,
+                Light::Area {
+                    shape: AreaShape::Triangle { .. },
+                    ..
+                }
+            )
+        });
+        if let Some(first) = first_tri_light {
+            let mut k = first;
+            for &t in &prepared.emissive_triangles {
+                let [a, b, c] =
+                    prepared.triangles[t as usize].map(|i| prepared.positions[i as usize]);
+                if chiaro_core::geometry::face_normal(a, b, c).is_some() && k < lights.len() {
+                    if let Some(slot) = triangle_light.get_mut(t as usize) {
+                        *slot = k as u32;
+                    }
+                    k += 1;
+                }
+            }
+        }
+        let materials: Vec<MaterialInfo> = prepared
+            .scene
+            .materials
+            .iter()
+            .map(|m| MaterialInfo::new(SurfaceMaterial::from_material(m), m))
+            .collect();
+        let tris = prepared
+            .triangles
+            .iter()
+            .enumerate()
+            .map(|(t, tri)| {
+                let [i0, i1, i2] = tri.map(|i| i as usize);
+                let ng = prepared.face_normal(t as u32);
+                let n0 = prepared.normals[i0];
+                // Vertex normals equal within `FLAT_NORMAL_TOLERANCE` (a faceted
+                // quad's two triangles' face normals, averaged onto shared
+                // vertices, differ in their last bit): the interpolated normal
+                // is then `n0` within the tolerance everywhere on the triangle.
+                let close = |n: Vec3| (n - n0).abs().max_element() <= FLAT_NORMAL_TOLERANCE;
+                let same_normals = close(prepared.normals[i1]) && close(prepared.normals[i2]);
+                // What `triangle_surface` computes for equal vertex normals.
+                let flat_ns = same_normals.then(|| {
+                    let ns = n0.try_normalize().unwrap_or(ng);
+                    if ns.dot(ng) < 0.0 { ng } else { ns }
+                });
+                let white = [i0, i1, i2]
+                    .iter()
+                    .all(|&i| prepared.colors[i] == Vec3::ONE);
+                let untextured = materials
+                    .get(prepared.tri_material[t].index())
+                    .is_some_and(|m| !m.textured);
+                TriInfo {
+                    ng,
+                    flat_ns,
+                    plain: white && untextured,
+                }
+            })
+            .collect();
+        let select_lights = if tri_lights.len() <= lanes::SELECT_LIGHTS {
+            // (`None` if any light is not a triangle.)
+            let all: Option<Vec<TriLight>> = tri_lights.iter().copied().collect();
+            all.unwrap_or_default()
+        } else {
+            Vec::new()
+        };
+        Self {
+            prepared,
+            accel,
+            lights,
+            env,
+            light_cdf,
+            light_pick,
+            tri_lights,
+            select_lights,
+            triangle_light,
+            tris,
+            materials,
+            max_depth: settings.path.max_depth,
+            rr_depth: settings.path.rr_depth.max(1),
+        }
+    }
+
+    /// The vertex at `hit` and its cached material when `hit` is on a plain
+    /// triangle (`None`: evaluate it through the surface layer,
+    /// `PreparedScene::shading_surface`).
+    #[inline(always)]
+    pub(super) fn plain_surface(
+        &self,
+        prim: u32,
+        u: f32,
+        v: f32,
+    ) -> Option<(Vertex, &MaterialInfo)> {
+        let t = prim as usize;
+        let info = self.tris.get(t).filter(|info| info.plain)?;
+        let [i0, i1, i2] = self.prepared.triangles[t].map(|i| i as usize);
+        let pos = &self.prepared.positions;
+        let w = 1.0 - u - v;
+        // As `PreparedScene::triangle_surface` interpolates it.
+        // (A `match`, not `unwrap_or_else`: the closure's captures were
+        // stored for every hit, flat or not.)
+        let ns = match info.flat_ns {
+            Some(ns) => ns,
+            None => {
+                let nrm = &self.prepared.normals;
+                let ns = (nrm[i0] * w + nrm[i1] * u + nrm[i2] * v)
+                    .try_normalize()
+                    .unwrap_or(info.ng);
+                if ns.dot(info.ng) < 0.0 { info.ng } else { ns }
+            }
+        };
+        let v = Vertex {
+            p: pos[i0] * w + pos[i1] * u + pos[i2] * v,
+            ng: info.ng,
+            ns,
+        };
+        let material = self.materials.get(self.prepared.tri_material[t].index())?;
+        Some((v, material))
+    }
+
+    /// Radiance along camera ray `ray`, and the first hit's distance and normal.
+    pub(super) fn radiance(
+        &self,
+        ray: Ray,
+        rng: &mut SobolSampler,
+        rays: &mut u64,
+    ) -> (Vec3, Option<(f32, Vec3)>) {
+        self.radiance_from(PathState::camera(ray), None, rng, rays)
+    }
+
+    /// The rest of the path from `state` (whose ray is about to be traced,
+    /// or has been: `traced` is then its hit, already counted in `rays`):
+    /// its radiance estimate (`state.l` included), and the first hit's
+    /// distance and normal when `state.depth` is 0. `rng` must be at the
+    /// pair the scalar loop would have reached.
+    pub(super) fn radiance_from(
+        &self,
+        state: PathState,
+        mut traced: Option<Hit>,
+        rng: &mut SobolSampler,
+        rays: &mut u64,
+    ) -> (Vec3, Option<(f32, Vec3)>) {
+        let PathState {
+            mut ray,
+            depth: start,
+            mut beta,
+            mut l,
+            mut prev_pdf,
+            mut prev_p,
+        } = state;
+        let mut first = None;
+        let mut owned;
+        for depth in start..self.max_depth {
+            let hit = match traced.take() {
+                Some(hit) => Some(hit),
+                None => {
+                    *rays += 1;
+                    // Camera rays skip the backs of single-sided materials.
+                    if depth == 0 {
+                        self.accel.intersect_camera(&ray)
+                    } else {
+                        self.accel.intersect(&ray)
+                    }
+                }
+            };
+            let Some(hit) = hit else {
+                l += beta * self.escaped(&ray, depth, prev_pdf);
+                break;
+            };
+            // The hit is used field by field: a copy of the whole struct
+            // would load 16 bytes that `intersect` stored in pieces, which
+            // stalls store-to-load forwarding.
+            let Hit { t, prim, u, v: hv } = hit;
+            let (v, info) = match self.plain_surface(prim, u, hv) {
+                Some(plain) => plain,
+                None => {
+                    let hit = Hit { t, prim, u, v: hv };
+                    // The surface layer, base level of textures.
+                    let ss = self.prepared.shading_surface(&ray, &hit, None);
+                    let mat = self.prepared.material(ss.hit.material);
+                    owned = MaterialInfo::new(ss.material, mat);
+                    let v = Vertex {
+                        p: ss.hit.p,
+                        ng: ss.hit.ng,
+                        ns: ss.ns,
+                    };
+                    (v, &owned)
+                }
+            };
+            // Every ray's direction is unit: the camera's are normalised,
+            // and sampled directions are unit vectors (up to rounding).
+            let wo = -ray.dir;
+            if depth == 0 {
+                first = Some((t * ray.dir.length(), v.ns));
+            }
+            let m = &info.bsdf.m;
+            let cos_o = v.ng.dot(wo);
+            // Emission seen along the path (one-sided unless two-sided).
+            if info.emissive && (info.two_sided || cos_o > 0.0) {
+                let w = if prev_pdf == 0.0 {
+                    1.0
+                } else {
+                    self.emitter_mis_weight(prim, prev_p, &v, wo, prev_pdf)
+                };
+                l += beta * m.emission * w;
+            }
+            // Shading frame on the side of the viewer.
+            let front = cos_o >= 0.0;
+            // (A multiplication by the side's sign: the same values, no branch.)
+            let side = if front { 1.0 } else { -1.0 };
+            let (n, ng) = (v.ns * side, v.ng * side);
+            let last = depth + 1 >= self.max_depth;
+            // Next-event estimation.
+            l += beta * self.direct(v.p, info, n, ng, wo, !last, rng, rays);
+            if last {
+                break;
+            }
+            // Continue the path.
+            let Some(s) = Self::sample_bsdf(&info.bsdf, n, ng, wo, front, rng) else {
+                break;
+            };
+            beta *= s.weight;
+            if !beta.is_finite() || beta.max_element() <= 0.0 {
+                break;
+            }
+            prev_pdf = if s.delta { 0.0 } else { s.pdf };
+            prev_p = v.p;
+            ray = Ray::new(offset_ray_origin(v.p, v.ng, s.wi), s.wi);
+            // Russian roulette.
+            if depth + 1 >= self.rr_depth {
+                let q = beta.max_element().min(0.95);
+                if rng.next_1d() >= q {
+                    break;
+                }
+                beta /= q;
+            }
+        }
+        (l, first)
+    }
+
+    /// Radiance of a ray that escaped at path depth `depth` after a scatter
+    /// of pdf `prev_pdf` (0: a delta lobe): `miss_radiance`'s rule (the
+    /// camera sees the background, other rays the environment map, which
+    /// lights the scene), MIS-weighted against the environment's next-event
+    /// estimation after a non-delta scatter; without a map the plain
+    /// background is seen only directly (camera or delta chains) and lights
+    /// nothing.
+    #[inline]
+    pub(super) fn escaped(&self, ray: &Ray, depth: u32, prev_pdf: f32) -> Vec3 {
+        let scene = self.prepared.scene;
+        if scene.environment.is_some() || depth == 0 || prev_pdf == 0.0 {
+            let l = chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0);
+            match &self.env {
+                Some(env) if depth > 0 && prev_pdf > 0.0 => {
+                    let light_pdf = self.light_pick_pdf(self.lights.len()) * env.pdf(ray.dir);
+                    l * power_heuristic(prev_pdf, light_pdf)
+                }
+                _ => l,
+            }
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// Samples the next direction through [`Bsdf::sample`], drawing its
+    /// numbers in the order the lock-step kernel follows: the lobe choice's
+    /// (its pair skipped when there is one lobe), the direction's pair, and
+    /// the Fresnel choice's only when the layer asks for it.
+    #[inline]
+    fn sample_bsdf(
+        bsdf: &Bsdf,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        front: bool,
+        rng: &mut SobolSampler,
+    ) -> Option<BsdfSample> {
+        if !bsdf.scatters() {
+            return None;
+        }
+        let u_lobe = if bsdf.needs_lobe_number() {
+            rng.next_1d()
+        } else {
+            rng.skip(1);
+            0.0
+        };
+        let u = rng.next_2d();
+        bsdf.sample(n, ng, wo, front, u_lobe, u, || rng.next_1d())
+    }
+}

@@ -1,0 +1,288 @@
+//! Next-event estimation: one light chosen by power, a sample on it and a
+//! shadow ray, combined with BSDF sampling by the power heuristic (Veach 1997).
+
+use super::integrator::{MaterialInfo, PathTracer, Vertex};
+use chiaro_core::geometry::{Ray, offset_ray_origin};
+use chiaro_core::sampling::{SobolSampler, power_heuristic, sample_uniform_triangle};
+use chiaro_core::scene::{AreaShape, Light};
+use chiaro_core::shading::{Bsdf, sample_light};
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// `PathTracer::triangle_light` entry of a triangle that is not a light.
+pub(super) const NO_LIGHT: u32 = u32::MAX;
+
+/// An emissive triangle as next-event estimation samples it.
+#[derive(Clone, Copy)]
+pub(super) struct TriLight {
+    pub(super) a: Vec3,
+    pub(super) b: Vec3,
+    pub(super) c: Vec3,
+    /// Unit normal (counter-clockwise front).
+    pub(super) n: Vec3,
+    pub(super) area: f32,
+    pub(super) le: Vec3,
+    pub(super) two_sided: bool,
+}
+
+impl PathTracer<'_, '_> {
+    pub(super) fn light_pick_pdf(&self, i: usize) -> f32 {
+        self.light_pick[i]
+    }
+
+    /// The light for the number `u`: an index into `lights`, or
+    /// `lights.len()` for the environment.
+    pub(super) fn pick_light(&self, u: f32) -> Option<usize> {
+        if self.light_cdf.is_empty() {
+            return None;
+        }
+        let i = self.light_cdf.partition_point(|&c| c <= u);
+        Some(i.min(self.light_cdf.len() - 1))
+    }
+
+    /// The number of lights next-event estimation chooses from (the
+    /// environment included).
+    #[inline]
+    pub(super) fn light_count(&self) -> usize {
+        self.light_cdf.len()
+    }
+
+    /// MIS weight of emission found by BSDF sampling from `from` with pdf `bsdf_pdf`.
+    pub(super) fn emitter_mis_weight(
+        &self,
+        prim: u32,
+        from: Vec3,
+        surf: &Vertex,
+        wo: Vec3,
+        bsdf_pdf: f32,
+    ) -> f32 {
+        let Some(&li) = self.triangle_light.get(prim as usize) else {
+            return 1.0;
+        };
+        let Some(Some(tl)) = self.tri_lights.get(li as usize) else {
+            return 1.0;
+        };
+        let d2 = (surf.p - from).length_squared();
+        let cos_l = surf.ng.dot(wo).abs();
+        if cos_l <= 0.0 {
+            return 1.0;
+        }
+        let light_pdf = self.light_pick_pdf(li as usize) * d2 / (cos_l * tl.area);
+        power_heuristic(bsdf_pdf, light_pdf)
+    }
+
+    /// Solid-angle pdf of sampling direction `wi` towards sample point `q`
+    /// (normal `nl`) on area light `light` from `p`; `None` for delta lights.
+    pub(super) fn light_solid_angle_pdf(light: &Light, p: Vec3, q: Vec3) -> Option<f32> {
+        let Light::Area { shape, .. } = light else {
+            return None;
+        };
+        match *shape {
+            AreaShape::Sphere { center, radius } => {
+                let dc2 = (center - p).length_squared();
+                let cos_max = (1.0 - radius * radius / dc2).max(0.0).sqrt();
+                Some(1.0 / (2.0 * PI * (1.0 - cos_max)).max(1e-12))
+            }
+            _ => {
+                let nl = match *shape {
+                    AreaShape::Quad { edge_u, edge_v, .. } => {
+                        edge_u.cross(edge_v).normalize_or_zero()
+                    }
+                    AreaShape::Disk { normal, .. } => normal.normalize_or_zero(),
+                    AreaShape::Triangle { a, b, c } => (b - a).cross(c - a).normalize_or_zero(),
+                    AreaShape::Sphere { .. } => Vec3::ZERO,
+                };
+                let d = q - p;
+                let d2 = d.length_squared();
+                let cos_l = nl.dot(d / d2.sqrt()).abs();
+                (cos_l > 0.0).then(|| d2 / (cos_l * shape.area()))
+            }
+        }
+    }
+
+    /// A sample of emissive triangle `tl` seen from `p`: the direction, the
+    /// point, and `(Le, solid-angle pdf)`, following `sample_light`'s
+    /// area-light case (uniform in area, converted by `d^2 / cos_l`).
+    pub(super) fn sample_tri_light(tl: &TriLight, p: Vec3, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
+        let bary = sample_uniform_triangle(u);
+        let q = tl.a * bary.x + tl.b * bary.y + tl.c * (1.0 - bary.x - bary.y);
+        let d = q - p;
+        let dist2 = d.length_squared();
+        if dist2 <= 0.0 {
+            return None;
+        }
+        let wi = d * (1.0 / dist2.sqrt());
+        let mut cos_l = -tl.n.dot(wi);
+        if tl.two_sided {
+            cos_l = cos_l.abs();
+        }
+        if cos_l <= 0.0 {
+            return None;
+        }
+        Some((wi, q, dist2 / (cos_l * tl.area)))
+    }
+
+    /// Next-event estimation: one light chosen by power, one sample on it,
+    /// its visibility by a shadow ray; MIS-weighted against BSDF sampling
+    /// when the path continues (`mis`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn direct(
+        &self,
+        p: Vec3,
+        info: &MaterialInfo,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        mis: bool,
+        rng: &mut SobolSampler,
+        rays: &mut u64,
+    ) -> Vec3 {
+        // The light choice's number, unless there is only one light (then
+        // its pair is skipped, which leaves every later number unchanged).
+        let u_pick = if self.light_count() > 1 {
+            rng.next_1d()
+        } else {
+            rng.skip(1);
+            0.0
+        };
+        let u = rng.next_2d();
+        let Some(li) = self.pick_light(u_pick) else {
+            return Vec3::ZERO;
+        };
+        self.direct_from(li, p, info, n, ng, wo, mis, u, rays)
+    }
+
+    /// [`Self::direct`] with the light chosen (`li`) and its sample's
+    /// numbers drawn (`u`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn direct_from(
+        &self,
+        li: usize,
+        p: Vec3,
+        info: &MaterialInfo,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        mis: bool,
+        u: Vec2,
+        rays: &mut u64,
+    ) -> Vec3 {
+        let pick = self.light_pick_pdf(li);
+        if pick <= 0.0 {
+            return Vec3::ZERO;
+        }
+        if let Some(tl) = &self.tri_lights[li] {
+            // Emissive triangle: L = f cos Le / (pick * pdf_solid_angle).
+            let Some((wi, q, light_pdf)) = Self::sample_tri_light(tl, p, u) else {
+                return Vec3::ZERO;
+            };
+            if ng.dot(wi) <= 0.0 {
+                return Vec3::ZERO;
+            }
+            let f_cos = info.bsdf.eval(n, wo, wi);
+            if f_cos == Vec3::ZERO {
+                return Vec3::ZERO;
+            }
+            *rays += 1;
+            if self
+                .accel
+                .occluded(&Ray::segment(offset_ray_origin(p, ng, wi), q))
+            {
+                return Vec3::ZERO;
+            }
+            let light_pdf = light_pdf * pick;
+            // The power heuristic's weight over the light's pdf, in one
+            // division: (l^2 / (l^2 + b^2)) / l = l / (l^2 + b^2).
+            let w_over_pdf = if mis {
+                let bsdf_pdf = info.bsdf.pdf(n, wo, wi);
+                light_pdf / (light_pdf * light_pdf + bsdf_pdf * bsdf_pdf)
+            } else {
+                1.0 / light_pdf
+            };
+            return f_cos * tl.le * w_over_pdf;
+        }
+        let Some(&light) = self.lights.get(li) else {
+            return self.direct_env(pick, p, &info.bsdf, n, ng, wo, mis, u, rays);
+        };
+        let Some(s) = sample_light(light, p, u) else {
+            return Vec3::ZERO;
+        };
+        let f_cos = info.bsdf.eval(n, wo, s.wi);
+        if f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
+            return Vec3::ZERO;
+        }
+        *rays += 1;
+        let origin = offset_ray_origin(p, ng, s.wi);
+        let shadow = if s.distance.is_finite() {
+            Ray::segment(origin, s.point)
+        } else {
+            Ray::new(origin, s.wi)
+        };
+        if self.accel.occluded(&shadow) {
+            return Vec3::ZERO;
+        }
+        let mut w = 1.0;
+        if mis
+            && !s.is_delta
+            && let Some(light_pdf) = Self::light_solid_angle_pdf(light, p, s.point)
+        {
+            let bsdf_pdf = info.bsdf.pdf(n, wo, s.wi);
+            w = power_heuristic(light_pdf * pick, bsdf_pdf);
+        }
+        PI * f_cos * s.intensity * (w / pick)
+    }
+
+    /// Next-event estimation of the environment (light `lights.len()`,
+    /// chosen with probability `pick`): a direction by its luminance, a
+    /// shadow ray to infinity, `f cos L / pdf` MIS-weighted (`mis`) against
+    /// BSDF sampling as [`Self::escaped`] weights the other strategy.
+    /// (Not inlined: `direct_from` stays as small where there is no map.)
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    pub(super) fn direct_env(
+        &self,
+        pick: f32,
+        p: Vec3,
+        bsdf: &Bsdf,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        mis: bool,
+        u: Vec2,
+        rays: &mut u64,
+    ) -> Vec3 {
+        let Some(env) = &self.env else {
+            return Vec3::ZERO;
+        };
+        if pick <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let Some(s) = env.sample(u) else {
+            return Vec3::ZERO;
+        };
+        if ng.dot(s.wi) <= 0.0 || s.radiance == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        let f_cos = bsdf.eval(n, wo, s.wi);
+        if f_cos == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        *rays += 1;
+        if self
+            .accel
+            .occluded(&Ray::new(offset_ray_origin(p, ng, s.wi), s.wi))
+        {
+            return Vec3::ZERO;
+        }
+        let light_pdf = s.pdf * pick;
+        let w_over_pdf = if mis {
+            let bsdf_pdf = bsdf.pdf(n, wo, s.wi);
+            light_pdf / (light_pdf * light_pdf + bsdf_pdf * bsdf_pdf)
+        } else {
+            1.0 / light_pdf
+        };
+        f_cos * s.radiance * w_over_pdf
+    }
+}

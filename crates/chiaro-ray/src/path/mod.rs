@@ -1,0 +1,222 @@
+//! The path-traced reference: an unbiased estimator of the rendering
+//! equation that every other technique is measured against.
+//!
+//! - Next-event estimation at every vertex (one light chosen by power),
+//!   combined with BSDF sampling by multiple importance sampling (power
+//!   heuristic, Veach 1997) for area lights, emissive triangles and the
+//!   environment map (one more light, sampled by its luminance through
+//!   `texture::EnvironmentLight`); delta lights (point, spot, directional)
+//!   by next-event estimation only.
+//! - The BSDF is the shading layer's (`chiaro_core::shading::Bsdf`: the
+//!   local model's Lambert plus Phong, Blinn or Torrance-Sparrow, sampled
+//!   lobe by lobe, plus ideal mirror reflection (kr) and transmission (kt):
+//!   a dielectric with Fresnel's equations and total internal reflection
+//!   when the material has `fresnel = true`, fixed kr/kt weights otherwise).
+//! - Russian roulette from `settings.path.rr_depth`; at most
+//!   `settings.path.max_depth` scattering vertices (1 = direct light only).
+//! - Random numbers from `chiaro_core::sampling::SobolSampler`: a pixel's
+//!   samples take each decision (camera jitter, light choice and point,
+//!   lobe choice and direction, Russian roulette) from its own shuffled,
+//!   Owen-scrambled Sobol dimension pair, so they stratify every decision
+//!   jointly; each draw is still uniform, so the estimator stays unbiased.
+//!
+//! - Paths are traced sixteen samples of a pixel at a time by the lock-step
+//!   kernel in `path/lanes.rs` (vectorised where the vertices are
+//!   Lambertian, bit-identical to the scalar loop in
+//!   `path/integrator.rs`, kept as [`Kernel::Scalar`]); next-event
+//!   estimation and light selection are in `path/lights.rs`.
+//!
+//! Conventions: ambient lights are ignored (indirect light is computed);
+//! `Scene::background` is what camera rays (and chains of mirror/glass
+//! bounces) see where nothing is hit, but it does not light the scene;
+//! an environment map, when present, does light it (found by next-event
+//! estimation and by BSDF sampling, combined by MIS).
+//! `Light::Area` lights are not geometry: they are reached by next-event
+//! estimation only and are invisible to the camera; emissive triangles are
+//! geometry and lights both.
+
+use chiaro_core::accel::Accelerator;
+use chiaro_core::error::{CoreError, Result};
+use chiaro_core::film::{Film, TilePixels, render_tiles_in};
+use chiaro_core::geometry::Ray;
+use chiaro_core::prepared::{PrepareOptions, PreparedScene};
+use chiaro_core::progress::Progress;
+use chiaro_core::sampling::{SobolSampler, pixel_rng, uniform2};
+use chiaro_core::scene::{RenderSettings, Scene};
+use chiaro_core::shading::sanitize;
+use glam::{Vec2, Vec3};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+mod integrator;
+mod lanes;
+mod lights;
+mod reference;
+#[cfg(test)]
+mod tests;
+
+use integrator::{MaterialInfo, PathState, PathTracer};
+use lights::{NO_LIGHT, TriLight};
+
+use chiaro_core::sampling::sobol::LANES;
+
+/// Tile side in pixels.
+const TILE: u32 = 16;
+
+/// Counts from a path-traced render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PathStats {
+    /// Rays traced (camera, bounce and shadow rays).
+    pub rays: u64,
+}
+
+/// Renders `scene` with the path tracer. `make_accel` builds the ray
+/// accelerator over the prepared scene (the BVH normally, the brute-force
+/// list in tests). Returns the film (mean radiance of `settings.samples`
+/// paths per pixel) and the ray count.
+pub fn render_with(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
+) -> Result<(Film, PathStats)> {
+    render_with_kernel(scene, settings, progress, make_accel, Kernel::Lanes)
+}
+
+/// Which loop traces the paths. `Lanes` and `Scalar` compute the same
+/// image, bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kernel {
+    /// The lock-step kernel (`path/lanes.rs`): a pixel's samples sixteen
+    /// at a time, vectorised where their vertices are Lambertian.
+    Lanes,
+    /// One path at a time.
+    Scalar,
+    /// The plain reference tracer (`path/reference.rs`): one path at a
+    /// time on the BSDF layer with independent PCG numbers. Agrees with
+    /// the others statistically, not bit for bit.
+    Reference,
+}
+
+/// [`render_with`] with the path loop chosen: for tests and benchmarks
+/// that compare the two.
+pub fn render_with_kernel(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
+    kernel: Kernel,
+) -> Result<(Film, PathStats)> {
+    render_impl(scene, settings, progress, make_accel, kernel, true)
+}
+
+/// [`render_with_kernel`], with the environment map sampled by next-event
+/// estimation (`env_sampling`) or reached by BSDF sampling alone (the
+/// tests' baseline for its variance).
+fn render_impl(
+    scene: &Scene,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
+    kernel: Kernel,
+    env_sampling: bool,
+) -> Result<(Film, PathStats)> {
+    if settings.path.max_depth == 0 {
+        return Err(CoreError::BadSetting {
+            key: "path.max_depth".into(),
+            message: "must be at least 1".into(),
+        });
+    }
+    progress.begin("prepare", 1);
+    let prepared = PreparedScene::new(
+        scene,
+        PrepareOptions {
+            analytic_spheres: true,
+            ..PrepareOptions::default()
+        },
+    );
+    let accel = make_accel(&prepared);
+    let tracer = PathTracer::new(&prepared, accel.as_ref(), settings, env_sampling);
+    let lanes = kernel == Kernel::Lanes;
+    progress.advance(1);
+    let rays = AtomicU64::new(0);
+    let (w, h) = (settings.width, settings.height);
+    let spp = settings.samples.max(1);
+    let cam = &scene.camera;
+    // `Camera::ray_direction` with the frame and field of view computed once.
+    let frame = cam.frame();
+    let tan_half = (cam.fov_y_degrees.to_radians() * 0.5).tan();
+    let aspect = w as f32 / h as f32;
+    // (Multiplications by 2 / w and 2 / h, exact for power-of-two sizes and
+    // within an ulp otherwise.)
+    let (two_over_w, two_over_h) = (2.0 / w as f32, 2.0 / h as f32);
+    let camera_dir = |x: f32, y: f32| {
+        let ndc_x = (x * two_over_w - 1.0) * tan_half * aspect;
+        let ndc_y = (1.0 - y * two_over_h) * tan_half;
+        (frame.forward + ndc_x * frame.right + ndc_y * frame.up).normalize()
+    };
+    let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
+        let mut tile = TilePixels::new(rect);
+        let mut count = 0u64;
+        let mut rng = SobolSampler::new(settings.seed, rect.x, rect.y, 0, spp);
+        for ty in 0..rect.height {
+            for tx in 0..rect.width {
+                let (px, py) = (rect.x + tx, rect.y + ty);
+                let mut sum = Vec3::ZERO;
+                rng.set_pixel(px, py);
+                let mut first_hit = None;
+                if kernel == Kernel::Reference {
+                    for s in 0..spp {
+                        let mut rng = pixel_rng(settings.seed, px, py, s);
+                        let j = uniform2(&mut rng);
+                        let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
+                        let ray = Ray::new(cam.eye, dir);
+                        let (l, fh) = tracer.reference_radiance(ray, &mut rng, &mut count);
+                        sum += sanitize(l);
+                        if s == 0 {
+                            first_hit = fh;
+                        }
+                    }
+                } else if lanes {
+                    let camera =
+                        |j: Vec2| Ray::new(cam.eye, camera_dir(px as f32 + j.x, py as f32 + j.y));
+                    for first in (0..spp).step_by(LANES) {
+                        let n = ((spp - first) as usize).min(LANES);
+                        let (ls, fh) =
+                            tracer.radiance_lanes(first, n, &camera, &mut rng, &mut count);
+                        for l in &ls[..n] {
+                            sum += sanitize(*l);
+                        }
+                        if first == 0 {
+                            first_hit = fh;
+                        }
+                    }
+                } else {
+                    for s in 0..spp {
+                        rng.set_sample(s);
+                        let j = rng.next_2d();
+                        let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
+                        let (l, fh) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
+                        sum += sanitize(l);
+                        if s == 0 {
+                            first_hit = fh;
+                        }
+                    }
+                }
+                if let Some((t, n)) = first_hit {
+                    let i = (ty * rect.width + tx) as usize;
+                    tile.depth[i] = t;
+                    tile.normal[i] = n;
+                }
+                tile.color[(ty * rect.width + tx) as usize] = sum / spp as f32;
+            }
+        }
+        rays.fetch_add(count, Ordering::Relaxed);
+        tile
+    })?;
+    Ok((
+        film,
+        PathStats {
+            rays: rays.into_inner(),
+        },
+    ))
+}

@@ -1,0 +1,776 @@
+//! Unit tests of the path tracer: estimator checks, and the lock-step and
+//! reference kernels against the scalar loop.
+
+use super::*;
+use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::geometry::primitives;
+use chiaro_core::progress::NoProgress;
+use chiaro_core::scene::{
+    AreaShape, Attenuation, Camera, Geometry, Light, Material, Object, Technique,
+};
+use std::f32::consts::PI;
+
+fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+    Box::new(SceneBvh::new(p))
+}
+
+fn furnace(geometry: Option<u32>) -> Scene {
+    let mut s = Scene::default();
+    s.add_material(Material {
+        emission: Vec3::splat(1.0),
+        two_sided: true,
+        ..Material::diffuse("furnace", Vec3::splat(0.5))
+    });
+    let geometry = match geometry {
+        None => Geometry::Sphere { radius: 10.0 },
+        Some(slices) => Geometry::Mesh(s.add_mesh(primitives::uv_sphere(10.0, slices, slices / 2))),
+    };
+    s.objects.push(Object {
+        geometry,
+        ..Default::default()
+    });
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 1.0, 0.0),
+        look_at: Vec3::new(0.0, 0.0, 5.0),
+        ..Camera::default()
+    };
+    s.render.technique = Technique::Path;
+    s.render.width = 16;
+    s.render.height = 16;
+    s.render.samples = 4;
+    s.render.path.max_depth = 64;
+    s.render.path.rr_depth = 64;
+    s
+}
+
+#[test]
+fn analytic_furnace_is_exact() {
+    // Inside a closed sphere of albedo rho and emission E, L = E / (1 - rho);
+    // with cosine sampling every path carries exactly sum rho^k E.
+    let s = furnace(None);
+    let (film, stats) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let expect = (1.0 - 0.5f32.powi(64)) / (1.0 - 0.5);
+    for c in &film.color {
+        assert!((c.x - expect).abs() < 1e-3, "{c} vs {expect}");
+    }
+    assert!(stats.rays > 0);
+}
+
+#[test]
+fn triangle_furnace_with_mis_is_unbiased() {
+    // Same furnace tessellated: every triangle is now a light, so
+    // next-event estimation and MIS are exercised; the mean must stay E / (1 - rho)
+    // (a wrong MIS weight or pdf biases it).
+    let mut s = furnace(Some(24));
+    s.render.path.max_depth = 40;
+    s.render.path.rr_depth = 3;
+    s.render.samples = 16;
+    let (film, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let n = film.color.len() as f32;
+    let mean = film.mean().x;
+    let var = film.color.iter().map(|c| (c.x - mean).powi(2)).sum::<f32>() / (n - 1.0);
+    let stderr = (var / n).sqrt();
+    assert!(
+        (mean - 2.0).abs() < 4.0 * stderr + 0.01,
+        "mean {mean} stderr {stderr}"
+    );
+}
+
+/// Mean and standard error of the mean of one channel over all pixels.
+fn mean_and_stderr(film: &Film, channel: usize) -> (f32, f32) {
+    let values: Vec<f32> = film.color.iter().map(|c| c[channel]).collect();
+    let n = values.len() as f32;
+    let mean = values.iter().sum::<f32>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+#[test]
+fn diffuse_sphere_inside_emitting_sphere_reflects_rho_times_le() {
+    // Closed form. A convex Lambertian body of albedo rho inside a closed
+    // enclosure whose inner surface emits radiance Le and reflects nothing
+    // (albedo 0). A convex body cannot see itself, so every direction of
+    // the outer hemisphere at any of its points meets the enclosure: the
+    // incident radiance is Le over the whole hemisphere, the irradiance
+    // E = integral Le cos(theta) dw = pi Le, and the reflected radiance is
+    // L = (rho / pi) E = rho Le. Nothing else contributes (the enclosure
+    // reflects nothing), so this holds at every max_depth >= 1, wherever
+    // the inner sphere sits and whatever the enclosure's shape.
+    // The enclosure is a tessellated sphere, so its triangles are lights:
+    // depth 1 tests next-event estimation alone, depth 4 its MIS with
+    // BSDF sampling.
+    let le = 1.5;
+    let rho = Vec3::new(0.8, 0.5, 0.2);
+    let mut s = Scene::default();
+    let emitter = s.add_material(Material {
+        emission: Vec3::splat(le),
+        two_sided: true,
+        ..Material::diffuse("enclosure", Vec3::ZERO)
+    });
+    let inner = s.add_material(Material::diffuse("inner", rho));
+    let shell = s.add_mesh(primitives::uv_sphere(10.0, 32, 16));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(shell),
+        material: emitter,
+        smooth: false,
+        ..Default::default()
+    });
+    let center = Vec3::new(1.0, 0.5, 0.0);
+    s.objects.push(Object {
+        geometry: Geometry::Sphere { radius: 1.0 },
+        material: inner,
+        transform: chiaro_core::scene::Transform {
+            translate: center,
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    // A narrow view whose every pixel lands on the inner sphere.
+    s.camera = Camera {
+        eye: center + Vec3::new(0.5, 1.0, -4.0),
+        look_at: center,
+        fov_y_degrees: 10.0,
+        ..Camera::default()
+    };
+    s.render.width = 16;
+    s.render.height = 16;
+    s.render.samples = 64;
+    for depth in [1, 4] {
+        s.render.path.max_depth = depth;
+        let (film, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+        for c in 0..3 {
+            let (mean, stderr) = mean_and_stderr(&film, c);
+            let expect = rho[c] * le;
+            // The estimate must be noisy but informative for this to test anything.
+            assert!(
+                stderr < 0.02 * expect,
+                "depth {depth} ch {c}: stderr {stderr}"
+            );
+            assert!(
+                (mean - expect).abs() < 4.0 * stderr,
+                "depth {depth} channel {c}: mean {mean} vs rho Le = {expect} (stderr {stderr})"
+            );
+        }
+    }
+}
+
+#[test]
+fn images_do_not_depend_on_the_thread_count() {
+    // Random numbers come from (seed, pixel, sample): 1 and 3 threads agree bit for bit.
+    let mut s = furnace(Some(12));
+    s.render.path.rr_depth = 2;
+    s.render.samples = 2;
+    let render = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("thread pool");
+        pool.install(|| render_with(&s, &s.render, &NoProgress, &bvh))
+            .expect("renders")
+            .0
+    };
+    let (one, three) = (render(1), render(3));
+    assert!(
+        one.color
+            .iter()
+            .any(|c| (c.x - one.color[0].x).abs() > 1e-3)
+    );
+    assert_eq!(one.color, three.color);
+}
+
+#[test]
+fn depth_one_point_light_is_the_lambert_term() {
+    // A plane under a point light: L = kd Ip cos / d^2 exactly at depth 1.
+    let mut s = Scene::default();
+    s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
+    let plane = s.add_mesh(primitives::plane(2.0, 1));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(plane),
+        smooth: false,
+        ..Default::default()
+    });
+    s.lights.push(Light::Point {
+        position: Vec3::new(0.0, 2.0, 0.0),
+        color: Vec3::ONE,
+        intensity: 8.0,
+        attenuation: Attenuation::InverseSquare,
+    });
+    s.lights.push(Light::Ambient {
+        color: Vec3::ONE,
+        intensity: 1.0,
+    });
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 3.0, -0.001),
+        look_at: Vec3::ZERO,
+        fov_y_degrees: 1.0,
+        ..Camera::default()
+    };
+    s.render.width = 4;
+    s.render.height = 4;
+    s.render.samples = 4;
+    s.render.path.max_depth = 1;
+    let (film, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    // Straight below the light: cos = 1, d = 2, ambient ignored.
+    let expect = 0.5 * 8.0 / 4.0;
+    for c in &film.color {
+        assert!((c.x - expect).abs() < 0.01 * expect, "{c} vs {expect}");
+    }
+}
+
+/// The shipped scene `scenes/NAME.toml` at `size` x `size` pixels.
+fn shipped(name: &str, size: u32) -> Scene {
+    let path = format!("{}/../../scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    let mut s = chiaro_io::load_scene(std::path::Path::new(&path))
+        .expect("the shipped scene loads")
+        .scene;
+    s.render.width = size;
+    s.render.height = size;
+    s
+}
+
+/// Mitsuba's Cornell box as shipped (`scenes/mitsuba-cbox.toml`).
+fn mitsuba_cbox(size: u32) -> Scene {
+    shipped("mitsuba-cbox", size)
+}
+
+/// Renders `scene` with both loops and asserts the films and ray
+/// counts are equal bit for bit.
+fn assert_kernels_agree(scene: &Scene, what: &str) {
+    let settings = &scene.render;
+    let render = |k| render_with_kernel(scene, settings, &NoProgress, &bvh, k).expect("renders");
+    let (a, ra) = render(Kernel::Scalar);
+    let (b, rb) = render(Kernel::Lanes);
+    assert_eq!(ra, rb, "{what}: ray counts");
+    let bits = |v: &[Vec3]| {
+        v.iter()
+            .flat_map(|c| c.to_array().map(f32::to_bits))
+            .collect::<Vec<_>>()
+    };
+    assert!(bits(&a.color) == bits(&b.color), "{what}: colours differ");
+    assert!(bits(&a.normal) == bits(&b.normal), "{what}: normals differ");
+    let depth = |f: &Film| f.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+    assert!(depth(&a) == depth(&b), "{what}: depths differ");
+    assert!(
+        a.color.iter().any(|c| c.max_element() > 0.0),
+        "{what}: black image"
+    );
+}
+
+#[test]
+fn lock_step_kernel_equals_the_scalar_loop_on_a_diffuse_box() {
+    // Sample counts below, at and between multiples of the lane count;
+    // depths that end at the first vertex and before Russian roulette.
+    let lanes = LANES as u32;
+    for (spp, max_depth, rr_depth) in [(lanes, 7, 5), (5, 7, 5), (lanes + 5, 3, 1), (3, 1, 5)] {
+        let mut s = mitsuba_cbox(12);
+        s.render.samples = spp;
+        s.render.path.max_depth = max_depth;
+        s.render.path.rr_depth = rr_depth;
+        assert_kernels_agree(&s, &format!("spp {spp} depth {max_depth} rr {rr_depth}"));
+    }
+}
+
+#[test]
+fn lock_step_kernel_hands_other_surfaces_to_the_scalar_loop() {
+    let mut s = mitsuba_cbox(12);
+    s.render.samples = 11;
+    // A glossy wall, a mirror wall, and a glass sphere (analytic): lanes
+    // meeting them finish in the scalar loop.
+    let id = |s: &Scene, n: &str| s.material_by_name(n).expect("a shipped material").index();
+    let red = id(&s, "red");
+    s.materials[red].specular = Vec3::splat(0.4);
+    s.materials[red].shininess = 20.0;
+    let green = id(&s, "green");
+    s.materials[green].reflect = Vec3::splat(0.6);
+    let glass = s.add_material(Material {
+        transmit: Vec3::splat(0.9),
+        ior: 1.5,
+        fresnel: true,
+        ..Material::diffuse("glass", Vec3::ZERO)
+    });
+    s.objects.push(Object {
+        geometry: Geometry::Sphere { radius: 0.25 },
+        material: glass,
+        transform: chiaro_core::scene::Transform {
+            translate: Vec3::new(-0.3, -0.2, 0.4),
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    assert_kernels_agree(&s, "mixed materials");
+}
+
+#[test]
+fn lock_step_kernel_equals_the_scalar_loop_on_the_shipped_scenes() {
+    // Area, point, spot and directional lights (sampled by the scalar
+    // loop's code), mirrors, glass, glossy and textured surfaces.
+    for name in [
+        "cornell-box",
+        "whitted",
+        "spotlights",
+        "transparency",
+        "teapot",
+    ] {
+        let mut s = shipped(name, 10);
+        s.render.samples = 6;
+        s.render.path.max_depth = 6;
+        s.render.path.rr_depth = 2;
+        assert_kernels_agree(&s, name);
+    }
+}
+
+#[test]
+fn lock_step_kernel_with_area_lights() {
+    // Quad, disk and sphere area lights beside the emissive triangles:
+    // next-event estimation with MIS through the scalar loop's code.
+    let mut s = mitsuba_cbox(12);
+    s.render.samples = 7;
+    let area = |shape| Light::Area {
+        shape,
+        color: Vec3::new(1.0, 0.9, 0.8),
+        intensity: 3.0,
+        two_sided: false,
+    };
+    s.lights.push(area(AreaShape::Quad {
+        corner: Vec3::new(-0.9, 0.5, -0.9),
+        edge_u: Vec3::new(0.0, 0.0, 0.3),
+        edge_v: Vec3::new(0.0, 0.3, 0.0),
+    }));
+    s.lights.push(area(AreaShape::Disk {
+        center: Vec3::new(0.6, 0.6, -0.6),
+        normal: Vec3::new(-1.0, -1.0, 1.0).normalize(),
+        radius: 0.15,
+    }));
+    s.lights.push(area(AreaShape::Sphere {
+        center: Vec3::new(0.0, 0.2, 0.5),
+        radius: 0.1,
+    }));
+    assert_kernels_agree(&s, "area lights");
+}
+
+#[test]
+fn lock_step_kernel_with_one_light() {
+    // One emissive triangle: the light choice's pair is skipped.
+    let mut s = mitsuba_cbox(12);
+    s.render.samples = 9;
+    replace_emitter(
+        &mut s,
+        vec![
+            Vec3::new(-0.3, 0.98, -0.3),
+            Vec3::new(0.3, 0.98, -0.3),
+            Vec3::new(0.0, 0.98, 0.3),
+        ],
+        vec![[0, 1, 2]],
+    );
+    assert_kernels_agree(&s, "one light");
+}
+
+/// Mitsuba's box with its emitter (the object `light`) replaced by the
+/// triangles `indices` of `positions`, in world space.
+fn replace_emitter(s: &mut Scene, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) {
+    let mesh = s.add_mesh(chiaro_core::scene::Mesh {
+        name: "emitter triangles".into(),
+        positions,
+        indices,
+        ..Default::default()
+    });
+    let light = s
+        .objects
+        .iter_mut()
+        .find(|o| o.name == "light")
+        .expect("the light");
+    light.geometry = Geometry::Mesh(mesh);
+    light.transform = Default::default();
+}
+
+#[test]
+fn lock_step_kernel_with_several_triangle_lights() {
+    // The emitter as 3, 4 (gathered by selects over the lights, up to
+    // `lanes::SELECT_LIGHTS`), 5 and 9 triangles (gathered lane by
+    // lane) of unequal areas, so the picks differ between lights.
+    for n in [3u32, 4, 5, 9] {
+        let mut s = mitsuba_cbox(12);
+        s.render.samples = 9;
+        let mut positions = Vec::new();
+        let mut indices = Vec::new();
+        for k in 0..n {
+            let (x, w) = (-0.6 + 0.13 * k as f32, 0.05 + 0.02 * k as f32);
+            let base = positions.len() as u32;
+            positions.extend([
+                Vec3::new(x, 0.98, -0.3),
+                Vec3::new(x + w, 0.98, -0.3),
+                Vec3::new(x, 0.98, 0.3),
+            ]);
+            // (Counter-clockwise seen from below: facing down.)
+            indices.push([base, base + 1, base + 2]);
+        }
+        replace_emitter(&mut s, positions, indices);
+        let prepared = PreparedScene::new(&s, PrepareOptions::default());
+        let accel = bvh(&prepared);
+        let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render, true);
+        assert_eq!(tracer.lights.len(), n as usize, "{n} lights");
+        assert_eq!(
+            tracer.select_lights.len(),
+            if n as usize <= lanes::SELECT_LIGHTS {
+                n as usize
+            } else {
+                0
+            },
+            "{n} lights: the select list"
+        );
+        assert_kernels_agree(&s, &format!("{n} triangle lights"));
+    }
+}
+
+#[test]
+fn lock_step_kernel_with_only_an_environment() {
+    // No lights but the environment (the box's emitter made plain
+    // white, the front open): lanes sample it through the scalar
+    // loop's code, and still draw each bounce's pairs.
+    let mut s = mitsuba_cbox(12);
+    s.render.samples = 8;
+    let light = s.material_by_name("light").expect("the light").index();
+    s.materials[light].emission = Vec3::ZERO;
+    let env = s.add_texture(chiaro_core::scene::Texture::Image(
+        chiaro_core::scene::ImageTexture {
+            source: "env".into(),
+            width: 8,
+            height: 4,
+            texels: (0..32)
+                .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
+                .collect(),
+            wrap: chiaro_core::scene::WrapMode::Repeat,
+            ..Default::default()
+        },
+    ));
+    s.environment = Some(chiaro_core::scene::Environment {
+        texture: env,
+        intensity: 2.0,
+        rotate_y_degrees: 0.0,
+        as_background: true,
+    });
+    assert_kernels_agree(&s, "environment only");
+}
+
+#[test]
+fn lock_step_kernel_with_an_environment_and_lights() {
+    // The box's two emitter triangles and the environment: lanes that
+    // pick the environment take the scalar loop's code.
+    let mut s = mitsuba_cbox(12);
+    s.render.samples = 11;
+    s.render.path.max_depth = 5;
+    s.render.path.rr_depth = 2;
+    let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
+        16,
+        8,
+        (5, 3),
+        50.0,
+    )));
+    s.environment = Some(chiaro_core::scene::Environment {
+        texture: env,
+        intensity: 1.0,
+        rotate_y_degrees: 200.0,
+        as_background: false,
+    });
+    let prepared = PreparedScene::new(&s, PrepareOptions::default());
+    let accel = bvh(&prepared);
+    let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render, true);
+    assert_eq!(tracer.light_count(), tracer.lights.len() + 1);
+    assert!(tracer.env.is_some());
+    assert_kernels_agree(&s, "environment and lights");
+}
+
+/// A `w x h` lat-long map of 0.05 with the texel `spot` at `value`.
+fn spot_map(w: u32, h: u32, spot: (u32, u32), value: f32) -> chiaro_core::scene::ImageTexture {
+    chiaro_core::scene::ImageTexture {
+        source: "spot".into(),
+        width: w,
+        height: h,
+        texels: (0..w * h)
+            .map(|i| {
+                let v = if (i % w, i / w) == spot { value } else { 0.05 };
+                [v, v, v, 1.0]
+            })
+            .collect(),
+        wrap: chiaro_core::scene::WrapMode::Repeat,
+        ..Default::default()
+    }
+}
+
+/// Mean and unbiased variance of channel 0 over the film's pixels.
+fn mean_and_variance(film: &Film) -> (f32, f32) {
+    let n = film.color.len() as f32;
+    let mean = film.color.iter().map(|c| c.x).sum::<f32>() / n;
+    let var = film.color.iter().map(|c| (c.x - mean).powi(2)).sum::<f32>() / (n - 1.0);
+    (mean, var)
+}
+
+#[test]
+fn diffuse_sphere_under_a_white_environment_reflects_its_albedo() {
+    // Furnace: a convex Lambertian body of albedo rho under a constant
+    // environment L sees L over every outward hemisphere, so it
+    // reflects rho L at any depth. Depth 1 is the environment's
+    // next-event estimation alone; depth 4 its MIS with BSDF sampling.
+    // A faceted mesh sphere (the lock-step kernel) and an analytic one
+    // (the scalar loop), each filling the frame; and the reference.
+    let (rho, le) = (0.6, 1.5);
+    for analytic in [false, true] {
+        let mut s = Scene::default();
+        s.add_material(Material::diffuse("white", Vec3::splat(rho)));
+        let geometry = if analytic {
+            Geometry::Sphere { radius: 1.0 }
+        } else {
+            Geometry::Mesh(s.add_mesh(primitives::uv_sphere(1.0, 24, 12)))
+        };
+        s.objects.push(Object {
+            geometry,
+            smooth: false,
+            ..Default::default()
+        });
+        let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
+            8,
+            4,
+            (0, 0),
+            0.05,
+        )));
+        s.environment = Some(chiaro_core::scene::Environment {
+            texture: env,
+            intensity: le / 0.05,
+            rotate_y_degrees: 10.0,
+            as_background: false,
+        });
+        s.camera = Camera {
+            eye: Vec3::new(0.3, 0.4, -4.0),
+            look_at: Vec3::new(0.0, 0.2, 0.0),
+            fov_y_degrees: 8.0,
+            ..Camera::default()
+        };
+        s.render.width = 16;
+        s.render.height = 16;
+        s.render.samples = 64;
+        s.render.path.rr_depth = 2;
+        for (depth, kernel) in [
+            (1, Kernel::Lanes),
+            (4, Kernel::Lanes),
+            (4, Kernel::Reference),
+        ] {
+            s.render.path.max_depth = depth;
+            let (film, _) =
+                render_with_kernel(&s, &s.render, &NoProgress, &bvh, kernel).expect("renders");
+            let (mean, var) = mean_and_variance(&film);
+            let stderr = (var / film.color.len() as f32).sqrt();
+            let expect = rho * le;
+            eprintln!(
+                "analytic {analytic} depth {depth} {kernel:?}: {mean} +- {stderr} vs {expect}"
+            );
+            assert!(
+                (mean - expect).abs() < 4.0 * stderr + 1e-4,
+                "analytic {analytic}, depth {depth}, {kernel:?}: mean {mean} stderr {stderr}, expected {expect}"
+            );
+        }
+    }
+}
+
+#[test]
+fn environment_sampling_cuts_the_variance_of_a_small_bright_spot() {
+    // A diffuse plane under a dim map with one texel 40000 times as
+    // bright (about 48 degrees from the zenith). Its radiance is
+    // rho / pi times the irradiance E = integral L cos over the upper
+    // hemisphere, computed here by quadrature of the lookup. With the
+    // environment sampled and without (BSDF sampling alone) the mean
+    // must be that; at equal samples the variance must be far lower.
+    let rho = 0.5;
+    let mut s = Scene::default();
+    s.add_material(Material::diffuse("grey", Vec3::splat(rho)));
+    let plane = s.add_mesh(primitives::plane(400.0, 1));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(plane),
+        smooth: false,
+        ..Default::default()
+    });
+    let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
+        64,
+        32,
+        (40, 8),
+        2000.0,
+    )));
+    s.environment = Some(chiaro_core::scene::Environment {
+        texture: env,
+        intensity: 1.0,
+        rotate_y_degrees: 25.0,
+        as_background: false,
+    });
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 1.0, -0.001),
+        look_at: Vec3::ZERO,
+        fov_y_degrees: 30.0,
+        ..Camera::default()
+    };
+    s.render.width = 16;
+    s.render.height = 16;
+    s.render.samples = 64;
+    s.render.path.max_depth = 2;
+    // E by the midpoint rule over the upper hemisphere.
+    let (nt, np) = (1024, 4096);
+    let mut e = 0.0f64;
+    for i in 0..nt {
+        let theta = (i as f32 + 0.5) / nt as f32 * 0.5 * PI;
+        let (st, ct) = theta.sin_cos();
+        let mut row = 0.0f64;
+        for j in 0..np {
+            let phi = (j as f32 + 0.5) / np as f32 * 2.0 * PI;
+            let d = Vec3::new(st * phi.cos(), ct, st * phi.sin());
+            row += f64::from(chiaro_core::shading::texture::environment_radiance(&s, d).x);
+        }
+        e += row * f64::from(st * ct);
+    }
+    let e = e as f32 * (0.5 * PI / nt as f32) * (2.0 * PI / np as f32);
+    let expect = rho / PI * e;
+    let mut variance = [0.0; 2];
+    for (k, env_sampling) in [true, false].into_iter().enumerate() {
+        let (film, _) = render_impl(
+            &s,
+            &s.render,
+            &NoProgress,
+            &bvh,
+            Kernel::Lanes,
+            env_sampling,
+        )
+        .expect("renders");
+        assert!(film.is_clean());
+        let (mean, var) = mean_and_variance(&film);
+        let stderr = (var / film.color.len() as f32).sqrt();
+        eprintln!(
+            "environment sampling {env_sampling}: mean {mean} stderr {stderr} variance {var}, expected {expect}"
+        );
+        assert!(
+            (mean - expect).abs() < 4.0 * stderr + 2e-3 * expect,
+            "environment sampling {env_sampling}: mean {mean} stderr {stderr}, expected {expect}"
+        );
+        variance[k] = var;
+    }
+    assert!(
+        variance[0] * 50.0 < variance[1],
+        "variance with environment sampling {} against {} without",
+        variance[0],
+        variance[1]
+    );
+}
+
+#[test]
+fn lanes_pick_the_lights_the_scalar_pick_does() {
+    // Counting CDF entries (up to 16 lights) and the binary search
+    // (more) against `pick_light`, at and beside every CDF entry.
+    for k in [1usize, 2, 3, 16, 17, 40] {
+        let mut s = mitsuba_cbox(4);
+        for j in 0..k {
+            s.lights.push(Light::Point {
+                position: Vec3::new(0.0, 0.5, 0.0),
+                color: Vec3::ONE,
+                intensity: 1.0 + (j % 5) as f32,
+                attenuation: Attenuation::InverseSquare,
+            });
+        }
+        let prepared = PreparedScene::new(&s, PrepareOptions::default());
+        let accel = SceneBvh::new(&prepared);
+        let tracer = PathTracer::new(&prepared, &accel, &s.render, true);
+        let mut us = vec![0.0, 0.5, 0.999_999_94, 1.0];
+        for &c in &tracer.light_cdf {
+            us.extend([c.next_down(), c, c.next_up()]);
+        }
+        for chunk in us.chunks(LANES) {
+            let mut u = [0.0; LANES];
+            u[..chunk.len()].copy_from_slice(chunk);
+            let lanes = tracer.pick_lights(&u).expect("lights");
+            for i in 0..LANES {
+                let want = tracer.pick_light(u[i]).expect("lights") as u32;
+                assert_eq!(lanes[i], want, "{k} lights, u = {}", u[i]);
+            }
+        }
+    }
+}
+
+#[test]
+fn glass_sphere_of_ior_one_is_invisible() {
+    // A non-absorbing dielectric with ior 1 refracts straight through:
+    // the image equals the image without it (up to ray offsets).
+    let mut s = Scene::default();
+    s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
+    let glass = s.add_material(Material {
+        diffuse: Vec3::ZERO,
+        transmit: Vec3::ONE,
+        ior: 1.0,
+        fresnel: true,
+        ..Material::default()
+    });
+    let plane = s.add_mesh(primitives::plane(5.0, 1));
+    s.objects.push(Object {
+        geometry: Geometry::Mesh(plane),
+        smooth: false,
+        ..Default::default()
+    });
+    s.lights.push(Light::Point {
+        position: Vec3::new(0.0, 4.0, 0.0),
+        color: Vec3::ONE,
+        intensity: 10.0,
+        attenuation: Attenuation::InverseSquare,
+    });
+    s.camera = Camera {
+        eye: Vec3::new(0.0, 3.0, -3.0),
+        look_at: Vec3::ZERO,
+        ..Camera::default()
+    };
+    s.render.width = 12;
+    s.render.height = 12;
+    s.render.samples = 2;
+    s.render.path.max_depth = 4;
+    let (without, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    s.objects.push(Object {
+        geometry: Geometry::Sphere { radius: 0.7 },
+        material: glass,
+        transform: chiaro_core::scene::Transform {
+            translate: Vec3::new(0.0, 0.8, -0.5),
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    // Shadow rays are blocked by glass (no caustics through NEE), so the
+    // sphere's shadow on the plane darkens; every other pixel must be
+    // unchanged. A pixel is classified by where its centre ray meets the
+    // plane: in the shadow (the segment to the light passes the sphere's
+    // centre closer than r - 0.1), clear of it (farther than r + 0.15, a
+    // margin for the pixel footprint), or on the edge (not checked).
+    let (with, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let (centre, r, light) = (Vec3::new(0.0, 0.8, -0.5), 0.7, Vec3::new(0.0, 4.0, 0.0));
+    let (w, h) = (s.render.width, s.render.height);
+    let (mut shadowed, mut clear) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let d = s.camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5, w, h);
+            let q = s.camera.eye + d * (-s.camera.eye.y / d.y);
+            // Distance from the sphere's centre to the segment q -> light.
+            let seg = light - q;
+            let t = ((centre - q).dot(seg) / seg.length_squared()).clamp(0.0, 1.0);
+            let dist = (q + seg * t - centre).length();
+            let i = (y * w + x) as usize;
+            let (a, b) = (without.color[i].x, with.color[i].x);
+            if dist > r + 0.15 {
+                clear += 1;
+                assert!(
+                    (a - b).abs() <= 1e-3,
+                    "pixel ({x}, {y}) changed: {a} -> {b}"
+                );
+            } else if dist < r - 0.1 {
+                shadowed += 1;
+                assert!(
+                    a > 0.1 && b < 0.3 * a,
+                    "pixel ({x}, {y}) not shadowed: {a} -> {b}"
+                );
+            }
+        }
+    }
+    assert!(
+        clear > 80 && shadowed > 10,
+        "clear {clear} shadowed {shadowed}"
+    );
+}
