@@ -68,7 +68,6 @@ pub fn settings_from(scene: &Scene, opts: &RenderOptions) -> Result<RenderSettin
             .ok_or_else(|| anyhow!("--set expects KEY=VALUE, got `{kv}`"))?;
         chiaro::settings::apply_override(&mut s, k.trim(), v.trim())?;
     }
-    chiaro::check_settings(&s)?;
     Ok(s)
 }
 
@@ -332,7 +331,7 @@ pub fn info(path: &Path) -> Result<()> {
         num(s.camera.fov_y_degrees)
     );
     println!("cannot show (per technique, see the README's table):");
-    for &t in chiaro::available_techniques() {
+    for t in chiaro::Technique::ALL {
         let limits = chiaro::limitations(s, t);
         if limits.is_empty() {
             println!("  {}: none of the table's limitations apply", t.name());

@@ -22,6 +22,7 @@
 
 pub mod accel;
 pub mod budget;
+pub mod context;
 pub mod error;
 pub mod film;
 pub mod framing;

@@ -121,10 +121,10 @@ use chiaro_core::geometry::primitives;
 use chiaro_core::geometry::primitives::MeshSize;
 use chiaro_core::glam::Mat4;
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Bump, Camera, DepthCue, Environment, Flap, Geometry, Light,
-    MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, Material, MaterialId, Mesh, NamedCamera, Object,
-    Procedural, ProceduralKind, RadiositySettings, RenderSettings, Scene, Severity,
-    ShadowMapSettings, SpotLight, Texture, TextureId, Transform, WrapMode,
+    AreaShape, Attenuation, Bump, Camera, DepthCue, Environment, Flap, FormFactorMethod, Geometry,
+    Light, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, Material, MaterialId, Mesh, NamedCamera,
+    Object, Procedural, ProceduralKind, RadiositySettings, RadiositySolver, RenderSettings, Scene,
+    Severity, ShadowMapSettings, SpotLight, Texture, TextureId, Transform, WrapMode,
 };
 use raw::{
     AttenuationSpec, Opt, RawCamera, RawLight, RawMaterial, RawObject, RawRender, RawScene,
@@ -506,31 +506,28 @@ impl Ctx<'_> {
         }
         if let Some(rad) = raw.radiosity {
             let d = RadiositySettings::default();
-            let pick = |v: &Opt<String>, what: &str, allowed: &[&str], default: &str| match v {
-                None => Ok(default.to_string()),
-                Some(s) if allowed.contains(&s.get_ref().as_str()) => Ok(s.get_ref().clone()),
+            // A name from `names` (the valid ones, for the message), parsed by `parse`.
+            let pick = |v: &Opt<String>, what: &str, names: &[&str]| match v {
+                None => Ok(None),
+                Some(s) if names.contains(&s.get_ref().as_str()) => Ok(Some(s.get_ref().clone())),
                 Some(s) => Err(self.at(
                     s.span(),
                     format!(
                         "{what}: unknown {:?}, expected one of: {}",
                         s.get_ref(),
-                        allowed.join(", ")
+                        names.join(", ")
                     ),
                 )),
             };
+            let solvers = RadiositySolver::ALL.map(RadiositySolver::name);
+            let methods = FormFactorMethod::ALL.map(FormFactorMethod::name);
             r.radiosity = RadiositySettings {
-                solver: pick(
-                    &rad.solver,
-                    "render.radiosity.solver",
-                    &["jacobi", "gauss-seidel", "progressive", "hierarchical"],
-                    &d.solver,
-                )?,
-                formfactor: pick(
-                    &rad.formfactor,
-                    "render.radiosity.formfactor",
-                    &["hemicube", "raycast", "analytic"],
-                    &d.formfactor,
-                )?,
+                solver: pick(&rad.solver, "render.radiosity.solver", &solvers)?
+                    .and_then(|n| RadiositySolver::from_name(&n))
+                    .unwrap_or(d.solver),
+                formfactor: pick(&rad.formfactor, "render.radiosity.formfactor", &methods)?
+                    .and_then(|n| FormFactorMethod::from_name(&n))
+                    .unwrap_or(d.formfactor),
                 patch_size: match &rad.patch_size {
                     Some(v) => self.non_negative(v, "render.radiosity.patch_size")?,
                     None => d.patch_size,

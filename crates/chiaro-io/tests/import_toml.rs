@@ -234,7 +234,10 @@ radius = 2
     assert_eq!(s.render.shadow_map.resolution, 512);
     assert_eq!(s.render.whitted.max_depth, 3);
     assert_eq!(s.render.path.max_depth, 2);
-    assert_eq!(s.render.radiosity.solver, "gauss-seidel");
+    assert_eq!(
+        s.render.radiosity.solver,
+        chiaro_core::scene::RadiositySolver::GaussSeidel
+    );
     assert_eq!(s.render.depth_cue.map(|d| d.far), Some(10.0));
     assert!((s.camera.fov_y_degrees - 39.3).abs() < 1e-5);
     assert_eq!(s.lights.len(), 4);

@@ -6,7 +6,7 @@
 use crate::convert::{json_to_py, merge_props, py_to_json, toml_literal};
 use crate::errors::{RenderError, SettingsError, core_err, io_err, to_pyerr};
 use crate::scene::PyScene;
-use crate::solution::{PySolution, check_solution_technique, render_from_solution};
+use crate::solution::{PySolution, check_solution_technique};
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film, write_film};
 use chiaro::scene::{Scene, ToneMap};
 use chiaro::{Film, Progress, RenderSettings, Technique, Vec3};
@@ -457,7 +457,7 @@ pub fn render<'py>(
     let callback = progress.map(Bound::unbind);
     let (film, stats) = match &solution {
         Some(sol) => run_polling(py, callback, threads, |p| {
-            render_from_solution(scene_ref, &settings, &sol.inner, p)
+            chiaro::render_from_solution(scene_ref, &settings, &sol.inner, p)
         })?
         .map_err(to_pyerr)?,
         None => render_polling(py, scene_ref, &settings, callback, threads)?,

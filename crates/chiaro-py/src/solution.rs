@@ -6,16 +6,14 @@
 //! every tile of a distributed render; it travels as bytes (the JSON of
 //! `RadiositySolution::save`) and pickles.
 
-use crate::errors::{RenderError, SettingsError, core_err};
+use crate::errors::{RenderError, SettingsError, core_err, to_pyerr};
 use crate::render::{overrides_json, resolve_settings, run_polling};
 use crate::scene::PyScene;
-use chiaro::scene::Scene;
-use chiaro::{Film, Progress, RenderSettings, Technique};
-use chiaro_radiosity::RadiositySolution;
+use chiaro::RadiositySolution;
+use chiaro::Technique;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyTuple};
 use std::sync::Arc;
-use std::time::Instant;
 
 /// A view-independent radiosity solution of one scene (Python
 /// `chiaro.RadiositySolution`). Immutable; shared, not copied, between
@@ -116,52 +114,6 @@ impl PySolution {
     }
 }
 
-/// Renders `scene` from an existing `solution` with `settings.technique`
-/// (`radiosity`: the solution displayed; `hybrid`: Whitted ray tracing with
-/// the solution's indirect light), honouring `settings.crop`. Nothing is
-/// solved. Returns the film and the facade's stats.
-///
-/// # Errors
-/// `CoreError::BadSetting` for another technique; the renderer's errors
-/// (a solution of another scene is `CoreError::Unsupported`).
-pub fn render_from_solution(
-    scene: &Scene,
-    settings: &RenderSettings,
-    solution: &RadiositySolution,
-    progress: &dyn Progress,
-) -> Result<(Film, chiaro::RenderStats), chiaro::Error> {
-    let start = Instant::now();
-    let (film, rays) = match settings.technique {
-        Technique::Radiosity => (
-            chiaro_radiosity::render_solution(scene, solution, settings, progress)?,
-            0,
-        ),
-        Technique::Hybrid => {
-            let (film, stats) =
-                chiaro::hybrid::render_with_solution(scene, solution.clone(), settings, progress)?;
-            (film, stats.rays)
-        }
-        other => {
-            return Err(chiaro_core::error::CoreError::BadSetting {
-                key: "solution".into(),
-                message: format!(
-                    "a radiosity solution renders with technique radiosity or hybrid, not {}",
-                    other.name()
-                ),
-            }
-            .into());
-        }
-    };
-    Ok((
-        film,
-        chiaro::RenderStats {
-            elapsed: start.elapsed(),
-            triangles: scene.triangle_count() as u64,
-            rays,
-        },
-    ))
-}
-
 /// `chiaro._chiaro.solve_radiosity`: see `chiaro.solve_radiosity`
 /// (python/chiaro/__init__.py). Solves with the scene's settings
 /// overridden as `render` overrides them (only the `radiosity.*` keys
@@ -179,9 +131,9 @@ pub fn solve_radiosity<'py>(
     let settings = resolve_settings(&scene.inner, None, None, None, None, None, &overrides)?;
     let inner = &scene.inner;
     let s = run_polling(py, progress.map(Bound::unbind), threads, |p| {
-        chiaro_radiosity::solve(inner, &settings, p)
+        chiaro::solve_radiosity(inner, &settings, p)
     })?
-    .map_err(core_err)?;
+    .map_err(to_pyerr)?;
     Ok(PySolution { inner: Arc::new(s) })
 }
 
@@ -203,7 +155,7 @@ pub fn check_solution_technique(technique: Technique) -> PyResult<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chiaro::{NoProgress, Vec3};
+    use chiaro::{NoProgress, RenderSettings, Scene, Vec3};
 
     fn cornell() -> Scene {
         let path =
@@ -219,7 +171,7 @@ mod tests {
         s.width = 24;
         s.height = 20;
         s.samples = 4;
-        s.radiosity.solver = "hierarchical".into();
+        s.radiosity.solver = chiaro::scene::RadiositySolver::Hierarchical;
         s
     }
 
@@ -227,16 +179,17 @@ mod tests {
     fn a_crop_window_equals_the_full_render_inside_and_is_black_outside() {
         let scene = cornell();
         let base = settings(&scene, Technique::Radiosity);
-        let sol = chiaro_radiosity::solve(&scene, &base, &NoProgress).expect("solve");
+        let sol = chiaro::solve_radiosity(&scene, &base, &NoProgress).expect("solve");
         for technique in [Technique::Radiosity, Technique::Hybrid] {
             let s = settings(&scene, technique);
-            let (full, _) = render_from_solution(&scene, &s, &sol, &NoProgress).expect("full");
+            let (full, _) =
+                chiaro::render_from_solution(&scene, &s, &sol, &NoProgress).expect("full");
             let cropped_s = RenderSettings {
                 crop: Some([5, 3, 17, 14]),
                 ..s.clone()
             };
             let (crop, _) =
-                render_from_solution(&scene, &cropped_s, &sol, &NoProgress).expect("crop");
+                chiaro::render_from_solution(&scene, &cropped_s, &sol, &NoProgress).expect("crop");
             let mut lit = 0;
             for y in 0..s.height {
                 for x in 0..s.width {
@@ -262,18 +215,23 @@ mod tests {
     fn a_solution_of_another_scene_is_refused() {
         let scene = cornell();
         let s = settings(&scene, Technique::Radiosity);
-        let sol = chiaro_radiosity::solve(&scene, &s, &NoProgress).expect("solve");
+        let sol = chiaro::solve_radiosity(&scene, &s, &NoProgress).expect("solve");
         let mut other = scene.clone();
         other.objects.pop();
         for technique in [Technique::Radiosity, Technique::Hybrid] {
-            let r = render_from_solution(&other, &settings(&other, technique), &sol, &NoProgress);
+            let r = chiaro::render_from_solution(
+                &other,
+                &settings(&other, technique),
+                &sol,
+                &NoProgress,
+            );
             let msg = r.err().map(|e| e.to_string()).unwrap_or_default();
             assert!(
                 msg.contains("does not match this scene"),
                 "{technique:?}: {msg}"
             );
         }
-        let r = render_from_solution(
+        let r = chiaro::render_from_solution(
             &scene,
             &settings(&scene, Technique::Phong),
             &sol,

@@ -86,13 +86,22 @@ fn main() {
     }
     let scene = cornell();
     let mut r = RenderSettings::default();
-    r.radiosity.solver = args[1].clone();
-    r.radiosity.formfactor = args[2].clone();
+    let (Some(solver), Some(formfactor)) = (
+        chiaro_radiosity::Solver::from_name(&args[1]),
+        chiaro_radiosity::Method::from_name(&args[2]),
+    ) else {
+        eprintln!("unknown solver or form-factor method");
+        std::process::exit(2);
+    };
+    r.radiosity.solver = solver;
+    r.radiosity.formfactor = formfactor;
     r.radiosity.patch_size = args[3].parse().unwrap_or(0.1);
     r.radiosity.tolerance = 0.01;
     r.radiosity.hemicube_resolution = 64;
     let t = std::time::Instant::now();
-    match chiaro_radiosity::solve(&scene, &r, &NoProgress) {
+    let solved = chiaro_core::context::RenderContext::new(&scene, &r, &NoProgress)
+        .and_then(|ctx| chiaro_radiosity::solve(&ctx));
+    match solved {
         Ok(sol) => {
             let st = &sol.stats;
             let ceiling = sol.object_mean_radiance(1).unwrap_or(Vec3::ZERO);

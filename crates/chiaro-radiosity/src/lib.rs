@@ -6,7 +6,8 @@
 //! [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
 //! draws it from the scene's camera through chiaro-raster's z-buffer (item
 //! buffer): the textured colour from the surface layer times the Gouraud
-//! interpolation of the vertex irradiance; [`render`] does both.
+//! interpolation of the vertex irradiance; [`Radiosity`] does both, as the
+//! technique interface's [`Renderer`].
 //!
 //! # Conventions (decided here; see ARCHITECTURE.md)
 //! - Every quantity a solver stores is **radiance** `L` (W sr^-1 m^-2), not
@@ -50,12 +51,11 @@ pub use formfactor::{FormFactor, disc_to_disc, perpendicular_rectangles, point_t
 use solution::{RHO_MIN, clamped_weights, irradiance_from};
 pub use solution::{RadiositySolution, SolveStats, fingerprint};
 
-use chiaro_core::accel::Accelerator;
+use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::Film;
-use chiaro_core::prepared::{PrepareOptions, PreparedScene};
-use chiaro_core::progress::Progress;
-use chiaro_core::scene::{RadiositySettings, RenderSettings, Scene, Severity};
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::scene::Scene;
 use chiaro_core::shading::texture::background_radiance;
 use formfactor::{PairFormFactor, PairRule, Visibility, pair, point_light_direct};
 use glam::{Vec2, Vec3};
@@ -63,184 +63,17 @@ use mesh::{Element, ElementMesh, SourceKind, material_at};
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// The radiosity solvers.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Solver {
-    /// Full matrix, Jacobi iteration.
-    Jacobi,
-    /// Full matrix, Gauss-Seidel iteration.
-    GaussSeidel,
-    /// Progressive refinement (shooting).
-    Progressive,
-    /// Hierarchical radiosity.
-    Hierarchical,
-}
+pub use chiaro_core::scene::{FormFactorMethod as Method, RadiositySolver as Solver};
 
-impl Solver {
-    /// Valid names, for messages.
-    pub const NAMES: &'static str = "jacobi, gauss-seidel, progressive, hierarchical";
+/// The radiosity technique: [`solve`], then [`render_solution`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Radiosity;
 
-    /// Parses a solver name.
-    pub fn from_name(s: &str) -> Option<Self> {
-        Some(match s {
-            "jacobi" => Self::Jacobi,
-            "gauss-seidel" => Self::GaussSeidel,
-            "progressive" => Self::Progressive,
-            "hierarchical" => Self::Hierarchical,
-            _ => return None,
-        })
-    }
-
-    /// The name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Jacobi => "jacobi",
-            Self::GaussSeidel => "gauss-seidel",
-            Self::Progressive => "progressive",
-            Self::Hierarchical => "hierarchical",
-        }
-    }
-}
-
-/// The form-factor methods.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Method {
-    /// Hemicube on the scan converter's item buffer.
-    Hemicube,
-    /// Exact point-to-polygon factors with ray-cast visibility.
-    Raycast,
-    /// Exact point-to-polygon factors, no visibility (unoccluded scenes).
-    Analytic,
-}
-
-impl Method {
-    /// Valid names, for messages.
-    pub const NAMES: &'static str = "hemicube, raycast, analytic";
-
-    /// Parses a method name.
-    pub fn from_name(s: &str) -> Option<Self> {
-        Some(match s {
-            "hemicube" => Self::Hemicube,
-            "raycast" => Self::Raycast,
-            "analytic" => Self::Analytic,
-            _ => return None,
-        })
-    }
-
-    /// The name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Hemicube => "hemicube",
-            Self::Raycast => "raycast",
-            Self::Analytic => "analytic",
-        }
-    }
-}
-
-/// Checked radiosity settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Config {
-    /// The solver.
-    pub solver: Solver,
-    /// The form-factor method.
-    pub method: Method,
-    /// Patch size, 0 for automatic.
-    pub patch_size: f32,
-    /// Hemicube resolution.
-    pub hemicube_resolution: u32,
-    /// Stop tolerance (unshot fraction).
-    pub tolerance: f32,
-    /// Iteration cap.
-    pub max_iterations: u32,
-}
-
-fn bad(key: &str, message: String) -> CoreError {
-    CoreError::BadSetting {
-        key: format!("radiosity.{key}"),
-        message,
-    }
-}
-
-impl Config {
-    /// Checks `settings`.
-    ///
-    /// # Errors
-    /// [`CoreError::BadSetting`] naming the field, with the valid values.
-    pub fn from_settings(s: &RadiositySettings) -> Result<Self, CoreError> {
-        let solver = Solver::from_name(&s.solver).ok_or_else(|| {
-            bad(
-                "solver",
-                format!("unknown solver `{}` (valid: {})", s.solver, Solver::NAMES),
-            )
-        })?;
-        let method = Method::from_name(&s.formfactor).ok_or_else(|| {
-            bad(
-                "formfactor",
-                format!(
-                    "unknown form-factor method `{}` (valid: {})",
-                    s.formfactor,
-                    Method::NAMES
-                ),
-            )
-        })?;
-        if solver == Solver::Hierarchical && method == Method::Hemicube {
-            return Err(bad(
-                "formfactor",
-                "the hierarchical solver needs area-to-area link form factors: use `raycast` or `analytic`".into(),
-            ));
-        }
-        if !(s.patch_size.is_finite() && s.patch_size >= 0.0) {
-            return Err(bad(
-                "patch_size",
-                format!(
-                    "must be a finite number >= 0 (0 = automatic), got {}",
-                    s.patch_size
-                ),
-            ));
-        }
-        if !(2..=4096).contains(&s.hemicube_resolution) {
-            return Err(bad(
-                "hemicube_resolution",
-                format!("must be in 2..=4096, got {}", s.hemicube_resolution),
-            ));
-        }
-        if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
-            return Err(bad(
-                "tolerance",
-                format!("must be in (0, 1), got {}", s.tolerance),
-            ));
-        }
-        if s.max_iterations == 0 {
-            return Err(bad("max_iterations", "must be at least 1".into()));
-        }
-        Ok(Self {
-            solver,
-            method,
-            patch_size: s.patch_size,
-            hemicube_resolution: s.hemicube_resolution,
-            tolerance: s.tolerance,
-            max_iterations: s.max_iterations,
-        })
-    }
-}
-
-/// The ray accelerator used for visibility: the flat BVH, or the
-/// two-level BVH when meshes are shared enough.
-fn make_accel(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
-    chiaro_core::accel::instanced::build_accelerator(ps)
-}
-
-fn check_scene(scene: &Scene) -> Result<(), CoreError> {
-    let issues: Vec<String> = scene
-        .validate()
-        .into_iter()
-        .filter(|i| i.severity == Severity::Error)
-        .map(|i| i.to_string())
-        .collect();
-    if issues.is_empty() {
-        Ok(())
-    } else {
-        Err(CoreError::InvalidScene { issues })
+impl Renderer for Radiosity {
+    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats), CoreError> {
+        let solution = solve(ctx)?;
+        let film = render_solution(ctx, &solution)?;
+        Ok((film, ctx.stats(0)))
     }
 }
 
@@ -289,44 +122,37 @@ fn direct_light(
         .collect()
 }
 
-/// Solves the radiosity of `scene` with `settings.radiosity` and returns the
-/// view-independent solution (radiance per element and per vertex).
+/// Solves the radiosity of the context's scene with `settings.radiosity`
+/// and returns the view-independent solution (radiance per element and per
+/// vertex).
 ///
 /// # Errors
-/// [`CoreError::BadSetting`] for unknown solver or form-factor names (the
-/// message lists the valid ones) or out-of-range numbers;
-/// [`CoreError::InvalidScene`] when the scene does not validate;
 /// [`CoreError::Unsupported`] when the mesh is too large for the solver;
-/// [`CoreError::Cancelled`] when `progress` asks.
-pub fn solve(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-) -> Result<RadiositySolution, CoreError> {
-    let cfg = Config::from_settings(&settings.radiosity)?;
-    check_scene(scene)?;
+/// [`CoreError::Cancelled`] when the progress asks.
+pub fn solve(ctx: &RenderContext<'_>) -> Result<RadiositySolution, CoreError> {
+    let cfg = &ctx.settings().radiosity;
+    let (scene, progress) = (ctx.scene(), ctx.progress());
     let start = Instant::now();
-    let ps = PreparedScene::new(scene, PrepareOptions::default());
+    let ps = ctx.tessellated();
     let patch = if cfg.patch_size > 0.0 {
         cfg.patch_size
     } else {
-        mesh::default_patch_size(&ps)
+        mesh::default_patch_size(ps)
     };
     let size = ps.bounds.diagonal().max(1e-6);
     let tol = size * 1e-6;
-    let accel = make_accel(&ps);
     let vis = Visibility {
-        accel: accel.as_ref(),
+        accel: ctx.tessellated_accel(),
         eps: size * 1e-4,
     };
     progress.begin("radiosity meshing", 1);
-    let mesh = mesh::build(&ps, patch, cfg.solver == Solver::Hierarchical)?;
+    let mesh = mesh::build(ps, patch, cfg.solver == Solver::Hierarchical)?;
     progress.advance(1);
     let n = mesh.elements.len();
     progress.message(&format!(
         "radiosity: {n} elements (patch size {patch}), solver {}, form factors {}",
         cfg.solver.name(),
-        cfg.method.name()
+        cfg.formfactor.name()
     ));
     let point_direct: Vec<Vec3> = mesh
         .elements
@@ -341,14 +167,14 @@ pub fn solve(
         .collect();
     let mut stats = SolveStats {
         solver: cfg.solver.name().into(),
-        formfactor: cfg.method.name().into(),
+        formfactor: cfg.formfactor.name().into(),
         patch_size: patch,
         elements: n,
         ..SolveStats::default()
     };
     let hemi;
     let pairs;
-    let ff: &dyn FormFactor = match cfg.method {
+    let ff: &dyn FormFactor = match cfg.formfactor {
         Method::Hemicube => {
             hemi = hemicube::HemicubeFormFactor::new(
                 &mesh.elements,
@@ -362,7 +188,7 @@ pub fn solve(
             pairs = PairFormFactor::raycast(
                 &mesh.elements,
                 Visibility {
-                    accel: accel.as_ref(),
+                    accel: vis.accel,
                     eps: vis.eps,
                 },
                 tol,
@@ -414,13 +240,13 @@ pub fn solve(
             out.l
         }
         Solver::Hierarchical => {
-            let (rule, v) = match cfg.method {
+            let (rule, v) = match cfg.formfactor {
                 Method::Analytic => (PairFormFactor::analytic(&[], tol).rule, None),
                 _ => (
                     PairFormFactor::raycast(
                         &[],
                         Visibility {
-                            accel: accel.as_ref(),
+                            accel: vis.accel,
                             eps: vis.eps,
                         },
                         tol,
@@ -430,7 +256,7 @@ pub fn solve(
                 ),
             };
             let (l, hs) = hierarchical::solve(
-                &ps,
+                ps,
                 &mesh,
                 &e,
                 v,
@@ -451,7 +277,7 @@ pub fn solve(
     let l: Vec<Vec3> = l.into_iter().map(chiaro_core::shading::sanitize).collect();
     // Irradiance for the display, pi (L - Le) / rho, and its indirect part
     // for the hybrid, pi (L - Le - direct) / rho.
-    let direct = direct_light(&ps, &mesh, &point_direct, &vis, tol);
+    let direct = direct_light(ps, &mesh, &point_direct, &vis, tol);
     let (irradiance, indirect): (Vec<Vec3>, Vec<Vec3>) = mesh
         .elements
         .iter()
@@ -471,7 +297,7 @@ pub fn solve(
         stats.seconds, stats.iterations, stats.unshot
     ));
     Ok(build_solution(
-        scene, &ps, &mesh, l, irradiance, indirect, stats,
+        scene, ps, &mesh, l, irradiance, indirect, stats,
     ))
 }
 
@@ -540,7 +366,7 @@ fn build_solution(
     }
 }
 
-/// Draws `solution` from `scene`'s camera: the display mesh is scan
+/// Draws `solution` from the context's camera: the display mesh is scan
 /// converted into chiaro-raster's item buffer (z-buffer) at
 /// `round(sqrt(samples))^2` samples per pixel, and each visible sample gets
 /// its surface's emission plus its textured `kd / pi` times the Gouraud
@@ -556,11 +382,10 @@ fn build_solution(
 /// [`CoreError::Unsupported`] if the solution belongs to another scene;
 /// [`CoreError::Cancelled`] when `progress` asks.
 pub fn render_solution(
-    scene: &Scene,
+    ctx: &RenderContext<'_>,
     solution: &RadiositySolution,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
 ) -> Result<Film, CoreError> {
+    let (scene, settings, progress) = (ctx.scene(), ctx.settings(), ctx.progress());
     solution.check_scene(scene)?;
     let (w, h) = (settings.width.max(1), settings.height.max(1));
     let ss = (settings.samples.max(1) as f32)
@@ -582,7 +407,7 @@ pub fn render_solution(
             (c[1] - c[0]).cross(c[2] - c[0]).normalize_or_zero()
         })
         .collect();
-    let surfaces = DisplaySurfaces::new(scene, solution);
+    let surfaces = DisplaySurfaces::new(ctx.tessellated(), solution);
     // The eye does not see the backs of single-sided (`cull_backface`)
     // materials, as in the other techniques: such elements are left out.
     let culling = scene.materials.iter().any(|m| m.cull_backface);
@@ -670,22 +495,20 @@ pub fn render_solution(
 /// emission)` of the source triangles whose surface is uniform (untextured,
 /// one vertex colour), evaluated once.
 struct DisplaySurfaces<'a> {
-    ps: PreparedScene<'a>,
+    ps: &'a PreparedScene<'a>,
     sources: Vec<u32>,
     uniform: Vec<Option<(Vec3, Vec3)>>,
 }
 
 impl<'a> DisplaySurfaces<'a> {
-    fn new(scene: &'a Scene, solution: &RadiositySolution) -> Self {
-        let ps = PreparedScene::new(scene, PrepareOptions::default());
+    fn new(ps: &'a PreparedScene<'a>, solution: &RadiositySolution) -> Self {
         let n = (solution.prepared_triangles as usize).min(ps.triangles.len());
         let uniform = (0..n as u32)
             .into_par_iter()
             .map(|t| {
                 let m = ps.material(ps.tri_material[t as usize]);
                 let [a, b, c] = ps.triangles[t as usize].map(|i| ps.colors[i as usize]);
-                (!m.is_textured() && a == b && b == c)
-                    .then(|| surface(&ps, t, 1.0 / 3.0, 1.0 / 3.0))
+                (!m.is_textured() && a == b && b == c).then(|| surface(ps, t, 1.0 / 3.0, 1.0 / 3.0))
             })
             .collect();
         Self {
@@ -714,7 +537,7 @@ impl<'a> DisplaySurfaces<'a> {
         let (kd, emission) = uniform.unwrap_or_else(|| {
             let [_, u, v] =
                 clamped_weights(mesh::barycentric(&solution.source_corners[s as usize], p));
-            surface(&self.ps, s, u, v)
+            surface(self.ps, s, u, v)
         });
         emission + kd * irradiance * std::f32::consts::FRAC_1_PI
     }
@@ -738,19 +561,6 @@ pub(crate) fn surface(ps: &PreparedScene<'_>, t: u32, u: f32, v: f32) -> (Vec3, 
         m.kd.clamp(Vec3::ZERO, Vec3::ONE),
         m.emission.max(Vec3::ZERO),
     )
-}
-
-/// Solves and displays: [`solve`] then [`render_solution`].
-///
-/// # Errors
-/// Those of [`solve`] and [`render_solution`].
-pub fn render(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-) -> Result<Film, CoreError> {
-    let s = solve(scene, settings, progress)?;
-    render_solution(scene, &s, settings, progress)
 }
 
 #[cfg(test)]

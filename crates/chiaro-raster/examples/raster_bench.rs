@@ -21,12 +21,14 @@
 //! `cargo run --release -p chiaro-raster --example raster_bench -- [frames] [--png] [--no-cull] [--issue4 | --issue8] [--crop] [--only NAME]`
 
 use chiaro_core::Vec3;
+use chiaro_core::context::RenderContext;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::Progress;
 use chiaro_core::scene::{
     AaMode, Attenuation, Camera, Geometry, Light, Material, Object, RenderSettings, Scene,
-    ShadeMode, ShadowMethod, Technique, Transform, TransparencyMode,
+    ShadowMethod, Technique, Transform, TransparencyMode,
 };
+use chiaro_raster::{RasterWork, ScanConversion};
 use chiaro_testkit::bench::{WordHash, median};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -144,11 +146,11 @@ fn peak_rss_mib() -> f64 {
         .map_or(f64::NAN, |kb| kb / 1024.0)
 }
 
-/// One benchmark case: a name, the scene, the shading mode and settings.
+/// One benchmark case: a name, the scene and settings (whose technique is
+/// the shading mode).
 struct Case {
     name: String,
     scene: usize,
-    mode: ShadeMode,
     settings: RenderSettings,
     /// Apply the FXAA post filter to the frame (what the facade does for
     /// `aa = post`), inside the timed region.
@@ -240,7 +242,6 @@ fn issue8_cases(cull: bool) -> Vec<Case> {
             cases.push(Case {
                 name: format!("{tag}, shadows {name}"),
                 scene,
-                mode: ShadeMode::Phong,
                 settings: RenderSettings {
                     shadows: sh,
                     ..base.clone()
@@ -253,7 +254,6 @@ fn issue8_cases(cull: bool) -> Vec<Case> {
         cases.push(Case {
             name: format!("shadow test, shadows maps, {name}"),
             scene: 0,
-            mode: ShadeMode::Phong,
             settings: RenderSettings {
                 shadows: ShadowMethod::Map,
                 samples,
@@ -349,7 +349,6 @@ fn main() {
             cases.push(Case {
                 name: name.into(),
                 scene: 0,
-                mode: ShadeMode::Phong,
                 settings: RenderSettings {
                     shadows: sh,
                     ..settings(Technique::Phong, cull)
@@ -360,7 +359,6 @@ fn main() {
         cases.push(Case {
             name: "phong, 1/3 of spheres kt=0.6 drawn opaque".into(),
             scene: 0,
-            mode: ShadeMode::Phong,
             settings: settings(Technique::Phong, cull),
             post: false,
         });
@@ -372,7 +370,6 @@ fn main() {
             cases.push(Case {
                 name: format!("phong, 1/3 of spheres kt=0.6, {name}"),
                 scene: 1,
-                mode: ShadeMode::Phong,
                 settings: RenderSettings {
                     transparency: Some(t),
                     ..settings(Technique::Phong, cull)
@@ -381,15 +378,14 @@ fn main() {
             });
         }
     } else {
-        for (name, mode, technique) in [
-            ("phong", ShadeMode::Phong, Technique::Phong),
-            ("gouraud", ShadeMode::Gouraud, Technique::Gouraud),
-            ("flat", ShadeMode::Flat, Technique::Flat),
+        for (name, technique) in [
+            ("phong", Technique::Phong),
+            ("gouraud", Technique::Gouraud),
+            ("flat", Technique::Flat),
         ] {
             cases.push(Case {
                 name: name.into(),
                 scene: 0,
-                mode,
                 settings: RenderSettings {
                     crop: crop.then_some([640, 270, 1280, 810]),
                     ..settings(technique, cull)
@@ -408,7 +404,15 @@ fn main() {
         .iter()
         .filter(|c| only.is_none_or(|o| c.name.starts_with(o.as_str())))
     {
-        let ps = &prepared[case.scene];
+        // One context a case: the scene is prepared in the warm-up frame.
+        let timer = PhaseTimer::default();
+        let ctx = match RenderContext::new(&scenes[case.scene], &case.settings, &timer) {
+            Ok(ctx) => ctx,
+            Err(e) => {
+                eprintln!("{}: {e}", case.name);
+                continue;
+            }
+        };
         let mut times = Vec::new();
         let mut cpu = Vec::new();
         let mut phases: Vec<(String, Vec<f64>)> = Vec::new();
@@ -416,23 +420,19 @@ fn main() {
         // One film reused by every frame, as the peer reuses its framebuffer.
         let mut target = chiaro_core::film::Film::new(0, 0);
         for frame in 0..=frames {
-            let timer = PhaseTimer::default();
+            if let Ok(mut m) = timer.marks.lock() {
+                m.clear();
+            }
             let c0 = cpu_ms();
             let t = Instant::now();
-            let f = chiaro_raster::render_prepared_into(
-                ps,
-                &case.settings,
-                case.mode,
-                &chiaro_raster::RasterOptions::default(),
-                &timer,
-                &mut target,
-            )
-            .map(|()| {
-                case.post.then(|| {
-                    timer.begin("fxaa", 0);
-                    chiaro_core::film::postfilter::fxaa(&target)
-                })
-            });
+            let f = ScanConversion::default()
+                .render_into(&ctx, &mut target, &RasterWork::default())
+                .map(|()| {
+                    case.post.then(|| {
+                        timer.begin("fxaa", 0);
+                        chiaro_core::film::postfilter::fxaa(&target)
+                    })
+                });
             let end = Instant::now();
             let c1 = cpu_ms();
             film = match f {

@@ -3,6 +3,8 @@
 //! environment maps, and supersampled anti-aliasing.
 //!
 //! # Where each method lives
+//! - [`technique`]: [`ScanConversion`], the technique interface's renderer
+//!   for flat, Gouraud and Phong.
 //! - [`pipeline`]: the driver of the five steps, each in its file:
 //!   [`pipeline::vertex`] (clip space, snapping, eye rays),
 //!   [`pipeline::binning`] (setup and tiles), [`pipeline::visibility`]
@@ -39,10 +41,11 @@ pub mod gouraud;
 pub mod pipeline;
 pub mod raster;
 pub mod shadows;
+pub mod technique;
 pub mod zbuffer;
 
-pub use pipeline::{
-    RasterOptions, RasterWork, dither_threshold, render, render_counted, render_prepared,
-    render_prepared_into, render_prepared_with, shade_mode_of,
-};
+pub use pipeline::{RasterOptions, RasterWork, dither_threshold};
 pub use shadows::volumes::VolumeCounting;
+pub use technique::ScanConversion;
+
+use pipeline::render_work;

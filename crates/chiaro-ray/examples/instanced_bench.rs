@@ -25,9 +25,11 @@
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::accel::instanced::{InstancedBvh, scene_bvh_memory_bytes};
+use chiaro_core::context::{AccelBuilder, RenderContext, Renderer};
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{Camera, Geometry, Material, Object, RenderSettings, Scene, Transform};
+use chiaro_ray::preview::Preview;
 use chiaro_testkit::bench::{bvh_rays, cpu_seconds, flag_value, median};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -167,8 +169,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             samples: 1,
             ..RenderSettings::default()
         };
-        let render = |make: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>| {
-            chiaro_ray::preview::render_with(&scene, &settings, &NoProgress, make)
+        let render = |make: &AccelBuilder<'_>| -> chiaro_core::error::Result<_> {
+            let ctx = RenderContext::new(&scene, &settings, &NoProgress)?.with_accelerator(make);
+            Preview.render(&ctx).map(|(film, _)| film)
         };
         let film_flat = render(&|p| Box::new(SceneBvh::new(p)))?;
         let film_inst = render(&|p| Box::new(InstancedBvh::new(p)))?;

@@ -26,6 +26,7 @@
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
+use chiaro_core::context::{RenderContext, Renderer};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::Technique;
@@ -101,8 +102,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut last = None;
     for i in 0..repeats.max(1) {
         let (t0, cpu0) = (Instant::now(), cpu_seconds());
-        let (film, stats) = pool
-            .install(|| path::render_with_kernel(&scene, &settings, &NoProgress, &accel, kernel))?;
+        // A fresh context each time: the preparation and the BVH build are timed.
+        let (film, stats) = pool.install(|| {
+            let ctx = RenderContext::new(&scene, &settings, &NoProgress)?.with_accelerator(&accel);
+            path::PathTracing { kernel }.render(&ctx)
+        })?;
         let secs = t0.elapsed().as_secs_f64();
         let cpu = cpu_seconds().zip(cpu0).map_or(f64::NAN, |(b, a)| b - a);
         println!(

@@ -17,6 +17,7 @@
 
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::accel::{Accelerator, Hit};
+use chiaro_core::context::{RenderContext, Renderer};
 use chiaro_core::geometry::Ray;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
@@ -94,7 +95,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             log: log.clone(),
         })
     };
-    pool.install(|| path::render_with(&scene, &settings, &NoProgress, &make))?;
+    pool.install(|| {
+        let ctx = RenderContext::new(&scene, &settings, &NoProgress)?.with_accelerator(&make);
+        path::PathTracing::LANES.render(&ctx)
+    })?;
     let (closest, shadow) = std::mem::take(&mut *log.lock().map_err(|_| "poisoned log")?);
     println!(
         "{scene_path}, {spp} spp: {} closest-hit rays, {} shadow rays",

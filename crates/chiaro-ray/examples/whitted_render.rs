@@ -6,6 +6,7 @@
 //!     [--size 640x480] [--samples N] [--adaptive] [--threshold T] [--light-samples N] [--threads N]
 //! ```
 
+use chiaro_core::context::RenderContext;
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{AaMode, Technique};
 use chiaro_ray::whitted;
@@ -48,8 +49,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .num_threads(threads)
         .build()?;
     let t0 = Instant::now();
-    let (film, stats) =
-        pool.install(|| whitted::render_with_stats(&scene, &settings, &NoProgress))?;
+    let (film, stats) = pool.install(|| -> chiaro_core::error::Result<_> {
+        let ctx = RenderContext::new(&scene, &settings, &NoProgress)?;
+        whitted::Tracer::new(&ctx).render(&NoProgress)
+    })?;
     let secs = t0.elapsed().as_secs_f64();
     println!(
         "{}x{} {:?} samples {}: {secs:.3}s, {} rays ({} camera), {:.2} Mrays/s",

@@ -5,14 +5,12 @@
 //! Where no surface is hit it shows the background every technique shows
 //! (`texture::background_radiance`: the environment map or the colour).
 
-use chiaro_core::accel::Accelerator;
-use chiaro_core::error::{CoreError, Result};
+use chiaro_core::context::{RenderContext, RenderStats, Renderer};
+use chiaro_core::error::Result;
 use chiaro_core::film::{Film, TilePixels, render_tiles_in};
 use chiaro_core::geometry::Ray;
-use chiaro_core::prepared::{PrepareOptions, PreparedScene};
-use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{pixel_rng, uniform2};
-use chiaro_core::scene::{Attenuation, Light, RenderSettings, Scene};
+use chiaro_core::scene::{Attenuation, Light};
 use chiaro_core::shading::texture::background_radiance;
 use chiaro_core::shading::{LocalLighting, ShadingPoint, sanitize, shade_local};
 use glam::{Vec2, Vec3};
@@ -20,33 +18,27 @@ use glam::{Vec2, Vec3};
 /// Tile side in pixels.
 const TILE: u32 = 32;
 
-/// Renders `scene` with eye-light shading, `settings.samples` jittered rays
-/// per pixel (one ray through the pixel centre when `samples == 1`).
-///
-/// `make_accel` builds the accelerator over the prepared scene (the BVH in
-/// normal use, the brute-force list in tests). Returns the film with depth
-/// and normal buffers filled from the first sample of each pixel.
-pub fn render_with(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
-) -> Result<Film> {
-    if settings.width == 0 || settings.height == 0 {
-        return Err(CoreError::BadSetting {
-            key: "width/height".into(),
-            message: "image size must be at least 1x1".into(),
-        });
+/// The preview technique, as the technique interface's [`Renderer`]:
+/// eye-light shading, `settings.samples` jittered rays per pixel (one ray
+/// through the pixel centre when `samples == 1`). The film's depth and
+/// normal buffers come from the first sample of each pixel.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Preview;
+
+impl Renderer for Preview {
+    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats)> {
+        let settings = ctx.settings();
+        let film = render_preview(ctx)?;
+        let pixels = u64::from(settings.width) * u64::from(settings.height);
+        Ok((film, ctx.stats(pixels * u64::from(settings.samples.max(1)))))
     }
+}
+
+fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
+    let (scene, settings, progress) = (ctx.scene(), ctx.settings(), ctx.progress());
     progress.begin("prepare", 1);
-    let prepared = PreparedScene::new(
-        scene,
-        PrepareOptions {
-            analytic_spheres: true,
-            ..PrepareOptions::default()
-        },
-    );
-    let accel = make_accel(&prepared);
+    let prepared = ctx.analytic();
+    let accel = ctx.analytic_accel();
     progress.advance(1);
     let cam = &scene.camera;
     let eye_light = [
@@ -137,9 +129,11 @@ pub fn render_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chiaro_core::accel::Accelerator;
     use chiaro_core::accel::list::ListAccel;
+    use chiaro_core::prepared::PreparedScene;
     use chiaro_core::progress::NoProgress;
-    use chiaro_core::scene::{Geometry, Material, Object};
+    use chiaro_core::scene::{Geometry, Material, Object, Scene};
 
     fn sphere_scene() -> Scene {
         let mut s = Scene::default();
@@ -157,10 +151,16 @@ mod tests {
         Box::new(ListAccel::new(p))
     }
 
+    /// The preview of `s` over the brute-force accelerator.
+    fn render_with(s: &Scene) -> Result<Film> {
+        let ctx = RenderContext::new(s, &s.render, &NoProgress)?.with_accelerator(&list);
+        Preview.render(&ctx).map(|(film, _)| film)
+    }
+
     #[test]
     fn eye_light_sphere_is_brightest_in_the_middle() {
         let s = sphere_scene();
-        let film = render_with(&s, &s.render, &NoProgress, &list).expect("renders");
+        let film = render_with(&s).expect("renders");
         assert!(film.is_clean());
         let centre = film.get(16, 16).x;
         // Facing the eye light 5 units away with no attenuation:
@@ -179,10 +179,8 @@ mod tests {
             .num_threads(1)
             .build()
             .expect("pool");
-        let a = one
-            .install(|| render_with(&s, &s.render, &NoProgress, &list))
-            .expect("renders");
-        let b = render_with(&s, &s.render, &NoProgress, &list).expect("renders");
+        let a = one.install(|| render_with(&s)).expect("renders");
+        let b = render_with(&s).expect("renders");
         assert_eq!(a, b);
     }
 }

@@ -260,15 +260,13 @@ pub fn make_job(
     let mut scenes = Vec::new();
     let mut settings = Vec::new();
     for v in views {
-        let technique = Technique::from_name(&v.technique)
-            .filter(|t| chiaro::available_techniques().contains(t))
-            .ok_or_else(|| {
-                format!(
-                    "unknown technique `{}` (available: {})",
-                    v.technique,
-                    chiaro::technique_list()
-                )
-            })?;
+        let technique = Technique::from_name(&v.technique).ok_or_else(|| {
+            format!(
+                "unknown technique `{}` (available: {})",
+                v.technique,
+                chiaro::technique_list()
+            )
+        })?;
         let mut s = scene.render.clone();
         s.technique = technique;
         s.width = width;

@@ -6,10 +6,10 @@
 use crate::protocol::{FrameHeader, Job, Request, draft_settings, encode_frame, make_job};
 use crate::tev::render_in_bands;
 use crate::{ConnGuard, Phase, State};
+use chiaro::RadiositySolution;
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film};
 use chiaro::{Film, Progress, RenderSettings, Scene, Technique};
 use chiaro_core::film::metrics;
-use chiaro_radiosity::RadiositySolution;
 use serde_json::json;
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream};
@@ -31,7 +31,7 @@ pub(crate) fn info_json(state: &State) -> String {
         "height": r.height,
         "samples": r.samples,
         "technique": r.technique.name(),
-        "techniques": chiaro::available_techniques().iter().map(|t| t.name()).collect::<Vec<_>>(),
+        "techniques": chiaro::Technique::ALL.iter().map(|t| t.name()).collect::<Vec<_>>(),
         "shadows": ["scene", "none", "map", "volume", "ray", "object", "scanline"],
         "transparency": ["scene", "interpolated", "screen-door", "filtered"],
         "models": ["scene", "phong", "blinn", "torrance-sparrow"],
@@ -410,35 +410,21 @@ impl SolutionCache {
         if !matches!(settings.technique, Technique::Radiosity | Technique::Hybrid) {
             return chiaro::render_with_stats(scene, settings, progress);
         }
-        chiaro::check_settings(settings)?;
         let key = (
-            chiaro_radiosity::fingerprint(scene, 0.0),
+            chiaro::radiosity_fingerprint(scene, 0.0),
             serde_json::to_string(&settings.radiosity).unwrap_or_default(),
         );
         let solution = match self.cached.take() {
             Some((k, solution)) if k == key => solution,
             _ => {
-                let solution = chiaro_radiosity::solve(scene, settings, progress)?;
+                let solution = chiaro::solve_radiosity(scene, settings, progress)?;
                 self.solves += 1;
                 solution
             }
         };
-        let start = Instant::now();
-        let result = if settings.technique == Technique::Hybrid {
-            chiaro::hybrid::render_with_solution(scene, solution.clone(), settings, progress)
-                .map(|(film, stats)| (film, stats.rays))
-        } else {
-            chiaro_radiosity::render_solution(scene, &solution, settings, progress)
-                .map(|film| (film, 0))
-        };
+        let result = chiaro::render_from_solution(scene, settings, &solution, progress);
         self.cached = Some((key, solution));
-        let (film, rays) = result?;
-        let stats = chiaro::RenderStats {
-            elapsed: start.elapsed(),
-            triangles: scene.triangle_count() as u64,
-            rays,
-        };
-        Ok((film, stats))
+        result
     }
 }
 

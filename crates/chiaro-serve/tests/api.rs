@@ -397,8 +397,8 @@ fn orbiting_a_radiosity_render_reuses_the_solution() {
     // Coarse patches and analytic form factors keep each solve short.
     let mut scene = chiaro::io::load_scene(&cornell()).expect("scene").scene;
     scene.render.radiosity.patch_size = 150.0;
-    scene.render.radiosity.solver = "jacobi".into();
-    scene.render.radiosity.formfactor = "analytic".into();
+    scene.render.radiosity.solver = chiaro::scene::RadiositySolver::Jacobi;
+    scene.render.radiosity.formfactor = chiaro::scene::FormFactorMethod::Analytic;
     let opts = ServeOptions {
         port: 0,
         ..ServeOptions::default()

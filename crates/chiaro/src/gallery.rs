@@ -9,7 +9,7 @@
 //! settings as recorded, each PNG as recorded, the README's table as
 //! generated, and the cells re-rendered within [`CellTolerance`].
 
-use crate::{Error, NoProgress, Result, available_techniques};
+use crate::{Error, NoProgress, Result};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, tonemap};
 use chiaro_core::scene::{RenderSettings, Technique};
@@ -80,7 +80,7 @@ pub struct Manifest {
     /// The command that regenerates it ([`REGENERATE`]).
     pub generator: String,
     /// The cells, scene by scene in [`scenes`] order, techniques in
-    /// [`available_techniques`] order.
+    /// [`Technique::ALL`] order.
     pub cells: Vec<Cell>,
 }
 
@@ -242,7 +242,7 @@ pub fn generate(root: &Path, log: &mut dyn FnMut(&str)) -> Result<Manifest> {
     let mut cells = Vec::new();
     for scene_path in scenes(root)? {
         let (scene, scene_sha256) = load(root, &scene_path)?;
-        for &technique in available_techniques() {
+        for technique in Technique::ALL {
             let (film, settings, seconds) = render_cell(&scene, technique)?;
             let image = image_name(&scene_path, technique);
             let opts = OutputOptions {
@@ -285,7 +285,7 @@ pub fn settings_json(settings: &RenderSettings) -> serde_json::Value {
 /// The README's gallery table: one row per scene, one column per
 /// technique, thumbnails linking to the full PNG.
 pub fn readme_table(manifest: &Manifest) -> String {
-    let techniques = available_techniques();
+    let techniques = Technique::ALL;
     let mut s = String::from("| scene |");
     for t in techniques {
         s += &format!(" {} |", t.name());

@@ -8,41 +8,41 @@
 //! counted twice.
 
 use chiaro_core::Vec3;
+use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::Film;
-use chiaro_core::progress::Progress;
-use chiaro_core::scene::{RenderSettings, Scene};
 use chiaro_radiosity::RadiositySolution;
-use chiaro_ray::whitted::{RenderStats, Tracer};
+use chiaro_ray::whitted::Tracer;
 use std::f32::consts::PI;
 
-/// Renders `scene` with the hybrid technique, solving radiosity first
-/// (`settings.radiosity`). Returns the film and the ray tracer's counts.
-pub fn render(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-) -> Result<(Film, RenderStats), CoreError> {
-    let solution = chiaro_radiosity::solve(scene, settings, progress)?;
-    render_with_solution(scene, solution, settings, progress)
+/// The hybrid technique, as the technique interface's [`Renderer`]:
+/// radiosity solved first (`settings.radiosity`), then ray traced.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Hybrid;
+
+impl Renderer for Hybrid {
+    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats), CoreError> {
+        let solution = chiaro_radiosity::solve(ctx)?;
+        render_with_solution(ctx, &solution)
+    }
 }
 
-/// Renders `scene` with the hybrid technique from an existing radiosity
-/// solution (which must belong to `scene`).
+/// Renders the context's scene with the hybrid technique from an existing
+/// radiosity solution (which must belong to the scene).
 pub fn render_with_solution(
-    scene: &Scene,
-    solution: RadiositySolution,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
+    ctx: &RenderContext<'_>,
+    solution: &RadiositySolution,
 ) -> Result<(Film, RenderStats), CoreError> {
-    solution.check_scene(scene)?;
+    solution.check_scene(ctx.scene())?;
+    let progress = ctx.progress();
     progress.begin("prepare", 1);
-    let tracer = Tracer::new(scene, settings).with_indirect(move |hit| {
+    let tracer = Tracer::new(ctx).with_indirect(move |hit| {
         solution
             .indirect_irradiance_at(hit.object, hit.p, hit.ng)
             .unwrap_or(Vec3::ZERO)
             / PI
     });
     progress.advance(1);
-    tracer.render(progress)
+    let (film, stats) = tracer.render(progress)?;
+    Ok((film, ctx.stats(stats.rays)))
 }

@@ -143,6 +143,35 @@ mod tests {
     }
 
     #[test]
+    fn radiosity_names_are_typed_and_a_bad_one_lists_the_valid_ones() {
+        let mut s = RenderSettings::default();
+        apply_override(&mut s, "radiosity.solver", "gauss-seidel").expect("known");
+        apply_override(&mut s, "radiosity.formfactor", "hemicube").expect("known");
+        assert_eq!(
+            s.radiosity.solver,
+            chiaro_core::scene::RadiositySolver::GaussSeidel
+        );
+        assert_eq!(
+            s.radiosity.formfactor,
+            chiaro_core::scene::FormFactorMethod::Hemicube
+        );
+        let msg = apply_override(&mut s, "radiosity.solver", "magic")
+            .expect_err("unknown solver")
+            .to_string();
+        assert!(
+            msg.contains("radiosity.solver") && msg.contains("gauss-seidel"),
+            "{msg}"
+        );
+        let msg = apply_override(&mut s, "radiosity.formfactor", "voodoo")
+            .expect_err("unknown method")
+            .to_string();
+        assert!(
+            msg.contains("hemicube") && msg.contains("analytic"),
+            "{msg}"
+        );
+    }
+
+    #[test]
     fn wrong_type_is_an_error_and_leaves_settings_alone() {
         let mut s = RenderSettings::default();
         let before = s.clone();

@@ -33,7 +33,7 @@ enum Tech {
 
 impl Tech {
     fn all() -> Vec<Tech> {
-        let mut v: Vec<Tech> = chiaro::available_techniques()
+        let mut v: Vec<Tech> = chiaro::Technique::ALL
             .iter()
             .map(|&t| Tech::Facade(t))
             .collect();
@@ -359,12 +359,13 @@ fn render(scene: &Scene, s: &RenderSettings, tech: Tech) -> Result<Cell, String>
                 rays: st.rays,
             })
             .map_err(|e| e.to_string()),
-        Tech::PathReference => chiaro_ray::path::render_with_kernel(
+        Tech::PathReference => chiaro::render_with(
             scene,
             s,
             &NoProgress,
-            &chiaro_core::accel::instanced::build_accelerator,
-            Kernel::Reference,
+            &chiaro_ray::path::PathTracing {
+                kernel: Kernel::Reference,
+            },
         )
         .map(|(film, st)| Cell {
             film,
@@ -821,12 +822,11 @@ fn rule_fast_path_is_reference(m: &mut Matrix, case: &Case) {
                 s.height = h;
                 s.samples = 4;
                 s.seed = 1000 + k;
-                chiaro_ray::path::render_with_kernel(
+                chiaro::render_with(
                     &case.scene,
                     &s,
                     &NoProgress,
-                    &chiaro_core::accel::instanced::build_accelerator,
-                    kernel,
+                    &chiaro_ray::path::PathTracing { kernel },
                 )
                 .expect("renders")
                 .0
@@ -910,8 +910,8 @@ fn rule_radiosity_matches_path(m: &mut Matrix, case: &Case, ids: &Ids) {
     // cross_technique.rs's converged settings (40 mm patches in the Cornell
     // box, about a 24th of its diagonal).
     s.radiosity.patch_size = chiaro::scene_bounds(&case.scene).diagonal() / 24.0;
-    s.radiosity.solver = "hierarchical".into();
-    s.radiosity.formfactor = "raycast".into();
+    s.radiosity.solver = chiaro::scene::RadiositySolver::Hierarchical;
+    s.radiosity.formfactor = chiaro::scene::FormFactorMethod::Raycast;
     // Converged: at 0.01 the unshot energy darkens dim objects measurably
     // (BENCHMARKS.md, "Radiosity against the path tracer on mitsuba-cbox").
     s.radiosity.tolerance = 0.001;

@@ -228,7 +228,7 @@ fn path_tracer_at_depth_one_equals_direct_local_shading() {
 #[test]
 fn every_technique_renders_the_test_scene_without_nan() {
     let scene = scenes::shadow_test(24);
-    for &t in chiaro::available_techniques() {
+    for t in chiaro::Technique::ALL {
         let mut s = scene.render.clone();
         s.technique = t;
         s.samples = 2;
@@ -312,8 +312,8 @@ fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     s.height = 40;
     s.technique = Technique::Radiosity;
     s.samples = 1;
-    s.radiosity.solver = "hierarchical".into();
-    s.radiosity.formfactor = "raycast".into();
+    s.radiosity.solver = chiaro::scene::RadiositySolver::Hierarchical;
+    s.radiosity.formfactor = chiaro::scene::FormFactorMethod::Raycast;
     s.radiosity.patch_size = 40.0;
     // At the default tolerance (0.01), which also sets the BF refinement
     // threshold of the hierarchical solver.

@@ -138,7 +138,7 @@ fn every_technique_sees_the_same_rotated_environment_behind_the_ball() {
         // The turned map shows blocks 5 and 6 across, 1 and 2 down (a map
         // turned the other way would show blocks 1 and 2 across).
         assert_eq!(blocks, [(5, 1), (5, 2), (6, 1), (6, 2)]);
-        for &t in chiaro::available_techniques() {
+        for t in chiaro::Technique::ALL {
             let mut s = scene.render.clone();
             s.technique = t;
             let film = render(&scene, &s);

@@ -62,7 +62,7 @@ fn the_estimate_counts_films_and_dense_radiosity() {
     settings.technique = Technique::Radiosity;
     settings.width = 8;
     settings.height = 8;
-    settings.radiosity.solver = "jacobi".into();
+    settings.radiosity.solver = chiaro::scene::RadiositySolver::Jacobi;
     let e = chiaro::memory_estimate(&scene, &settings);
     assert!(
         e.items

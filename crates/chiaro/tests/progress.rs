@@ -69,7 +69,7 @@ const SCENES: [&str; 2] = ["cornell-box.toml", "teapot.toml"];
 fn every_stage_reports_its_announced_total() {
     for name in SCENES {
         let scene = shipped(name);
-        for &technique in chiaro::available_techniques() {
+        for technique in chiaro::Technique::ALL {
             let rec = Recorder::default();
             chiaro::render(&scene, &small(&scene, technique), &rec).expect("renders");
             let stages = rec.stages.into_inner().expect("not poisoned");
@@ -101,7 +101,7 @@ fn every_technique_stops_soon_after_cancel() {
         .expect("a pool");
     for name in SCENES {
         let scene = shipped(name);
-        for &technique in chiaro::available_techniques() {
+        for technique in chiaro::Technique::ALL {
             // Units of the whole render, then cancel a third of the way in.
             let full = Recorder::default();
             let settings = small(&scene, technique);

@@ -157,7 +157,7 @@ fn shipped(name: &str) -> Scene {
 /// Form factors a radiosity solve computed: a column of `elements` per
 /// shot (progressive), the matrix (Jacobi, Gauss-Seidel), or the links
 /// (hierarchical).
-fn form_factors(s: &chiaro_radiosity::SolveStats) -> u64 {
+fn form_factors(s: &chiaro::SolveStats) -> u64 {
     let n = s.elements as u64;
     match s.solver.as_str() {
         "progressive" => n * u64::from(s.iterations),
@@ -179,7 +179,10 @@ fn work(scene: &Scene, technique: Technique) -> Vec<(&'static str, u64)> {
     match technique {
         Technique::Flat | Technique::Gouraud | Technique::Phong => {
             let w = chiaro_raster::RasterWork::default();
-            chiaro_raster::render_counted(scene, &settings, &NoProgress, &w).expect("renders");
+            let ctx = chiaro::RenderContext::new(scene, &settings, &NoProgress).expect("valid");
+            chiaro_raster::ScanConversion::DEFAULT
+                .render_into(&ctx, &mut chiaro::Film::new(0, 0), &w)
+                .expect("renders");
             let get =
                 |a: &std::sync::atomic::AtomicU64| a.load(std::sync::atomic::Ordering::Relaxed);
             vec![
@@ -190,7 +193,7 @@ fn work(scene: &Scene, technique: Technique) -> Vec<(&'static str, u64)> {
             ]
         }
         Technique::Radiosity | Technique::Hybrid => {
-            let solution = chiaro_radiosity::solve(scene, &settings, &NoProgress).expect("solves");
+            let solution = chiaro::solve_radiosity(scene, &settings, &NoProgress).expect("solves");
             let s = solution.stats.clone();
             let mut out = vec![
                 ("elements", s.elements as u64),
@@ -198,7 +201,7 @@ fn work(scene: &Scene, technique: Technique) -> Vec<(&'static str, u64)> {
             ];
             if technique == Technique::Hybrid {
                 let (_, stats) =
-                    chiaro::hybrid::render_with_solution(scene, solution, &settings, &NoProgress)
+                    chiaro::render_from_solution(scene, &settings, &solution, &NoProgress)
                         .expect("renders");
                 out.push(("rays", stats.rays));
             }
@@ -241,7 +244,7 @@ fn no_cell_does_ten_times_its_recorded_work() {
     let mut failures = Vec::new();
     for name in SCENES {
         let scene = shipped(name);
-        for &technique in chiaro::available_techniques() {
+        for technique in chiaro::Technique::ALL {
             for (counter, n) in work(&scene, technique) {
                 let t = technique.name();
                 println!("work: (\"{name}\", \"{t}\", \"{counter}\", {n}),");

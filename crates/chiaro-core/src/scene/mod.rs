@@ -21,9 +21,10 @@ pub use material::{
 };
 pub use mesh::{Geometry, Mesh, Object, Transform};
 pub use settings::{
-    AaMode, DepthCue, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, PathSettings, PixelFilter,
-    RadiositySettings, RenderSettings, SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings,
-    ShadowMethod, Technique, ToneMap, WhittedSettings,
+    AaMode, DepthCue, FormFactorMethod, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_RASTER_SAMPLES,
+    MAX_SAMPLES, PathSettings, PixelFilter, RadiositySettings, RadiositySolver, RenderSettings,
+    SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings, ShadowMethod, Technique, ToneMap,
+    WhittedSettings,
 };
 pub use texture::{
     Environment, Filter, ImageTexture, Procedural, ProceduralKind, Texture, UvTransform, WrapMode,

@@ -13,6 +13,9 @@ pub const MAX_IMAGE_SIDE: u32 = 16_384;
 pub const MAX_IMAGE_PIXELS: u64 = 8192 * 8192;
 /// Largest accepted samples per pixel.
 pub const MAX_SAMPLES: u32 = 1 << 16;
+/// Most samples per pixel the scan converter takes (more are rendered as
+/// this many, with a warning from [`RenderSettings::validate`]).
+pub const MAX_RASTER_SAMPLES: u32 = 64;
 /// Accepted shadow-map resolutions (texels per side of a map or cube face).
 pub const SHADOW_MAP_RESOLUTIONS: std::ops::RangeInclusive<u32> = 16..=8192;
 
@@ -64,6 +67,26 @@ impl Technique {
             Technique::Hybrid => "hybrid",
             Technique::Path => "path",
         }
+    }
+
+    /// The scan converter's shading mode, for flat, Gouraud and Phong.
+    pub fn shade_mode(self) -> Option<ShadeMode> {
+        match self {
+            Technique::Flat => Some(ShadeMode::Flat),
+            Technique::Gouraud => Some(ShadeMode::Gouraud),
+            Technique::Phong => Some(ShadeMode::Phong),
+            _ => None,
+        }
+    }
+
+    /// Whether the technique is scan conversion (flat, Gouraud, Phong).
+    pub fn is_scan_conversion(self) -> bool {
+        self.shade_mode().is_some()
+    }
+
+    /// Whether the technique solves radiosity (radiosity, hybrid).
+    pub fn solves_radiosity(self) -> bool {
+        matches!(self, Technique::Radiosity | Technique::Hybrid)
     }
 
     /// Parses a technique name, ignoring case and surrounding spaces.
@@ -243,14 +266,91 @@ impl Default for PathSettings {
     }
 }
 
+/// The radiosity solvers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum RadiositySolver {
+    /// Full matrix, Jacobi iteration.
+    Jacobi,
+    /// Full matrix, Gauss-Seidel iteration.
+    GaussSeidel,
+    /// Progressive refinement (shooting).
+    #[default]
+    Progressive,
+    /// Hierarchical radiosity.
+    Hierarchical,
+}
+
+impl RadiositySolver {
+    /// Every solver.
+    pub const ALL: [Self; 4] = [
+        Self::Jacobi,
+        Self::GaussSeidel,
+        Self::Progressive,
+        Self::Hierarchical,
+    ];
+
+    /// Parses a solver name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|s| s.name() == name)
+    }
+
+    /// The name, as written in scene files and `--set`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Jacobi => "jacobi",
+            Self::GaussSeidel => "gauss-seidel",
+            Self::Progressive => "progressive",
+            Self::Hierarchical => "hierarchical",
+        }
+    }
+
+    /// Whether the solver stores the full form-factor matrix.
+    pub fn is_matrix(self) -> bool {
+        matches!(self, Self::Jacobi | Self::GaussSeidel)
+    }
+}
+
+/// The radiosity form-factor methods.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum FormFactorMethod {
+    /// Hemicube on the scan converter's item buffer.
+    Hemicube,
+    /// Exact point-to-polygon factors with ray-cast visibility.
+    #[default]
+    Raycast,
+    /// Exact point-to-polygon factors, no visibility (unoccluded scenes).
+    Analytic,
+}
+
+impl FormFactorMethod {
+    /// Every method.
+    pub const ALL: [Self; 3] = [Self::Hemicube, Self::Raycast, Self::Analytic];
+
+    /// Parses a method name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// The name, as written in scene files and `--set`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Hemicube => "hemicube",
+            Self::Raycast => "raycast",
+            Self::Analytic => "analytic",
+        }
+    }
+}
+
 /// Options of the radiosity solver.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RadiositySettings {
-    /// `jacobi`, `gauss-seidel`, `progressive` or `hierarchical`.
-    pub solver: String,
-    /// `hemicube`, `raycast` or `analytic`.
-    pub formfactor: String,
+    /// The solver.
+    pub solver: RadiositySolver,
+    /// The form-factor method.
+    pub formfactor: FormFactorMethod,
     /// Largest patch edge, scene units (0 = choose from the scene size).
     pub patch_size: f32,
     /// Hemicube resolution (pixels on the top face's side).
@@ -264,8 +364,8 @@ pub struct RadiositySettings {
 impl Default for RadiositySettings {
     fn default() -> Self {
         Self {
-            solver: "progressive".into(),
-            formfactor: "raycast".into(),
+            solver: RadiositySolver::Progressive,
+            formfactor: FormFactorMethod::Raycast,
             patch_size: 0.0,
             hemicube_resolution: 128,
             tolerance: 0.01,

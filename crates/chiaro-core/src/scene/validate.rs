@@ -1,8 +1,9 @@
 //! `Scene::validate`: every problem in a scene, not only the first.
 
 use super::{
-    AreaShape, Geometry, Light, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES,
-    SHADOW_MAP_RESOLUTIONS, Scene, Texture,
+    AreaShape, FormFactorMethod, Geometry, Light, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE,
+    MAX_RASTER_SAMPLES, MAX_SAMPLES, RadiositySolver, RenderSettings, SHADOW_MAP_RESOLUTIONS,
+    Scene, Texture,
 };
 use glam::Vec3;
 use std::fmt;
@@ -74,31 +75,14 @@ impl Checker {
     }
 }
 
-impl Scene {
-    /// Whether anything lights the scene: a light of any kind, an object
-    /// with an emissive material, or an environment map.
-    pub fn has_light_source(&self) -> bool {
-        let emits = |m: super::MaterialId| {
-            self.materials
-                .get(m.index())
-                .is_some_and(|m| m.is_emissive())
-        };
-        !self.lights.is_empty()
-            || self.environment.is_some()
-            || self.objects.iter().any(|o| {
-                emits(o.material)
-                    || matches!(o.geometry, Geometry::Mesh(id) if self
-                        .meshes
-                        .get(id.index())
-                        .is_some_and(|mesh| mesh.face_materials.iter().any(|&f| emits(f))))
-            })
-    }
-
-    /// Checks the whole scene and returns every problem found (empty when
-    /// the scene is fine). Errors make a scene unrenderable; warnings do not.
+impl RenderSettings {
+    /// Checks the render settings alone and returns every problem found,
+    /// each naming its setting (`render.path.max_depth`). This is the one
+    /// place settings are validated: [`Scene::validate`] includes it, and
+    /// the techniques take its result as given.
     pub fn validate(&self) -> Vec<Issue> {
         let mut c = Checker { issues: Vec::new() };
-        let r = &self.render;
+        let r = self;
         if r.width == 0 || r.height == 0 {
             c.error(
                 "render",
@@ -139,6 +123,97 @@ impl Scene {
                 ),
             );
         }
+
+        if r.light_samples == 0 {
+            c.error(
+                "render.light_samples",
+                "expected at least 1 sample per area light",
+            );
+        }
+        if r.path.max_depth == 0 {
+            c.error(
+                "render.path.max_depth",
+                "expected at least 1 (1 = direct light only)",
+            );
+        }
+        let rad = &r.radiosity;
+        if rad.solver == RadiositySolver::Hierarchical
+            && rad.formfactor == FormFactorMethod::Hemicube
+        {
+            c.error(
+                "render.radiosity.formfactor",
+                "the hierarchical solver needs area-to-area link form factors: use `raycast` or `analytic`",
+            );
+        }
+        if !(rad.patch_size.is_finite() && rad.patch_size >= 0.0) {
+            c.error(
+                "render.radiosity.patch_size",
+                format!(
+                    "expected a finite number >= 0 (0 = automatic), got {}",
+                    rad.patch_size
+                ),
+            );
+        }
+        if !(2..=4096).contains(&rad.hemicube_resolution) {
+            c.error(
+                "render.radiosity.hemicube_resolution",
+                format!("expected 2..=4096, got {}", rad.hemicube_resolution),
+            );
+        }
+        if !(rad.tolerance.is_finite() && rad.tolerance > 0.0 && rad.tolerance < 1.0) {
+            c.error(
+                "render.radiosity.tolerance",
+                format!("expected a number in (0, 1), got {}", rad.tolerance),
+            );
+        }
+        if rad.max_iterations == 0 {
+            c.error("render.radiosity.max_iterations", "expected at least 1");
+        }
+        if r.technique.is_scan_conversion() && r.samples > MAX_RASTER_SAMPLES {
+            c.warn(
+                "render.samples",
+                format!(
+                    "scan conversion takes at most {MAX_RASTER_SAMPLES} samples per pixel; {} are rendered as {MAX_RASTER_SAMPLES}",
+                    r.samples
+                ),
+            );
+        }
+        c.issues
+    }
+}
+
+impl Scene {
+    /// Whether anything lights the scene: a light of any kind, an object
+    /// with an emissive material, or an environment map.
+    pub fn has_light_source(&self) -> bool {
+        let emits = |m: super::MaterialId| {
+            self.materials
+                .get(m.index())
+                .is_some_and(|m| m.is_emissive())
+        };
+        !self.lights.is_empty()
+            || self.environment.is_some()
+            || self.objects.iter().any(|o| {
+                emits(o.material)
+                    || matches!(o.geometry, Geometry::Mesh(id) if self
+                        .meshes
+                        .get(id.index())
+                        .is_some_and(|mesh| mesh.face_materials.iter().any(|&f| emits(f))))
+            })
+    }
+
+    /// Checks the whole scene and returns every problem found (empty when
+    /// the scene is fine). Errors make a scene unrenderable; warnings do not.
+    pub fn validate(&self) -> Vec<Issue> {
+        self.validate_with(&self.render)
+    }
+
+    /// [`Self::validate`] with `settings` in place of the scene's own
+    /// `render` table (a render whose settings were overridden), without
+    /// copying the scene.
+    pub fn validate_with(&self, settings: &RenderSettings) -> Vec<Issue> {
+        let mut c = Checker { issues: Vec::new() };
+        c.issues.extend(settings.validate());
 
         check_camera(&mut c, "camera", &self.camera);
         for (i, nc) in self.cameras.iter().enumerate() {
@@ -446,6 +521,44 @@ mod tests {
                 .collect();
             assert_eq!(bad.is_empty(), ok, "{res}: {bad:?}");
         }
+    }
+
+    #[test]
+    fn every_settings_error_names_its_setting() {
+        use crate::scene::Technique;
+        let mut r = RenderSettings {
+            technique: Technique::Phong,
+            samples: 100,
+            light_samples: 0,
+            ..RenderSettings::default()
+        };
+        r.path.max_depth = 0;
+        r.radiosity.solver = RadiositySolver::Hierarchical;
+        r.radiosity.formfactor = FormFactorMethod::Hemicube;
+        r.radiosity.tolerance = f32::NAN;
+        r.radiosity.max_iterations = 0;
+        let issues = r.validate();
+        let paths = |sev: Severity| -> Vec<&str> {
+            issues
+                .iter()
+                .filter(|i| i.severity == sev)
+                .map(|i| i.path.as_str())
+                .collect()
+        };
+        assert_eq!(
+            paths(Severity::Error),
+            [
+                "render.light_samples",
+                "render.path.max_depth",
+                "render.radiosity.formfactor",
+                "render.radiosity.tolerance",
+                "render.radiosity.max_iterations",
+            ],
+            "{issues:#?}"
+        );
+        // The scan converter's sample cap is said, not silent.
+        assert_eq!(paths(Severity::Warning), ["render.samples"], "{issues:#?}");
+        assert!(RenderSettings::default().validate().is_empty());
     }
 
     #[test]

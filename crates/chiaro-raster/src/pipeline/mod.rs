@@ -1,7 +1,7 @@
 //! The scan-conversion renderer: flat, Gouraud and Phong shading on a tiled,
 //! deferred z-buffer pipeline.
 //!
-//! The driver, [`render_prepared_into`], reads as five steps, each in its file:
+//! The driver, `render_work` (called by [`crate::ScanConversion`]), reads as five steps, each in its file:
 //! 1. *Vertex* ([`vertex`]): world positions of the [`PreparedScene`] to clip
 //!    space, snapped once per vertex.
 //! 2. *Binning* ([`binning`], parallel over fixed chunks of triangles):
@@ -82,12 +82,14 @@ use crate::raster::sample_offsets;
 use crate::shadows::Shadows;
 use crate::shadows::volumes::VolumeCounting;
 use crate::shadows::volumes::bin_volumes;
+#[cfg(test)]
+pub(crate) use crate::technique::test_support::*;
 use chiaro_core::accel::alpha::Coverage;
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, tiles};
-use chiaro_core::prepared::{PrepareOptions, PreparedScene};
+use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::{RenderSettings, Scene, Severity, ShadeMode, Technique};
+use chiaro_core::scene::{RenderSettings, ShadeMode};
 use chiaro_core::shading::EmitterGroup;
 use std::sync::atomic::AtomicU64;
 pub use visibility::dither_threshold;
@@ -96,39 +98,6 @@ pub use visibility::dither_threshold;
 pub const TILE_SIZE: u32 = 64;
 /// Id of samples no triangle covers.
 pub(crate) const NONE: u32 = u32::MAX;
-
-/// Renders `scene` by scan conversion with `settings.technique` (flat,
-/// Gouraud or Phong; an object's `shade_mode` overrides it).
-///
-/// Returns the film: linear RGB radiance (the `samples` of each pixel
-/// box- or tent-filtered, `settings.filter`), the distance from the eye to
-/// the nearest surface along the pixel's sample ray (`INFINITY` on the
-/// background) and the world-space shading normal (zero on the background).
-///
-/// # Errors
-/// [`CoreError::Unsupported`] for a technique other than flat, Gouraud or
-/// Phong; [`CoreError::InvalidScene`] when `Scene::validate` reports errors
-/// or the image size is zero or too large; [`CoreError::Cancelled`] when the
-/// progress asks to stop.
-pub fn render(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-) -> Result<Film, CoreError> {
-    let mode = shade_mode_of(settings.technique)?;
-    check_size(settings)?;
-    let errors: Vec<String> = scene
-        .validate()
-        .into_iter()
-        .filter(|i| i.severity == Severity::Error)
-        .map(|i| format!("{}: {}", i.path, i.message))
-        .collect();
-    if !errors.is_empty() {
-        return Err(CoreError::InvalidScene { issues: errors });
-    }
-    let ps = PreparedScene::new(scene, PrepareOptions::default());
-    render_prepared(&ps, settings, mode, progress)
-}
 
 /// The work a scan-conversion render did, counted where it is cheap (per
 /// tile), for tests that catch a render whose work grows out of proportion.
@@ -145,143 +114,17 @@ pub struct RasterWork {
     pub volume_tile_polygons: AtomicU64,
 }
 
-/// [`render`], also counting its work into `work`.
-///
-/// # Errors
-/// As [`render`].
-pub fn render_counted(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-    work: &RasterWork,
-) -> Result<Film, CoreError> {
-    let mode = shade_mode_of(settings.technique)?;
-    check_size(settings)?;
-    if scene
-        .validate()
-        .iter()
-        .any(|i| i.severity == Severity::Error)
-    {
-        return render(scene, settings, progress);
-    }
-    let ps = PreparedScene::new(scene, PrepareOptions::default());
-    let mut film = Film::new(settings.width, settings.height);
-    render_work(
-        &ps,
-        settings,
-        mode,
-        &RasterOptions::default(),
-        progress,
-        &mut film,
-        work,
-    )?;
-    Ok(film)
-}
-
-/// The shading mode of a scan-conversion technique.
-///
-/// # Errors
-/// [`CoreError::Unsupported`] for techniques that are not scan conversion.
-pub fn shade_mode_of(technique: Technique) -> Result<ShadeMode, CoreError> {
-    match technique {
-        Technique::Flat => Ok(ShadeMode::Flat),
-        Technique::Gouraud => Ok(ShadeMode::Gouraud),
-        Technique::Phong => Ok(ShadeMode::Phong),
-        other => Err(CoreError::Unsupported(format!(
-            "the scan converter renders flat, gouraud and phong, not `{}`",
-            other.name()
-        ))),
-    }
-}
-
-pub(crate) fn check_size(settings: &RenderSettings) -> Result<(), CoreError> {
-    let (w, h) = (settings.width, settings.height);
-    let max = chiaro_core::scene::MAX_IMAGE_SIDE;
-    if w == 0
-        || h == 0
-        || w > max
-        || h > max
-        || u64::from(w) * u64::from(h) > chiaro_core::scene::MAX_IMAGE_PIXELS
-    {
-        return Err(CoreError::InvalidScene {
-            issues: vec![format!(
-                "render: image size {w}x{h} is outside 1x1..{max}x{max}"
-            )],
-        });
-    }
-    Ok(())
-}
-
-/// Options of [`render_prepared_with`] that are not render settings.
+/// Options of [`crate::ScanConversion`] that are not render settings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RasterOptions {
     /// How shadow-volume faces are counted (z-fail by default).
     pub volume_counting: VolumeCounting,
 }
 
-/// Renders an already prepared scene with the default shading `mode`.
-/// See [`render`]; the prepared scene must come from
-/// `PrepareOptions { analytic_spheres: false, .. }` (spheres tessellated).
-///
-/// # Errors
-/// [`CoreError::Cancelled`] when the progress asks to stop;
-/// [`CoreError::InvalidScene`] for a bad image size;
-/// [`CoreError::Unsupported`] for `shadows = object | scanline`.
-pub fn render_prepared(
-    ps: &PreparedScene<'_>,
-    settings: &RenderSettings,
-    mode: ShadeMode,
-    progress: &dyn Progress,
-) -> Result<Film, CoreError> {
-    render_prepared_with(ps, settings, mode, &RasterOptions::default(), progress)
-}
-
-/// [`render_prepared`] with extra `options` (the shadow-volume counting).
-///
-/// # Errors
-/// As [`render_prepared`].
-pub fn render_prepared_with(
-    ps: &PreparedScene<'_>,
-    settings: &RenderSettings,
-    mode: ShadeMode,
-    options: &RasterOptions,
-    progress: &dyn Progress,
-) -> Result<Film, CoreError> {
-    check_size(settings)?;
-    let mut film = Film::new(settings.width, settings.height);
-    render_prepared_into(ps, settings, mode, options, progress, &mut film)?;
-    Ok(film)
-}
-
-/// [`render_prepared_with`] into `film`, whose buffers are reused when it
-/// already has the image's size (so that frames rendered one after another
-/// neither allocate nor fault in a new film each time, as a GPU's
-/// framebuffer is reused); it is resized otherwise. On success `film` holds
-/// exactly the picture [`render_prepared_with`] returns, whatever it held
-/// before; on an error its pixels are unspecified.
-///
-/// # Errors
-/// As [`render_prepared`].
-pub fn render_prepared_into(
-    ps: &PreparedScene<'_>,
-    settings: &RenderSettings,
-    mode: ShadeMode,
-    options: &RasterOptions,
-    progress: &dyn Progress,
-    film: &mut Film,
-) -> Result<(), CoreError> {
-    render_work(
-        ps,
-        settings,
-        mode,
-        options,
-        progress,
-        film,
-        &RasterWork::default(),
-    )
-}
-
-/// [`render_prepared_into`], counting the work into `work`.
+/// Scan converts the prepared scene (spheres tessellated) with the default
+/// shading `mode` into `film` (see [`crate::ScanConversion::render_into`]),
+/// counting the work into `work`. The settings were validated by the
+/// render context.
 pub(crate) fn render_work(
     ps: &PreparedScene<'_>,
     settings: &RenderSettings,
@@ -291,7 +134,6 @@ pub(crate) fn render_work(
     film: &mut Film,
     work: &RasterWork,
 ) -> Result<(), CoreError> {
-    check_size(settings)?;
     let n = settings.width as usize * settings.height as usize;
     if film.width != settings.width
         || film.height != settings.height

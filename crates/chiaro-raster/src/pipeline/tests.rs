@@ -892,7 +892,7 @@ fn rendering_into_a_used_film_gives_the_fresh_picture() {
             crop,
             ..settings(technique, w, h)
         };
-        let mode = shade_mode_of(technique).expect("raster technique");
+        let mode = technique.shade_mode().expect("raster technique");
         let opts = RasterOptions::default();
         let fresh = render_prepared_with(&ps, &st, mode, &opts, &NoProgress).expect("fresh");
         render_prepared_into(&ps, &st, mode, &opts, &NoProgress, &mut film).expect("into");

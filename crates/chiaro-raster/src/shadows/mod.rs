@@ -154,7 +154,7 @@ impl ExactFallback {
 /// True if a render of `settings` shades points other than pixel centres
 /// (several samples per pixel, or flat or Gouraud shading anywhere).
 pub(crate) fn shades_off_centre(ps: &PreparedScene<'_>, settings: &RenderSettings) -> bool {
-    let mode = crate::pipeline::shade_mode_of(settings.technique).unwrap_or(ShadeMode::Flat);
+    let mode = settings.technique.shade_mode().unwrap_or(ShadeMode::Flat);
     settings.samples > 1
         || mode != ShadeMode::Phong
         || ps

@@ -35,14 +35,11 @@
 //! estimation only and are invisible to the camera; emissive triangles are
 //! geometry and lights both.
 
-use chiaro_core::accel::Accelerator;
-use chiaro_core::error::{CoreError, Result};
+use chiaro_core::context::{RenderContext, RenderStats, Renderer};
+use chiaro_core::error::Result;
 use chiaro_core::film::{Film, TilePixels, render_tiles_in};
 use chiaro_core::geometry::Ray;
-use chiaro_core::prepared::{PrepareOptions, PreparedScene};
-use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{SobolSampler, pixel_rng, uniform2};
-use chiaro_core::scene::{RenderSettings, Scene};
 use chiaro_core::shading::sanitize;
 use glam::{Vec2, Vec3};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -62,24 +59,46 @@ use chiaro_core::sampling::sobol::LANES;
 /// Tile side in pixels.
 const TILE: u32 = 16;
 
-/// Counts from a path-traced render.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct PathStats {
-    /// Rays traced (camera, bounce and shadow rays).
-    pub rays: u64,
+/// The path tracer, as the technique interface's [`Renderer`]: the film
+/// holds the mean radiance of `settings.samples` paths per pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PathTracing {
+    /// The loop that traces the paths.
+    pub kernel: Kernel,
 }
 
-/// Renders `scene` with the path tracer. `make_accel` builds the ray
-/// accelerator over the prepared scene (the BVH normally, the brute-force
-/// list in tests). Returns the film (mean radiance of `settings.samples`
-/// paths per pixel) and the ray count.
-pub fn render_with(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
-) -> Result<(Film, PathStats)> {
-    render_with_kernel(scene, settings, progress, make_accel, Kernel::Lanes)
+impl PathTracing {
+    /// The lock-step kernel: what every front renders with.
+    pub const LANES: Self = Self {
+        kernel: Kernel::Lanes,
+    };
+}
+
+impl Default for PathTracing {
+    fn default() -> Self {
+        Self::LANES
+    }
+}
+
+impl Renderer for PathTracing {
+    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats)> {
+        let (film, rays) = render_impl(ctx, self.kernel, true)?;
+        Ok((film, ctx.stats(rays)))
+    }
+}
+
+/// The path tracer over `make_accel`'s accelerator with `kernel`, from a
+/// scene: how the crate's tests drive it.
+#[cfg(test)]
+fn render_with_kernel(
+    scene: &chiaro_core::scene::Scene,
+    settings: &chiaro_core::scene::RenderSettings,
+    progress: &dyn chiaro_core::progress::Progress,
+    make_accel: &chiaro_core::context::AccelBuilder<'_>,
+    kernel: Kernel,
+) -> Result<(Film, u64)> {
+    let ctx = RenderContext::new(scene, settings, progress)?.with_accelerator(make_accel);
+    render_impl(&ctx, kernel, true)
 }
 
 /// Which loop traces the paths. `Lanes` and `Scalar` compute the same
@@ -97,45 +116,15 @@ pub enum Kernel {
     Reference,
 }
 
-/// [`render_with`] with the path loop chosen: for tests and benchmarks
-/// that compare the two.
-pub fn render_with_kernel(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
-    kernel: Kernel,
-) -> Result<(Film, PathStats)> {
-    render_impl(scene, settings, progress, make_accel, kernel, true)
-}
-
-/// [`render_with_kernel`], with the environment map sampled by next-event
+/// Renders `ctx` with `kernel`, the environment map sampled by next-event
 /// estimation (`env_sampling`) or reached by BSDF sampling alone (the
-/// tests' baseline for its variance).
-fn render_impl(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-    make_accel: &dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator>,
-    kernel: Kernel,
-    env_sampling: bool,
-) -> Result<(Film, PathStats)> {
-    if settings.path.max_depth == 0 {
-        return Err(CoreError::BadSetting {
-            key: "path.max_depth".into(),
-            message: "must be at least 1".into(),
-        });
-    }
+/// tests' baseline for its variance). Returns the film and the rays traced.
+fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> Result<(Film, u64)> {
+    let (scene, settings, progress) = (ctx.scene(), ctx.settings(), ctx.progress());
     progress.begin("prepare", 1);
-    let prepared = PreparedScene::new(
-        scene,
-        PrepareOptions {
-            analytic_spheres: true,
-            ..PrepareOptions::default()
-        },
-    );
-    let accel = make_accel(&prepared);
-    let tracer = PathTracer::new(&prepared, accel.as_ref(), settings, env_sampling);
+    let prepared = ctx.analytic();
+    let accel = ctx.analytic_accel();
+    let tracer = PathTracer::new(prepared, accel, settings, env_sampling);
     let lanes = kernel == Kernel::Lanes;
     progress.advance(1);
     let rays = AtomicU64::new(0);
@@ -213,10 +202,5 @@ fn render_impl(
         rays.fetch_add(count, Ordering::Relaxed);
         tile
     })?;
-    Ok((
-        film,
-        PathStats {
-            rays: rays.into_inner(),
-        },
-    ))
+    Ok((film, rays.into_inner()))
 }

@@ -2,11 +2,13 @@
 //! reference kernels against the scalar loop.
 
 use super::*;
+use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::geometry::primitives;
+use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Camera, Geometry, Light, Material, Object, Technique,
+    AreaShape, Attenuation, Camera, Geometry, Light, Material, Object, Scene, Technique,
 };
 use std::f32::consts::PI;
 
@@ -48,12 +50,13 @@ fn analytic_furnace_is_exact() {
     // Inside a closed sphere of albedo rho and emission E, L = E / (1 - rho);
     // with cosine sampling every path carries exactly sum rho^k E.
     let s = furnace(None);
-    let (film, stats) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let (film, rays) =
+        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
     let expect = (1.0 - 0.5f32.powi(64)) / (1.0 - 0.5);
     for c in &film.color {
         assert!((c.x - expect).abs() < 1e-3, "{c} vs {expect}");
     }
-    assert!(stats.rays > 0);
+    assert!(rays > 0);
 }
 
 #[test]
@@ -65,7 +68,8 @@ fn triangle_furnace_with_mis_is_unbiased() {
     s.render.path.max_depth = 40;
     s.render.path.rr_depth = 3;
     s.render.samples = 16;
-    let (film, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let (film, _) =
+        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
     let n = film.color.len() as f32;
     let mean = film.mean().x;
     let var = film.color.iter().map(|c| (c.x - mean).powi(2)).sum::<f32>() / (n - 1.0);
@@ -137,7 +141,8 @@ fn diffuse_sphere_inside_emitting_sphere_reflects_rho_times_le() {
     s.render.samples = 64;
     for depth in [1, 4] {
         s.render.path.max_depth = depth;
-        let (film, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+        let (film, _) =
+            render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
         for c in 0..3 {
             let (mean, stderr) = mean_and_stderr(&film, c);
             let expect = rho[c] * le;
@@ -165,7 +170,7 @@ fn images_do_not_depend_on_the_thread_count() {
             .num_threads(threads)
             .build()
             .expect("thread pool");
-        pool.install(|| render_with(&s, &s.render, &NoProgress, &bvh))
+        pool.install(|| render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes))
             .expect("renders")
             .0
     };
@@ -209,7 +214,8 @@ fn depth_one_point_light_is_the_lambert_term() {
     s.render.height = 4;
     s.render.samples = 4;
     s.render.path.max_depth = 1;
-    let (film, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let (film, _) =
+        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
     // Straight below the light: cos = 1, d = 2, ambient ignored.
     let expect = 0.5 * 8.0 / 4.0;
     for c in &film.color {
@@ -628,15 +634,10 @@ fn environment_sampling_cuts_the_variance_of_a_small_bright_spot() {
     let expect = rho / PI * e;
     let mut variance = [0.0; 2];
     for (k, env_sampling) in [true, false].into_iter().enumerate() {
-        let (film, _) = render_impl(
-            &s,
-            &s.render,
-            &NoProgress,
-            &bvh,
-            Kernel::Lanes,
-            env_sampling,
-        )
-        .expect("renders");
+        let ctx = RenderContext::new(&s, &s.render, &NoProgress)
+            .expect("valid")
+            .with_accelerator(&bvh);
+        let (film, _) = render_impl(&ctx, Kernel::Lanes, env_sampling).expect("renders");
         assert!(film.is_clean());
         let (mean, var) = mean_and_variance(&film);
         let stderr = (var / film.color.len() as f32).sqrt();
@@ -724,7 +725,8 @@ fn glass_sphere_of_ior_one_is_invisible() {
     s.render.height = 12;
     s.render.samples = 2;
     s.render.path.max_depth = 4;
-    let (without, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let (without, _) =
+        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
     s.objects.push(Object {
         geometry: Geometry::Sphere { radius: 0.7 },
         material: glass,
@@ -740,7 +742,8 @@ fn glass_sphere_of_ior_one_is_invisible() {
     // plane: in the shadow (the segment to the light passes the sphere's
     // centre closer than r - 0.1), clear of it (farther than r + 0.15, a
     // margin for the pixel footprint), or on the edge (not checked).
-    let (with, _) = render_with(&s, &s.render, &NoProgress, &bvh).expect("renders");
+    let (with, _) =
+        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
     let (centre, r, light) = (Vec3::new(0.0, 0.8, -0.5), 0.7, Vec3::new(0.0, 4.0, 0.0));
     let (w, h) = (s.render.width, s.render.height);
     let (mut shadowed, mut clear) = (0, 0);

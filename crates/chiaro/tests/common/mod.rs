@@ -10,12 +10,11 @@ pub fn render_cell(scene: &Scene, s: &RenderSettings, kernel: Option<Kernel>) ->
     match kernel {
         None => chiaro::render(scene, s, &NoProgress).expect("renders"),
         Some(k) => {
-            chiaro_ray::path::render_with_kernel(
+            chiaro::render_with(
                 scene,
                 s,
                 &NoProgress,
-                &chiaro_core::accel::instanced::build_accelerator,
-                k,
+                &chiaro_ray::path::PathTracing { kernel: k },
             )
             .expect("renders")
             .0

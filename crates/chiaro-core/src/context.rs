@@ -1,0 +1,292 @@
+//! The technique interface: every technique renders one [`RenderContext`]
+//! (the validated scene and settings, the prepared scenes and their
+//! accelerators, built once and on demand, progress and cancellation)
+//! through the one method of [`Renderer`], in the manner of pbrt-v4's
+//! `Integrator` over its `Scene` and Tungsten's `TraceableScene`.
+//!
+//! Settings are validated here and nowhere else ([`RenderSettings::validate`]
+//! with [`Scene::validate_with`]); a technique takes what the context holds
+//! as given.
+
+use crate::accel::Accelerator;
+use crate::budget::{Estimate, bytes_of};
+use crate::error::{CoreError, Result};
+use crate::film::Film;
+use crate::prepared::{PrepareOptions, PreparedScene};
+use crate::progress::Progress;
+use crate::scene::{RenderSettings, Scene, Severity, Technique};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+/// Statistics of one render.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RenderStats {
+    /// Wall-clock time from the context's creation (excluding file I/O).
+    pub elapsed: Duration,
+    /// Triangles in the scene.
+    pub triangles: u64,
+    /// Rays traced, where the technique counts them (0 otherwise).
+    pub rays: u64,
+}
+
+/// A technique: renders the context's scene with its settings.
+pub trait Renderer: Sync {
+    /// Renders `ctx`. Returns the film (linear radiance, depth and normal
+    /// buffers) and the render's statistics.
+    ///
+    /// # Errors
+    /// [`CoreError::Cancelled`] when the progress asks to stop;
+    /// [`CoreError::Unsupported`] for what the technique cannot render.
+    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats)>;
+}
+
+/// Builds the accelerator over a prepared scene.
+pub type AccelBuilder<'f> = dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator> + Sync + 'f;
+
+/// One render's validated inputs and the state every technique shares,
+/// prepared lazily: the flattened scene with analytic spheres (ray tracers)
+/// or tessellated spheres (scan conversion, radiosity), each with its ray
+/// accelerator.
+pub struct RenderContext<'a> {
+    scene: &'a Scene,
+    settings: RenderSettings,
+    progress: &'a dyn Progress,
+    start: Instant,
+    make_accel: &'a AccelBuilder<'a>,
+    analytic: OnceLock<PreparedScene<'a>>,
+    analytic_accel: OnceLock<Box<dyn Accelerator>>,
+    tessellated: OnceLock<PreparedScene<'a>>,
+    tessellated_accel: OnceLock<Box<dyn Accelerator>>,
+}
+
+impl std::fmt::Debug for RenderContext<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RenderContext")
+            .field("technique", &self.settings.technique)
+            .field("width", &self.settings.width)
+            .field("height", &self.settings.height)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'a> RenderContext<'a> {
+    /// Validates `scene` rendered with `settings` (which replace
+    /// `scene.render`) and its memory estimate against the settings'
+    /// budget. Every error found is reported at once; warnings about the
+    /// settings go to `progress`.
+    ///
+    /// # Errors
+    /// [`CoreError::InvalidScene`] listing every error, each naming its
+    /// setting or scene item; [`CoreError::Unsupported`] when the render
+    /// would exceed its memory budget.
+    pub fn new(
+        scene: &'a Scene,
+        settings: &RenderSettings,
+        progress: &'a dyn Progress,
+    ) -> Result<Self> {
+        let mut errors = Vec::new();
+        for issue in scene.validate_with(settings) {
+            match issue.severity {
+                Severity::Error => errors.push(issue.to_string()),
+                Severity::Warning if issue.path.starts_with("render") => {
+                    progress.warning(&issue.to_string());
+                }
+                Severity::Warning => {}
+            }
+        }
+        if !errors.is_empty() {
+            return Err(CoreError::InvalidScene { issues: errors });
+        }
+        memory_estimate(scene, settings)
+            .check(settings.memory_budget())
+            .map_err(CoreError::Unsupported)?;
+        Ok(Self {
+            scene,
+            settings: settings.clone(),
+            progress,
+            start: Instant::now(),
+            make_accel: &crate::accel::instanced::build_accelerator,
+            analytic: OnceLock::new(),
+            analytic_accel: OnceLock::new(),
+            tessellated: OnceLock::new(),
+            tessellated_accel: OnceLock::new(),
+        })
+    }
+
+    /// The same context with `settings` changed by `f` (validated again),
+    /// for a render that derives its settings from another's (one sample
+    /// per pixel before a post filter).
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn with_settings(&self, f: impl FnOnce(&mut RenderSettings)) -> Result<Self> {
+        let mut settings = self.settings.clone();
+        f(&mut settings);
+        let mut ctx = Self::new(self.scene, &settings, self.progress)?;
+        ctx.make_accel = self.make_accel;
+        Ok(ctx)
+    }
+
+    /// Uses `make` instead of the BVH to build the ray accelerators (the
+    /// brute-force list in tests).
+    pub fn with_accelerator(mut self, make: &'a AccelBuilder<'a>) -> Self {
+        self.make_accel = make;
+        self
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &'a Scene {
+        self.scene
+    }
+
+    /// The validated settings.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    /// Progress, warnings and cancellation.
+    pub fn progress(&self) -> &'a dyn Progress {
+        self.progress
+    }
+
+    /// The scene flattened for the ray tracers: spheres stay analytic.
+    pub fn analytic(&self) -> &PreparedScene<'a> {
+        self.analytic.get_or_init(|| {
+            PreparedScene::new(
+                self.scene,
+                PrepareOptions {
+                    analytic_spheres: true,
+                    ..PrepareOptions::default()
+                },
+            )
+        })
+    }
+
+    /// The ray accelerator over [`Self::analytic`].
+    pub fn analytic_accel(&self) -> &dyn Accelerator {
+        self.analytic_accel
+            .get_or_init(|| (self.make_accel)(self.analytic()))
+            .as_ref()
+    }
+
+    /// The scene flattened for scan conversion and radiosity: spheres
+    /// tessellated.
+    pub fn tessellated(&self) -> &PreparedScene<'a> {
+        self.tessellated
+            .get_or_init(|| PreparedScene::new(self.scene, PrepareOptions::default()))
+    }
+
+    /// The ray accelerator over [`Self::tessellated`].
+    pub fn tessellated_accel(&self) -> &dyn Accelerator {
+        self.tessellated_accel
+            .get_or_init(|| (self.make_accel)(self.tessellated()))
+            .as_ref()
+    }
+
+    /// Whether the progress asks to stop.
+    pub fn cancelled(&self) -> bool {
+        self.progress.cancelled()
+    }
+
+    /// The statistics of a render that traced `rays` rays.
+    pub fn stats(&self, rays: u64) -> RenderStats {
+        RenderStats {
+            elapsed: self.start.elapsed(),
+            triangles: self.scene.triangle_count() as u64,
+            rays,
+        }
+    }
+}
+
+/// What rendering `scene` with `settings` will allocate, by consumer, in
+/// bytes: the prepared triangles and vertices (with the spheres the scan
+/// converter and radiosity tessellate), texture mip levels, the film and
+/// the scan converter's supersamples, shadow maps (up to their share of the
+/// budget, [`crate::budget::MemoryBudget::shadow_map_bytes`]), and a dense
+/// radiosity matrix. The per-item sizes are the constants of
+/// [`crate::budget`]; the sum is an estimate of the peak, made without
+/// allocating anything.
+pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
+    use crate::geometry::primitives::MeshSize;
+    use crate::scene::{Geometry, ShadowMethod, Texture};
+    let analytic = matches!(
+        settings.technique,
+        Technique::Preview | Technique::Whitted | Technique::Path
+    );
+    let (mut meshes, mut spheres) = (
+        MeshSize {
+            vertices: 0,
+            triangles: 0,
+        },
+        0u64,
+    );
+    for obj in &scene.objects {
+        match obj.geometry {
+            Geometry::Mesh(id) => {
+                if let Some(m) = scene.meshes.get(id.index()) {
+                    let s = MeshSize::of(m);
+                    meshes.vertices = meshes.vertices.saturating_add(s.vertices);
+                    meshes.triangles = meshes.triangles.saturating_add(s.triangles);
+                }
+            }
+            Geometry::Sphere { .. } => spheres += 1,
+        }
+    }
+    let slices = PrepareOptions::default().sphere_slices;
+    let sphere = MeshSize::uv_sphere(slices, slices / 2).times(spheres);
+    let mut e = Estimate::default();
+    e.add(
+        format!("{} mesh triangles", meshes.triangles),
+        meshes.prepared_bytes(),
+    );
+    if !analytic {
+        e.add(
+            format!(
+                "{spheres} tessellated spheres ({} triangles)",
+                sphere.triangles
+            ),
+            sphere.prepared_bytes(),
+        );
+    }
+    let texels: u64 = scene
+        .textures
+        .iter()
+        .map(|t| match t {
+            Texture::Image(i) => u64::from(i.width) * u64::from(i.height),
+            Texture::Procedural(_) => 0,
+        })
+        .sum();
+    // Mip levels: a third of the texels again, RGBA f32.
+    e.add("texture mip levels", bytes_of(texels, 16) / 3);
+    let pixels = u64::from(settings.width) * u64::from(settings.height);
+    // Colour, depth and normal a pixel.
+    e.add("film", bytes_of(pixels, 28));
+    if settings.technique.is_scan_conversion() {
+        // Colour, depth and item a supersample.
+        e.add(
+            "supersamples",
+            bytes_of(
+                pixels.saturating_mul(u64::from(settings.samples.max(1))),
+                20,
+            ),
+        );
+    }
+    if settings.shadows == ShadowMethod::Map {
+        // Up to six depth faces of f32 per light; lights past the shadow-map
+        // share of the budget use shadow rays instead, so no more than it.
+        let r = u64::from(settings.shadow_map.resolution);
+        let lights = scene.lights.len() as u64;
+        e.add(
+            "shadow maps",
+            bytes_of(r * r * 6, 4)
+                .saturating_mul(lights)
+                .min(settings.memory_budget().shadow_map_bytes()),
+        );
+    }
+    if settings.technique.solves_radiosity() && settings.radiosity.solver.is_matrix() {
+        // Two f32 matrices over at least one element a triangle.
+        let n = meshes.triangles.saturating_add(sphere.triangles);
+        e.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
+    }
+    e
+}

@@ -1,0 +1,137 @@
+//! Scan conversion as the technique interface's [`Renderer`]: flat,
+//! Gouraud or Phong shading (by `settings.technique`) of the context's
+//! tessellated scene.
+
+use crate::{RasterOptions, RasterWork, render_work};
+use chiaro_core::context::{RenderContext, RenderStats, Renderer};
+use chiaro_core::error::{CoreError, Result};
+use chiaro_core::film::Film;
+use chiaro_core::scene::ShadeMode;
+
+/// The scan-conversion techniques (flat, Gouraud, Phong).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ScanConversion {
+    /// Options that are not render settings (the shadow-volume counting).
+    pub options: RasterOptions,
+}
+
+impl ScanConversion {
+    /// The default options (z-fail shadow volumes): what every front renders with.
+    pub const DEFAULT: Self = Self {
+        options: RasterOptions {
+            volume_counting: crate::VolumeCounting::ZFail,
+        },
+    };
+
+    /// The shading mode of the context's technique.
+    fn mode(ctx: &RenderContext<'_>) -> Result<ShadeMode> {
+        let technique = ctx.settings().technique;
+        technique.shade_mode().ok_or_else(|| {
+            CoreError::Unsupported(format!(
+                "the scan converter renders flat, gouraud and phong, not `{}`",
+                technique.name()
+            ))
+        })
+    }
+
+    /// Renders `ctx` into `film`, whose buffers are reused when it already
+    /// has the image's size (so frames rendered one after another neither
+    /// allocate nor fault in a new film, as a GPU reuses its framebuffer);
+    /// it is resized otherwise. The work done is counted into `work`. On
+    /// success `film` holds exactly the picture [`Renderer::render`]
+    /// returns, whatever it held before; on an error its pixels are
+    /// unspecified.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    pub fn render_into(
+        &self,
+        ctx: &RenderContext<'_>,
+        film: &mut Film,
+        work: &RasterWork,
+    ) -> Result<()> {
+        let mode = Self::mode(ctx)?;
+        render_work(
+            ctx.tessellated(),
+            ctx.settings(),
+            mode,
+            &self.options,
+            ctx.progress(),
+            film,
+            work,
+        )
+    }
+}
+
+impl Renderer for ScanConversion {
+    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats)> {
+        let settings = ctx.settings();
+        let mut film = Film::new(settings.width, settings.height);
+        self.render_into(ctx, &mut film, &RasterWork::default())?;
+        Ok((film, ctx.stats(0)))
+    }
+}
+
+/// The scan converter driven the ways the crate's tests drive it: from a
+/// scene through a render context, or over a prepared scene they built.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use super::*;
+    use crate::RasterOptions;
+    use chiaro_core::prepared::PreparedScene;
+    use chiaro_core::progress::Progress;
+    use chiaro_core::scene::{RenderSettings, Scene};
+
+    /// [`ScanConversion`] of `scene` with `settings`.
+    pub(crate) fn render(
+        scene: &Scene,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<Film> {
+        let ctx = RenderContext::new(scene, settings, progress)?;
+        ScanConversion::default().render(&ctx).map(|(film, _)| film)
+    }
+
+    /// The pipeline over `ps` (spheres tessellated) with `mode` and `options`.
+    pub(crate) fn render_prepared_with(
+        ps: &PreparedScene<'_>,
+        settings: &RenderSettings,
+        mode: ShadeMode,
+        options: &RasterOptions,
+        progress: &dyn Progress,
+    ) -> Result<Film> {
+        let mut film = Film::new(settings.width, settings.height);
+        render_prepared_into(ps, settings, mode, options, progress, &mut film)?;
+        Ok(film)
+    }
+
+    /// [`render_prepared_with`] into an existing `film`.
+    pub(crate) fn render_prepared_into(
+        ps: &PreparedScene<'_>,
+        settings: &RenderSettings,
+        mode: ShadeMode,
+        options: &RasterOptions,
+        progress: &dyn Progress,
+        film: &mut Film,
+    ) -> Result<()> {
+        render_work(
+            ps,
+            settings,
+            mode,
+            options,
+            progress,
+            film,
+            &RasterWork::default(),
+        )
+    }
+
+    /// [`render_prepared_with`] with the default options.
+    pub(crate) fn render_prepared(
+        ps: &PreparedScene<'_>,
+        settings: &RenderSettings,
+        mode: ShadeMode,
+        progress: &dyn Progress,
+    ) -> Result<Film> {
+        render_prepared_with(ps, settings, mode, &RasterOptions::default(), progress)
+    }
+}
