@@ -89,7 +89,7 @@ impl<'a> RenderContext<'a> {
             match issue.severity {
                 Severity::Error => errors.push(issue.to_string()),
                 Severity::Warning if issue.path.starts_with("render") => {
-                    progress.warning(&issue.to_string());
+                    progress.warning(&format!("{}: {}", issue.path, issue.message));
                 }
                 Severity::Warning => {}
             }
