@@ -335,6 +335,8 @@ fn main() {
             rayon::current_num_threads()
         );
     }
+    // The render contexts prepare their own copies; this one only named the sizes.
+    drop(prepared);
     println!("load average before: {}", load_average());
     let mut cases = Vec::new();
     if issue8 {
