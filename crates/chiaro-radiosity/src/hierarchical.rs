@@ -319,7 +319,7 @@ pub(crate) fn solve(
     // a shared edge falls short of its integral), so too loose a threshold
     // darkens the walls lit only indirectly; 0.01 keeps the Cornell box's
     // walls as close to the path tracer as the full-matrix solution
-    // (BENCHMARKS.md, "Radiosity", session 3).
+    // (BENCHMARKS.md, "Radiosity").
     t.eps = (0.01 * tolerance * max_e).max(f32::MIN_POSITIVE);
     let roots = t.roots.clone();
     for &p in &roots {

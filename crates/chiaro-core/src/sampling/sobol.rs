@@ -250,7 +250,8 @@ fn second_by_taylor_shift(mut x: u32) -> u32 {
 /// tracer's lock-step batch. Sixteen: an AVX-512 build that allows 512-bit
 /// vectors (`-C target-feature=-prefer-256-bit`; ARCHITECTURE.md, "Target
 /// CPU") runs each lane loop as one instruction; on AVX2 the loops are two
-/// 256-bit halves, no slower than eight lanes (BENCHMARKS.md, session 14).
+/// 256-bit halves, no slower than eight lanes (BENCHMARKS.md, "Path tracing
+/// vs Mitsuba 3").
 pub const LANES: usize = 16;
 
 /// [`shuffled_index`] per lane, with the full reversal (which vectorises;

@@ -550,8 +550,7 @@ impl PathTracer<'_, '_> {
 
 /// The lanes set in `m`, in order, read from their bit mask: the loop
 /// visits only those lanes, so its branches do not depend on which lanes
-/// are set (a test per lane of a random pattern was a third of the
-/// kernel's mispredicted branches, cachegrind's branch simulation).
+/// are set (a test per lane of a random mask would mispredict often).
 #[inline(always)]
 fn set_lanes(m: &[bool; LANES]) -> impl Iterator<Item = usize> + use<> {
     // Each eight bytes (each 0 or 1) as one word; the multiply gathers

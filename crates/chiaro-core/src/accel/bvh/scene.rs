@@ -323,7 +323,7 @@ impl SceneBvh {
 /// so it waits for them to reach the cache, at the head of the traversal's
 /// chain of dependent steps. `black_box` keeps each component a load of its
 /// own, which the store-to-load forwarding can serve (BENCHMARKS.md, "Path
-/// tracing vs Mitsuba 3", session 8).
+/// tracing vs Mitsuba 3").
 #[inline(always)]
 fn read_ray(ray: &Ray) -> Ray {
     let bb = std::hint::black_box::<f32>;

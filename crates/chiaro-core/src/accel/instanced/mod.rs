@@ -57,10 +57,10 @@ use sharing::{Candidate, duplicated, shared_instances, valid_triangles};
 
 /// [`build_accelerator`] picks the two-level BVH when instancing saves at
 /// least this many triangles (the triangles a flat BVH would hold beyond
-/// one copy of each shared mesh, about 60 bytes each in a [`SceneBvh`], so
-/// about 2 MiB: a core's share of L2 on the 2-core test box). Below it the
-/// flat BVH is as fast or faster and small anyway; above it incoherent rays
-/// (the path tracer's), build time and memory favour the two-level BVH,
+/// one copy of each shared mesh). Below it the flat BVH's extra copies
+/// still fit a core's cache: it is as fast or faster and small anyway;
+/// above it incoherent rays (the path tracer's), build time and memory
+/// favour the two-level BVH,
 /// while coherent camera rays lose a little until the flat BVH outgrows
 /// the caches (`instanced_bench`; BENCHMARKS.md, "Ray tracing").
 pub const MIN_DUPLICATED_TRIANGLES: usize = 32_768;
