@@ -28,6 +28,102 @@ pub fn light_power(light: &Light, scene_radius: f32) -> f32 {
     }
 }
 
+/// What an environment map of mean luminance `mean_luminance` delivers into
+/// a sphere of radius `scene_radius` (pbrt-v4's `ImageInfiniteLight::Phi`):
+/// `4 pi^2 r^2` times the mean radiance, comparable with [`light_power`].
+pub fn environment_power(scene_radius: f32, mean_luminance: f32) -> f32 {
+    4.0 * PI * PI * scene_radius * scene_radius * mean_luminance
+}
+
+/// Lights chosen in proportion to their power: the cumulative table that
+/// one uniform number is searched in, and each light's probability.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LightPowerTable {
+    /// Cumulative selection probabilities (the last is 1 up to rounding).
+    cdf: Vec<f32>,
+    /// Selection probability of each light (`cdf[i] - cdf[i - 1]`).
+    pmf: Vec<f32>,
+}
+
+impl LightPowerTable {
+    /// The table over `powers`, one per light; all lights equally likely
+    /// when the powers sum to zero.
+    pub fn new(powers: &[f32]) -> Self {
+        let n = powers.len();
+        let total: f32 = powers.iter().sum();
+        let mut acc = 0.0;
+        let cdf: Vec<f32> = powers
+            .iter()
+            .map(|&p| {
+                acc += if total > 0.0 {
+                    p / total
+                } else {
+                    1.0 / n as f32
+                };
+                acc
+            })
+            .collect();
+        let pmf = (0..cdf.len())
+            .map(|i| {
+                let prev = if i == 0 { 0.0 } else { cdf[i - 1] };
+                cdf[i] - prev
+            })
+            .collect();
+        Self { cdf, pmf }
+    }
+
+    /// The table over `lights` by [`light_power`], followed (as light
+    /// `lights.len()`) by an environment map of mean luminance `env`
+    /// when there is one, by [`environment_power`].
+    pub fn of_lights(lights: &[&Light], scene_radius: f32, env: Option<f32>) -> Self {
+        let mut powers: Vec<f32> = lights
+            .iter()
+            .map(|l| light_power(l, scene_radius))
+            .collect();
+        if let Some(mean) = env {
+            powers.push(environment_power(scene_radius, mean));
+        }
+        Self::new(&powers)
+    }
+
+    /// The light for the uniform number `u` (the first whose cumulative
+    /// probability exceeds `u`, the last when rounding leaves none);
+    /// `None` without lights.
+    #[inline]
+    pub fn pick(&self, u: f32) -> Option<usize> {
+        if self.cdf.is_empty() {
+            return None;
+        }
+        let i = self.cdf.partition_point(|&c| c <= u);
+        Some(i.min(self.cdf.len() - 1))
+    }
+
+    /// The probability of choosing light `i` (0 out of range).
+    #[inline]
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.pmf.get(i).copied().unwrap_or(0.0)
+    }
+
+    /// The cumulative probabilities, for a caller that counts entries at
+    /// or below `u` instead of searching ([`Self::pick`]'s index).
+    #[inline]
+    pub fn cdf(&self) -> &[f32] {
+        &self.cdf
+    }
+
+    /// The number of lights.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.cdf.len()
+    }
+
+    /// True without lights.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.cdf.is_empty()
+    }
+}
+
 /// Walker's alias table (built by Vose's method): picks index `i` with
 /// probability `w_i / sum(w)` from one uniform number in O(1).
 #[derive(Debug, Clone, PartialEq)]
@@ -509,5 +605,36 @@ mod tests {
         assert!((rest_sum / f64::from(n) - 0.5).abs() < 1e-3);
         assert!(AliasTable::new(&[0.0, -2.0]).is_none());
         assert!(AliasTable::new(&[]).is_none());
+    }
+
+    #[test]
+    fn power_table_picks_by_power_and_its_pmf_sums_to_one() {
+        let t = LightPowerTable::new(&[1.0, 0.0, 3.0]);
+        assert_eq!(t.len(), 3);
+        assert_eq!(t.pmf(0), 0.25);
+        assert_eq!(t.pmf(1), 0.0);
+        assert_eq!(t.pmf(2), 0.75);
+        assert_eq!(t.pmf(3), 0.0);
+        assert_eq!(t.pick(0.0), Some(0));
+        assert_eq!(t.pick(0.2499), Some(0));
+        // A light of zero power is never picked: 0.25 lands on light 2.
+        assert_eq!(t.pick(0.25), Some(2));
+        assert_eq!(t.pick(0.9999), Some(2));
+        // Past the last entry (rounding): the last light.
+        assert_eq!(t.pick(1.5), Some(2));
+        let even = LightPowerTable::new(&[0.0, 0.0]);
+        assert_eq!((even.pmf(0), even.pmf(1)), (0.5, 0.5));
+        assert_eq!(LightPowerTable::new(&[]).pick(0.5), None);
+        // The environment follows the lights.
+        let point = Light::Point {
+            position: Vec3::ZERO,
+            color: Vec3::ONE,
+            intensity: 1.0,
+            attenuation: crate::scene::Attenuation::None,
+        };
+        let t = LightPowerTable::of_lights(&[&point], 1.0, Some(1.0 / PI));
+        let (pl, pe) = (light_power(&point, 1.0), environment_power(1.0, 1.0 / PI));
+        assert_eq!(t.len(), 2);
+        assert!((t.pmf(0) - pl / (pl + pe)).abs() < 1e-6);
     }
 }

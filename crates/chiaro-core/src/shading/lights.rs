@@ -155,17 +155,15 @@ fn sample_area(
             return sample_sphere_cone(center, radius, le, p, u);
         }
         AreaShape::Triangle { a, b, c } => {
-            let bary = crate::sampling::sample_uniform_triangle(u);
-            let cr = (b - a).cross(c - a);
-            let area2 = cr.length();
-            if area2 <= 0.0 {
-                return None;
-            }
-            (
-                a * bary.x + b * bary.y + c * (1.0 - bary.x - bary.y),
-                cr / area2,
-                0.5 * area2,
-            )
+            let e = TriangleEmitter::new(a, b, c, le, two_sided)?;
+            let s = e.sample(p, u)?;
+            return Some(LightSample {
+                wi: s.wi,
+                distance: s.dist2.sqrt(),
+                point: s.point,
+                intensity: le * (s.cos_l * e.area / (PI * s.dist2)),
+                is_delta: false,
+            });
         }
     };
     let d = q - p;
@@ -189,6 +187,115 @@ fn sample_area(
         intensity: le * (cos_l * area / (PI * dist2)),
         is_delta: false,
     })
+}
+
+/// An emissive triangle as a light: sampled uniformly in area, its samples
+/// converted to solid angle by `d^2 / cos_l`. [`sample_light`]'s triangle
+/// case and the path tracer's emissive-triangle lights both sample it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TriangleEmitter {
+    pub a: Vec3,
+    pub b: Vec3,
+    pub c: Vec3,
+    /// Unit normal (counter-clockwise front).
+    pub n: Vec3,
+    pub area: f32,
+    /// Emitted radiance.
+    pub le: Vec3,
+    /// Emits from both faces (otherwise from the front only).
+    pub two_sided: bool,
+}
+
+/// One sample of a [`TriangleEmitter`] as seen from a point `p`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TriangleSample {
+    /// Unit direction from `p` towards the sample.
+    pub wi: Vec3,
+    /// The sample point.
+    pub point: Vec3,
+    /// Squared distance from `p` to the sample.
+    pub dist2: f32,
+    /// Cosine at the light between its emitting normal and `-wi` (positive).
+    pub cos_l: f32,
+}
+
+impl TriangleEmitter {
+    /// The triangle `a b c` emitting `le`; `None` when it is degenerate.
+    pub fn new(a: Vec3, b: Vec3, c: Vec3, le: Vec3, two_sided: bool) -> Option<Self> {
+        let cr = (b - a).cross(c - a);
+        let len = cr.length();
+        (len > 0.0).then(|| Self {
+            a,
+            b,
+            c,
+            n: cr / len,
+            area: 0.5 * len,
+            le,
+            two_sided,
+        })
+    }
+
+    /// A point uniform in area for `u` in `[0,1)^2`, seen from `p`; `None`
+    /// at `p` itself and behind a one-sided emitter.
+    #[inline]
+    pub fn sample(&self, p: Vec3, u: Vec2) -> Option<TriangleSample> {
+        let bary = crate::sampling::sample_uniform_triangle(u);
+        let q = self.a * bary.x + self.b * bary.y + self.c * (1.0 - bary.x - bary.y);
+        let d = q - p;
+        let dist2 = d.length_squared();
+        if dist2 <= 0.0 {
+            return None;
+        }
+        let wi = d * (1.0 / dist2.sqrt());
+        let mut cos_l = -self.n.dot(wi);
+        if self.two_sided {
+            cos_l = cos_l.abs();
+        }
+        if cos_l <= 0.0 {
+            return None;
+        }
+        Some(TriangleSample {
+            wi,
+            point: q,
+            dist2,
+            cos_l,
+        })
+    }
+
+    /// The solid-angle pdf of sample `s`: `d^2 / (cos_l A)`.
+    #[inline]
+    pub fn pdf(&self, s: &TriangleSample) -> f32 {
+        s.dist2 / (s.cos_l * self.area)
+    }
+}
+
+/// The solid-angle pdf with which [`sample_light`] samples the direction
+/// from `p` towards the point `q` on area light `light` (pbrt-v4's
+/// `Light::PDF_Li`); `None` for delta lights and where the light is seen
+/// edge-on. For a sphere the pdf of its uniformly sampled cone.
+pub fn sample_light_pdf(light: &Light, p: Vec3, q: Vec3) -> Option<f32> {
+    let Light::Area { shape, .. } = light else {
+        return None;
+    };
+    match *shape {
+        AreaShape::Sphere { center, radius } => {
+            let dc2 = (center - p).length_squared();
+            let cos_max = (1.0 - radius * radius / dc2).max(0.0).sqrt();
+            Some(1.0 / (2.0 * PI * (1.0 - cos_max)).max(1e-12))
+        }
+        _ => {
+            let nl = match *shape {
+                AreaShape::Quad { edge_u, edge_v, .. } => edge_u.cross(edge_v).normalize_or_zero(),
+                AreaShape::Disk { normal, .. } => normal.normalize_or_zero(),
+                AreaShape::Triangle { a, b, c } => (b - a).cross(c - a).normalize_or_zero(),
+                AreaShape::Sphere { .. } => Vec3::ZERO,
+            };
+            let d = q - p;
+            let d2 = d.length_squared();
+            let cos_l = nl.dot(d / d2.sqrt()).abs();
+            (cos_l > 0.0).then(|| d2 / (cos_l * shape.area()))
+        }
+    }
 }
 
 /// Uniform sampling of the cone of directions subtended by a sphere
@@ -325,5 +432,90 @@ mod tests {
         e /= (k * k) as f32;
         let expect = PI * 2.0 * (1.0f32 / 9.0);
         assert!((e - expect).abs() < 1e-3 * expect * 10.0, "{e} vs {expect}");
+    }
+
+    /// For each area shape, [`sample_light_pdf`] at a sample's point is the
+    /// pdf implied by the sample's intensity (`Le / (pi * intensity)`, see
+    /// [`LightSample::intensity`]).
+    #[test]
+    fn sample_light_pdf_is_the_pdf_sample_light_draws_with() {
+        let shapes = [
+            AreaShape::Quad {
+                corner: Vec3::new(-0.5, 2.0, -0.3),
+                edge_u: Vec3::new(1.0, 0.1, 0.0),
+                edge_v: Vec3::new(0.0, 0.0, 0.7),
+            },
+            AreaShape::Disk {
+                center: Vec3::new(0.3, 2.5, 0.1),
+                normal: Vec3::new(0.1, -1.0, 0.2),
+                radius: 0.4,
+            },
+            AreaShape::Triangle {
+                a: Vec3::new(-0.4, 1.5, -0.2),
+                b: Vec3::new(0.2, 1.7, 0.6),
+                c: Vec3::new(0.5, 1.6, -0.3),
+            },
+            AreaShape::Sphere {
+                center: Vec3::new(0.2, 3.0, -0.4),
+                radius: 0.6,
+            },
+        ];
+        let p = Vec3::new(0.1, 0.0, 0.2);
+        for shape in shapes {
+            let light = Light::Area {
+                shape,
+                color: Vec3::ONE,
+                intensity: 3.0,
+                two_sided: true,
+            };
+            let le = light.power_rgb().x;
+            let mut checked = 0;
+            for &u in &[[0.1, 0.2], [0.5, 0.5], [0.9, 0.3], [0.25, 0.8]] {
+                let s = sample_light(&light, p, Vec2::from_array(u)).expect("visible");
+                let implied = le / (PI * s.intensity.x);
+                let pdf = sample_light_pdf(&light, p, s.point).expect("area light");
+                assert!(
+                    (pdf - implied).abs() <= 1e-4 * implied,
+                    "{shape:?} at {u:?}: {pdf} vs {implied}"
+                );
+                checked += 1;
+            }
+            assert_eq!(checked, 4);
+        }
+        let point = Light::Point {
+            position: Vec3::Y,
+            color: Vec3::ONE,
+            intensity: 1.0,
+            attenuation: crate::scene::Attenuation::None,
+        };
+        assert_eq!(sample_light_pdf(&point, Vec3::ZERO, Vec3::Y), None);
+    }
+
+    /// `sample_light`'s triangle case is the emitter's sample: the same
+    /// direction and point, and intensity `Le / (pi * pdf)`.
+    #[test]
+    fn triangle_light_samples_through_the_emitter() {
+        let (a, b, c) = (
+            Vec3::new(-0.4, 1.5, -0.2),
+            Vec3::new(0.5, 1.6, -0.3),
+            Vec3::new(0.2, 1.7, 0.6),
+        );
+        let light = Light::Area {
+            shape: AreaShape::Triangle { a, b, c },
+            color: Vec3::ONE,
+            intensity: 2.0,
+            two_sided: false,
+        };
+        let e = TriangleEmitter::new(a, b, c, light.power_rgb(), false).expect("not degenerate");
+        let p = Vec3::new(0.1, 0.0, 0.2);
+        let u = Vec2::new(0.3, 0.6);
+        let s = sample_light(&light, p, u).expect("front");
+        let t = e.sample(p, u).expect("front");
+        assert_eq!((s.wi, s.point), (t.wi, t.point));
+        let expect = e.le.x / (PI * e.pdf(&t));
+        assert!((s.intensity.x - expect).abs() <= 1e-5 * expect);
+        // One-sided: nothing from above.
+        assert!(e.sample(Vec3::new(0.1, 3.0, 0.2), u).is_none());
+        assert!(TriangleEmitter::new(a, a, c, Vec3::ONE, false).is_none());
     }
 }

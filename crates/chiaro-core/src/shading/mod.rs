@@ -31,8 +31,11 @@ pub mod texture;
 pub use brdf::{SurfaceMaterial, eval_brdf_cos};
 pub use bsdf::{Bsdf, BsdfSample, DeltaSplit, delta_split, luminance};
 pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract};
-pub use light_set::{AliasTable, EmitterGroup, SampleKey, group_jitter, light_power};
-pub use lights::{LightSample, sample_light};
+pub use light_set::{
+    AliasTable, EmitterGroup, LightPowerTable, SampleKey, environment_power, group_jitter,
+    light_power,
+};
+pub use lights::{LightSample, TriangleEmitter, TriangleSample, sample_light, sample_light_pdf};
 pub use point::PointLighting;
 
 use crate::scene::{DepthCue, Light};

@@ -2,16 +2,15 @@
 //! tracer of Kajiya (1986) with Russian roulette (Arvo and Kirk 1990).
 
 use super::lanes;
-use super::lights::{NO_LIGHT, TriLight};
+use super::lights::NO_LIGHT;
 use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::sampling::{SobolSampler, power_heuristic};
 use chiaro_core::scene::{AreaShape, Light, RenderSettings};
 use chiaro_core::shading::texture::EnvironmentLight;
-use chiaro_core::shading::{Bsdf, BsdfSample, SurfaceMaterial};
+use chiaro_core::shading::{Bsdf, BsdfSample, LightPowerTable, SurfaceMaterial, TriangleEmitter};
 use glam::Vec3;
-use std::f32::consts::PI;
 
 /// The path tracer over one prepared scene.
 pub(super) struct PathTracer<'a, 's> {
@@ -22,19 +21,17 @@ pub(super) struct PathTracer<'a, 's> {
     /// The environment map as a light: light number `lights.len()`, after
     /// `lights` (`None` without a map, or when it is black).
     pub(super) env: Option<EnvironmentLight<'s>>,
-    /// Cumulative selection probabilities of `lights` and then `env`.
-    pub(super) light_cdf: Vec<f32>,
-    /// Selection probability of each light (`light_cdf[i] - light_cdf[i - 1]`).
-    pub(super) light_pick: Vec<f32>,
+    /// Selection of `lights` and then `env` by power.
+    pub(super) light_table: LightPowerTable,
     /// Sampling data of each light in `lights` that is an emissive triangle
     /// (`None` for the others, sampled through `sample_light`, and for the
     /// environment).
-    pub(super) tri_lights: Vec<Option<TriLight>>,
+    pub(super) tri_lights: Vec<Option<TriangleEmitter>>,
     /// `tri_lights` without the `Option`s when every light is an emissive
     /// triangle and there are at most `lanes::SELECT_LIGHTS` of them (the
     /// lock-step kernel then gathers each lane's light by selects over
     /// this list); empty otherwise.
-    pub(super) select_lights: Vec<TriLight>,
+    pub(super) select_lights: Vec<TriangleEmitter>,
     /// Light index (in `lights`) of each triangle, `NO_LIGHT` when it does not emit.
     pub(super) triangle_light: Vec<u32>,
     /// Per-triangle geometry cached for the common untextured case.
@@ -153,58 +150,22 @@ impl<'a, 's> PathTracer<'a, 's> {
             .collect();
         // Select lights in proportion to a rough power estimate.
         let scene_radius = 0.5 * prepared.bounds.diagonal().max(1e-3);
-        let mut power: Vec<f32> = lights
-            .iter()
-            .map(|l| chiaro_core::shading::light_power(l, scene_radius))
-            .collect();
         let env = env_sampling
             .then(|| EnvironmentLight::new(prepared.scene))
             .flatten();
-        if let Some(env) = &env {
-            // What enters a sphere of the scene's radius (pbrt-v4's
-            // `ImageInfiniteLight::Phi`): 4 pi^2 r^2 times the mean radiance.
-            power.push(4.0 * PI * PI * scene_radius * scene_radius * env.mean_luminance());
-        }
-        let n_lights = power.len();
-        let total: f32 = power.iter().sum();
-        let mut acc = 0.0;
-        let light_cdf: Vec<f32> = power
-            .iter()
-            .map(|&p| {
-                acc += if total > 0.0 {
-                    p / total
-                } else {
-                    1.0 / n_lights as f32
-                };
-                acc
-            })
-            .collect();
-        let light_pick = (0..light_cdf.len())
-            .map(|i| {
-                let prev = if i == 0 { 0.0 } else { light_cdf[i - 1] };
-                light_cdf[i] - prev
-            })
-            .collect();
-        let mut tri_lights: Vec<Option<TriLight>> = lights
+        let light_table = LightPowerTable::of_lights(
+            &lights,
+            scene_radius,
+            env.as_ref().map(|e| e.mean_luminance()),
+        );
+        let mut tri_lights: Vec<Option<TriangleEmitter>> = lights
             .iter()
             .map(|l| match l {
                 Light::Area {
                     shape: AreaShape::Triangle { a, b, c },
                     two_sided,
                     ..
-                } => {
-                    let cr = (*b - *a).cross(*c - *a);
-                    let len = cr.length();
-                    (len > 0.0).then(|| TriLight {
-                        a: *a,
-                        b: *b,
-                        c: *c,
-                        n: cr / len,
-                        area: 0.5 * len,
-                        le: l.power_rgb(),
-                        two_sided: *two_sided,
-                    })
-                }
+                } => TriangleEmitter::new(*a, *b, *c, l.power_rgb(), *two_sided),
                 _ => None,
             })
             .collect();
@@ -276,7 +237,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             .collect();
         let select_lights = if tri_lights.len() <= lanes::SELECT_LIGHTS {
             // (`None` if any light is not a triangle.)
-            let all: Option<Vec<TriLight>> = tri_lights.iter().copied().collect();
+            let all: Option<Vec<TriangleEmitter>> = tri_lights.iter().copied().collect();
             all.unwrap_or_default()
         } else {
             Vec::new()
@@ -286,8 +247,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             accel,
             lights,
             env,
-            light_cdf,
-            light_pick,
+            light_table,
             tri_lights,
             select_lights,
             triangle_light,

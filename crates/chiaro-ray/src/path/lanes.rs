@@ -24,13 +24,14 @@
 // form LLVM vectorises, and clearer than a dozen zipped iterators.
 #![allow(clippy::needless_range_loop)]
 
-use super::{PathState, PathTracer, TriLight};
+use super::{PathState, PathTracer};
 use chiaro_core::accel::Hit;
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
 use chiaro_core::sampling::sobol::LANES;
 use chiaro_core::sampling::{
     SobolSampler, cosine_hemisphere_pdf, sample_cosine_hemisphere_xyz, sample_uniform_triangle_xy,
 };
+use chiaro_core::shading::TriangleEmitter;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
@@ -138,7 +139,7 @@ struct LightLanes {
 impl LightLanes {
     /// `tl` (chosen with probability `pick`) in every lane.
     #[inline(always)]
-    fn splat(tl: &TriLight, pick: f32) -> Self {
+    fn splat(tl: &TriangleEmitter, pick: f32) -> Self {
         Self {
             a: V3::splat(tl.a),
             b: V3::splat(tl.b),
@@ -153,7 +154,7 @@ impl LightLanes {
 
     /// `tl` in the lanes where `m` is set.
     #[inline(always)]
-    fn select(&mut self, m: &[bool; LANES], tl: &TriLight, pick: f32) {
+    fn select(&mut self, m: &[bool; LANES], tl: &TriangleEmitter, pick: f32) {
         self.a.select(m, tl.a);
         self.b.select(m, tl.b);
         self.c.select(m, tl.c);
@@ -166,7 +167,7 @@ impl LightLanes {
 
     /// `tl` in lane `i`.
     #[inline(always)]
-    fn set(&mut self, i: usize, tl: &TriLight, pick: f32) {
+    fn set(&mut self, i: usize, tl: &TriangleEmitter, pick: f32) {
         self.a.set(i, tl.a);
         self.b.set(i, tl.b);
         self.c.set(i, tl.c);
@@ -386,7 +387,7 @@ impl PathTracer<'_, '_> {
     pub(super) fn pick_lights(&self, u: &F) -> Option<[u32; LANES]> {
         /// Lights up to which counting beats the search.
         const FEW: usize = 16;
-        let (cdf, n) = (&self.light_cdf, self.light_count());
+        let (cdf, n) = (self.light_table.cdf(), self.light_count());
         if n == 0 {
             return None;
         }
@@ -472,7 +473,7 @@ impl PathTracer<'_, '_> {
             // No lights: nothing to sample (the pair above is still drawn).
             return;
         }
-        // The light sample (`sample_tri_light`), the Lambert term
+        // The light sample (`TriangleEmitter::sample`), the Lambert term
         // (`eval_brdf_cos`) and the MIS weight, lane-parallel.
         let mut o_l = V3::default();
         let mut d_l = V3::default();

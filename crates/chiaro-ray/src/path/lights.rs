@@ -3,48 +3,32 @@
 
 use super::integrator::{MaterialInfo, PathTracer, Vertex};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
-use chiaro_core::sampling::{SobolSampler, power_heuristic, sample_uniform_triangle};
-use chiaro_core::scene::{AreaShape, Light};
-use chiaro_core::shading::{Bsdf, sample_light};
+use chiaro_core::sampling::{SobolSampler, power_heuristic};
+use chiaro_core::shading::{Bsdf, sample_light, sample_light_pdf};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// `PathTracer::triangle_light` entry of a triangle that is not a light.
 pub(super) const NO_LIGHT: u32 = u32::MAX;
 
-/// An emissive triangle as next-event estimation samples it.
-#[derive(Clone, Copy)]
-pub(super) struct TriLight {
-    pub(super) a: Vec3,
-    pub(super) b: Vec3,
-    pub(super) c: Vec3,
-    /// Unit normal (counter-clockwise front).
-    pub(super) n: Vec3,
-    pub(super) area: f32,
-    pub(super) le: Vec3,
-    pub(super) two_sided: bool,
-}
-
 impl PathTracer<'_, '_> {
+    #[inline]
     pub(super) fn light_pick_pdf(&self, i: usize) -> f32 {
-        self.light_pick[i]
+        self.light_table.pmf(i)
     }
 
     /// The light for the number `u`: an index into `lights`, or
     /// `lights.len()` for the environment.
+    #[inline]
     pub(super) fn pick_light(&self, u: f32) -> Option<usize> {
-        if self.light_cdf.is_empty() {
-            return None;
-        }
-        let i = self.light_cdf.partition_point(|&c| c <= u);
-        Some(i.min(self.light_cdf.len() - 1))
+        self.light_table.pick(u)
     }
 
     /// The number of lights next-event estimation chooses from (the
     /// environment included).
     #[inline]
     pub(super) fn light_count(&self) -> usize {
-        self.light_cdf.len()
+        self.light_table.len()
     }
 
     /// MIS weight of emission found by BSDF sampling from `from` with pdf `bsdf_pdf`.
@@ -69,57 +53,6 @@ impl PathTracer<'_, '_> {
         }
         let light_pdf = self.light_pick_pdf(li as usize) * d2 / (cos_l * tl.area);
         power_heuristic(bsdf_pdf, light_pdf)
-    }
-
-    /// Solid-angle pdf of sampling direction `wi` towards sample point `q`
-    /// (normal `nl`) on area light `light` from `p`; `None` for delta lights.
-    pub(super) fn light_solid_angle_pdf(light: &Light, p: Vec3, q: Vec3) -> Option<f32> {
-        let Light::Area { shape, .. } = light else {
-            return None;
-        };
-        match *shape {
-            AreaShape::Sphere { center, radius } => {
-                let dc2 = (center - p).length_squared();
-                let cos_max = (1.0 - radius * radius / dc2).max(0.0).sqrt();
-                Some(1.0 / (2.0 * PI * (1.0 - cos_max)).max(1e-12))
-            }
-            _ => {
-                let nl = match *shape {
-                    AreaShape::Quad { edge_u, edge_v, .. } => {
-                        edge_u.cross(edge_v).normalize_or_zero()
-                    }
-                    AreaShape::Disk { normal, .. } => normal.normalize_or_zero(),
-                    AreaShape::Triangle { a, b, c } => (b - a).cross(c - a).normalize_or_zero(),
-                    AreaShape::Sphere { .. } => Vec3::ZERO,
-                };
-                let d = q - p;
-                let d2 = d.length_squared();
-                let cos_l = nl.dot(d / d2.sqrt()).abs();
-                (cos_l > 0.0).then(|| d2 / (cos_l * shape.area()))
-            }
-        }
-    }
-
-    /// A sample of emissive triangle `tl` seen from `p`: the direction, the
-    /// point, and `(Le, solid-angle pdf)`, following `sample_light`'s
-    /// area-light case (uniform in area, converted by `d^2 / cos_l`).
-    pub(super) fn sample_tri_light(tl: &TriLight, p: Vec3, u: Vec2) -> Option<(Vec3, Vec3, f32)> {
-        let bary = sample_uniform_triangle(u);
-        let q = tl.a * bary.x + tl.b * bary.y + tl.c * (1.0 - bary.x - bary.y);
-        let d = q - p;
-        let dist2 = d.length_squared();
-        if dist2 <= 0.0 {
-            return None;
-        }
-        let wi = d * (1.0 / dist2.sqrt());
-        let mut cos_l = -tl.n.dot(wi);
-        if tl.two_sided {
-            cos_l = cos_l.abs();
-        }
-        if cos_l <= 0.0 {
-            return None;
-        }
-        Some((wi, q, dist2 / (cos_l * tl.area)))
     }
 
     /// Next-event estimation: one light chosen by power, one sample on it,
@@ -175,9 +108,10 @@ impl PathTracer<'_, '_> {
         }
         if let Some(tl) = &self.tri_lights[li] {
             // Emissive triangle: L = f cos Le / (pick * pdf_solid_angle).
-            let Some((wi, q, light_pdf)) = Self::sample_tri_light(tl, p, u) else {
+            let Some(ts) = tl.sample(p, u) else {
                 return Vec3::ZERO;
             };
+            let (wi, q, light_pdf) = (ts.wi, ts.point, tl.pdf(&ts));
             if ng.dot(wi) <= 0.0 {
                 return Vec3::ZERO;
             }
@@ -226,7 +160,7 @@ impl PathTracer<'_, '_> {
         let mut w = 1.0;
         if mis
             && !s.is_delta
-            && let Some(light_pdf) = Self::light_solid_angle_pdf(light, p, s.point)
+            && let Some(light_pdf) = sample_light_pdf(light, p, s.point)
         {
             let bsdf_pdf = info.bsdf.pdf(n, wo, s.wi);
             w = power_heuristic(light_pdf * pick, bsdf_pdf);

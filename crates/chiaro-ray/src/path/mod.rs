@@ -52,7 +52,7 @@ mod reference;
 mod tests;
 
 use integrator::{MaterialInfo, PathState, PathTracer};
-use lights::{NO_LIGHT, TriLight};
+use lights::NO_LIGHT;
 
 use chiaro_core::sampling::sobol::LANES;
 

@@ -10,7 +10,7 @@
 use super::PathTracer;
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::sampling::{Rng, power_heuristic, uniform, uniform2};
-use chiaro_core::shading::{Bsdf, sample_light};
+use chiaro_core::shading::{Bsdf, sample_light, sample_light_pdf};
 use glam::Vec3;
 use std::f32::consts::PI;
 
@@ -61,7 +61,7 @@ impl PathTracer<'_, '_> {
                     .filter(|&&li| li != super::NO_LIGHT)
                     .and_then(|&li| {
                         let li = li as usize;
-                        Self::light_solid_angle_pdf(self.lights[li], prev_p, surf.p)
+                        sample_light_pdf(self.lights[li], prev_p, surf.p)
                             .map(|pdf| pdf * self.light_pick_pdf(li))
                     });
                 let w = light_pdf.map_or(1.0, |lp| power_heuristic(prev_pdf, lp));
@@ -146,7 +146,7 @@ impl PathTracer<'_, '_> {
         let mut w = 1.0;
         if mis
             && !s.is_delta
-            && let Some(light_pdf) = Self::light_solid_angle_pdf(light, p, s.point)
+            && let Some(light_pdf) = sample_light_pdf(light, p, s.point)
         {
             w = power_heuristic(light_pdf * pick, bsdf.pdf(n, wo, s.wi));
         }

@@ -676,7 +676,7 @@ fn lanes_pick_the_lights_the_scalar_pick_does() {
         let accel = SceneBvh::new(&prepared);
         let tracer = PathTracer::new(&prepared, &accel, &s.render, true);
         let mut us = vec![0.0, 0.5, 0.999_999_94, 1.0];
-        for &c in &tracer.light_cdf {
+        for &c in tracer.light_table.cdf() {
             us.extend([c.next_down(), c, c.next_up()]);
         }
         for chunk in us.chunks(LANES) {
