@@ -96,6 +96,27 @@ impl ShadowCasters {
         }
     }
 
+    /// The casters of a technique whose shadow rays cross only BLEND
+    /// surfaces (`1 - alpha` at each crossing, by the rule of the module)
+    /// and stop at every other surface, whatever its transmit colour or
+    /// object: the path tracer's, which carries light through glass by BSDF
+    /// sampling. `None` when `ps` has no BLEND triangle.
+    pub fn blend_only(ps: &PreparedScene<'_>) -> Option<Self> {
+        let blend = crate::accel::alpha::Coverage::blend(ps)?;
+        let objects: Vec<u32> = ps
+            .tri_object
+            .iter()
+            .copied()
+            .chain(ps.spheres.iter().map(|s| s.object))
+            .collect();
+        Some(Self {
+            blockers: vec![Blocker::Opaque; objects.len()],
+            blend: Some(blend),
+            objects,
+            all_opaque: false,
+        })
+    }
+
     /// These casters with the opaque ones ignored (`None` when there is no
     /// transparent caster): the tint of transparent casters alone, for a
     /// technique that finds opaque shadows another way.
@@ -353,5 +374,32 @@ mod tests {
         assert_eq!(through(&s, false, Vec3::ZERO, Vec3::Z * 3.0), Vec3::ZERO);
         s.objects[0].casts_shadows = false;
         assert_eq!(through(&s, false, Vec3::ZERO, Vec3::Z * 3.0), Vec3::ONE);
+    }
+
+    #[test]
+    fn blend_only_passes_blend_surfaces_and_stops_at_glass() {
+        // A BLEND pane of alpha 0.2 at z = 0, a glass pane (kt 0.5) at z = 2.
+        let mut s = panes(&[0.0, 2.0], &[Vec3::ZERO, Vec3::splat(0.5)], None);
+        let m0 = s.objects[0].material.index();
+        s.materials[m0].alpha_mode = crate::scene::AlphaMode::Blend;
+        s.materials[m0].alpha = 0.2;
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        let accel = ListAccel::new(&ps);
+        let casters = ShadowCasters::blend_only(&ps).expect("a BLEND pane");
+        let tr = |z0: f32, z1: f32| {
+            let ray = Ray::segment(Vec3::new(0.1, 0.2, z0), Vec3::new(0.1, 0.2, z1));
+            casters.transmittance(&accel, &ray)
+        };
+        // Through the BLEND pane: 1 - 0.2, once for its two triangles' edge.
+        let t = tr(1.0, -1.0);
+        assert!((t - Vec3::splat(0.8)).abs().max_element() < 1e-6, "{t}");
+        // Glass stops it (the path tracer's BSDF carries light through it).
+        assert_eq!(tr(3.0, 1.0), Vec3::ZERO);
+        // Nothing crossed: 1.
+        assert_eq!(tr(1.5, 0.5), Vec3::ONE);
+        // Without BLEND surfaces there are no such casters.
+        s.materials[m0].alpha_mode = crate::scene::AlphaMode::Opaque;
+        let plain = PreparedScene::new(&s, PrepareOptions::default());
+        assert!(ShadowCasters::blend_only(&plain).is_none());
     }
 }

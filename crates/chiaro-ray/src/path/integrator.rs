@@ -7,9 +7,10 @@ use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::sampling::{SobolSampler, power_heuristic};
-use chiaro_core::scene::{AreaShape, Light, RenderSettings};
+use chiaro_core::scene::{AlphaMode, AreaShape, Light, RenderSettings};
 use chiaro_core::shading::texture::EnvironmentLight;
 use chiaro_core::shading::{Bsdf, BsdfSample, LightPowerTable, SurfaceMaterial, TriangleEmitter};
+use chiaro_core::shadow::ShadowCasters;
 use glam::Vec3;
 
 /// The path tracer over one prepared scene.
@@ -38,6 +39,9 @@ pub(super) struct PathTracer<'a, 's> {
     tris: Vec<TriInfo>,
     /// Per-material constants, by material id.
     pub(super) materials: Vec<MaterialInfo>,
+    /// Shadow rays' casters when the scene has BLEND surfaces (they pass
+    /// those, stop at every other surface); `None`: the plain any-hit query.
+    pub(super) shadows: Option<ShadowCasters>,
     pub(super) max_depth: u32,
     pub(super) rr_depth: u32,
 }
@@ -46,6 +50,11 @@ pub(super) struct PathTracer<'a, 's> {
 /// a triangle whose shading normal is taken as constant (16 float ulps at
 /// 1: far below any intended smoothing, far above rounding).
 const FLAT_NORMAL_TOLERANCE: f32 = 1e-6;
+
+/// Consecutive BLEND pass-throughs a path makes without counting them as
+/// bounces; past this each counts (a bound on the loop, never met by a
+/// real scene).
+pub(super) const MAX_PASSES: u32 = 64;
 
 /// What shading needs of a triangle whose material has no texture and whose
 /// vertices have no colours (`plain`): the surface is then its position,
@@ -74,6 +83,8 @@ pub(super) struct MaterialInfo {
     /// transmission lobe), chosen with probability 1 and weighted by `kd`:
     /// the vertices that [`lanes`] shades.
     pub(super) lambert: bool,
+    /// A glTF BLEND material: its transmission is a straight pass-through.
+    pub(super) blend: bool,
 }
 
 impl MaterialInfo {
@@ -90,6 +101,7 @@ impl MaterialInfo {
             bsdf,
             two_sided: m.two_sided,
             textured: m.is_textured() || m.bump.is_some() || m.normal_map.is_some(),
+            blend: m.alpha_mode == AlphaMode::Blend,
         }
     }
 }
@@ -253,6 +265,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             triangle_light,
             tris,
             materials,
+            shadows: ShadowCasters::blend_only(prepared),
             max_depth: settings.path.max_depth,
             rr_depth: settings.path.rr_depth.max(1),
         }
@@ -327,7 +340,10 @@ impl<'a, 's> PathTracer<'a, 's> {
         } = state;
         let mut first = None;
         let mut owned;
-        for depth in start..self.max_depth {
+        // A straight pass through a BLEND surface is not a bounce: `depth`
+        // stays, and so does the MIS state of the vertex before it.
+        let (mut depth, mut passes) = (start, 0u32);
+        while depth < self.max_depth {
             let hit = match traced.take() {
                 Some(hit) => Some(hit),
                 None => {
@@ -367,7 +383,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             // Every ray's direction is unit: the camera's are normalised,
             // and sampled directions are unit vectors (up to rounding).
             let wo = -ray.dir;
-            if depth == 0 {
+            if depth == 0 && first.is_none() {
                 first = Some((t * ray.dir.length(), v.ns));
             }
             let m = &info.bsdf.m;
@@ -389,19 +405,26 @@ impl<'a, 's> PathTracer<'a, 's> {
             let last = depth + 1 >= self.max_depth;
             // Next-event estimation.
             l += beta * self.direct(v.p, info, n, ng, wo, !last, rng, rays);
-            if last {
+            if last && !info.blend {
                 break;
             }
             // Continue the path.
             let Some(s) = Self::sample_bsdf(&info.bsdf, n, ng, wo, front, rng) else {
                 break;
             };
+            // (BLEND's delta transmission, at ior 1, is the pass-through.)
+            let pass = info.blend && s.delta && ng.dot(s.wi) < 0.0 && passes < MAX_PASSES;
+            if last && !pass {
+                break;
+            }
             beta *= s.weight;
             if !beta.is_finite() || beta.max_element() <= 0.0 {
                 break;
             }
-            prev_pdf = if s.delta { 0.0 } else { s.pdf };
-            prev_p = v.p;
+            if !pass {
+                prev_pdf = if s.delta { 0.0 } else { s.pdf };
+                prev_p = v.p;
+            }
             ray = Ray::new(offset_ray_origin(v.p, v.ng, s.wi), s.wi);
             // Russian roulette.
             if depth + 1 >= self.rr_depth {
@@ -410,6 +433,12 @@ impl<'a, 's> PathTracer<'a, 's> {
                     break;
                 }
                 beta /= q;
+            }
+            if pass {
+                passes += 1;
+            } else {
+                passes = 0;
+                depth += 1;
             }
         }
         (l, first)

@@ -31,6 +31,25 @@ impl PathTracer<'_, '_> {
         self.light_table.len()
     }
 
+    /// What reaches the far end of shadow ray `ray`: `None` when it is
+    /// blocked, else the transmittance of the BLEND surfaces crossed
+    /// (`ShadowCasters::transmittance`, the shared rule: `1 - alpha` per
+    /// crossing), 1 in a scene without them (which keeps the plain any-hit
+    /// query). BSDF sampling passes a BLEND surface with probability
+    /// proportional to `1 - alpha` and keeps the MIS state of the vertex
+    /// before it (`radiance_from`), so both strategies estimate the same
+    /// transmitted light and the power-heuristic weights stay as they are.
+    #[inline]
+    pub(super) fn shadow_pass(&self, ray: &Ray) -> Option<Vec3> {
+        match &self.shadows {
+            None => (!self.accel.occluded(ray)).then_some(Vec3::ONE),
+            Some(c) => {
+                let tr = c.transmittance(self.accel, ray);
+                (tr != Vec3::ZERO).then_some(tr)
+            }
+        }
+    }
+
     /// MIS weight of emission found by BSDF sampling from `from` with pdf `bsdf_pdf`.
     pub(super) fn emitter_mis_weight(
         &self,
@@ -120,12 +139,9 @@ impl PathTracer<'_, '_> {
                 return Vec3::ZERO;
             }
             *rays += 1;
-            if self
-                .accel
-                .occluded(&Ray::segment(offset_ray_origin(p, ng, wi), q))
-            {
+            let Some(tr) = self.shadow_pass(&Ray::segment(offset_ray_origin(p, ng, wi), q)) else {
                 return Vec3::ZERO;
-            }
+            };
             let light_pdf = light_pdf * pick;
             // The power heuristic's weight over the light's pdf, in one
             // division: (l^2 / (l^2 + b^2)) / l = l / (l^2 + b^2).
@@ -135,7 +151,7 @@ impl PathTracer<'_, '_> {
             } else {
                 1.0 / light_pdf
             };
-            return f_cos * tl.le * w_over_pdf;
+            return f_cos * tl.le * w_over_pdf * tr;
         }
         let Some(&light) = self.lights.get(li) else {
             return self.direct_env(pick, p, &info.bsdf, n, ng, wo, mis, u, rays);
@@ -154,9 +170,9 @@ impl PathTracer<'_, '_> {
         } else {
             Ray::new(origin, s.wi)
         };
-        if self.accel.occluded(&shadow) {
+        let Some(tr) = self.shadow_pass(&shadow) else {
             return Vec3::ZERO;
-        }
+        };
         let mut w = 1.0;
         if mis
             && !s.is_delta
@@ -165,7 +181,7 @@ impl PathTracer<'_, '_> {
             let bsdf_pdf = info.bsdf.pdf(n, wo, s.wi);
             w = power_heuristic(light_pdf * pick, bsdf_pdf);
         }
-        PI * f_cos * s.intensity * (w / pick)
+        PI * f_cos * s.intensity * (w / pick) * tr
     }
 
     /// Next-event estimation of the environment (light `lights.len()`,
@@ -204,12 +220,9 @@ impl PathTracer<'_, '_> {
             return Vec3::ZERO;
         }
         *rays += 1;
-        if self
-            .accel
-            .occluded(&Ray::new(offset_ray_origin(p, ng, s.wi), s.wi))
-        {
+        let Some(tr) = self.shadow_pass(&Ray::new(offset_ray_origin(p, ng, s.wi), s.wi)) else {
             return Vec3::ZERO;
-        }
+        };
         let light_pdf = s.pdf * pick;
         let w_over_pdf = if mis {
             let bsdf_pdf = bsdf.pdf(n, wo, s.wi);
@@ -217,6 +230,6 @@ impl PathTracer<'_, '_> {
         } else {
             1.0 / light_pdf
         };
-        f_cos * s.radiance * w_over_pdf
+        f_cos * s.radiance * w_over_pdf * tr
     }
 }

@@ -44,6 +44,8 @@ use chiaro_core::shading::sanitize;
 use glam::{Vec2, Vec3};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+#[cfg(test)]
+mod blend_tests;
 mod integrator;
 mod lanes;
 mod lights;
@@ -51,7 +53,7 @@ mod reference;
 #[cfg(test)]
 mod tests;
 
-use integrator::{MaterialInfo, PathState, PathTracer};
+use integrator::{MAX_PASSES, MaterialInfo, PathState, PathTracer};
 use lights::NO_LIGHT;
 
 use chiaro_core::sampling::sobol::LANES;
@@ -106,7 +108,8 @@ fn render_with_kernel(
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kernel {
     /// The lock-step kernel (`path/lanes.rs`): a pixel's samples sixteen
-    /// at a time, vectorised where their vertices are Lambertian.
+    /// at a time, vectorised where their vertices are Lambertian (a scene
+    /// with BLEND surfaces runs the scalar loop).
     Lanes,
     /// One path at a time.
     Scalar,
@@ -125,7 +128,9 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
     let prepared = ctx.analytic();
     let accel = ctx.analytic_accel();
     let tracer = PathTracer::new(prepared, accel, settings, env_sampling);
-    let lanes = kernel == Kernel::Lanes;
+    // Scenes with BLEND surfaces take the scalar loop: the lanes' shadow
+    // rays know only opaque casters.
+    let lanes = kernel == Kernel::Lanes && tracer.shadows.is_none();
     progress.advance(1);
     let rays = AtomicU64::new(0);
     let (w, h) = (settings.width, settings.height);

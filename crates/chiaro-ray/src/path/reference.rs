@@ -5,11 +5,13 @@
 //! independent PCG numbers (`sampling::pixel_rng`), one path at a time,
 //! no lanes and no per-triangle caches. It shares the fast tracer's light
 //! selection (power CDF, emissive triangle to light index), its
-//! environment sampling and its escaped ray radiance. Tests compare the two statistically, not bit for bit.
+//! environment sampling, its shadow rays (through BLEND surfaces) and its
+//! escaped ray radiance. Tests compare the two statistically, not bit for bit.
 
 use super::PathTracer;
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::sampling::{Rng, power_heuristic, uniform, uniform2};
+use chiaro_core::scene::AlphaMode;
 use chiaro_core::shading::{Bsdf, sample_light, sample_light_pdf};
 use glam::Vec3;
 use std::f32::consts::PI;
@@ -28,7 +30,10 @@ impl PathTracer<'_, '_> {
         let mut first = None;
         // The previous bounce's solid-angle pdf (0: camera or delta) and point.
         let (mut prev_pdf, mut prev_p) = (0.0f32, ray.origin);
-        for depth in 0..self.max_depth {
+        // A straight pass through a BLEND surface is not a bounce: `depth`
+        // and the MIS state of the vertex before it stay.
+        let (mut depth, mut passes) = (0, 0u32);
+        while depth < self.max_depth {
             // Find the next vertex, or add what the escaped ray sees.
             *rays += 1;
             // Camera rays skip the backs of single-sided materials.
@@ -47,7 +52,7 @@ impl PathTracer<'_, '_> {
             let mat = self.prepared.material(surf.material);
             let bsdf = Bsdf::new(ss.material, mat.fresnel);
             let wo = -ray.dir.normalize();
-            if depth == 0 {
+            if depth == 0 && first.is_none() {
                 first = Some((hit.t * ray.dir.length(), ss.ns));
             }
             // Emission found by the path, MIS-weighted against next-event
@@ -74,7 +79,8 @@ impl PathTracer<'_, '_> {
             let last = depth + 1 >= self.max_depth;
             // Next-event estimation.
             l += beta * self.reference_direct(surf.p, &bsdf, n, ng, wo, !last, rng, rays);
-            if last {
+            let blend = mat.alpha_mode == AlphaMode::Blend;
+            if last && !blend {
                 break;
             }
             // Sample the BSDF for the next direction.
@@ -82,12 +88,19 @@ impl PathTracer<'_, '_> {
             let Some(s) = bsdf.sample(n, ng, wo, front, u_lobe, u, || uniform(rng)) else {
                 break;
             };
+            // (BLEND's delta transmission, at ior 1, is the pass-through.)
+            let pass = blend && s.delta && ng.dot(s.wi) < 0.0 && passes < super::MAX_PASSES;
+            if last && !pass {
+                break;
+            }
             beta *= s.weight;
             if !beta.is_finite() || beta.max_element() <= 0.0 {
                 break;
             }
-            prev_pdf = if s.delta { 0.0 } else { s.pdf };
-            prev_p = surf.p;
+            if !pass {
+                prev_pdf = if s.delta { 0.0 } else { s.pdf };
+                prev_p = surf.p;
+            }
             ray = Ray::new(offset_ray_origin(surf.p, surf.ng, s.wi), s.wi);
             // Russian roulette.
             if depth + 1 >= self.rr_depth {
@@ -96,6 +109,12 @@ impl PathTracer<'_, '_> {
                     break;
                 }
                 beta /= q;
+            }
+            if pass {
+                passes += 1;
+            } else {
+                passes = 0;
+                depth += 1;
             }
         }
         (l, first)
@@ -139,9 +158,9 @@ impl PathTracer<'_, '_> {
         } else {
             Ray::new(origin, s.wi)
         };
-        if self.accel.occluded(&shadow) {
+        let Some(tr) = self.shadow_pass(&shadow) else {
             return Vec3::ZERO;
-        }
+        };
         // `pi * intensity` is the light sample's `Le / pdf` (see `LightSample`).
         let mut w = 1.0;
         if mis
@@ -150,7 +169,7 @@ impl PathTracer<'_, '_> {
         {
             w = power_heuristic(light_pdf * pick, bsdf.pdf(n, wo, s.wi));
         }
-        PI * f_cos * s.intensity * (w / pick)
+        PI * f_cos * s.intensity * (w / pick) * tr
     }
 }
 
