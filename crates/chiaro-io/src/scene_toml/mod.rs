@@ -8,6 +8,11 @@
 //! NaN and infinite numbers are refused wherever they appear. Relative paths
 //! (meshes, textures) resolve against the scene file's directory.
 //!
+//! The `[render]` values are checked by `RenderSettings::validate`, the one
+//! settings check that `--set`, Python and the web viewer share: every
+//! error it finds is reported, each at its value and naming its setting
+//! (`t.toml:5:23: render.radiosity.hemicube_resolution: expected 2..=4096, got 1`).
+//!
 //! # Tables
 //!
 //! | table | keys |
@@ -153,6 +158,7 @@ pub fn parse_scene(text: &str, base: &Path, path: &Path) -> Result<Loaded> {
     // Parse once with spans, refuse NaN/Inf anywhere, then deserialize.
     let root = toml::de::DeTable::parse(text).map_err(|e| ctx.toml_err(&e))?;
     check_numbers(&ctx, root.get_ref())?;
+    ctx.spans.settings = render::setting_spans(root.get_ref());
     let raw =
         RawScene::deserialize(toml::de::Deserializer::from(root)).map_err(|e| ctx.toml_err(&e))?;
     let scene = ctx.build(raw)?;
@@ -212,6 +218,8 @@ struct SpanIndex {
     lights: Vec<Range<usize>>,
     meshes: Vec<Range<usize>>,
     camera: Option<Range<usize>>,
+    /// The keys under `[render]`, by setting path.
+    settings: render::SettingSpans,
 }
 
 struct Ctx<'a> {
@@ -275,7 +283,12 @@ impl Ctx<'_> {
     fn toml_err(&self, e: &toml::de::Error) -> IoError {
         let span = e.span().unwrap_or(0..0);
         let key = key_before(self.text, span.start);
-        self.at(span, crate::plain::plain_serde_message(e.message(), key))
+        let message = crate::plain::plain_serde_message(e.message(), key);
+        // A render setting's value is named by its setting path.
+        match self.spans.settings.iter().find(|(_, s)| **s == span) {
+            Some((setting, _)) => self.at(span, format!("{setting}: {message}")),
+            None => self.at(span, message),
+        }
     }
 
     /// Rejects the first present field that is not in `allowed`.
@@ -411,7 +424,13 @@ impl Ctx<'_> {
 
     /// Runs `Scene::validate`, placing each issue at the span of the item it names.
     fn finish(mut self, scene: Scene) -> Result<Loaded> {
-        for issue in scene.validate() {
+        // The settings' issues were reported by `render` (errors) and are
+        // left to the render context (warnings).
+        for issue in scene
+            .validate()
+            .into_iter()
+            .filter(|i| !render::is_setting(&i.path))
+        {
             let span = self.issue_span(&issue.path);
             match issue.severity {
                 Severity::Error => {

@@ -1,149 +1,136 @@
-//! `[render]`: the render settings.
+//! `[render]`: the render settings. serde reads the types and names; the
+//! values are checked by [`RenderSettings::validate`], the one check every
+//! front shares, whose issues are placed here at the setting's value in the
+//! file.
 
-use super::raw::{Opt, RawRender, Splat3};
-use super::{Ctx, span_of};
+use super::Ctx;
+use super::raw::{RawRender, Splat3};
 use crate::Result;
-use chiaro_core::scene::{
-    DepthCue, FormFactorMethod, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_SAMPLES, RadiositySettings,
-    RadiositySolver, RenderSettings, ShadowMapSettings,
-};
+use chiaro_core::scene::{DepthCue, RenderSettings, Severity};
+use std::collections::HashMap;
+use std::ops::Range;
+
+/// Byte spans of the keys under `[render]` by dotted setting path
+/// (`render.radiosity.tolerance`): a value's span, or a table's header or
+/// key, to place the issues of [`RenderSettings::validate`].
+pub(super) type SettingSpans = HashMap<String, Range<usize>>;
+
+/// Records the spans of `render` and every key below it in `root`.
+pub(super) fn setting_spans(root: &toml::de::DeTable) -> SettingSpans {
+    fn walk(
+        path: String,
+        key: Range<usize>,
+        v: &toml::Spanned<toml::de::DeValue>,
+        out: &mut SettingSpans,
+    ) {
+        let span = match v.get_ref() {
+            // A table's span may be empty (dotted keys): its key then.
+            toml::de::DeValue::Table(_) if v.span().is_empty() => key,
+            _ => v.span(),
+        };
+        out.insert(path.clone(), span);
+        if let toml::de::DeValue::Table(t) = v.get_ref() {
+            for (k, v) in t {
+                walk(format!("{path}.{}", k.get_ref()), k.span(), v, out);
+            }
+        }
+    }
+    let mut out = SettingSpans::new();
+    if let Some((k, v)) = root.iter().find(|(k, _)| k.get_ref() == "render") {
+        walk("render".into(), k.span(), v, &mut out);
+    }
+    out
+}
 
 impl Ctx<'_> {
+    /// The settings of `[render]` as read (defaults for absent keys),
+    /// validated by [`Self::check_settings`].
     pub(super) fn render(&self, raw: Option<RawRender>) -> Result<RenderSettings> {
         let mut r = RenderSettings::default();
         let Some(raw) = raw else { return Ok(r) };
-        r.memory_limit = raw.memory_limit;
-        if let Some(t) = raw.technique {
-            r.technique = t;
+        macro_rules! set {
+            ($($field:ident),*) => {$(
+                if let Some(v) = raw.$field {
+                    r.$field = v;
+                }
+            )*};
         }
-        if let Some(w) = &raw.width {
-            r.width = self.in_range_u32(w, "render.width", 1, MAX_IMAGE_SIDE)?;
-        }
-        if let Some(h) = &raw.height {
-            r.height = self.in_range_u32(h, "render.height", 1, MAX_IMAGE_SIDE)?;
-        }
-        if u64::from(r.width) * u64::from(r.height) > MAX_IMAGE_PIXELS {
-            let span = span_of(&raw.height).or(span_of(&raw.width)).unwrap_or(0..0);
-            return Err(self.at(
-                span,
-                format!(
-                    "image {}x{} has more than {MAX_IMAGE_PIXELS} pixels",
-                    r.width, r.height
-                ),
-            ));
-        }
-        if let Some(s) = &raw.samples {
-            r.samples = self.in_range_u32(s, "render.samples", 1, MAX_SAMPLES)?;
-        }
-        if let Some(s) = &raw.light_samples {
-            r.light_samples = self.in_range_u32(s, "render.light_samples", 1, MAX_SAMPLES)?;
-        }
-        if let Some(s) = raw.seed {
-            r.seed = s;
-        }
-        if let Some(s) = raw.shadows {
-            r.shadows = s;
-        }
+        set!(
+            technique,
+            width,
+            height,
+            samples,
+            seed,
+            shadows,
+            aa,
+            filter,
+            light_samples,
+            tonemap,
+            exposure,
+            cull_backfaces,
+            shadow_map,
+            whitted,
+            path,
+            radiosity
+        );
         r.transparency = raw.transparency;
-        if let Some(a) = raw.aa {
-            r.aa = a;
-        }
-        if let Some(f) = raw.filter {
-            r.filter = f;
-        }
-        if let Some(t) = raw.tonemap {
-            r.tonemap = t;
-        }
-        if let Some(e) = raw.exposure {
-            r.exposure = e;
-        }
-        if let Some(c) = raw.cull_backfaces {
-            r.cull_backfaces = c;
-        }
+        r.memory_limit = raw.memory_limit;
         if let Some(dc) = raw.depth_cue {
             let d = DepthCue::default();
-            let cue = DepthCue {
+            r.depth_cue = Some(DepthCue {
                 color: dc.color.map_or(d.color, Splat3::vec3),
                 near: dc.near.unwrap_or(d.near),
-                far: dc.far.as_ref().map_or(d.far, |f| *f.get_ref()),
+                far: dc.far.unwrap_or(d.far),
                 max_scale: dc.max_scale.unwrap_or(d.max_scale),
                 min_scale: dc.min_scale.unwrap_or(d.min_scale),
-            };
-            if cue.far <= cue.near {
-                return Err(self.at(
-                    span_of(&dc.far).unwrap_or(0..0),
-                    format!(
-                        "render.depth_cue: expected far > near, got near {} far {}",
-                        cue.near, cue.far
-                    ),
-                ));
-            }
-            r.depth_cue = Some(cue);
+            });
         }
-        if let Some(sm) = raw.shadow_map {
-            let d = ShadowMapSettings::default();
-            r.shadow_map = ShadowMapSettings {
-                resolution: match &sm.resolution {
-                    Some(v) => {
-                        self.in_range_u32(v, "render.shadow_map.resolution", 1, MAX_IMAGE_SIDE)?
-                    }
-                    None => d.resolution,
-                },
-                bias: sm.bias.unwrap_or(d.bias),
-                slope_bias: sm.slope_bias.unwrap_or(d.slope_bias),
-                pcf_radius: sm.pcf_radius.unwrap_or(d.pcf_radius),
-            };
-        }
-        if let Some(w) = raw.whitted {
-            r.whitted = w;
-        }
-        if let Some(p) = raw.path {
-            r.path = p;
-        }
-        if let Some(rad) = raw.radiosity {
-            let d = RadiositySettings::default();
-            // A name from `names` (the valid ones, for the message), parsed by `parse`.
-            let pick = |v: &Opt<String>, what: &str, names: &[&str]| match v {
-                None => Ok(None),
-                Some(s) if names.contains(&s.get_ref().as_str()) => Ok(Some(s.get_ref().clone())),
-                Some(s) => Err(self.at(
-                    s.span(),
-                    format!(
-                        "{what}: unknown {:?}, expected one of: {}",
-                        s.get_ref(),
-                        names.join(", ")
-                    ),
-                )),
-            };
-            let solvers = RadiositySolver::ALL.map(RadiositySolver::name);
-            let methods = FormFactorMethod::ALL.map(FormFactorMethod::name);
-            r.radiosity = RadiositySettings {
-                solver: pick(&rad.solver, "render.radiosity.solver", &solvers)?
-                    .and_then(|n| RadiositySolver::from_name(&n))
-                    .unwrap_or(d.solver),
-                formfactor: pick(&rad.formfactor, "render.radiosity.formfactor", &methods)?
-                    .and_then(|n| FormFactorMethod::from_name(&n))
-                    .unwrap_or(d.formfactor),
-                patch_size: match &rad.patch_size {
-                    Some(v) => self.non_negative(v, "render.radiosity.patch_size")?,
-                    None => d.patch_size,
-                },
-                hemicube_resolution: match &rad.hemicube_resolution {
-                    Some(v) => self.in_range_u32(
-                        v,
-                        "render.radiosity.hemicube_resolution",
-                        1,
-                        MAX_IMAGE_SIDE,
-                    )?,
-                    None => d.hemicube_resolution,
-                },
-                tolerance: match &rad.tolerance {
-                    Some(v) => self.finite_positive(v, "render.radiosity.tolerance")?,
-                    None => d.tolerance,
-                },
-                max_iterations: rad.max_iterations.unwrap_or(d.max_iterations),
-            };
-        }
+        self.check_settings(&r)?;
         Ok(r)
     }
+
+    /// Runs [`RenderSettings::validate`] and refuses the settings when it
+    /// finds errors: every error, each at its setting's value in the file
+    /// (the first one's line and column are the error's). Warnings are left
+    /// to the render context, which reports them for every front.
+    fn check_settings(&self, r: &RenderSettings) -> Result<()> {
+        let mut errors = r
+            .validate()
+            .into_iter()
+            .filter(|i| i.severity == Severity::Error)
+            .map(|i| {
+                (
+                    self.setting_span(&i.path),
+                    format!("{}: {}", i.path, i.message),
+                )
+            });
+        let Some((span, first)) = errors.next() else {
+            return Ok(());
+        };
+        let mut message = first;
+        for (span, m) in errors {
+            message.push_str(&format!("\n{}: {m}", self.where_(span)));
+        }
+        Err(self.at(span, message))
+    }
+
+    /// The span of setting `path` in the file, else of its nearest parent
+    /// that is (the `[render]` table at worst), else the file's start.
+    fn setting_span(&self, path: &str) -> Range<usize> {
+        let mut p = path;
+        loop {
+            if let Some(s) = self.spans.settings.get(p) {
+                return s.clone();
+            }
+            match p.rsplit_once('.') {
+                Some((parent, _)) => p = parent,
+                None => return 0..0,
+            }
+        }
+    }
+}
+
+/// Whether an issue path names a render setting (`render`, `render.samples`).
+pub(super) fn is_setting(path: &str) -> bool {
+    path == "render" || path.starts_with("render.")
 }
