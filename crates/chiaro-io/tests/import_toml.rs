@@ -515,3 +515,48 @@ fn settings_warnings_are_not_load_warnings() {
             .any(|i| i.path == "render.samples" && i.severity == Severity::Warning)
     );
 }
+
+/// Checks `Scene::validate` makes for every scene (camera, material and
+/// spot-cone ranges) are made once, there, and placed at the file's key.
+#[test]
+fn scene_validate_issues_are_placed_at_the_key() {
+    let (l, c, m) = error_at("[camera]\neye = [0, 0, 5]\nfov = 180\n");
+    assert_eq!((l, c), (3, 7), "{m}");
+    assert_eq!(m, "camera.fov: expected 0 < fov < 180 degrees, got 180");
+    let (l, c, m) = error_at("[camera]\neye = [0, 1, 2]\nlook_at = [0, 1, 2]\n");
+    assert_eq!((l, c), (3, 11), "{m}");
+    assert_eq!(m, "camera.look_at: eye and look_at are the same point");
+    let (l, c, m) = error_at("[camera]\nnear = 0\n");
+    assert_eq!((l, c), (2, 8), "{m}");
+    assert!(m.starts_with("camera.near: expected 0 < near < far"), "{m}");
+    let (l, c, m) = error_at("[cameras.top]\neye = [0, 9, 0]\nup = [0, 0, 1]\nfov = 0\n");
+    assert_eq!((l, c), (4, 7), "{m}");
+    assert!(m.starts_with("cameras[0].fov: "), "{m}");
+    let (l, c, m) = error_at("[material.a]\n[material.\"b.c\"]\ndiffuse = 0.5\nroughness = 0\n");
+    assert_eq!((l, c), (4, 13), "{m}");
+    assert_eq!(
+        m,
+        "materials[1] (b.c).roughness: expected 0 < roughness <= 1, got 0"
+    );
+    let (l, c, m) = error_at("[material.a]\nspecular = [0.5, -1, 0]\n");
+    assert_eq!((l, c), (2, 12), "{m}");
+    assert!(
+        m.starts_with("materials[0] (a).specular: expected values >= 0"),
+        "{m}"
+    );
+    let (l, c, m) = error_at(
+        "[[light]]\ntype = \"point\"\nposition = [0, 1, 0]\n\n[[light]]\ntype = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\ncone = 200\n",
+    );
+    assert_eq!((l, c), (9, 8), "{m}");
+    assert_eq!(
+        m,
+        "lights[1] (spot).cone: expected 0 < cone <= 180 degrees, got 200"
+    );
+    // Several errors: each at its key.
+    let (l, c, m) = error_at("[camera]\nfov = 0\n[material.a]\nior = 0\n");
+    assert_eq!((l, c), (2, 7), "{m}");
+    assert!(
+        m.contains("\nt.toml:4:7: materials[0] (a).ior: expected a finite number > 0, got 0"),
+        "{m}"
+    );
+}

@@ -497,11 +497,16 @@ fn check_camera(c: &mut Checker, path: &str, cam: &super::Camera) {
         );
     }
     if (cam.look_at - cam.eye).length_squared() == 0.0 {
-        c.error(path, "eye and look_at are the same point");
+        c.error(
+            format!("{path}.look_at"),
+            "eye and look_at are the same point",
+        );
     }
+    // Named by the distance that is wrong: `near` when it is not > 0.
+    let which = if cam.near > 0.0 { "far" } else { "near" };
     if !(cam.near > 0.0 && cam.far > cam.near && cam.far.is_finite()) {
         c.error(
-            path,
+            format!("{path}.{which}"),
             format!(
                 "expected 0 < near < far, got near {} far {}",
                 cam.near, cam.far

@@ -137,23 +137,13 @@ impl Ctx<'_> {
                     Some(e) => self.non_negative(e, "spot exponent")?,
                     None => 1.0,
                 };
-                let cone = match &l.cone {
-                    Some(c) => {
-                        let x = *c.get_ref();
-                        if !(x > 0.0 && x <= 180.0) {
-                            return Err(self.at(
-                                c.span(),
-                                format!("spot cone: expected 0 < cone <= 180 degrees, got {x}"),
-                            ));
-                        }
-                        x
-                    }
-                    None => 90.0,
-                };
+                // The cone's range is `Scene::validate`'s, placed at the key.
+                let cone = l.cone.as_ref().map_or(90.0, |c| *c.get_ref());
                 let softness = match &l.cone_softness {
                     Some(s) => {
                         let x = self.non_negative(s, "spot cone_softness")?;
-                        if x > cone {
+                        // An out-of-range cone is reported by `Scene::validate`.
+                        if x > cone && cone > 0.0 && cone <= 180.0 {
                             return Err(self.at(
                                 s.span(),
                                 format!("spot cone_softness {x} exceeds the cone {cone}"),

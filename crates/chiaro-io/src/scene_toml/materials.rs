@@ -16,48 +16,30 @@ impl Ctx<'_> {
         m: &RawMaterial,
     ) -> Result<Material> {
         let d = Material::default();
-        let rgb = |ctx: &Self, v: &Opt<Splat3>, what: &str, def: Vec3| -> Result<Vec3> {
-            match v {
-                Some(v) => ctx.non_negative3(v, &format!("material.{name}.{what}")),
-                None => Ok(def),
-            }
-        };
+        // Ranges (colours >= 0, shininess, ior, roughness) are
+        // `Scene::validate`'s, placed at the key by `finish`.
+        let rgb = |v: &Opt<Splat3>, def: Vec3| v.as_ref().map_or(def, |v| v.get_ref().vec3());
+        let num = |v: &Opt<f32>, def: f32| v.as_ref().map_or(def, |v| *v.get_ref());
         let mut mat = Material {
             name: name.to_string(),
-            ambient: rgb(self, &m.ambient, "ambient", d.ambient)?,
-            diffuse: rgb(self, &m.diffuse, "diffuse", d.diffuse)?,
-            specular: rgb(self, &m.specular, "specular", d.specular)?,
-            shininess: match &m.shininess {
-                Some(v) => self.non_negative(v, &format!("material.{name}.shininess"))?,
-                None => d.shininess,
-            },
+            ambient: rgb(&m.ambient, d.ambient),
+            diffuse: rgb(&m.diffuse, d.diffuse),
+            specular: rgb(&m.specular, d.specular),
+            shininess: num(&m.shininess, d.shininess),
             model: m.model.unwrap_or(d.model),
-            roughness: d.roughness,
+            roughness: num(&m.roughness, d.roughness),
             distribution: m.distribution.unwrap_or(d.distribution),
-            reflect: rgb(self, &m.reflect, "reflect", d.reflect)?,
-            transmit: rgb(self, &m.transmit, "transmit", d.transmit)?,
-            ior: match &m.ior {
-                Some(v) => self.finite_positive(v, &format!("material.{name}.ior"))?,
-                None => d.ior,
-            },
-            absorption: rgb(self, &m.absorption, "absorption", d.absorption)?,
+            reflect: rgb(&m.reflect, d.reflect),
+            transmit: rgb(&m.transmit, d.transmit),
+            ior: num(&m.ior, d.ior),
+            absorption: rgb(&m.absorption, d.absorption),
             fresnel: m.fresnel.unwrap_or(d.fresnel),
             transparency: m.transparency.unwrap_or(d.transparency),
-            emission: rgb(self, &m.emission, "emission", d.emission)?,
+            emission: rgb(&m.emission, d.emission),
             two_sided: m.two_sided.unwrap_or(d.two_sided),
             cull_backface: m.cull_backface.unwrap_or(d.cull_backface),
             ..d
         };
-        if let Some(r) = &m.roughness {
-            let x = *r.get_ref();
-            if !(x > 0.0 && x <= 1.0) {
-                return Err(self.at(
-                    r.span(),
-                    format!("material.{name}.roughness: expected 0 < roughness <= 1, got {x}"),
-                ));
-            }
-            mat.roughness = x;
-        }
         if let Some(t) = &m.texture {
             mat.texture = Some(self.texture(scene, t, true, false)?.0);
         }

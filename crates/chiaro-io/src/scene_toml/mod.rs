@@ -12,6 +12,8 @@
 //! settings check that `--set`, Python and the web viewer share: every
 //! error it finds is reported, each at its value and naming its setting
 //! (`t.toml:5:23: render.radiosity.hemicube_resolution: expected 2..=4096, got 1`).
+//! The ranges `Scene::validate` checks for every scene (camera, material,
+//! spot cone) are its alone too, placed at the key they name.
 //!
 //! # Tables
 //!
@@ -158,7 +160,7 @@ pub fn parse_scene(text: &str, base: &Path, path: &Path) -> Result<Loaded> {
     // Parse once with spans, refuse NaN/Inf anywhere, then deserialize.
     let root = toml::de::DeTable::parse(text).map_err(|e| ctx.toml_err(&e))?;
     check_numbers(&ctx, root.get_ref())?;
-    ctx.spans.settings = render::setting_spans(root.get_ref());
+    ctx.spans.keys = key_spans(root.get_ref());
     let raw =
         RawScene::deserialize(toml::de::Deserializer::from(root)).map_err(|e| ctx.toml_err(&e))?;
     let scene = ctx.build(raw)?;
@@ -218,8 +220,49 @@ struct SpanIndex {
     lights: Vec<Range<usize>>,
     meshes: Vec<Range<usize>>,
     camera: Option<Range<usize>>,
-    /// The keys under `[render]`, by setting path.
-    settings: render::SettingSpans,
+    /// How many materials the file's `[material.NAME]` tables made (the
+    /// first ones of the scene).
+    file_materials: usize,
+    /// Every key of the file, by dotted path (`material.glass.roughness`,
+    /// `light[2].cone`): its value's span, or a table's header or key.
+    keys: HashMap<String, Range<usize>>,
+}
+
+/// Records the span of every key in `root` by dotted path, array elements
+/// as `name[i]`.
+fn key_spans(root: &toml::de::DeTable) -> HashMap<String, Range<usize>> {
+    use toml::de::DeValue;
+    fn walk(
+        path: String,
+        key: Range<usize>,
+        v: &toml::Spanned<DeValue>,
+        out: &mut HashMap<String, Range<usize>>,
+    ) {
+        let span = match v.get_ref() {
+            // A table's span may be empty (dotted keys): its key then.
+            DeValue::Table(_) if v.span().is_empty() => key.clone(),
+            _ => v.span(),
+        };
+        out.insert(path.clone(), span);
+        match v.get_ref() {
+            DeValue::Table(t) => {
+                for (k, v) in t {
+                    walk(format!("{path}.{}", k.get_ref()), k.span(), v, out);
+                }
+            }
+            DeValue::Array(a) => {
+                for (i, v) in a.iter().enumerate() {
+                    walk(format!("{path}[{i}]"), key.clone(), v, out);
+                }
+            }
+            _ => {}
+        }
+    }
+    let mut out = HashMap::new();
+    for (k, v) in root {
+        walk(k.get_ref().to_string(), k.span(), v, &mut out);
+    }
+    out
 }
 
 struct Ctx<'a> {
@@ -285,7 +328,12 @@ impl Ctx<'_> {
         let key = key_before(self.text, span.start);
         let message = crate::plain::plain_serde_message(e.message(), key);
         // A render setting's value is named by its setting path.
-        match self.spans.settings.iter().find(|(_, s)| **s == span) {
+        let setting = self
+            .spans
+            .keys
+            .iter()
+            .find(|(k, s)| **s == span && render::is_setting(k));
+        match setting {
             Some((setting, _)) => self.at(span, format!("{setting}: {message}")),
             None => self.at(span, message),
         }
@@ -382,6 +430,7 @@ impl Ctx<'_> {
             known.push(name.get_ref().clone());
         }
 
+        self.spans.file_materials = scene.materials.len();
         for l in &raw.light {
             let light = self.light(l.get_ref())?;
             scene.lights.push(light);
@@ -422,30 +471,24 @@ impl Ctx<'_> {
         format!("{}:{l}:{c}", self.path.display())
     }
 
-    /// Runs `Scene::validate`, placing each issue at the span of the item it names.
+    /// Runs `Scene::validate`, placing each issue at the span of the key or
+    /// item it names; refuses the scene with every error.
     fn finish(mut self, scene: Scene) -> Result<Loaded> {
         // The settings' issues were reported by `render` (errors) and are
         // left to the render context (warnings).
-        for issue in scene
+        let (errors, warnings): (Vec<_>, Vec<_>) = scene
             .validate()
             .into_iter()
             .filter(|i| !render::is_setting(&i.path))
-        {
-            let span = self.issue_span(&issue.path);
-            match issue.severity {
-                Severity::Error => {
-                    return Err(self.at(span, format!("{}: {}", issue.path, issue.message)));
-                }
-                Severity::Warning => {
-                    let w = format!(
-                        "{}: warning: {}: {}",
-                        self.where_(span),
-                        issue.path,
-                        issue.message
-                    );
-                    self.warnings.push(w);
-                }
-            }
+            .partition(|i| i.severity == Severity::Error);
+        self.refuse(errors.iter().map(|i| {
+            let span = self.issue_span(&scene, &i.path);
+            (span, format!("{}: {}", i.path, i.message))
+        }))?;
+        for i in warnings {
+            let span = self.issue_span(&scene, &i.path);
+            let w = format!("{}: warning: {}: {}", self.where_(span), i.path, i.message);
+            self.warnings.push(w);
         }
         Ok(Loaded {
             scene,
@@ -453,7 +496,79 @@ impl Ctx<'_> {
         })
     }
 
-    fn issue_span(&self, path: &str) -> Range<usize> {
+    /// An error listing every `(span, message)` of `errors`, each with its
+    /// line and column (the first one's are the error's), or `Ok` for none.
+    fn refuse(&self, mut errors: impl Iterator<Item = (Range<usize>, String)>) -> Result<()> {
+        let Some((span, mut message)) = errors.next() else {
+            return Ok(());
+        };
+        for (span, m) in errors {
+            message.push_str(&format!("\n{}: {m}", self.where_(span)));
+        }
+        Err(self.at(span, message))
+    }
+
+    /// The span of the key at dotted `path` in the file, else of its
+    /// nearest parent that is there, else the file's start.
+    fn key_span(&self, path: &str) -> Range<usize> {
+        let mut p = path;
+        loop {
+            if let Some(s) = self.spans.keys.get(p) {
+                return s.clone();
+            }
+            match p.rsplit_once('.') {
+                Some((parent, _)) => p = parent,
+                None => return 0..0,
+            }
+        }
+    }
+
+    /// The key in the file that an issue path of `Scene::validate` names
+    /// (`materials[1] (glass).roughness` is `material.glass.roughness`), for
+    /// the items the file itself made.
+    fn file_key(&self, scene: &Scene, path: &str) -> Option<String> {
+        let index = |prefix: &str| -> Option<(usize, &str)> {
+            let rest = path.strip_prefix(prefix)?.strip_prefix('[')?;
+            let (i, rest) = rest.split_once(']')?;
+            // `[3] (name).field` or `[3].field`: the `.field` part.
+            let rest = rest
+                .strip_prefix(" (")
+                .and_then(|r| r.rfind(')').map(|k| &r[k + 1..]))
+                .unwrap_or(rest);
+            let field = rest.find('.').map_or("", |k| &rest[k..]);
+            Some((i.parse().ok()?, field))
+        };
+        if path == "camera" || path.starts_with("camera.") {
+            return Some(path.to_string());
+        }
+        if let Some((i, field)) = index("cameras") {
+            let name = &scene.cameras.get(i)?.name;
+            return Some(format!("cameras.{name}{field}"));
+        }
+        if let Some((i, field)) = index("materials")
+            && i < self.spans.file_materials
+        {
+            let name = &scene.materials.get(i)?.name;
+            return Some(format!("material.{name}{field}"));
+        }
+        if let Some((i, field)) = index("lights")
+            && i < self.spans.lights.len()
+        {
+            return Some(format!("light[{i}]{field}"));
+        }
+        None
+    }
+
+    /// Where an issue of `Scene::validate` is placed: the key it names, else
+    /// the item it names, else the file's start.
+    fn issue_span(&self, scene: &Scene, path: &str) -> Range<usize> {
+        if let Some(key) = self.file_key(scene, path) {
+            return self.key_span(&key);
+        }
+        self.item_span(path)
+    }
+
+    fn item_span(&self, path: &str) -> Range<usize> {
         let index = |prefix: &str| -> Option<usize> {
             let rest = path.strip_prefix(prefix)?.strip_prefix('[')?;
             rest.split(']').next()?.parse().ok()
