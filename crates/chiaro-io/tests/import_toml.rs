@@ -4,7 +4,7 @@
 
 use chiaro_core::Vec3;
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Geometry, Light, ProceduralKind, ReflectanceModel, ShadeMode,
+    AreaShape, Attenuation, Geometry, Light, ProceduralKind, ReflectanceModel, Severity, ShadeMode,
     Technique, Texture,
 };
 use chiaro_io::{IoError, load_scene_str};
@@ -432,4 +432,131 @@ fn primitives_beyond_the_memory_limit_are_refused_before_tessellating() {
     );
     let (_, _, msg) = error_at("[render]\nmemory_limit = \"lots\"\n");
     assert!(msg.contains("not a size"), "{msg}");
+}
+
+/// `[render]` values are checked by `RenderSettings::validate` (the check
+/// `--set`, Python and the web viewer share); its issues are placed at the
+/// setting's value, whichever way the key is written, and name the setting.
+#[test]
+fn settings_errors_come_from_validate_at_the_value() {
+    let (l, c, m) = error_at("[render]\nsamples = 0\n");
+    assert_eq!((l, c), (2, 11), "{m}");
+    assert_eq!(m, "render.samples: expected 1..=65536, got 0");
+    let (l, c, m) =
+        error_at("[render]\nwidth = 8\n\n[render.radiosity]\nhemicube_resolution = 1\n");
+    assert_eq!((l, c), (5, 23), "{m}");
+    assert_eq!(
+        m,
+        "render.radiosity.hemicube_resolution: expected 2..=4096, got 1"
+    );
+    // Dotted keys and inline tables are found too.
+    let (l, c, m) = error_at("[render]\nradiosity.tolerance = 1.5\n");
+    assert_eq!((l, c), (2, 23), "{m}");
+    assert!(m.starts_with("render.radiosity.tolerance: "), "{m}");
+    let (l, c, m) = error_at("[render]\nshadow_map = { resolution = 8 }\n");
+    assert_eq!((l, c), (2, 29), "{m}");
+    assert!(m.starts_with("render.shadow_map.resolution: "), "{m}");
+    // A check that only validate made before: the light samples' bound.
+    let (l, c, m) = error_at("[render]\nlight_samples = 100000\n");
+    assert_eq!((l, c), (2, 17), "{m}");
+    assert_eq!(
+        m,
+        "render.light_samples: expected 1..=65536 samples per area light, got 100000"
+    );
+    // An issue about a key the file leaves at its default is placed at the
+    // nearest table the file has: `far` defaults to 100.
+    let (l, c, m) = error_at("[render]\nwidth = 8\n[render.depth_cue]\nnear = 200\n");
+    assert_eq!((l, c), (3, 1), "{m}");
+    assert_eq!(
+        m,
+        "render.depth_cue.far: expected far > near, got near 200 far 100"
+    );
+    // Names of solvers are serde's: an unknown one is refused at its value
+    // with the list.
+    let (l, c, m) = error_at("[render.radiosity]\nsolver = \"gauss\"\n");
+    assert_eq!((l, c), (2, 10), "{m}");
+    assert!(
+        m.starts_with("render.radiosity.solver: unknown value `gauss`")
+            && m.contains("did you mean `gauss-seidel`")
+            && m.contains("hierarchical"),
+        "{m}"
+    );
+}
+
+/// Every settings error is reported, each at its value; the error's own
+/// line and column are the first one's.
+#[test]
+fn every_settings_error_is_reported_with_its_location() {
+    let text = "[render]\nsamples = 0\n[render.path]\nmax_depth = 0\n";
+    let (l, c, m) = error_at(text);
+    assert_eq!((l, c), (2, 11), "{m}");
+    assert_eq!(
+        m,
+        "render.samples: expected 1..=65536, got 0\n\
+         t.toml:4:13: render.path.max_depth: expected at least 1 (1 = direct light only)"
+    );
+}
+
+/// Settings warnings are the render context's to report, not the loader's.
+#[test]
+fn settings_warnings_are_not_load_warnings() {
+    let text = "[render]\ntechnique = \"phong\"\nsamples = 100\n";
+    let l = load_scene_str(text, Path::new("."), "t.toml").expect("a warning is not an error");
+    assert!(
+        l.warnings.iter().all(|w| !w.contains("render.")),
+        "{:?}",
+        l.warnings
+    );
+    assert_eq!(l.scene.render.samples, 100);
+    assert!(
+        l.scene
+            .validate()
+            .iter()
+            .any(|i| i.path == "render.samples" && i.severity == Severity::Warning)
+    );
+}
+
+/// Checks `Scene::validate` makes for every scene (camera, material and
+/// spot-cone ranges) are made once, there, and placed at the file's key.
+#[test]
+fn scene_validate_issues_are_placed_at_the_key() {
+    let (l, c, m) = error_at("[camera]\neye = [0, 0, 5]\nfov = 180\n");
+    assert_eq!((l, c), (3, 7), "{m}");
+    assert_eq!(m, "camera.fov: expected 0 < fov < 180 degrees, got 180");
+    let (l, c, m) = error_at("[camera]\neye = [0, 1, 2]\nlook_at = [0, 1, 2]\n");
+    assert_eq!((l, c), (3, 11), "{m}");
+    assert_eq!(m, "camera.look_at: eye and look_at are the same point");
+    let (l, c, m) = error_at("[camera]\nnear = 0\n");
+    assert_eq!((l, c), (2, 8), "{m}");
+    assert!(m.starts_with("camera.near: expected 0 < near < far"), "{m}");
+    let (l, c, m) = error_at("[cameras.top]\neye = [0, 9, 0]\nup = [0, 0, 1]\nfov = 0\n");
+    assert_eq!((l, c), (4, 7), "{m}");
+    assert!(m.starts_with("cameras[0].fov: "), "{m}");
+    let (l, c, m) = error_at("[material.a]\n[material.\"b.c\"]\ndiffuse = 0.5\nroughness = 0\n");
+    assert_eq!((l, c), (4, 13), "{m}");
+    assert_eq!(
+        m,
+        "materials[1] (b.c).roughness: expected 0 < roughness <= 1, got 0"
+    );
+    let (l, c, m) = error_at("[material.a]\nspecular = [0.5, -1, 0]\n");
+    assert_eq!((l, c), (2, 12), "{m}");
+    assert!(
+        m.starts_with("materials[0] (a).specular: expected values >= 0"),
+        "{m}"
+    );
+    let (l, c, m) = error_at(
+        "[[light]]\ntype = \"point\"\nposition = [0, 1, 0]\n\n[[light]]\ntype = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\ncone = 200\n",
+    );
+    assert_eq!((l, c), (9, 8), "{m}");
+    assert_eq!(
+        m,
+        "lights[1] (spot).cone: expected 0 < cone <= 180 degrees, got 200"
+    );
+    // Several errors: each at its key.
+    let (l, c, m) = error_at("[camera]\nfov = 0\n[material.a]\nior = 0\n");
+    assert_eq!((l, c), (2, 7), "{m}");
+    assert!(
+        m.contains("\nt.toml:4:7: materials[0] (a).ior: expected a finite number > 0, got 0"),
+        "{m}"
+    );
 }

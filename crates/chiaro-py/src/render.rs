@@ -6,7 +6,7 @@
 use crate::convert::{json_to_py, merge_props, py_to_json, toml_literal};
 use crate::errors::{RenderError, SettingsError, core_err, io_err, to_pyerr};
 use crate::scene::PyScene;
-use crate::solution::{PySolution, check_solution_technique};
+use crate::solution::PySolution;
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film, write_film};
 use chiaro::scene::{Scene, ToneMap};
 use chiaro::{Film, Progress, RenderSettings, Technique, Vec3};
@@ -428,7 +428,7 @@ pub fn render<'py>(
         &overrides,
     )?;
     if solution.is_some() {
-        check_solution_technique(settings.technique)?;
+        chiaro::check_solution_technique(settings.technique).map_err(core_err)?;
     }
     let resolved = serde_json::to_value(&settings).unwrap_or(Value::Null);
     let full = (0, 0, settings.width, settings.height);

@@ -6,11 +6,10 @@
 //! every tile of a distributed render; it travels as bytes (the JSON of
 //! `RadiositySolution::save`) and pickles.
 
-use crate::errors::{RenderError, SettingsError, core_err, to_pyerr};
+use crate::errors::{RenderError, core_err, to_pyerr};
 use crate::render::{overrides_json, resolve_settings, run_polling};
 use crate::scene::PyScene;
 use chiaro::RadiositySolution;
-use chiaro::Technique;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyTuple};
 use std::sync::Arc;
@@ -137,25 +136,9 @@ pub fn solve_radiosity<'py>(
     Ok(PySolution { inner: Arc::new(s) })
 }
 
-/// Checks that `technique` can render from a solution.
-///
-/// # Errors
-/// `SettingsError` naming the two techniques that can.
-pub fn check_solution_technique(technique: Technique) -> PyResult<()> {
-    if matches!(technique, Technique::Radiosity | Technique::Hybrid) {
-        Ok(())
-    } else {
-        Err(SettingsError::new_err(format!(
-            "solution= needs technique radiosity or hybrid, not {}",
-            technique.name()
-        )))
-    }
-}
-
 #[cfg(test)]
 mod tests {
-    use super::*;
-    use chiaro::{NoProgress, RenderSettings, Scene, Vec3};
+    use chiaro::{NoProgress, RenderSettings, Scene, Technique, Vec3};
 
     fn cornell() -> Scene {
         let path =

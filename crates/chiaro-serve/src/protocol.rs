@@ -281,7 +281,7 @@ pub fn make_job(
         if v.samples > 0 {
             s.samples = v.samples;
         }
-        s.samples = s.samples.min(limits.max_samples).max(1);
+        s.samples = s.samples.min(limits.max_samples);
         if v.light_samples > limits.max_samples {
             return Err(format!(
                 "{} light samples exceed the page limit of {}",
@@ -308,7 +308,7 @@ pub fn make_job(
                 mat.model = m;
             }
         }
-        chiaro::check_settings(&s).map_err(|e| e.to_string())?;
+        chiaro::check_settings(&s).map_err(settings_message)?;
         scenes.push(sc);
         settings.push(s);
     }
@@ -319,6 +319,21 @@ pub fn make_job(
         progressive,
         refine,
     })
+}
+
+/// The settings errors of [`chiaro::check_settings`] for the page: each
+/// naming its setting, on one line.
+fn settings_message(e: chiaro_core::error::CoreError) -> String {
+    match e {
+        chiaro_core::error::CoreError::InvalidScene { issues } => {
+            let issues: Vec<&str> = issues
+                .iter()
+                .map(|i| i.strip_prefix("error: ").unwrap_or(i))
+                .collect();
+            format!("invalid render settings: {}", issues.join("; "))
+        }
+        e => e.to_string(),
+    }
 }
 
 /// Header of a binary frame sent to the page.
@@ -505,6 +520,50 @@ mod tests {
             ..View::default()
         }];
         assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &many).is_err());
+    }
+
+    /// A render setting is checked by the facade's one settings check,
+    /// and its message names the setting: nothing is silently repaired.
+    #[test]
+    fn render_settings_are_checked_by_the_facade() {
+        let mut scene = Scene::default();
+        scene.render.samples = 0;
+        scene.render.radiosity.tolerance = 2.0;
+        let e = make_job(
+            &scene,
+            &Limits::default(),
+            0,
+            16,
+            16,
+            Orbit::default(),
+            false,
+            false,
+            &[View::default()],
+        )
+        .expect_err("invalid settings");
+        assert_eq!(
+            e,
+            "invalid render settings: render.samples: expected 1..=65536, got 0; \
+             render.radiosity.tolerance: expected a number in (0, 1), got 2"
+        );
+        let v = [View {
+            samples: 4,
+            ..View::default()
+        }];
+        scene.render.radiosity.tolerance = 0.5;
+        let j = make_job(
+            &scene,
+            &Limits::default(),
+            0,
+            16,
+            16,
+            Orbit::default(),
+            false,
+            false,
+            &v,
+        )
+        .expect("the view's samples replace the scene's");
+        assert_eq!(j.settings[0].samples, 4);
     }
 
     #[test]

@@ -166,8 +166,12 @@ pub fn scene_bounds(scene: &Scene) -> chiaro_core::geometry::Aabb {
     .bounds
 }
 
-/// Refuses a technique that does not render from a radiosity solution.
-fn check_solution_technique(technique: Technique) -> Result<(), CoreError> {
+/// Refuses a technique that does not render from a radiosity solution
+/// (only `radiosity` and `hybrid` do), for every front.
+///
+/// # Errors
+/// [`CoreError::BadSetting`] for key `solution`, naming the two techniques.
+pub fn check_solution_technique(technique: Technique) -> Result<(), CoreError> {
     if technique.solves_radiosity() {
         Ok(())
     } else {

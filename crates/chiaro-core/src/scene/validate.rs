@@ -83,22 +83,19 @@ impl RenderSettings {
     pub fn validate(&self) -> Vec<Issue> {
         let mut c = Checker { issues: Vec::new() };
         let r = self;
-        if r.width == 0 || r.height == 0 {
-            c.error(
-                "render",
-                format!(
-                    "image size must be at least 1x1, got {}x{}",
-                    r.width, r.height
-                ),
-            );
-        } else if r.width > MAX_IMAGE_SIDE
-            || r.height > MAX_IMAGE_SIDE
-            || u64::from(r.width) * u64::from(r.height) > MAX_IMAGE_PIXELS
+        for (path, side) in [("render.width", r.width), ("render.height", r.height)] {
+            if !(1..=MAX_IMAGE_SIDE).contains(&side) {
+                c.error(path, format!("expected 1..={MAX_IMAGE_SIDE}, got {side}"));
+            }
+        }
+        if u64::from(r.width) * u64::from(r.height) > MAX_IMAGE_PIXELS
+            && r.width <= MAX_IMAGE_SIDE
+            && r.height <= MAX_IMAGE_SIDE
         {
             c.error(
-                "render",
+                "render.height",
                 format!(
-                    "image size {}x{} exceeds the limit ({MAX_IMAGE_SIDE} per side, {MAX_IMAGE_PIXELS} pixels)",
+                    "image {}x{} has more than {MAX_IMAGE_PIXELS} pixels",
                     r.width, r.height
                 ),
             );
@@ -124,11 +121,17 @@ impl RenderSettings {
             );
         }
 
-        if r.light_samples == 0 {
+        if r.light_samples == 0 || r.light_samples > MAX_SAMPLES {
             c.error(
                 "render.light_samples",
-                "expected at least 1 sample per area light",
+                format!(
+                    "expected 1..={MAX_SAMPLES} samples per area light, got {}",
+                    r.light_samples
+                ),
             );
+        }
+        if let Some(cue) = &r.depth_cue {
+            check_depth_cue(&mut c, cue);
         }
         if r.path.max_depth == 0 {
             c.error(
@@ -462,6 +465,26 @@ impl Scene {
     }
 }
 
+/// Depth cueing needs finite distances with `far > near`, and finite
+/// colours and scales.
+fn check_depth_cue(c: &mut Checker, cue: &super::DepthCue) {
+    c.finite("render.depth_cue.color", cue.color);
+    for (path, x) in [
+        ("render.depth_cue.max_scale", cue.max_scale),
+        ("render.depth_cue.min_scale", cue.min_scale),
+    ] {
+        if !x.is_finite() {
+            c.error(path, format!("expected a finite number, got {x}"));
+        }
+    }
+    if !(cue.near.is_finite() && cue.far.is_finite() && cue.far > cue.near) {
+        c.error(
+            "render.depth_cue.far",
+            format!("expected far > near, got near {} far {}", cue.near, cue.far),
+        );
+    }
+}
+
 /// The checks of one camera, reported under `path` (`camera`, `cameras[2]`).
 fn check_camera(c: &mut Checker, path: &str, cam: &super::Camera) {
     c.finite(&format!("{path}.eye"), cam.eye);
@@ -474,11 +497,16 @@ fn check_camera(c: &mut Checker, path: &str, cam: &super::Camera) {
         );
     }
     if (cam.look_at - cam.eye).length_squared() == 0.0 {
-        c.error(path, "eye and look_at are the same point");
+        c.error(
+            format!("{path}.look_at"),
+            "eye and look_at are the same point",
+        );
     }
+    // Named by the distance that is wrong: `near` when it is not > 0.
+    let which = if cam.near > 0.0 { "far" } else { "near" };
     if !(cam.near > 0.0 && cam.far > cam.near && cam.far.is_finite()) {
         c.error(
-            path,
+            format!("{path}.{which}"),
             format!(
                 "expected 0 < near < far, got near {} far {}",
                 cam.near, cam.far
@@ -559,6 +587,70 @@ mod tests {
         // The scan converter's sample cap is said, not silent.
         assert_eq!(paths(Severity::Warning), ["render.samples"], "{issues:#?}");
         assert!(RenderSettings::default().validate().is_empty());
+    }
+
+    /// The checks the scene file used to make alone: each image side, the
+    /// light samples' upper bound and the depth cue's distances.
+    #[test]
+    fn size_light_samples_and_depth_cue_name_their_setting() {
+        let errors = |r: &RenderSettings| -> Vec<(String, String)> {
+            r.validate()
+                .into_iter()
+                .filter(|i| i.severity == Severity::Error)
+                .map(|i| (i.path, i.message))
+                .collect()
+        };
+        let pair = |p: &str, m: &str| (p.to_string(), m.to_string());
+        let mut r = RenderSettings {
+            width: 0,
+            height: MAX_IMAGE_SIDE + 1,
+            light_samples: MAX_SAMPLES + 1,
+            depth_cue: Some(DepthCue {
+                near: 5.0,
+                far: 5.0,
+                ..DepthCue::default()
+            }),
+            ..RenderSettings::default()
+        };
+        assert_eq!(
+            errors(&r),
+            [
+                pair("render.width", "expected 1..=16384, got 0"),
+                pair("render.height", "expected 1..=16384, got 16385"),
+                pair(
+                    "render.light_samples",
+                    "expected 1..=65536 samples per area light, got 65537"
+                ),
+                pair(
+                    "render.depth_cue.far",
+                    "expected far > near, got near 5 far 5"
+                ),
+            ]
+        );
+        r.width = 16_000;
+        r.height = 16_000;
+        r.light_samples = MAX_SAMPLES;
+        r.depth_cue = Some(DepthCue {
+            far: f32::INFINITY,
+            ..DepthCue::default()
+        });
+        assert_eq!(
+            errors(&r),
+            [
+                pair(
+                    "render.height",
+                    "image 16000x16000 has more than 67108864 pixels"
+                ),
+                pair(
+                    "render.depth_cue.far",
+                    "expected far > near, got near 0 far inf"
+                ),
+            ]
+        );
+        r.width = 8192;
+        r.height = 8192;
+        r.depth_cue = Some(DepthCue::default());
+        assert!(errors(&r).is_empty(), "{:?}", errors(&r));
     }
 
     #[test]

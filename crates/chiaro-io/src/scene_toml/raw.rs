@@ -5,8 +5,9 @@
 
 use chiaro_core::glam::Vec3;
 use chiaro_core::scene::{
-    AaMode, Distribution, PathSettings, PixelFilter, ProceduralKind, ReflectanceModel, ShadeMode,
-    ShadowMethod, Technique, ToneMap, TransparencyMode, WhittedSettings, WrapMode,
+    AaMode, Distribution, PathSettings, PixelFilter, ProceduralKind, RadiositySettings,
+    ReflectanceModel, ShadeMode, ShadowMapSettings, ShadowMethod, Technique, ToneMap,
+    TransparencyMode, WhittedSettings, WrapMode,
 };
 use serde::Deserialize;
 use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
@@ -197,28 +198,29 @@ pub(crate) struct RawScene {
     pub background: Opt<Splat3>,
 }
 
-/// `[render]`.
+/// `[render]`: [`chiaro_core::scene::RenderSettings`] as written in a file
+/// (every key optional, `depth_cue.color` a scalar or three numbers).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawRender {
     pub technique: Option<Technique>,
-    pub width: Opt<u32>,
-    pub height: Opt<u32>,
-    pub samples: Opt<u32>,
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub samples: Option<u32>,
     pub seed: Option<u64>,
     pub shadows: Option<ShadowMethod>,
     pub transparency: Option<TransparencyMode>,
     pub aa: Option<AaMode>,
     pub filter: Option<PixelFilter>,
-    pub light_samples: Opt<u32>,
+    pub light_samples: Option<u32>,
     pub depth_cue: Option<RawDepthCue>,
     pub tonemap: Option<ToneMap>,
     pub exposure: Option<f32>,
     pub cull_backfaces: Option<bool>,
-    pub shadow_map: Option<RawShadowMap>,
+    pub shadow_map: Option<ShadowMapSettings>,
     pub whitted: Option<WhittedSettings>,
     pub path: Option<PathSettings>,
-    pub radiosity: Option<RawRadiosity>,
+    pub radiosity: Option<RadiositySettings>,
     pub memory_limit: Option<chiaro_core::budget::ByteSize>,
 }
 
@@ -228,31 +230,9 @@ pub(crate) struct RawRender {
 pub(crate) struct RawDepthCue {
     pub color: Option<Splat3>,
     pub near: Option<f32>,
-    pub far: Opt<f32>,
+    pub far: Option<f32>,
     pub max_scale: Option<f32>,
     pub min_scale: Option<f32>,
-}
-
-/// `[render.shadow_map]`.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawShadowMap {
-    pub resolution: Opt<u32>,
-    pub bias: Option<f32>,
-    pub slope_bias: Option<f32>,
-    pub pcf_radius: Option<u32>,
-}
-
-/// `[render.radiosity]`.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawRadiosity {
-    pub solver: Opt<String>,
-    pub formfactor: Opt<String>,
-    pub patch_size: Opt<f32>,
-    pub hemicube_resolution: Opt<u32>,
-    pub tolerance: Opt<f32>,
-    pub max_iterations: Option<u32>,
 }
 
 /// `[camera]` and each `[cameras.NAME]`.
