@@ -220,7 +220,7 @@ fn bad_settings_fail() {
     let msg = run(&zero, &[Technique::Phong])
         .expect_err("zero width")
         .to_string();
-    assert!(msg.contains("image size"), "{msg}");
+    assert!(msg.contains("render.width"), "{msg}");
 }
 
 /// The share of a per-pixel error sum that falls on `mask`ed pixels.
