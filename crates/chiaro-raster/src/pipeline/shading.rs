@@ -24,7 +24,7 @@ use chiaro_core::prepared::{PreparedScene, SurfaceHit};
 use chiaro_core::scene::{AlphaMode, MaterialId};
 use chiaro_core::scene::{Material, RenderSettings, ShadeMode};
 use chiaro_core::shading::texture::{
-    background_radiance, environment_radiance, environment_specular,
+    background_radiance, environment_diffuse, environment_radiance, environment_specular,
 };
 use chiaro_core::shading::{
     LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize, shade_local,
@@ -555,12 +555,15 @@ pub(crate) fn shade_sample(
     let mut specular = Vec3::ZERO;
     let mut coverage_kt = None;
     let prefiltered = ps.prefiltered_environment();
-    // The untextured material with the vertex colour at the sample (flat
-    // and Gouraud triangles do not carry it) for the glossy environment term.
-    let vertex_lobe = || {
+    // The material with the vertex colour at the sample (flat and Gouraud
+    // triangles do not carry it) and the diffuse texture factor `tex`, for
+    // the environment terms.
+    let vertex_lobe = |tex: Vec3| {
         let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
         let color = ps.colors[i0] * w.x + ps.colors[i1] * w.y + ps.colors[i2] * w.z;
-        SurfaceMaterial::with_vertex_color(material, color)
+        let mut sm = SurfaceMaterial::with_vertex_color(material, color);
+        sm.kd *= tex;
+        sm
     };
     let (color, n, kr, lobe) = match td.mode {
         ShadeMode::Phong if !needs_footprint && !want_specular && ctx.point_lighting.is_some() => {
@@ -596,7 +599,15 @@ pub(crate) fn shade_sample(
                     counts,
                 ),
             };
-            (c, n, base.kr, prefiltered.map(|_| *base))
+            (
+                c,
+                n,
+                base.kr,
+                prefiltered.map(|_| SurfaceMaterial {
+                    kd: base.kd * hit.color,
+                    ..*base
+                }),
+            )
         }
         ShadeMode::Phong => {
             let (sm, n) = if needs_footprint {
@@ -666,7 +677,7 @@ pub(crate) fn shade_sample(
                 split.diffuse * tex + split.rest,
                 hit.ns * sign,
                 material.reflect,
-                prefiltered.map(|_| vertex_lobe()),
+                prefiltered.map(|_| vertex_lobe(tex)),
             )
         }
         ShadeMode::Flat => {
@@ -682,16 +693,16 @@ pub(crate) fn shade_sample(
                 split.diffuse * tex + split.rest,
                 hit.ng * sign,
                 material.reflect,
-                prefiltered.map(|_| vertex_lobe()),
+                prefiltered.map(|_| vertex_lobe(tex)),
             )
         }
     };
     let mut color = color;
-    // The environment reflected by the glossy lobe (the split sum), in
-    // place of the ambient light's stand-in for it.
+    // The environment's diffuse light and its reflection by the glossy
+    // lobe (the split sum).
     if let (Some(table), Some(lobe)) = (prefiltered, lobe) {
         let glossy = environment_specular(table, ps.scene, &lobe, n, wo);
-        color += glossy;
+        color += environment_diffuse(table, lobe.kd, n) + glossy;
         specular += glossy;
     }
     // Reflection map: the environment in the mirror direction, weighted by kr.

@@ -22,8 +22,8 @@ use image::filtered;
 pub use image::{bilinear, nearest, wrap_index};
 pub use mipmap::MipMap;
 pub use prefiltered::{
-    LEVEL_ALPHAS, PrefilteredEnvironment, environment_specular, specular_albedo_scale_bias,
-    specular_lobe_albedo,
+    LEVEL_ALPHAS, PrefilteredEnvironment, environment_diffuse, environment_specular,
+    specular_albedo_scale_bias, specular_lobe_albedo,
 };
 pub use procedural::{pattern, perlin_noise, procedural_color, procedural_value, turbulence};
 

@@ -2,7 +2,11 @@
 //! the environment map prefiltered for the GGX lobe at a few roughness
 //! levels and the specular lobe's directional albedo as the scale and bias
 //! of F0, Karis 2013, "Real Shading in Unreal Engine 4" (the split-sum
-//! approximation, with `n = v = r` for the prefiltered radiance).
+//! approximation, with `n = v = r` for the prefiltered radiance), and the
+//! map's diffuse irradiance by normal (the cosine convolution of a small
+//! level of the map, as Ramamoorthi and Hanrahan's irradiance environment
+//! maps, integrated directly rather than fitted by spherical harmonics,
+//! whose ringing blackens normals facing away from small bright lamps).
 //!
 //! The albedo table integrates the shading layer's own BSDF
 //! ([`Bsdf::sample`], whose weight is `eval_brdf_cos / pdf`), so it is what
@@ -134,6 +138,8 @@ fn ggx_half_vector(alpha: f32, u: Vec2) -> Vec3 {
 pub struct PrefilteredEnvironment {
     /// The levels `LEVEL_ALPHAS[1..]`.
     levels: Vec<LatLong>,
+    /// `E(n) / pi`, the map's irradiance over pi by normal.
+    irradiance: LatLong,
 }
 
 impl PrefilteredEnvironment {
@@ -166,7 +172,19 @@ impl PrefilteredEnvironment {
         let levels = (1..LEVEL_ALPHAS.len())
             .map(|i| prefilter(&pyramid, LEVEL_ALPHAS[i], LEVEL_WIDTHS[i], LEVEL_SAMPLES[i]))
             .collect();
-        Some(Self { levels })
+        let irradiance = irradiance(&pyramid);
+        Some(Self { levels, irradiance })
+    }
+
+    /// The irradiance from the map at a surface with unit normal `n`
+    /// divided by pi, `E(n) / pi` (the radiance a white Lambertian surface
+    /// reflects), from a small image of it by normal (bilinear); never
+    /// negative.
+    pub fn irradiance_over_pi(&self, n: Vec3) -> Vec3 {
+        match n.try_normalize() {
+            Some(n) => self.irradiance.lookup(n),
+            None => Vec3::ZERO,
+        }
     }
 
     /// The prefiltered radiance around the reflected direction `r` (need
@@ -200,6 +218,46 @@ impl PrefilteredEnvironment {
     }
 }
 
+/// Width of the irradiance image (the height is half) and the widest
+/// pyramid level it is integrated from.
+const IRRADIANCE_WIDTH: u32 = 64;
+const IRRADIANCE_SOURCE_WIDTH: u32 = 64;
+
+/// `E(n) / pi` per texel (normal `n`): the cosine-weighted mean of the
+/// map's pyramid level at most `IRRADIANCE_SOURCE_WIDTH` wide over the
+/// hemisphere about `n`, texels weighted by their solid angle,
+/// `sum L w cos / sum w cos` (exact for a constant map; never negative).
+fn irradiance(pyramid: &[LatLong]) -> LatLong {
+    let src = pyramid
+        .iter()
+        .find(|l| l.w <= IRRADIANCE_SOURCE_WIDTH)
+        .unwrap_or(&pyramid[pyramid.len() - 1]);
+    // Every source texel's direction, solid-angle weight and radiance.
+    let texels: Vec<(Vec3, f32, Vec3)> = (0..src.w * src.h)
+        .map(|i| {
+            let uv = Vec2::new(
+                ((i % src.w) as f32 + 0.5) / src.w as f32,
+                ((i / src.w) as f32 + 0.5) / src.h as f32,
+            );
+            (latlong_dir(uv), (uv.y * PI).sin(), src.texels[i as usize])
+        })
+        .collect();
+    LatLong::from_fn(IRRADIANCE_WIDTH, IRRADIANCE_WIDTH / 2, |n| {
+        let (mut sum, mut weight) = (Vec3::ZERO, 0.0f32);
+        for &(d, w, l) in &texels {
+            let c = n.dot(d);
+            if c > 0.0 {
+                sum += l * (w * c);
+                weight += w * c;
+            }
+        }
+        if weight > 0.0 {
+            sum / weight
+        } else {
+            Vec3::ZERO
+        }
+    })
+}
 /// One prefiltered level: per texel (direction `r`), the GGX lobe with
 /// `n = v = r`, `sum L(l) (n.l) / sum (n.l)` over `n` Hammersley half
 /// vectors, each read from the pyramid level whose texel's solid
@@ -385,6 +443,18 @@ pub fn specular_lobe_albedo(m: &SurfaceMaterial, cos_o: f32) -> (f32, Vec3) {
     }
 }
 
+/// The map's light reflected by the Lambertian lobe of diffuse colour `kd`
+/// at a point with unit normal `n`: `kd E(n) / pi` from the map's
+/// irradiance image. A light like the others, so not scaled
+/// by the ambient coefficient. The one diffuse environment term of the
+/// scan converter and Whitted.
+pub fn environment_diffuse(table: &PrefilteredEnvironment, kd: Vec3, n: Vec3) -> Vec3 {
+    if kd == Vec3::ZERO {
+        return Vec3::ZERO;
+    }
+    kd * table.irradiance_over_pi(n)
+}
+
 /// The environment reflected by the specular lobe of `m` at a point with
 /// unit normal `n` seen from the unit direction `wo`: the split sum
 /// `prefiltered(reflect(wo, n), alpha) * albedo` (see
@@ -488,6 +558,29 @@ mod tests {
         assert!((t.radiance(&scene, near, 0.0).x - 1.0).abs() < 1e-6);
         let horizon = t.radiance(&scene, Vec3::X, 0.35).x;
         assert!((horizon - 0.5).abs() < 0.05, "{horizon}");
+    }
+
+    /// Irradiance: a constant map L gives `E = pi L` for every normal; a
+    /// map of L above the horizon and 0 below gives the cosine lobe's
+    /// closed form `E(n) = pi L (1 + n.y) / 2`.
+    #[test]
+    fn irradiance_closed_forms() {
+        let scene = map_scene(64, 32, |_, _| 1.5, 45.0);
+        let t = PrefilteredEnvironment::new(&scene).expect("a map");
+        for d in dirs() {
+            let e = t.irradiance_over_pi(d);
+            assert!(
+                (e - Vec3::splat(1.5)).abs().max_element() < 1e-4,
+                "{d}: {e}"
+            );
+        }
+        let scene = map_scene(128, 64, |_, y| if y < 32 { 2.0 } else { 0.0 }, 0.0);
+        let t = PrefilteredEnvironment::new(&scene).expect("a map");
+        for d in dirs() {
+            let e = t.irradiance_over_pi(d).x;
+            let expect = 2.0 * (1.0 + d.y) / 2.0;
+            assert!((e - expect).abs() < 0.02, "{d}: {e} vs {expect}");
+        }
     }
 
     /// At roughness 0 the albedo is Schlick's Fresnel at `n . wo`:
