@@ -11,8 +11,8 @@ use crate::scene::{
 };
 use crate::shading::SurfaceMaterial;
 use crate::shading::texture::{
-    MipMap, TexCoord, bump_normal, eval_height, eval_texture, normal_map_normal,
-    uv_surface_gradient,
+    MipMap, PrefilteredEnvironment, TexCoord, bump_normal, eval_height, eval_texture,
+    normal_map_normal, uv_surface_gradient,
 };
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::sync::OnceLock;
@@ -90,6 +90,10 @@ pub struct PreparedScene<'s> {
     /// Mip-map pyramids of the scene's image textures (index = texture id),
     /// built on first use by [`PreparedScene::mip_map`].
     pub mip_maps: OnceLock<Vec<Option<MipMap>>>,
+    /// The environment map prefiltered for the local techniques' glossy
+    /// reflection, built on first use by
+    /// [`PreparedScene::prefiltered_environment`].
+    pub prefiltered: OnceLock<Option<PrefilteredEnvironment>>,
 }
 
 /// The alpha (coverage) of a surface point: the base colour factor's alpha
@@ -148,6 +152,7 @@ impl<'s> PreparedScene<'s> {
             lights: scene.lights.clone(),
             bounds: Aabb::EMPTY,
             mip_maps: OnceLock::new(),
+            prefiltered: OnceLock::new(),
         };
         for (oi, obj) in scene.objects.iter().enumerate() {
             let world_from_object = obj.transform.world_from_object();
@@ -444,6 +449,16 @@ impl<'s> PreparedScene<'s> {
             })
             .get(t.index())
             .and_then(Option::as_ref)
+    }
+
+    /// The environment map prefiltered for glossy reflection by the local
+    /// techniques, built on the first call; `None` (and nothing built)
+    /// without an environment map.
+    pub fn prefiltered_environment(&self) -> Option<&PrefilteredEnvironment> {
+        self.scene.environment.as_ref()?;
+        self.prefiltered
+            .get_or_init(|| PrefilteredEnvironment::new(self.scene))
+            .as_ref()
     }
 
     /// Evaluates texture `t` at `tc` (linear RGBA), trilinear through its

@@ -324,8 +324,8 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
         }
         if !has_emitters {
             let added = if framed.inside.is_none() {
-                "the studio environment (lighting only, not the background), \
-                 its mean radiance as an ambient light, and a directional light"
+                "the studio environment (lighting only, not the background) \
+                 and a directional light"
             } else {
                 "an ambient light and a point light"
             };
@@ -416,8 +416,9 @@ fn studio_env(texture: TextureId, intensity: f32) -> Environment {
 
 /// Adds the studio environment to `scene` (its texture and
 /// `scene.environment`), as the automatic lighting of a model without
-/// lights does; [`default_lights`] holds its mean radiance as the ambient
-/// light for the techniques that do not integrate the map.
+/// lights does: the map lights the model in every technique but radiosity
+/// (the local techniques through its prefiltered table, the path tracer
+/// integrating it).
 pub fn add_studio_environment(scene: &mut Scene) {
     let (texture, intensity, _) = studio();
     let id = scene.add_texture(Texture::Image(texture.clone()));
@@ -425,16 +426,16 @@ pub fn add_studio_environment(scene: &mut Scene) {
 }
 
 /// The mean radiance of the studio environment as added by
-/// [`add_studio_environment`]: the ambient light of [`default_lights`].
+/// [`add_studio_environment`].
 pub fn studio_ambient() -> Vec3 {
     studio().2
 }
 
-/// The lights added to a file that has none: an ambient light of the
-/// studio environment's mean radiance ([`studio_ambient`]: what the local
-/// techniques use in place of the map's diffuse light, the path tracer
-/// integrating the map itself and ignoring it) and a white directional
-/// light of intensity 1 shining from above the camera's right shoulder.
+/// The light added to a file that has none, besides the studio
+/// environment: a white directional light of intensity 1 shining from
+/// above the camera's right shoulder. (No ambient light: the map's
+/// diffuse light reaches the local techniques through its spherical
+/// harmonics, `texture::environment_diffuse`.)
 pub fn default_lights(camera: &Camera) -> Vec<Light> {
     let f = camera.frame();
     let direction = (f.forward - 0.5 * f.up - 0.3 * f.right).normalize_or_zero();
@@ -443,17 +444,11 @@ pub fn default_lights(camera: &Camera) -> Vec<Light> {
     } else {
         direction
     };
-    vec![
-        Light::Ambient {
-            color: studio_ambient(),
-            intensity: 1.0,
-        },
-        Light::Directional {
-            direction,
-            color: Vec3::ONE,
-            intensity: 1.0,
-        },
-    ]
+    vec![Light::Directional {
+        direction,
+        color: Vec3::ONE,
+        intensity: 1.0,
+    }]
 }
 
 /// Runs `Scene::validate`: errors become one [`IoError::Format`] listing
@@ -577,7 +572,8 @@ mod studio_tests {
     use super::*;
 
     /// The embedded map decodes (not the constant stand-in), is finite and
-    /// is scaled to the stated mean luminance; `default_lights` carries it.
+    /// is scaled to the stated mean luminance; `default_lights` adds no
+    /// ambient stand-in for it.
     #[test]
     fn studio_environment_decodes() {
         let (t, intensity, mean) = studio();
@@ -594,7 +590,10 @@ mod studio_tests {
             "{mean}"
         );
         let lights = default_lights(&Camera::default());
-        assert!(matches!(lights[0], Light::Ambient { color, .. } if color == *mean));
+        assert!(
+            lights.iter().all(|l| !matches!(l, Light::Ambient { .. })),
+            "{lights:?}"
+        );
         let mut scene = Scene::default();
         add_studio_environment(&mut scene);
         let env = scene.environment.clone().expect("environment");

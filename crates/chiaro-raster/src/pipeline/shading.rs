@@ -23,7 +23,9 @@ use chiaro_core::film::TilePixels;
 use chiaro_core::prepared::{PreparedScene, SurfaceHit};
 use chiaro_core::scene::{AlphaMode, MaterialId};
 use chiaro_core::scene::{Material, RenderSettings, ShadeMode};
-use chiaro_core::shading::texture::{background_radiance, environment_radiance};
+use chiaro_core::shading::texture::{
+    background_radiance, environment_diffuse, environment_radiance, environment_specular,
+};
 use chiaro_core::shading::{
     LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize, shade_local,
     shade_local_split,
@@ -119,6 +121,14 @@ impl Ctx<'_, '_> {
         sp: &ShadingPoint,
         counts: Option<&[i32]>,
     ) -> Vec3 {
+        let owned;
+        let m = match self.without_specular_ambient(m) {
+            Some(o) => {
+                owned = o;
+                &owned
+            }
+            None => m,
+        };
         if let Some(pl) = &self.point_lighting {
             return pl.shade(m, sp);
         }
@@ -149,6 +159,20 @@ impl Ctx<'_, '_> {
         )
     }
 
+    /// `m` without the ambient stand-in for its specular lobe
+    /// (`ks_ambient`) when the scene's environment map is reflected by that
+    /// lobe instead ([`environment_specular`]); `None` when `m` is used as
+    /// it is.
+    #[inline]
+    fn without_specular_ambient(&self, m: &SurfaceMaterial) -> Option<SurfaceMaterial> {
+        (m.ks_ambient != Vec3::ZERO && self.ps.prefiltered_environment().is_some()).then_some(
+            SurfaceMaterial {
+                ks_ambient: Vec3::ZERO,
+                ..*m
+            },
+        )
+    }
+
     /// The jitter of sample `i` of light `li` at the shading point `key`:
     /// area lights at their strata centres, an emitter group's picks from
     /// the jitter sequence Whitted shares ([`group_jitter`]).
@@ -169,6 +193,14 @@ impl Ctx<'_, '_> {
         m: &SurfaceMaterial,
         sp: &ShadingPoint,
     ) -> Split {
+        let owned;
+        let m = match self.without_specular_ambient(m) {
+            Some(o) => {
+                owned = o;
+                &owned
+            }
+            None => m,
+        };
         if let Some(pl) = &self.point_lighting {
             let [total, rest] = pl.shade_split(m, sp);
             return Split {
@@ -522,7 +554,18 @@ pub(crate) fn shade_sample(
     let sign = if flip { -1.0 } else { 1.0 };
     let mut specular = Vec3::ZERO;
     let mut coverage_kt = None;
-    let (color, n, kr) = match td.mode {
+    let prefiltered = ps.prefiltered_environment();
+    // The material with the vertex colour at the sample (flat and Gouraud
+    // triangles do not carry it) and the diffuse texture factor `tex`, for
+    // the environment terms.
+    let vertex_lobe = |tex: Vec3| {
+        let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
+        let color = ps.colors[i0] * w.x + ps.colors[i1] * w.y + ps.colors[i2] * w.z;
+        let mut sm = SurfaceMaterial::with_vertex_color(material, color);
+        sm.kd *= tex;
+        sm
+    };
+    let (color, n, kr, lobe) = match td.mode {
         ShadeMode::Phong if !needs_footprint && !want_specular && ctx.point_lighting.is_some() => {
             // The common case without copying the material: untextured (so
             // no bump or normal map), the point-light model, no pixel index.
@@ -556,7 +599,15 @@ pub(crate) fn shade_sample(
                     counts,
                 ),
             };
-            (c, n, base.kr)
+            (
+                c,
+                n,
+                base.kr,
+                prefiltered.map(|_| SurfaceMaterial {
+                    kd: base.kd * hit.color,
+                    ..*base
+                }),
+            )
         }
         ShadeMode::Phong => {
             let (sm, n) = if needs_footprint {
@@ -592,7 +643,7 @@ pub(crate) fn shade_sample(
                 };
                 specular = c - ctx.illuminate(t, pixel, &diffuse_only, &sp, counts);
             }
-            (c, n, sm.kr)
+            (c, n, sm.kr, prefiltered.map(|_| sm))
         }
         ShadeMode::Gouraud => {
             let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
@@ -626,6 +677,7 @@ pub(crate) fn shade_sample(
                 split.diffuse * tex + split.rest,
                 hit.ns * sign,
                 material.reflect,
+                prefiltered.map(|_| vertex_lobe(tex)),
             )
         }
         ShadeMode::Flat => {
@@ -641,10 +693,18 @@ pub(crate) fn shade_sample(
                 split.diffuse * tex + split.rest,
                 hit.ng * sign,
                 material.reflect,
+                prefiltered.map(|_| vertex_lobe(tex)),
             )
         }
     };
     let mut color = color;
+    // The environment's diffuse light and its reflection by the glossy
+    // lobe (the split sum).
+    if let (Some(table), Some(lobe)) = (prefiltered, lobe) {
+        let glossy = environment_specular(table, ps.scene, &lobe, n, wo);
+        color += environment_diffuse(table, lobe.kd, n) + glossy;
+        specular += glossy;
+    }
     // Reflection map: the environment in the mirror direction, weighted by kr.
     if ctx.ps.scene.environment.is_some() && kr.max_element() > 0.0 {
         color += kr * environment_radiance(ctx.ps.scene, reflect(wo, n));
@@ -706,12 +766,25 @@ impl<'a, 's> Ctx<'a, 's> {
             } else {
                 None
             },
-            bases: ps
-                .scene
-                .materials
-                .iter()
-                .map(SurfaceMaterial::from_material)
-                .collect(),
+            bases: {
+                // Under a reflected environment the specular lobe's
+                // ambient stand-in is dropped (`without_specular_ambient`).
+                let reflected = ps.prefiltered_environment().is_some();
+                ps.scene
+                    .materials
+                    .iter()
+                    .map(|m| {
+                        let b = SurfaceMaterial::from_material(m);
+                        match reflected {
+                            true => SurfaceMaterial {
+                                ks_ambient: Vec3::ZERO,
+                                ..b
+                            },
+                            false => b,
+                        }
+                    })
+                    .collect()
+            },
             lean_frame: scene.environment.is_none() && settings.depth_cue.is_none(),
             one_material: ps.tri_material.first().copied().filter(|&m| {
                 // Parallel, and stops at the first other material.

@@ -5,7 +5,10 @@
 //! ([`chiaro_core::shading::shade_local`]) gives the emitted, ambient and
 //! direct light, with each light sample's visibility decided by a shadow
 //! ray; shadow rays pass through transparent surfaces, tinted by their
-//! transmit colour `kt`. Then
+//! transmit colour `kt`; under an environment map the map's diffuse light
+//! and its prefiltered reflection by the glossy lobe are added
+//! (`texture::environment_diffuse` and `environment_specular`, as the scan
+//! converter does). Then
 //! - a reflected ray is traced, weighted by `kr` (or by the Fresnel
 //!   reflectance `F` for a dielectric: a material with `kt > 0` and
 //!   `fresnel = true`),
@@ -42,7 +45,7 @@ use chiaro_core::prepared::{PreparedScene, RayDifferentials, SurfaceHit};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, RenderSettings, ShadowMethod};
-use chiaro_core::shading::texture::miss_radiance;
+use chiaro_core::shading::texture::{environment_diffuse, environment_specular, miss_radiance};
 use chiaro_core::shading::{
     EmitterGroup, LightSample, LocalLighting, SampleKey, ShadingPoint, SurfaceMaterial,
     delta_split, depth_cue, group_jitter, sanitize, shade_local,
@@ -317,6 +320,13 @@ impl<'s> Tracer<'s> {
             sm.emission = Vec3::ZERO;
         }
         let sp = ShadingPoint { p: sh.p, n, ng, wo };
+        // The environment's diffuse light and its reflection by the glossy
+        // lobe (the split sum), in place of the specular lobe's ambient
+        // stand-in.
+        let prefiltered = self.prepared.prefiltered_environment();
+        if prefiltered.is_some() {
+            sm.ks_ambient = Vec3::ZERO;
+        }
         // Local illumination through the one shading function; the tracer
         // supplies only the visibility of each light sample.
         let lighting = LocalLighting {
@@ -348,6 +358,10 @@ impl<'s> Tracer<'s> {
         );
         if let Some(indirect) = &self.indirect {
             color += sm.kd * indirect(&sh);
+        }
+        if let Some(table) = prefiltered {
+            color += environment_diffuse(table, sm.kd, n)
+                + environment_specular(table, self.prepared.scene, &sm, n, wo);
         }
         // Recursive rays: mirror reflection and refraction.
         if depth < self.settings.whitted.max_depth {

@@ -2,12 +2,13 @@
 //! and trilinear through [`MipMap`] pyramids), procedural solid textures
 //! (checker, wood, marble, noise, dimples, from Perlin noise and turbulence),
 //! bump mapping by the height gradient, tangent-space normal maps, and the
-//! lat-long environment map.
+//! lat-long environment map and its prefiltered image-based lighting.
 
 mod bump;
 mod environment;
 mod image;
 mod mipmap;
+mod prefiltered;
 mod procedural;
 #[cfg(test)]
 mod tests;
@@ -20,6 +21,10 @@ pub use environment::{
 use image::filtered;
 pub use image::{bilinear, nearest, wrap_index};
 pub use mipmap::MipMap;
+pub use prefiltered::{
+    LEVEL_ALPHAS, PrefilteredEnvironment, environment_diffuse, environment_specular,
+    specular_albedo_scale_bias, specular_lobe_albedo,
+};
 pub use procedural::{pattern, perlin_noise, procedural_color, procedural_value, turbulence};
 
 use crate::scene::Texture;
