@@ -29,7 +29,9 @@ pub struct RenderStats {
     pub rays: u64,
 }
 
-/// A technique: renders the context's scene with its settings.
+/// A technique: renders the context's scene with its settings. `aa =
+/// "post"` is the facade's filter after the render; a renderer called with
+/// it directly supersamples.
 pub trait Renderer: Sync {
     /// Renders `ctx`. Returns the film (linear radiance, depth and normal
     /// buffers) and the render's statistics.

@@ -43,6 +43,25 @@ pub struct FilmDiff {
 /// # Panics
 /// If the films differ in size (a test bug, not user input).
 pub fn diff_films(a: &Film, b: &Film, tol: f32, mask: impl Fn(usize) -> bool) -> FilmDiff {
+    diff_films_scaled(a, b, tol, mask, |_, _| 1.0)
+}
+
+/// [`diff_films`] with `tol` relative to the brighter of the two pixels'
+/// largest channel where that exceeds 1: for high-dynamic-range films
+/// (reflected lamps), where two renders agree in their leading digits.
+pub fn diff_films_relative(a: &Film, b: &Film, tol: f32, mask: impl Fn(usize) -> bool) -> FilmDiff {
+    diff_films_scaled(a, b, tol, mask, |x, y| {
+        x.max_element().max(y.max_element()).max(1.0)
+    })
+}
+
+fn diff_films_scaled(
+    a: &Film,
+    b: &Film,
+    tol: f32,
+    mask: impl Fn(usize) -> bool,
+    scale: impl Fn(glam::Vec3, glam::Vec3) -> f32,
+) -> FilmDiff {
     assert_eq!(
         (a.width, a.height),
         (b.width, b.height),
@@ -58,7 +77,7 @@ pub fn diff_films(a: &Film, b: &Film, tol: f32, mask: impl Fn(usize) -> bool) ->
         d.compared += 1;
         d.max_abs = d.max_abs.max(e);
         sum += f64::from(e);
-        if e > tol {
+        if e > tol * scale(a.color[i], b.color[i]) {
             d.over += 1;
         }
     }

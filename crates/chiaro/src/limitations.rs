@@ -99,7 +99,7 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Flat,
         Feature::EnvironmentLight,
-        "light from the environment map",
+        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Flat,
@@ -129,7 +129,7 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Gouraud,
         Feature::EnvironmentLight,
-        "light from the environment map",
+        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Gouraud,
@@ -149,12 +149,12 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Phong,
         Feature::EnvironmentLight,
-        "light from the environment map",
+        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Whitted,
         Feature::EnvironmentLight,
-        "light from the environment map: only mirrors and glass show it",
+        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Radiosity,
@@ -225,7 +225,7 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Hybrid,
         Feature::EnvironmentLight,
-        "light from the environment map: only mirrors and glass show it",
+        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Path,
@@ -243,15 +243,15 @@ pub const SHOWS: &[(Technique, &str)] = &[
     ),
     (
         Technique::Flat,
-        "direct light and shadows per polygon, textures per pixel, non-refractive transparency, environment reflection maps",
+        "direct light and shadows per polygon, textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
     ),
     (
         Technique::Gouraud,
-        "direct light and shadows per vertex, interpolated; textures per pixel, non-refractive transparency, environment reflection maps",
+        "direct light and shadows per vertex, interpolated; textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
     ),
     (
         Technique::Phong,
-        "direct light, highlights and shadows per pixel, textures, normal and bump maps, non-refractive transparency, environment reflection maps",
+        "direct light, highlights and shadows per pixel, textures, normal and bump maps, non-refractive transparency, environment reflection maps and the environment's light",
     ),
     (
         Technique::Whitted,

@@ -5,7 +5,7 @@
 
 use chiaro::scene::{Light, ShadowMethod, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
-use chiaro_testkit::{diff_films, dump_ppm};
+use chiaro_testkit::{diff_films, diff_films_relative, dump_ppm};
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -86,8 +86,10 @@ fn phong_equals_whitted_at_depth_zero_on_a_normal_mapped_model() {
     // textures and the normal map over the same footprint as the scan
     // converter, so a lookup changes by about the texture's contrast per
     // pixel, and the two place a sample the same up to rounding (about
-    // 1e-4 pixel), as on untextured surfaces.
-    let d = diff_films(&raster, &traced, 1e-3, &mask);
+    // 1e-4 pixel), as on untextured surfaces. Relative above 1: the
+    // near-mirror metals reflect the studio's lamps at radiance up to ~30,
+    // where that rounding moves the reflected lookup by 1e-4 of the value.
+    let d = diff_films_relative(&raster, &traced, 1e-3, &mask);
     eprintln!("phong vs whitted: {d:?}");
     if d.over > 0 {
         dump_ppm(&raster, "surface_phong");

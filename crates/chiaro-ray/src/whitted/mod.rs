@@ -38,7 +38,7 @@
 
 use chiaro_core::accel::Accelerator;
 use chiaro_core::context::{RenderContext, RenderStats as ContextStats, Renderer};
-use chiaro_core::error::{CoreError, Result};
+use chiaro_core::error::Result;
 use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles_in};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::{PreparedScene, RayDifferentials, SurfaceHit};
@@ -219,7 +219,7 @@ impl<'s> Tracer<'s> {
             indirect: None,
             casters,
             emitters,
-            centre_light_samples: settings.aa == AaMode::Supersample && settings.samples <= 1,
+            centre_light_samples: settings.aa != AaMode::Adaptive && settings.samples <= 1,
         }
     }
 
@@ -424,13 +424,6 @@ impl<'s> Tracer<'s> {
     /// sampling) and the ray counts.
     pub fn render(&self, progress: &dyn Progress) -> Result<(Film, RenderStats)> {
         let s = &self.settings;
-        if s.aa == AaMode::Post {
-            return Err(CoreError::Unsupported(
-                "aa = \"post\" is a scan-conversion filter; the Whitted ray tracer supports \
-                 \"supersample\" and \"adaptive\""
-                    .into(),
-            ));
-        }
         let rays = AtomicU64::new(0);
         let primary = AtomicU64::new(0);
         // Tiles are cut to the crop window; every pixel depends only on its
