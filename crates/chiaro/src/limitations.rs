@@ -99,7 +99,7 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Flat,
         Feature::EnvironmentLight,
-        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
+        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Flat,
@@ -129,7 +129,7 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Gouraud,
         Feature::EnvironmentLight,
-        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
+        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Gouraud,
@@ -149,12 +149,12 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Phong,
         Feature::EnvironmentLight,
-        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
+        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Whitted,
         Feature::EnvironmentLight,
-        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
+        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Radiosity,
@@ -225,7 +225,7 @@ pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
     (
         Technique::Hybrid,
         Feature::EnvironmentLight,
-        "the environment map's light unoccluded: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
+        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
     ),
     (
         Technique::Path,
