@@ -14,17 +14,19 @@ use std::ops::Range;
 /// light) keep their stratified per-triangle images.
 pub const PER_TRIANGLE_BOUND: u32 = 64;
 
-/// A rough power estimate of `light` (luminance times area or solid-angle
-/// measure) for choosing lights in proportion to it; `scene_radius` sizes a
-/// directional light's footprint. Never negative.
+/// The luminance of the power `light` emits (a spot light's counted as a
+/// point light's), for choosing lights in proportion to it: an area light
+/// `pi Le A` per side; a point light `4 pi` times its radiant intensity
+/// `pi Ip` (it gives irradiance `pi Ip cos / d^2`); a directional light its
+/// irradiance `pi Ip` over a disk of radius `scene_radius`. Never negative.
 pub fn light_power(light: &Light, scene_radius: f32) -> f32 {
     let p = luminance(light.power_rgb()).max(0.0);
     match light {
         Light::Area {
             shape, two_sided, ..
         } => p * shape.area() * PI * if *two_sided { 2.0 } else { 1.0 },
-        Light::Directional { .. } => p * PI * scene_radius * scene_radius,
-        _ => p * 4.0 * PI,
+        Light::Directional { .. } => p * PI * PI * scene_radius * scene_radius,
+        _ => p * 4.0 * PI * PI,
     }
 }
 
@@ -632,6 +634,14 @@ mod tests {
             intensity: 1.0,
             attenuation: crate::scene::Attenuation::None,
         };
+        // Its power is what crosses a sphere around it: the irradiance the
+        // local model gives at distance d (`pi I / d^2`) times `4 pi d^2`.
+        let d = 3.0;
+        let i = crate::shading::sample_light(&point, Vec3::new(0.0, 0.0, d), Vec2::ZERO)
+            .expect("lit")
+            .intensity;
+        let crossing = PI * luminance(i) / (d * d) * 4.0 * PI * d * d;
+        assert!((light_power(&point, 1.0) - crossing).abs() < 1e-4 * crossing);
         let t = LightPowerTable::of_lights(&[&point], 1.0, Some(1.0 / PI));
         let (pl, pe) = (light_power(&point, 1.0), environment_power(1.0, 1.0 / PI));
         assert_eq!(t.len(), 2);
