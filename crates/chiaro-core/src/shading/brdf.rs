@@ -89,6 +89,22 @@ impl SurfaceMaterial {
         sm
     }
 
+    /// The material as local shading takes it where the environment map's
+    /// glossy reflection is integrated (`reflected`, by
+    /// `texture::environment_specular`): without the specular lobe's ambient
+    /// stand-in `ks_ambient`, so the map is not counted twice.
+    #[inline]
+    pub fn under_environment(self, reflected: bool) -> Self {
+        if reflected {
+            Self {
+                ks_ambient: Vec3::ZERO,
+                ..self
+            }
+        } else {
+            self
+        }
+    }
+
     /// True when the specular lobe contributes.
     #[inline]
     pub fn has_specular(&self) -> bool {

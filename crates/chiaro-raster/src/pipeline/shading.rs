@@ -165,12 +165,8 @@ impl Ctx<'_, '_> {
     /// it is.
     #[inline]
     fn without_specular_ambient(&self, m: &SurfaceMaterial) -> Option<SurfaceMaterial> {
-        (m.ks_ambient != Vec3::ZERO && self.ps.prefiltered_environment().is_some()).then_some(
-            SurfaceMaterial {
-                ks_ambient: Vec3::ZERO,
-                ..*m
-            },
-        )
+        (m.ks_ambient != Vec3::ZERO && self.ps.prefiltered_environment().is_some())
+            .then(|| m.under_environment(true))
     }
 
     /// The jitter of sample `i` of light `li` at the shading point `key`:
@@ -773,16 +769,7 @@ impl<'a, 's> Ctx<'a, 's> {
                 ps.scene
                     .materials
                     .iter()
-                    .map(|m| {
-                        let b = SurfaceMaterial::from_material(m);
-                        match reflected {
-                            true => SurfaceMaterial {
-                                ks_ambient: Vec3::ZERO,
-                                ..b
-                            },
-                            false => b,
-                        }
-                    })
+                    .map(|m| SurfaceMaterial::from_material(m).under_environment(reflected))
                     .collect()
             },
             lean_frame: scene.environment.is_none() && settings.depth_cue.is_none(),

@@ -324,9 +324,7 @@ impl<'s> Tracer<'s> {
         // lobe (the split sum), in place of the specular lobe's ambient
         // stand-in.
         let prefiltered = self.prepared.prefiltered_environment();
-        if prefiltered.is_some() {
-            sm.ks_ambient = Vec3::ZERO;
-        }
+        let sm = sm.under_environment(prefiltered.is_some());
         // Local illumination through the one shading function; the tracer
         // supplies only the visibility of each light sample.
         let lighting = LocalLighting {
