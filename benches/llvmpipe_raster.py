@@ -7,7 +7,7 @@ depth test, two point lights and ambient, Phong model (R.V)^32.
 Modes: phong (per-pixel), gouraud (per-vertex), flat (per-pixel with the
 face normal from screen derivatives). Prints ms/frame, median of FRAMES after
 3 warm-up frames, wall and process CPU time (all of llvmpipe's threads).
-Based on /work/shared/peers/gl_llvmpipe.py; builds the mesh itself (no trimesh).
+Builds the mesh itself (no trimesh).
 
 usage: LIBGL_ALWAYS_SOFTWARE=1 llvmpipe_raster.py [phong|gouraud|flat] [FRAMES] [cull 0|1]
 """

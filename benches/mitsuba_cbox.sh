@@ -11,7 +11,7 @@
 # CHIARO_PROFILE=dist builds chiaro with the workspace's thin-LTO profile
 # (default: release).
 # needs: a venv with mitsuba, numpy ($MITSUBA_VENV, default /tmp/mvenv) and
-# Debian's libllvm19 for the llvm variant (see shared/peers/README.md).
+# Debian's libllvm19 for the llvm variant (apt-get install libllvm19).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 repeats=${1:-3}
@@ -21,7 +21,7 @@ py="$venv/bin/python"
 out=target/mitsuba-bench
 mkdir -p "$out"
 export DRJIT_LIBLLVM_PATH=${DRJIT_LIBLLVM_PATH:-/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1}
-quiet=${WAIT_QUIET:-/work/shared/peers/wait_quiet.sh}
+quiet=${WAIT_QUIET:-benches/wait_quiet.sh}
 
 profile=${CHIARO_PROFILE:-release}
 cargo build --profile "$profile" -q -p chiaro-ray --example path_bench

@@ -1,7 +1,7 @@
 //! What the benchmark examples share: process CPU time, medians, a
 //! checksum of results, and the
-//! ray workload of the BVH benchmarks (the camera of
-//! `shared/peers/embree_rays.py` and uniformly random rays).
+//! ray workload of the BVH benchmarks (a pinhole camera over the icosphere
+//! grid, as the Embree comparison traces it, and uniformly random rays).
 
 use chiaro_core::geometry::{Aabb, Ray};
 use chiaro_core::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
