@@ -4,6 +4,9 @@
 //! - 8- and 16-bit **colour** textures are sRGB-encoded: with `srgb = true`
 //!   the sRGB EOTF (IEC 61966-2-1) turns them linear. Data textures (normal
 //!   and bump maps, roughness) pass `srgb = false` and get `code / max`.
+//! - 8-bit textures keep their codes (four bytes a texel) and are decoded at
+//!   each lookup to the same `f32` values (`ImageTexture::texels8`); 16-bit
+//!   and float images are held as linear `f32`.
 //! - HDR and EXR files hold linear floats already and are read as they are.
 //! - Alpha is always linear, 1 where the file has none.
 //! - NaN, infinite and negative colour values (possible in HDR/EXR files) are
@@ -17,7 +20,7 @@
 
 use crate::error::{IoError, Result};
 use chiaro_core::budget::MemoryBudget;
-use chiaro_core::film::tonemap::{srgb_eotf, srgb8_to_linear_table};
+use chiaro_core::film::tonemap::srgb_eotf;
 use chiaro_core::glam::Vec3;
 use chiaro_core::scene::{ImageTexture, WrapMode};
 use std::io::Cursor;
@@ -48,8 +51,7 @@ pub fn load_texture(path: &Path, srgb: bool) -> Result<ImageTexture> {
 /// As [`load_texture`].
 pub fn load_texture_within(path: &Path, srgb: bool, budget: MemoryBudget) -> Result<ImageTexture> {
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
-    let img = decode_image_within(&bytes, path, srgb, budget)?;
-    Ok(img.into_texture(path.display().to_string()))
+    decode_texture_within(&bytes, path, srgb, budget, path.display().to_string())
 }
 
 /// Decodes an image held in memory (a glTF embedded or buffer-view image);
@@ -72,13 +74,13 @@ pub fn load_texture_bytes_within(
     srgb: bool,
     budget: MemoryBudget,
 ) -> Result<ImageTexture> {
-    let img = decode_image_within(bytes, Path::new(name), srgb, budget)?;
-    Ok(img.into_texture(name.to_string()))
+    decode_texture_within(bytes, Path::new(name), srgb, budget, name.to_string())
 }
 
 /// The most memory decoding a `width x height` image takes, in bytes: its
-/// RGBA `f32` texels (16 a pixel), their mip levels (a third more), and the
-/// decoder's own buffers (at most 16 a pixel, for a 32-bit float file).
+/// RGBA `f32` texels (16 a pixel; an 8-bit file's codes take 4), their `f32`
+/// mip levels (a third more), and the decoder's own buffers (at most 16 a
+/// pixel, for a 32-bit float file).
 pub fn decode_bytes(width: u32, height: u32) -> u64 {
     (u64::from(width) * u64::from(height)).saturating_mul(16 * 7) / 3
 }
@@ -156,43 +158,68 @@ pub(crate) fn decode_image_within(
     if bytes.starts_with(&EXR_MAGIC) {
         decode_exr(bytes, name, budget)
     } else {
-        decode_with_image_crate(bytes, name, srgb, budget)
+        let img = decode_with_image_crate(bytes, name, budget)?;
+        Ok(DecodedImage {
+            width: img.width(),
+            height: img.height(),
+            texels: linear_texels(&img, srgb),
+            depth: None,
+            normal: None,
+        })
     }
 }
 
-fn decode_with_image_crate(
+/// Decodes an image texture: 8-bit files keep their codes
+/// ([`ImageTexture::new_8bit`]), others become linear `f32` texels.
+fn decode_texture_within(
     bytes: &[u8],
     name: &Path,
     srgb: bool,
     budget: MemoryBudget,
-) -> Result<DecodedImage> {
-    use image::DynamicImage;
-    let bad =
-        |e: &dyn std::fmt::Display| IoError::format(name, format!("cannot decode the image: {e}"));
-    let reader = || {
-        image::ImageReader::new(Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| bad(&e))
-    };
-    if reader()?.format().is_none() {
-        return Err(IoError::format(
-            name,
-            "not a PNG, JPEG, Radiance HDR or OpenEXR image",
-        ));
+    source: String,
+) -> Result<ImageTexture> {
+    if bytes.starts_with(&EXR_MAGIC) {
+        return Ok(decode_exr(bytes, name, budget)?.into_texture(source));
     }
-    // Check the header's size before allocating anything.
-    let (width, height) = reader()?.into_dimensions().map_err(|e| bad(&e))?;
-    check_size(width, height, name, budget)?;
-    let mut r = reader()?;
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_IMAGE_SIDE);
-    limits.max_image_height = Some(MAX_IMAGE_SIDE);
-    // The decoder's own buffers stay within the budget too.
-    limits.max_alloc = Some(budget.limit.0);
-    r.limits(limits);
-    let img = r.decode().map_err(|e| bad(&e))?;
+    let img = decode_with_image_crate(bytes, name, budget)?;
+    let (width, height) = (img.width(), img.height());
+    Ok(match codes8(img) {
+        Ok(codes) => ImageTexture::new_8bit(source, width, height, codes, srgb),
+        Err(img) => DecodedImage {
+            width,
+            height,
+            texels: linear_texels(&img, srgb),
+            depth: None,
+            normal: None,
+        }
+        .into_texture(source),
+    })
+}
 
-    let texels: Vec<[f32; 4]> = match &img {
+/// The RGBA codes of an 8-bit image (luminance as grey, alpha 255 where the
+/// file has none); other images back as they are.
+fn codes8(img: image::DynamicImage) -> std::result::Result<Vec<[u8; 4]>, image::DynamicImage> {
+    use image::DynamicImage;
+    match img {
+        DynamicImage::ImageRgb32F(_)
+        | DynamicImage::ImageRgba32F(_)
+        | DynamicImage::ImageLuma16(_)
+        | DynamicImage::ImageLumaA16(_)
+        | DynamicImage::ImageRgb16(_)
+        | DynamicImage::ImageRgba16(_) => Err(img),
+        _ => Ok(img
+            .into_rgba8()
+            .pixels()
+            .map(|p| p.0)
+            .collect::<Vec<[u8; 4]>>()),
+    }
+}
+
+/// The decoded image as linear RGBA `f32` (8-bit codes through the same
+/// decode as [`ImageTexture::texel`]'s).
+fn linear_texels(img: &image::DynamicImage, srgb: bool) -> Vec<[f32; 4]> {
+    use image::DynamicImage;
+    match img {
         DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => img
             .to_rgba32f()
             .pixels()
@@ -218,32 +245,44 @@ fn decode_with_image_crate(
                 .collect()
         }
         _ => {
-            let table: [f32; 256] = if srgb {
-                srgb8_to_linear_table()
-            } else {
-                std::array::from_fn(|v| v as f32 / 255.0)
-            };
-            img.to_rgba8()
-                .pixels()
-                .map(|p| {
-                    let [r, g, b, a] = p.0;
-                    [
-                        table[usize::from(r)],
-                        table[usize::from(g)],
-                        table[usize::from(b)],
-                        f32::from(a) / 255.0,
-                    ]
-                })
-                .collect()
+            let codes = img.to_rgba8().pixels().map(|p| p.0).collect();
+            let t = ImageTexture::new_8bit(String::new(), img.width(), img.height(), codes, srgb);
+            (0..t.texel_count()).map(|i| t.texel_at(i)).collect()
         }
+    }
+}
+
+/// Decodes a PNG, JPEG or Radiance HDR image, its size checked from the
+/// header first; `name` is for messages.
+fn decode_with_image_crate(
+    bytes: &[u8],
+    name: &Path,
+    budget: MemoryBudget,
+) -> Result<image::DynamicImage> {
+    let bad =
+        |e: &dyn std::fmt::Display| IoError::format(name, format!("cannot decode the image: {e}"));
+    let reader = || {
+        image::ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| bad(&e))
     };
-    Ok(DecodedImage {
-        width,
-        height,
-        texels,
-        depth: None,
-        normal: None,
-    })
+    if reader()?.format().is_none() {
+        return Err(IoError::format(
+            name,
+            "not a PNG, JPEG, Radiance HDR or OpenEXR image",
+        ));
+    }
+    // Check the header's size before allocating anything.
+    let (width, height) = reader()?.into_dimensions().map_err(|e| bad(&e))?;
+    check_size(width, height, name, budget)?;
+    let mut r = reader()?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    // The decoder's own buffers stay within the budget too.
+    limits.max_alloc = Some(budget.limit.0);
+    r.limits(limits);
+    r.decode().map_err(|e| bad(&e))
 }
 
 /// Reads the first valid layer of an OpenEXR file: `R`, `G`, `B` (or `Y`
@@ -369,13 +408,54 @@ mod tests {
         let bytes = png_bytes(&image::DynamicImage::ImageRgb8(buf));
         let t = load_texture_bytes(&bytes, "mem.png", true).expect("decodes");
         assert_eq!((t.width, t.height), (2, 1));
-        assert!((t.texels[0][0] - 0.215_860_5).abs() < 1e-6);
-        assert_eq!(t.texels[0][1], 0.0);
-        assert_eq!(t.texels[0][2], 1.0);
-        assert_eq!(t.texels[0][3], 1.0);
+        let t0 = t.texel_at(0);
+        assert!((t0[0] - 0.215_860_5).abs() < 1e-6);
+        assert_eq!(t0[1], 0.0);
+        assert_eq!(t0[2], 1.0);
+        assert_eq!(t0[3], 1.0);
         let lin = load_texture_bytes(&bytes, "mem.png", false).expect("decodes");
-        assert!((lin.texels[0][0] - 128.0 / 255.0).abs() < 1e-7);
+        assert!((lin.texel_at(0)[0] - 128.0 / 255.0).abs() < 1e-7);
         assert_eq!(lin.source, "mem.png");
+    }
+
+    /// 8-bit files keep their codes (4 bytes a texel) and read as the `f32`
+    /// decode of the same file (the film reader's route) bit for bit; a
+    /// texture survives the JSON the Python module pickles scenes with.
+    #[test]
+    fn png8_is_held_as_codes_and_reads_as_its_f32_decode() {
+        let mut buf = image::RgbaImage::new(16, 16);
+        for (i, p) in buf.pixels_mut().enumerate() {
+            let c = |k: usize| ((i * k + 3) % 256) as u8;
+            *p = image::Rgba([c(1), c(7), c(11), c(13)]);
+        }
+        let bytes = png_bytes(&image::DynamicImage::ImageRgba8(buf));
+        for srgb in [true, false] {
+            let t = load_texture_bytes(&bytes, "mem8.png", srgb).expect("decodes");
+            assert!(t.texels.is_empty());
+            assert_eq!(t.texel_bytes(), 16 * 16 * 4);
+            let f = decode_image(&bytes, Path::new("mem8.png"), srgb).expect("decodes");
+            assert_eq!(t.texel_count(), f.texels.len());
+            for (i, want) in f.texels.iter().enumerate() {
+                assert_eq!(t.texel_at(i).map(f32::to_bits), want.map(f32::to_bits));
+            }
+            let json = serde_json::to_string(&t).expect("serializes");
+            let back: ImageTexture = serde_json::from_str(&json).expect("deserializes");
+            assert_eq!(back, t);
+        }
+        // A grey 8-bit PNG expands to RGBA codes; a 16-bit one stays f32.
+        let grey = load_texture_bytes(&grey_png(4), "g.png", false).expect("decodes");
+        assert_eq!(grey.texel_bytes(), 4 * 4 * 4);
+        assert_eq!(grey.texel_at(5), [0.0, 0.0, 0.0, 1.0]);
+        let mut buf16: image::ImageBuffer<image::Rgba<u16>, Vec<u16>> =
+            image::ImageBuffer::new(2, 2);
+        buf16.put_pixel(1, 1, image::Rgba([1, 2, 3, 4]));
+        let t16 = load_texture_bytes(
+            &png_bytes(&image::DynamicImage::ImageRgba16(buf16)),
+            "m16.png",
+            false,
+        )
+        .expect("decodes");
+        assert!(t16.texels8.is_none() && t16.texels.len() == 4);
     }
 
     #[test]
@@ -384,6 +464,7 @@ mod tests {
         buf.put_pixel(0, 0, image::Rgba([1000, 40000, 65535, 32768]));
         let bytes = png_bytes(&image::DynamicImage::ImageRgba16(buf));
         let t = load_texture_bytes(&bytes, "mem16.png", false).expect("decodes");
+        assert!(t.texels8.is_none());
         assert!((t.texels[0][0] - 1000.0 / 65535.0).abs() < 1e-7);
         assert!((t.texels[0][3] - 32768.0 / 65535.0).abs() < 1e-7);
         let s = load_texture_bytes(&bytes, "mem16.png", true).expect("decodes");

@@ -1,7 +1,9 @@
-//! Textures: decoded images (linear RGB(A) f32) and procedural solid textures.
+//! Textures: decoded images (linear RGBA `f32`, or the 8-bit codes of an
+//! 8-bit file decoded at each lookup) and procedural solid textures.
 
 use glam::{Mat2, Vec2, Vec3};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use std::sync::{Arc, LazyLock};
 
 /// What happens to texture coordinates outside `[0, 1]`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
@@ -71,8 +73,85 @@ impl UvTransform {
     }
 }
 
-/// A decoded image. Texels are linear (sRGB already removed for colour
-/// textures), row-major from the top-left, RGBA.
+/// How the colour codes of [`Texels8`] become linear values (alpha is
+/// always `code / 255`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Encoding8 {
+    /// sRGB-encoded colour (base colour, emission): the sRGB EOTF.
+    Srgb,
+    /// Linear data (normal, metallic-roughness, occlusion maps): `code / 255`.
+    Unorm,
+}
+
+/// The 256 linear values of each encoding's codes, built once.
+struct Decode8 {
+    srgb: [f32; 256],
+    unorm: [f32; 256],
+}
+
+static DECODE8: LazyLock<Decode8> = LazyLock::new(|| Decode8 {
+    srgb: crate::film::tonemap::srgb8_to_linear_table(),
+    unorm: std::array::from_fn(|v| v as f32 / 255.0),
+});
+
+/// The texels of an 8-bit image as its file holds them (RGBA codes,
+/// row-major from the top-left), decoded at each lookup. Four bytes a texel
+/// instead of sixteen; clones share the codes (the mip-map's level 0 and a
+/// scene's imported textures are not copies).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Texels8 {
+    /// How colour codes map to linear values.
+    pub encoding: Encoding8,
+    #[serde(serialize_with = "ser_codes", deserialize_with = "de_codes")]
+    codes: Arc<[[u8; 4]]>,
+}
+
+fn ser_codes<S: Serializer>(codes: &Arc<[[u8; 4]]>, s: S) -> Result<S::Ok, S::Error> {
+    codes.as_ref().serialize(s)
+}
+
+fn de_codes<'de, D: Deserializer<'de>>(d: D) -> Result<Arc<[[u8; 4]]>, D::Error> {
+    Vec::<[u8; 4]>::deserialize(d).map(Arc::from)
+}
+
+impl Texels8 {
+    /// Texels from their RGBA codes.
+    pub fn new(encoding: Encoding8, codes: Vec<[u8; 4]>) -> Self {
+        Self {
+            encoding,
+            codes: Arc::from(codes),
+        }
+    }
+
+    /// The RGBA codes.
+    pub fn codes(&self) -> &[[u8; 4]] {
+        &self.codes
+    }
+
+    /// Texel `i` as linear RGBA: the same `f32` values an image decoded to
+    /// `f32` at load holds, bit for bit.
+    #[inline]
+    pub fn decode(&self, i: usize) -> [f32; 4] {
+        let t = &*DECODE8;
+        let [r, g, b, a] = self.codes[i];
+        let colour = match self.encoding {
+            Encoding8::Srgb => &t.srgb,
+            Encoding8::Unorm => &t.unorm,
+        };
+        [
+            colour[usize::from(r)],
+            colour[usize::from(g)],
+            colour[usize::from(b)],
+            t.unorm[usize::from(a)],
+        ]
+    }
+}
+
+/// A decoded image, row-major from the top-left, RGBA, linear (sRGB is
+/// removed for colour textures): either `f32` texels or, for 8-bit files,
+/// their codes ([`Texels8`]). Read texels through [`ImageTexture::texel`]
+/// and [`ImageTexture::texel_at`], which see both alike.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ImageTexture {
     /// Where the image came from (for messages and `chiaro info`).
@@ -81,8 +160,12 @@ pub struct ImageTexture {
     pub width: u32,
     /// Height in texels.
     pub height: u32,
-    /// `width * height` texels.
+    /// `width * height` linear `f32` texels (HDR and 16-bit files, images
+    /// built in code); empty when `texels8` holds the image.
     pub texels: Vec<[f32; 4]>,
+    /// The `width * height` texels of an 8-bit file; `None` for `f32` images.
+    #[serde(default)]
+    pub texels8: Option<Texels8>,
     /// Wrap mode for u (glTF's `wrapS`), and for v unless `wrap_t` is set.
     pub wrap: WrapMode,
     /// Wrap mode for v (glTF's `wrapT`); `None`: the same as `wrap`.
@@ -113,6 +196,7 @@ impl Default for ImageTexture {
             width: 0,
             height: 0,
             texels: Vec::new(),
+            texels8: None,
             wrap: WrapMode::Repeat,
             wrap_t: None,
             mag_filter: Filter::Linear,
@@ -127,7 +211,34 @@ impl ImageTexture {
     /// The texel at integer coordinates (already wrapped, in range).
     #[inline]
     pub fn texel(&self, x: u32, y: u32) -> [f32; 4] {
-        self.texels[(y * self.width + x) as usize]
+        self.texel_at((y * self.width + x) as usize)
+    }
+
+    /// Texel `i` in row-major order, linear RGBA.
+    #[inline]
+    pub fn texel_at(&self, i: usize) -> [f32; 4] {
+        match &self.texels8 {
+            Some(t) => t.decode(i),
+            None => self.texels[i],
+        }
+    }
+
+    /// How many texels the image holds (0: it samples as white).
+    #[inline]
+    pub fn texel_count(&self) -> usize {
+        match &self.texels8 {
+            Some(t) => t.codes.len(),
+            None => self.texels.len(),
+        }
+    }
+
+    /// The bytes its texels take (shared 8-bit codes counted in full).
+    pub fn texel_bytes(&self) -> usize {
+        std::mem::size_of_val(self.texels.as_slice())
+            + self
+                .texels8
+                .as_ref()
+                .map_or(0, |t| std::mem::size_of_val(t.codes()))
     }
 
     /// The wrap modes of u and v.
@@ -143,6 +254,29 @@ impl ImageTexture {
             width,
             height,
             texels,
+            ..Self::default()
+        }
+    }
+
+    /// An 8-bit image from its `width * height` RGBA codes, colour
+    /// sRGB-encoded when `srgb` (else `code / 255`), with default sampling.
+    pub fn new_8bit(
+        source: String,
+        width: u32,
+        height: u32,
+        codes: Vec<[u8; 4]>,
+        srgb: bool,
+    ) -> Self {
+        let encoding = if srgb {
+            Encoding8::Srgb
+        } else {
+            Encoding8::Unorm
+        };
+        Self {
+            source,
+            width,
+            height,
+            texels8: Some(Texels8::new(encoding, codes)),
             ..Self::default()
         }
     }

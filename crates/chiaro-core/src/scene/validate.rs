@@ -286,11 +286,12 @@ impl Scene {
             if let Texture::Image(img) = t
                 && (img.width == 0
                     || img.height == 0
-                    || img.texels.len() != (img.width as usize * img.height as usize))
+                    || (img.texels8.is_some() && !img.texels.is_empty())
+                    || img.texel_count() != (img.width as usize * img.height as usize))
             {
                 c.error(
                     format!("textures[{i}] ({})", img.source),
-                    "image has no texels or a wrong texel count",
+                    "image has no texels, a wrong texel count, or both f32 and 8-bit texels",
                 );
             }
         }

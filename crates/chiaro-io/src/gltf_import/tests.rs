@@ -340,3 +340,45 @@ fn unbacked_accessor_counts_are_checked_against_the_budget() {
         .expect_err("sparse count");
     assert!(e.to_string().contains("sparse count 2 exceeds"), "{e}");
 }
+
+/// DamagedHelmet's five 2048 x 2048 8-bit textures are held as their codes
+/// (4 bytes a texel, not 16), the scene holds one copy of each, and their
+/// mip-maps add only the `f32` levels below level 0.
+#[test]
+fn damaged_helmet_textures_hold_their_8bit_codes_once() {
+    let Some(assets) = chiaro_testkit::shared_assets() else {
+        eprintln!("skipped: no shared assets (set CHIARO_ASSETS)");
+        return;
+    };
+    let path =
+        assets.join("khronos-gltf-sample-assets/DamagedHelmet/glTF-Binary/DamagedHelmet.glb");
+    let imported = load_gltf(&path).expect("DamagedHelmet loads");
+    let loaded = crate::whole_scene(imported.clone(), &path).expect("scene");
+    use chiaro_core::scene::{ImageTexture, Texture};
+    let images = |textures: &[Texture]| -> Vec<ImageTexture> {
+        textures
+            .iter()
+            .filter_map(|t| match t {
+                Texture::Image(i) if i.source.contains("DamagedHelmet") => Some(i.clone()),
+                _ => None,
+            })
+            .collect()
+    };
+    let (ours, theirs) = (images(&loaded.scene.textures), images(&imported.textures));
+    assert_eq!(ours.len(), 5);
+    let side = 2048 * 2048;
+    for (t, i) in ours.iter().zip(&theirs) {
+        assert_eq!((t.width, t.height), (2048, 2048), "{}", t.source);
+        assert!(t.texels.is_empty(), "{}", t.source);
+        assert_eq!(t.texel_bytes(), side * 4, "{}", t.source);
+        // The scene's texture shares the import's codes.
+        let codes = |t: &ImageTexture| t.texels8.as_ref().map(|c| c.codes().as_ptr());
+        assert_eq!(codes(t), codes(i), "{}", t.source);
+    }
+    let total: usize = ours.iter().map(|t| t.texel_bytes()).sum();
+    assert_eq!(total, 5 * side * 4);
+    // The pyramid: level 0 shared, levels 1.. as f32 (1024^2 + 512^2 + ... + 1 texels).
+    let mip = chiaro_core::shading::texture::MipMap::new(&ours[0]);
+    let below: usize = (1..=11).map(|l| (2048usize >> l).pow(2)).sum();
+    assert_eq!(mip.extra_bytes(), below * 16);
+}

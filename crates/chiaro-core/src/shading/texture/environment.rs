@@ -97,22 +97,24 @@ impl<'s> EnvironmentLight<'s> {
             return None;
         }
         // An image without texels reads as white (see `bilinear`): one cell.
-        let (w, h) = if img.texels.is_empty() {
+        let n = img.texel_count();
+        let (w, h) = if n == 0 {
             (1, 1)
         } else {
             (img.width.max(1), img.height.max(1))
         };
-        if !img.texels.is_empty() && img.texels.len() != (w as usize) * (h as usize) {
+        if n != 0 && n != (w as usize) * (h as usize) {
             return None;
         }
         use rayon::prelude::*;
         // Each texel's luminance (negative and non-finite channels as 0).
-        let lum: Vec<f32> = if img.texels.is_empty() {
+        let lum: Vec<f32> = if n == 0 {
             vec![1.0]
         } else {
-            img.texels
-                .par_iter()
-                .map(|t| {
+            (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let t = img.texel_at(i);
                     let c = |v: f32| if v.is_finite() { v.max(0.0) } else { 0.0 };
                     0.2126 * c(t[0]) + 0.7152 * c(t[1]) + 0.0722 * c(t[2])
                 })

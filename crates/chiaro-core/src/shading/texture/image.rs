@@ -22,13 +22,13 @@ pub fn wrap_index(i: i64, size: u32, mode: WrapMode) -> u32 {
 /// OBJ-with-flip use), returning linear RGBA. The image's uv transform is
 /// not applied here (see [`eval_texture`](super::eval_texture)).
 pub fn bilinear(img: &ImageTexture, uv: Vec2) -> Vec4 {
-    if img.texels.is_empty() {
+    if img.texel_count() == 0 {
         return Vec4::ONE;
     }
     let x = uv.x * img.width as f32 - 0.5;
     let y = uv.y * img.height as f32 - 0.5;
     if !(x.is_finite() && y.is_finite()) {
-        return Vec4::from(img.texels[0]);
+        return Vec4::from(img.texel_at(0));
     }
     let (wrap_u, wrap_v) = img.wrap_uv();
     let (x0, y0) = (x.floor(), y.floor());
@@ -47,13 +47,13 @@ pub fn bilinear(img: &ImageTexture, uv: Vec2) -> Vec4 {
 
 /// Nearest-texel lookup of `img` at `uv` (the texel containing it), linear RGBA.
 pub fn nearest(img: &ImageTexture, uv: Vec2) -> Vec4 {
-    if img.texels.is_empty() {
+    if img.texel_count() == 0 {
         return Vec4::ONE;
     }
     let x = (uv.x * img.width as f32).floor();
     let y = (uv.y * img.height as f32).floor();
     if !(x.is_finite() && y.is_finite()) {
-        return Vec4::from(img.texels[0]);
+        return Vec4::from(img.texel_at(0));
     }
     let (wrap_u, wrap_v) = img.wrap_uv();
     Vec4::from(img.texel(

@@ -7,6 +7,8 @@ use glam::{Vec2, Vec4};
 
 /// A mip-map pyramid of an image texture: level 0 is the image, each next
 /// level halves both sides (rounding up) by a 2x2 box filter, down to 1x1.
+/// Level 0 of an 8-bit image shares the image's codes; the smaller levels
+/// are `f32` (their box-filtered values are not 8-bit codes).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MipMap {
     /// The levels, finest first.
@@ -19,7 +21,7 @@ impl MipMap {
     pub fn new(img: &ImageTexture) -> Self {
         let mut levels = vec![img.clone()];
         while let Some(prev) = levels.last() {
-            if prev.texels.is_empty() || (prev.width <= 1 && prev.height <= 1) {
+            if prev.texel_count() == 0 || (prev.width <= 1 && prev.height <= 1) {
                 break;
             }
             let (w, h) = (
@@ -46,11 +48,23 @@ impl MipMap {
                 width: w,
                 height: h,
                 texels,
+                texels8: None,
                 ..*prev
             };
             levels.push(next);
         }
         Self { levels }
+    }
+
+    /// The bytes the levels hold beyond the image's own texels (level 0 of
+    /// an 8-bit image is shared, of an `f32` image a copy).
+    pub fn extra_bytes(&self) -> usize {
+        let shared = self.levels[0].texels8.is_some();
+        self.levels
+            .iter()
+            .skip(usize::from(shared))
+            .map(ImageTexture::texel_bytes)
+            .sum()
     }
 
     /// The level of detail for the screen-space derivatives of the texture

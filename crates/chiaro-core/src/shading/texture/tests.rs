@@ -446,3 +446,128 @@ fn miss_radiance_rule() {
         assert_eq!(miss_radiance(&scene, Vec3::Z, false), Vec3::splat(3.0));
     }
 }
+
+/// An 8-bit image and its `f32` twin decoded as the loader did before
+/// 8-bit storage (the sRGB table or `code / 255` for colour, `code / 255`
+/// for alpha): every code appears in every channel.
+fn image_8bit_and_f32(srgb: bool) -> (ImageTexture, ImageTexture) {
+    let (w, h) = (16u32, 17u32);
+    let codes: Vec<[u8; 4]> = (0..w * h)
+        .map(|i| {
+            let c = |k: u32| ((i * k + k / 2) % 256) as u8;
+            [c(1), c(7), c(13), c(29)]
+        })
+        .collect();
+    let table = crate::film::tonemap::srgb8_to_linear_table();
+    let colour = |v: u8| {
+        if srgb {
+            table[usize::from(v)]
+        } else {
+            f32::from(v) / 255.0
+        }
+    };
+    let texels = codes
+        .iter()
+        .map(|&[r, g, b, a]| [colour(r), colour(g), colour(b), f32::from(a) / 255.0])
+        .collect();
+    let mut packed = ImageTexture::new_8bit("t8".into(), w, h, codes, srgb);
+    let mut plain = ImageTexture::new("t32".into(), w, h, texels);
+    for t in [&mut packed, &mut plain] {
+        t.wrap = WrapMode::Mirror;
+        t.wrap_t = Some(WrapMode::Repeat);
+    }
+    (packed, plain)
+}
+
+fn bits(v: Vec4) -> [u32; 4] {
+    v.to_array().map(f32::to_bits)
+}
+
+#[test]
+fn eight_bit_texels_look_up_as_their_f32_decode_bit_for_bit() {
+    for srgb in [true, false] {
+        let (packed, plain) = image_8bit_and_f32(srgb);
+        assert_eq!(packed.texels.len(), 0);
+        assert_eq!(packed.texel_count(), plain.texels.len());
+        assert_eq!(packed.texel_bytes() * 4, plain.texel_bytes());
+        for i in 0..plain.texel_count() {
+            assert_eq!(
+                packed.texel_at(i).map(f32::to_bits),
+                plain.texels[i].map(f32::to_bits),
+                "texel {i}, srgb {srgb}"
+            );
+        }
+        let (mp, mf) = (MipMap::new(&packed), MipMap::new(&plain));
+        assert_eq!(mp.levels.len(), mf.levels.len());
+        // Level 0 shares the image's codes; the smaller levels are the same f32.
+        let codes = |t: &ImageTexture| t.texels8.as_ref().map(|c| c.codes().as_ptr());
+        assert_eq!(codes(&mp.levels[0]), codes(&packed));
+        assert!(codes(&packed).is_some());
+        for (lp, lf) in mp.levels.iter().zip(&mf.levels).skip(1) {
+            assert_eq!(lp.texels8, None);
+            assert_eq!(
+                lp.texels
+                    .iter()
+                    .flatten()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>(),
+                lf.texels
+                    .iter()
+                    .flatten()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            );
+        }
+        assert_eq!(mp.extra_bytes() + plain.texel_bytes(), mf.extra_bytes());
+        let (tp, tf) = (Texture::Image(packed), Texture::Image(plain));
+        for k in 0..400 {
+            let uv = Vec2::new(k as f32 * 0.0371 - 3.1, (k % 23) as f32 * 0.113 - 1.2);
+            let d = 0.002 * (k % 9) as f32;
+            let tc = TexCoord {
+                uv,
+                duv_dx: Vec2::new(d, 0.3 * d),
+                duv_dy: Vec2::new(-0.2 * d, 1.7 * d),
+                ..TexCoord::default()
+            };
+            let (Texture::Image(ip), Texture::Image(ifl)) = (&tp, &tf) else {
+                unreachable!()
+            };
+            assert_eq!(bits(bilinear(ip, uv)), bits(bilinear(ifl, uv)), "{uv}");
+            assert_eq!(bits(nearest(ip, uv)), bits(nearest(ifl, uv)), "{uv}");
+            assert_eq!(
+                bits(eval_texture(&tp, Some(&mp), &tc)),
+                bits(eval_texture(&tf, Some(&mf), &tc)),
+                "{uv} {d}"
+            );
+            assert_eq!(
+                bits(eval_texture(&tp, None, &tc)),
+                bits(eval_texture(&tf, None, &tc))
+            );
+        }
+    }
+}
+
+#[test]
+fn an_eight_bit_environment_map_lights_as_its_f32_twin() {
+    let (packed, plain) = image_8bit_and_f32(true);
+    let lights = [packed, plain].map(|img| {
+        let mut scene = Scene::default();
+        let t = scene.add_texture(Texture::Image(img));
+        scene.environment = Some(crate::scene::Environment {
+            texture: t,
+            intensity: 1.0,
+            rotate_y_degrees: 0.0,
+            as_background: true,
+        });
+        let d = glam::Vec3::new(0.3, 0.5, -0.8).normalize();
+        (
+            environment_mean_radiance(&scene)
+                .to_array()
+                .map(f32::to_bits),
+            environment_radiance(&scene, d).to_array().map(f32::to_bits),
+            EnvironmentLight::new(&scene).map(|l| l.pdf(d).to_bits()),
+        )
+    });
+    assert_eq!(lights[0], lights[1]);
+    assert!(lights[0].2.is_some());
+}
