@@ -9,7 +9,7 @@ fuzz_target!(|data: &[u8]| {
     for srgb in [true, false] {
         if let Ok(t) = chiaro_io::images::load_texture_bytes(data, "fuzz", srgb) {
             assert_eq!(
-                t.texels.len() as u64,
+                t.texel_count() as u64,
                 u64::from(t.width) * u64::from(t.height)
             );
         }

@@ -27,7 +27,8 @@ pub use settings::{
     WhittedSettings,
 };
 pub use texture::{
-    Environment, Filter, ImageTexture, Procedural, ProceduralKind, Texture, UvTransform, WrapMode,
+    Encoding8, Environment, Filter, ImageTexture, Procedural, ProceduralKind, Texels8, Texture,
+    UvTransform, WrapMode,
 };
 pub use validate::{Issue, Severity};
 
