@@ -122,6 +122,170 @@ fn bits(mut m: u32) -> impl Iterator<Item = usize> {
     })
 }
 
+/// A packet's origins, inverse directions and `t_min`s in
+/// structure-of-arrays form, one ray per lane, for [`node_packet`]'s test of
+/// a child box against all rays at once.
+#[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+pub(super) struct PacketPre {
+    org: [safe_arch::m256; 3],
+    /// `1 / dir` per axis; its sign bit picks the entry plane, as
+    /// [`RayPre`]'s rows do.
+    inv: [safe_arch::m256; 3],
+    t_min: safe_arch::m256,
+}
+
+/// Without AVX the packet's node test runs per ray ([`node_per_ray`]).
+#[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+pub(super) struct PacketPre;
+
+impl PacketPre {
+    #[inline(always)]
+    pub(super) fn new(rays: &[Ray; PACKET], pre: &[RayPre; PACKET], t_min: &[f32; PACKET]) -> Self {
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+        {
+            const _: () = assert!(PACKET == 8, "one ray per AVX lane");
+            let row =
+                |f: &dyn Fn(usize) -> f32| safe_arch::m256::from_array(std::array::from_fn(f));
+            Self {
+                org: std::array::from_fn(|a| row(&|r| rays[r].origin[a])),
+                inv: std::array::from_fn(|a| row(&|r| pre[r].recip[a])),
+                t_min: safe_arch::m256::from_array(*t_min),
+            }
+        }
+        #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+        {
+            let _ = (rays, pre, t_min);
+            Self
+        }
+    }
+}
+
+/// Mask of the rays whose `near` is at most their `cull` (NaN: not).
+#[inline(always)]
+fn before(near: &[f32; PACKET], cull: &[f32; PACKET]) -> u32 {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    {
+        use safe_arch::*;
+        let le = cmp_op_mask_m256::<{ cmp_op!(LessEqualOrdered) }>(
+            m256::from_array(*near),
+            m256::from_array(*cull),
+        );
+        move_mask_m256(le) as u32
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    {
+        (0..PACKET).fold(0, |m, r| m | (u32::from(near[r] <= cull[r]) << r))
+    }
+}
+
+/// Per child of `n`: the mask of the rays in `rays` that meet its box
+/// within `(t_min, cull)` (the single-ray node test's answer for each
+/// ray), their entry distances raised to their `path` entries, and the
+/// entry of the first such ray (the packet's order key).
+pub(super) type NodeRays = ([u32; WIDTH], [[f32; PACKET]; WIDTH], [f32; WIDTH]);
+
+/// The node test of a packet, one child at a time across the rays (one ray
+/// per AVX lane): per ray the same operations in the same order as
+/// [`BvhNode::intersect`] (the entry plane chosen by the sign of `1 /
+/// dir`, `max`/`min` with the same operand order), so the same bits.
+#[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+#[inline(always)]
+pub(super) fn node_packet(
+    n: &BvhNode,
+    _pre: &[RayPre; PACKET],
+    soa: &PacketPre,
+    _t_min: &[f32; PACKET],
+    cull: &[f32; PACKET],
+    rays: u32,
+    path: &[f32; PACKET],
+) -> NodeRays {
+    use super::{EMPTY_LANE, EXIT_SLACK};
+    use safe_arch::*;
+    let mut lane_rays = [0u32; WIDTH];
+    let mut lane_near = [[f32::INFINITY; PACKET]; WIDTH];
+    let mut lane_key = [f32::INFINITY; WIDTH];
+    let cull = m256::from_array(*cull);
+    let path = m256::from_array(*path);
+    let b = &n.bounds;
+    for i in 0..WIDTH {
+        if n.count[i] == EMPTY_LANE {
+            continue;
+        }
+        let slab = |a: usize, near: bool| {
+            let (lo, hi) = (set_splat_m256(b[a][i]), set_splat_m256(b[a + 3][i]));
+            let plane = if near {
+                blend_varying_m256(lo, hi, soa.inv[a])
+            } else {
+                blend_varying_m256(hi, lo, soa.inv[a])
+            };
+            mul_m256(sub_m256(plane, soa.org[a]), soa.inv[a])
+        };
+        let near = max_m256(
+            slab(2, true),
+            max_m256(slab(1, true), max_m256(slab(0, true), soa.t_min)),
+        );
+        let far = min_m256(
+            slab(2, false),
+            min_m256(
+                slab(1, false),
+                min_m256(slab(0, false), set_splat_m256(f32::INFINITY)),
+            ),
+        );
+        let far = min_m256(mul_m256(far, set_splat_m256(EXIT_SLACK)), cull);
+        let hit = cmp_op_mask_m256::<{ cmp_op!(LessEqualOrdered) }>(near, far);
+        let mask = move_mask_m256(hit) as u32 & rays;
+        if mask != 0 {
+            lane_rays[i] = mask;
+            let near = near.to_array();
+            lane_key[i] = near[mask.trailing_zeros() as usize];
+            lane_near[i] = max_m256(m256::from_array(near), path).to_array();
+        }
+    }
+    (lane_rays, lane_near, lane_key)
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+#[inline(always)]
+pub(super) fn node_packet(
+    n: &BvhNode,
+    pre: &[RayPre; PACKET],
+    _soa: &PacketPre,
+    t_min: &[f32; PACKET],
+    cull: &[f32; PACKET],
+    rays: u32,
+    path: &[f32; PACKET],
+) -> NodeRays {
+    node_per_ray(n, pre, t_min, cull, rays, path)
+}
+
+/// [`node_packet`] a ray at a time with [`BvhNode::intersect`]: the
+/// portable packet node test, and the AVX one's test oracle.
+#[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "avx"))))]
+#[inline(always)]
+pub(super) fn node_per_ray(
+    n: &BvhNode,
+    pre: &[RayPre; PACKET],
+    t_min: &[f32; PACKET],
+    cull: &[f32; PACKET],
+    rays: u32,
+    path: &[f32; PACKET],
+) -> NodeRays {
+    let mut lane_rays = [0u32; WIDTH];
+    let mut lane_near = [[f32::INFINITY; PACKET]; WIDTH];
+    let mut lane_key = [f32::INFINITY; WIDTH];
+    for r in bits(rays) {
+        let (near, mask) = n.intersect(&pre[r], t_min[r], cull[r]);
+        for i in bits(mask) {
+            if lane_rays[i] == 0 {
+                lane_key[i] = near[i];
+            }
+            lane_rays[i] |= 1 << r;
+            lane_near[i][r] = near[i].max(path[r]);
+        }
+    }
+    (lane_rays, lane_near, lane_key)
+}
+
 impl Bvh {
     /// Closest-hit traversal of the rays in `rays` (a mask over `pre`):
     /// `pre[r]` is ray `r`'s `RayPre`, `t_min[r]` its `t_min` and `cull[r]`
@@ -134,6 +298,7 @@ impl Bvh {
     pub(super) fn traverse_closest_packet(
         &self,
         pre: &[RayPre; PACKET],
+        soa: &PacketPre,
         t_min: &[f32; PACKET],
         cull: &mut [f32; PACKET],
         rays: u32,
@@ -153,18 +318,9 @@ impl Bvh {
         loop {
             if cur.count == 0 {
                 let n = &nodes[cur.child as usize];
-                let mut lane_rays = [0u32; WIDTH];
-                let mut lane_near = [[f32::INFINITY; PACKET]; WIDTH];
-                let mut lane_min = [f32::INFINITY; WIDTH];
-                for r in bits(cur.rays) {
-                    let (near, mask) = n.intersect(&pre[r], t_min[r], cull[r]);
-                    for i in bits(mask) {
-                        lane_rays[i] |= 1 << r;
-                        lane_near[i][r] = near[i].max(cur.near[r]);
-                        lane_min[i] = lane_min[i].min(near[i]);
-                    }
-                }
-                // Hit children, farthest (by the packet's least entry) first.
+                let (lane_rays, lane_near, lane_min) =
+                    node_packet(n, pre, soa, t_min, cull, cur.rays, &cur.near);
+                // Hit children, farthest (by the packet's entry) first.
                 let mut order = [0usize; WIDTH];
                 let mut k = 0usize;
                 for i in 0..WIDTH {
@@ -208,12 +364,7 @@ impl Bvh {
                 let Some(mut e) = stack.pop() else {
                     return;
                 };
-                for r in bits(e.rays) {
-                    let keep = e.near[r] <= cull[r];
-                    if !keep {
-                        e.rays &= !(1 << r);
-                    }
-                }
+                e.rays &= before(&e.near, cull);
                 if e.rays != 0 {
                     cur = e;
                     break;
@@ -233,6 +384,7 @@ impl Bvh {
     pub(super) fn traverse_any_packet(
         &self,
         pre: &[RayPre; PACKET],
+        soa: &PacketPre,
         t_min: &[f32; PACKET],
         t_max: &[f32; PACKET],
         rays: u32,
@@ -252,13 +404,8 @@ impl Bvh {
         loop {
             if cur.count == 0 {
                 let n = &nodes[cur.child as usize];
-                let mut lane_rays = [0u32; WIDTH];
-                for r in bits(cur.rays) {
-                    let (_, mask) = n.intersect(&pre[r], t_min[r], t_max[r]);
-                    for i in bits(mask) {
-                        lane_rays[i] |= 1 << r;
-                    }
-                }
+                let far = [f32::NEG_INFINITY; PACKET];
+                let (lane_rays, _, _) = node_packet(n, pre, soa, t_min, t_max, cur.rays, &far);
                 let mut first = None;
                 for (i, &rays) in lane_rays.iter().enumerate() {
                     if rays == 0 {
@@ -306,6 +453,7 @@ impl Bvh {
 struct Packet {
     rays: [Ray; PACKET],
     pre: [RayPre; PACKET],
+    soa: PacketPre,
     wr: [WatertightRay; PACKET],
     t_min: [f32; PACKET],
     /// Mask of the real rays.
@@ -318,9 +466,11 @@ impl Packet {
         debug_assert!(!rays.is_empty() && rays.len() <= PACKET);
         let rays: [Ray; PACKET] = std::array::from_fn(|i| read_ray(&rays[i.min(rays.len() - 1)]));
         let pre: [RayPre; PACKET] = std::array::from_fn(|i| RayPre::new(&rays[i]));
+        let t_min = rays.map(|r| r.t_min);
         Self {
             wr: std::array::from_fn(|i| WatertightRay::with_inverse(&rays[i], pre[i].recip)),
-            t_min: rays.map(|r| r.t_min),
+            soa: PacketPre::new(&rays, &pre, &t_min),
+            t_min,
             live: (1u32 << rays.len().min(PACKET)) - 1,
             rays,
             pre,
@@ -369,6 +519,7 @@ impl SceneBvh {
         let blocks: &[TriBlock] = &self.blocks;
         self.bvh.traverse_closest_packet(
             &p.pre,
+            &p.soa,
             &p.t_min,
             &mut cull,
             p.live,
@@ -433,6 +584,7 @@ impl SceneBvh {
         let t_max = p.rays.map(|r| r.t_max);
         self.bvh.traverse_any_packet(
             &p.pre,
+            &p.soa,
             &p.t_min,
             &t_max,
             p.live,

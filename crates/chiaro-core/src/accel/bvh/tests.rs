@@ -891,3 +891,57 @@ fn culled_camera_packets_match_single_rays() {
     }
     assert!(culled > 100, "the views see back faces ({culled})");
 }
+
+#[test]
+fn packet_node_test_matches_the_per_ray_one() {
+    use super::packet::{PACKET, PacketPre, node_packet, node_per_ray};
+    let s = tie_scene();
+    let ps = PreparedScene::new(&s, PrepareOptions::default());
+    let bvh = SceneBvh::new(&ps);
+    let mut rays = random_rays(&ps, 400, 5);
+    rays.extend(tiled_camera_rays(
+        Vec3::new(0.0, 0.0, 20.0),
+        Vec3::ZERO,
+        16,
+        8,
+        0.8,
+    ));
+    rays.extend(tiled_camera_rays(
+        Vec3::new(-20.0, 0.0, 0.0),
+        Vec3::ZERO,
+        16,
+        8,
+        0.8,
+    ));
+    let mut compared = 0;
+    for (k, chunk) in rays.chunks_exact(PACKET).enumerate() {
+        let rr: [Ray; PACKET] = std::array::from_fn(|i| Ray {
+            t_min: [0.0, 0.5][(i + k) % 2],
+            ..chunk[i]
+        });
+        let pre: [RayPre; PACKET] = std::array::from_fn(|i| RayPre::new(&rr[i]));
+        let t_min = rr.map(|r| r.t_min);
+        let soa = PacketPre::new(&rr, &pre, &t_min);
+        let cull: [f32; PACKET] = std::array::from_fn(|i| [f32::INFINITY, 3.0, 12.0][(i + k) % 3]);
+        let path: [f32; PACKET] = std::array::from_fn(|i| [f32::NEG_INFINITY, 2.0][(i + k) % 2]);
+        for n in bvh.bvh().nodes() {
+            for mask in [0xff, 0x5a] {
+                let a = node_packet(n, &pre, &soa, &t_min, &cull, mask, &path);
+                let b = node_per_ray(n, &pre, &t_min, &cull, mask, &path);
+                assert_eq!(a.0, b.0, "rays per child");
+                for i in 0..WIDTH {
+                    if a.0[i] != 0 {
+                        compared += 1;
+                        assert_eq!(a.2[i].to_bits(), b.2[i].to_bits(), "order key");
+                    }
+                    for r in 0..PACKET {
+                        if a.0[i] >> r & 1 == 1 {
+                            assert_eq!(a.1[i][r].to_bits(), b.1[i][r].to_bits(), "entry");
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(compared > 1000, "children met: {compared}");
+}
