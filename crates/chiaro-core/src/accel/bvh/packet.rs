@@ -48,11 +48,11 @@ pub(super) fn widen(t: f32) -> f32 {
 /// ray, the largest entry distance on the path to it (its own box's and
 /// its ancestors').
 #[derive(Debug, Clone, Copy)]
-struct PacketEntry {
-    child: u32,
-    count: u32,
-    rays: u32,
-    near: [f32; PACKET],
+pub(super) struct PacketEntry {
+    pub(super) child: u32,
+    pub(super) count: u32,
+    pub(super) rays: u32,
+    pub(super) near: [f32; PACKET],
 }
 
 impl Default for PacketEntry {
@@ -66,31 +66,52 @@ impl Default for PacketEntry {
     }
 }
 
-/// Entries in a packet stack's fixed part; deeper trees spill into a `Vec`.
-const PACKET_STACK: usize = 48;
+/// Entries in a packet stack's first fixed part, cleared for every packet
+/// (a packet through a small scene seldom holds more, and clearing a larger
+/// array would cost more than its traversal).
+const PACKET_STACK_FIRST: usize = 12;
+/// Entries in the second fixed part, set up only when a packet first needs
+/// it; deeper trees spill into a `Vec`.
+const PACKET_STACK_MORE: usize = 36;
 
-/// A packet traversal stack: a fixed array, then a `Vec` (never allocated
-/// for ordinary trees).
-struct PacketStack {
-    fixed: [PacketEntry; PACKET_STACK],
+/// A packet traversal stack: two fixed arrays, the second made only when
+/// the first is full, then a `Vec` (never allocated for ordinary trees).
+pub(super) struct PacketStack {
+    first: [PacketEntry; PACKET_STACK_FIRST],
+    more: Option<[PacketEntry; PACKET_STACK_MORE]>,
     len: usize,
     spill: Vec<PacketEntry>,
 }
 
 impl PacketStack {
     #[inline(always)]
-    fn new() -> Self {
+    pub(super) fn new() -> Self {
         Self {
-            fixed: [PacketEntry::default(); PACKET_STACK],
+            first: [PacketEntry::default(); PACKET_STACK_FIRST],
+            more: None,
             len: 0,
             spill: Vec::new(),
         }
     }
 
     #[inline(always)]
-    fn push(&mut self, e: PacketEntry) {
-        if self.len < PACKET_STACK {
-            self.fixed[self.len] = e;
+    pub(super) fn push(&mut self, e: PacketEntry) {
+        if self.len < PACKET_STACK_FIRST {
+            self.first[self.len] = e;
+            self.len += 1;
+        } else {
+            self.push_more(e);
+        }
+    }
+
+    /// [`PacketStack::push`] past the first part.
+    #[inline(never)]
+    fn push_more(&mut self, e: PacketEntry) {
+        if self.len < PACKET_STACK_FIRST + PACKET_STACK_MORE {
+            let more = self
+                .more
+                .get_or_insert([PacketEntry::default(); PACKET_STACK_MORE]);
+            more[self.len - PACKET_STACK_FIRST] = e;
             self.len += 1;
         } else {
             self.spill.push(e);
@@ -98,15 +119,26 @@ impl PacketStack {
     }
 
     #[inline(always)]
-    fn pop(&mut self) -> Option<PacketEntry> {
+    pub(super) fn pop(&mut self) -> Option<PacketEntry> {
+        // (The spill holds entries only when both fixed parts are full.)
+        if self.len > PACKET_STACK_FIRST {
+            self.pop_more()
+        } else if self.len > 0 {
+            self.len -= 1;
+            Some(self.first[self.len])
+        } else {
+            None
+        }
+    }
+
+    /// [`PacketStack::pop`] past the first part.
+    #[inline(never)]
+    fn pop_more(&mut self) -> Option<PacketEntry> {
         if let Some(e) = self.spill.pop() {
             return Some(e);
         }
-        if self.len == 0 {
-            return None;
-        }
         self.len -= 1;
-        Some(self.fixed[self.len])
+        self.more.as_ref().map(|m| m[self.len - PACKET_STACK_FIRST])
     }
 }
 
@@ -478,7 +510,22 @@ impl Packet {
     }
 }
 
+/// Nodes from which [`SceneBvh`]'s `Accelerator` packet queries trace
+/// packets; smaller trees loop over single rays. A packet saves node loads
+/// that miss the cache and costs set-up and per-node work for eight rays, so
+/// it pays only on a tree far larger than the cache (BENCHMARKS.md, "BVH ray
+/// packets").
+pub const PACKET_MIN_NODES: usize = 1 << 15;
+
 impl SceneBvh {
+    /// Whether packets pay on this tree ([`PACKET_MIN_NODES`]): the
+    /// `Accelerator` packet queries use them when true and loop over single
+    /// rays otherwise. [`SceneBvh::intersect_packet`] and
+    /// [`SceneBvh::occluded_packet`] always trace packets.
+    pub fn packets_pay(&self) -> bool {
+        self.bvh.node_count() >= PACKET_MIN_NODES
+    }
+
     /// [`Accelerator::intersect`](crate::accel::Accelerator::intersect) of
     /// each ray into `hits` (`hits.len() == rays.len()`), [`PACKET`] rays
     /// at a time through the packet traversal: bit-identical answers, faster

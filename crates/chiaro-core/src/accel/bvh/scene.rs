@@ -387,15 +387,27 @@ impl Accelerator for SceneBvh {
     }
 
     fn intersect_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        SceneBvh::intersect_packet(self, rays, hits);
+        if self.packets_pay() {
+            SceneBvh::intersect_packet(self, rays, hits);
+        } else {
+            for (r, h) in rays.iter().zip(hits) {
+                *h = self.intersect(r);
+            }
+        }
     }
 
     fn intersect_camera_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        SceneBvh::intersect_packet(self, rays, hits);
+        Accelerator::intersect_packet(self, rays, hits);
     }
 
     fn occluded_packet(&self, rays: &[Ray], occluded: &mut [bool]) {
-        SceneBvh::occluded_packet(self, rays, occluded);
+        if self.packets_pay() {
+            SceneBvh::occluded_packet(self, rays, occluded);
+        } else {
+            for (r, o) in rays.iter().zip(occluded) {
+                *o = self.occluded(r);
+            }
+        }
     }
 
     fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool {

@@ -945,3 +945,18 @@ fn packet_node_test_matches_the_per_ray_one() {
     }
     assert!(compared > 1000, "children met: {compared}");
 }
+
+#[test]
+fn packet_stack_is_lifo_across_its_parts() {
+    let mut s = super::packet::PacketStack::new();
+    for i in 0..100u32 {
+        s.push(super::packet::PacketEntry {
+            child: i,
+            ..Default::default()
+        });
+    }
+    for i in (0..100u32).rev() {
+        assert_eq!(s.pop().map(|e| e.child), Some(i));
+    }
+    assert!(s.pop().is_none());
+}
