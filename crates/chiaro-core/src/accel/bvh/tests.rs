@@ -733,7 +733,7 @@ fn check_packets_match_single(bvh: &SceneBvh, rays: &[Ray], what: &str) {
 
 /// A grid of unit quads in the plane z = 0 (shared edges everywhere), a
 /// second copy of every fourth quad lying exactly on the first (ties at
-/// equal distances), and a tilted icosphere-like soup above it.
+/// equal distances), and an icosphere above it.
 fn tie_scene() -> Scene {
     let mut mesh = Mesh::default();
     let n = 24u32;
