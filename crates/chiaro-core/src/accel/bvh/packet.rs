@@ -1,21 +1,25 @@
 //! Packet traversal of a [`Bvh`]: up to [`PACKET`] coherent rays (a tile of
 //! camera rays, shadow rays towards one light) walk the tree together. A
-//! node is loaded once for the packet and its children are tested against
-//! every active ray with the single-ray node test ([`BvhNode::intersect`],
-//! the same operations per ray, so the same entry distances and masks); a
-//! child is visited when any active ray meets it, with the rays that do.
+//! node is loaded once for the packet and each child box is tested against
+//! every active ray: with AVX against all eight at once, one ray per lane
+//! ([`node_packet`]), elsewhere with [`BvhNode::intersect`] per ray; either
+//! way the single-ray test's operations per ray, so the same entry
+//! distances and masks. A child is visited when any active ray meets it,
+//! with the rays that do.
 //!
-//! Closest hit: children are visited nearest first by the packet's least
-//! entry distance, and a popped child keeps only the rays whose entry lies
-//! before their current hit. A packet visits leaves in another order than
-//! each ray alone would, so a ray's answer may differ from its single
-//! traversal only where that order decides it: two primitives at exactly
-//! the same distance (the first visited wins), or a hit that lies before
-//! the computed entry of one of its ancestors' boxes (rounding; single
-//! traversal may cull such a box). The leaf callback sees both (rays cull
-//! with their hit widened by [`CULL_MARGIN`], so a box entered just beyond
-//! the hit is still visited) and flags the ray; flagged rays are traced
-//! again alone, so the answers are the single traversal's bit for bit.
+//! Closest hit: children are visited nearest first by the entry of the
+//! first ray that meets them, and a popped child keeps only the rays whose
+//! entry lies before their current hit. A packet visits leaves in another
+//! order than each ray alone would, so a ray's answer may differ from its
+//! single traversal only where that order decides it: two primitives at
+//! exactly the same distance (the first visited wins), or a hit that lies
+//! before the computed entry of one of its ancestors' boxes (rounding;
+//! single traversal may cull such a box). The leaf callback sees both
+//! (rays cull with their hit widened by [`CULL_MARGIN`], so a box entered
+//! just beyond the hit is still visited) and flags the ray; flagged rays
+//! are traced again alone, so the answers are the single traversal's bit
+//! for bit. (Only a hit computed more than `CULL_MARGIN` before such an
+//! entry, a rounding error far beyond the triangle test's, could escape.)
 //!
 //! Any hit: each ray visits exactly the leaves its single traversal would
 //! (the same node tests with its fixed `t_max`), in another order, and
