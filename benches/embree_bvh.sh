@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# BVH build time and single-ray throughput of chiaro's BVH next to native
-# Embree 3, on the same 1,003,520-triangle grid of icospheres and the same
-# rays (the workload of shared/peers/embree_rays.py), both on $THREADS threads.
+# BVH build time and ray throughput of chiaro's BVH (single rays, and packets
+# of 8: camera rays in 4 x 2 tiles, random rays 8 in a row) next to native
+# Embree 3 (rtcIntersect1, rtcIntersect16), on the same 1,003,520-triangle
+# grid of icospheres and the same rays (the workload of
+# shared/peers/embree_rays.py), both on $THREADS threads.
 #
 #   benches/embree_bvh.sh [THREADS] [REPS] [PAIRS]
 #

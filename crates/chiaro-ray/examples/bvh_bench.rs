@@ -1,7 +1,9 @@
-//! BVH benchmark (chiaro's 4-wide BVH, [`SceneBvh`]) on the workload of `shared/peers/embree_rays.py`: a 14 x 14
+//! BVH benchmark (chiaro's 8-wide BVH, [`SceneBvh`]) on the workload of `shared/peers/embree_rays.py`: a 14 x 14
 //! grid of 5120-triangle icospheres (1,003,520 triangles), 1000 x 1000
 //! coherent pinhole camera rays and 1M incoherent random rays, closest hit,
-//! one ray at a time, on a rayon pool of `--threads` threads.
+//! one ray at a time and as packets of [`PACKET`] (camera rays in 4 x 2
+//! pixel tiles, random rays eight in a row), on a rayon pool of `--threads`
+//! threads. The packets' answers are checked against the single rays'.
 //!
 //! ```text
 //! cargo run --release -p chiaro-ray --example bvh_bench -- [--threads 2] [--reps 5] [--dump DIR]
@@ -15,7 +17,9 @@
 //! machine.
 
 use chiaro_core::accel::Accelerator;
-use chiaro_core::accel::bvh::{BvhOptions, SceneBvh};
+use chiaro_core::accel::Hit;
+use chiaro_core::accel::bvh::{BvhOptions, PACKET, SceneBvh};
+use chiaro_core::geometry::Ray;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
 use chiaro_testkit::bench::{WordHash, bvh_rays, cpu_seconds, flag_value, median};
@@ -169,20 +173,37 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
         }
     }
-    for (name, rays) in [
-        ("coherent(camera)", &coherent),
-        ("incoherent(random)", &incoherent),
-    ] {
+    // The camera rays again in 4 x 2 pixel tiles, one packet each.
+    let tiled: Vec<Ray> = (0..h / 2)
+        .flat_map(|ty| (0..w / 4).map(move |tx| (tx, ty)))
+        .flat_map(|(tx, ty)| (0..8).map(move |k| (4 * tx + k % 4) + w * (2 * ty + k / 4)))
+        .map(|i| coherent[i])
+        .collect();
+    assert_eq!(tiled.len(), coherent.len(), "tiles cover the image");
+    let single = |c: &[Ray]| c.iter().filter(|r| bvh.intersect(r).is_some()).count();
+    let packets = |c: &[Ray]| {
+        let mut hits = [None; PACKET];
+        c.chunks(PACKET)
+            .map(|p| {
+                bvh.intersect_packet(p, &mut hits[..p.len()]);
+                hits[..p.len()].iter().filter(|h| h.is_some()).count()
+            })
+            .sum::<usize>()
+    };
+    type Trace<'a> = &'a (dyn Fn(&[Ray]) -> usize + Sync);
+    let runs: [(&str, &str, &Vec<Ray>, Trace); 4] = [
+        ("coherent(camera)", "intersect", &coherent, &single),
+        ("coherent(camera)", "packet 4x2", &tiled, &packets),
+        ("incoherent(random)", "intersect", &incoherent, &single),
+        ("incoherent(random)", "packet 8", &incoherent, &packets),
+    ];
+    for (name, how, rays, trace) in runs {
         let mut times = Vec::new();
         let mut cpu = Vec::new();
         let mut hits = 0usize;
         for _ in 0..reps.max(1) {
             let (t0, c0) = (Instant::now(), cpu_seconds());
-            hits = pool.install(|| {
-                rays.par_chunks(4096)
-                    .map(|c| c.iter().filter(|r| bvh.intersect(r).is_some()).count())
-                    .sum()
-            });
+            hits = pool.install(|| rays.par_chunks(4096).map(trace).sum());
             times.push(t0.elapsed().as_secs_f64());
             if let (Some(c0), Some(c1)) = (c0, cpu_seconds()) {
                 cpu.push(c1 - c0);
@@ -200,12 +221,35 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             )
         };
         println!(
-            "{name:<20} intersect  threads={threads}: median {med:.4}s -> {:.2} Mrays/s (min {:.4} max {:.4}, hit rate {:.3}{cpu_note})",
+            "{name:<20} {how:<10} threads={threads}: median {med:.4}s -> {:.2} Mrays/s (min {:.4} max {:.4}, hit rate {:.3}{cpu_note})",
             rays.len() as f64 / med / 1e6,
             times[0],
             times[times.len() - 1],
             hits as f64 / rays.len() as f64
         );
+    }
+    // The packets' answers are the single rays' bit for bit.
+    let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()));
+    for (name, rays) in [("camera tiles", &tiled), ("random", &incoherent)] {
+        let differ: usize = pool.install(|| {
+            rays.par_chunks(4096)
+                .map(|c| {
+                    let mut hits = vec![None; c.len()];
+                    bvh.intersect_packet(c, &mut hits);
+                    c.iter()
+                        .zip(&hits)
+                        .filter(|(r, h)| bits(bvh.intersect(r)) != bits(**h))
+                        .count()
+                })
+                .sum()
+        });
+        println!(
+            "{name}: {differ} of {} packet answers differ from single rays",
+            rays.len()
+        );
+        if differ != 0 {
+            return Err(format!("{differ} packet answers differ").into());
+        }
     }
     Ok(())
 }

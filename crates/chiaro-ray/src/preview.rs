@@ -17,6 +17,11 @@ use glam::{Vec2, Vec3};
 
 /// Tile side in pixels.
 const TILE: u32 = 32;
+/// Pixels per camera-ray packet, across and down (the BVH's packet of
+/// eight rays, `chiaro_core::accel::bvh::PACKET`).
+const GROUP_W: u32 = 4;
+const GROUP_H: u32 = 2;
+const GROUP: usize = (GROUP_W * GROUP_H) as usize;
 
 /// The preview technique, as the technique interface's [`Renderer`]:
 /// eye-light shading, `settings.samples` jittered rays per pixel (one ray
@@ -70,55 +75,77 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
         progress,
         |rect| {
             let mut tile = TilePixels::new(rect);
-            for ty in 0..rect.height {
-                for tx in 0..rect.width {
-                    let (px, py) = (rect.x + tx, rect.y + ty);
-                    let mut sum = Vec3::ZERO;
-                    for s in 0..spp {
-                        let offset = if spp == 1 {
-                            Vec2::splat(0.5)
-                        } else {
-                            let mut rng = pixel_rng(settings.seed, px, py, s);
-                            uniform2(&mut rng)
-                        };
-                        let dir =
-                            cam.ray_direction(px as f32 + offset.x, py as f32 + offset.y, w, h);
-                        let ray = Ray::new(cam.eye, dir);
-                        let Some(hit) = accel.intersect_camera(&ray) else {
-                            sum += background_radiance(scene, dir);
-                            continue;
-                        };
-                        // The surface layer at the base level of textures.
-                        let ss = prepared.shading_surface(&ray, &hit, None);
-                        let surf = ss.hit;
-                        let wo = -dir;
-                        // Face the viewer: the eye light lights whatever side we see.
-                        let (n, ng) = if surf.ng.dot(wo) < 0.0 {
-                            (-ss.ns, -surf.ng)
-                        } else {
-                            (ss.ns, surf.ng)
-                        };
-                        let sp = ShadingPoint {
-                            p: surf.p,
-                            n,
-                            ng,
-                            wo,
-                        };
-                        let m = ss.material;
-                        sum += shade_local(
-                            &m,
-                            &sp,
-                            &lighting,
-                            |_, _| Vec2::splat(0.5),
-                            |_, _| Vec3::ONE,
-                        );
-                        if s == 0 {
-                            let i = (ty * rect.width + tx) as usize;
-                            tile.depth[i] = hit.t * dir.length();
-                            tile.normal[i] = n;
+            // Pixels in groups of GROUP_W x GROUP_H; each sample's rays of
+            // a group are traced together (`intersect_camera_packet`, the
+            // same hits as one at a time).
+            for gy in (0..rect.height).step_by(GROUP_H as usize) {
+                for gx in (0..rect.width).step_by(GROUP_W as usize) {
+                    let mut pixels = [(0u32, 0u32); GROUP];
+                    let mut n = 0;
+                    for ty in gy..(gy + GROUP_H).min(rect.height) {
+                        for tx in gx..(gx + GROUP_W).min(rect.width) {
+                            pixels[n] = (tx, ty);
+                            n += 1;
                         }
                     }
-                    tile.color[(ty * rect.width + tx) as usize] = sanitize(sum / spp as f32);
+                    let mut sums = [Vec3::ZERO; GROUP];
+                    let mut rays = [Ray::new(cam.eye, Vec3::Z); GROUP];
+                    let mut hits = [None; GROUP];
+                    for s in 0..spp {
+                        for (ray, &(tx, ty)) in rays.iter_mut().zip(&pixels[..n]) {
+                            let (px, py) = (rect.x + tx, rect.y + ty);
+                            let offset = if spp == 1 {
+                                Vec2::splat(0.5)
+                            } else {
+                                let mut rng = pixel_rng(settings.seed, px, py, s);
+                                uniform2(&mut rng)
+                            };
+                            let dir =
+                                cam.ray_direction(px as f32 + offset.x, py as f32 + offset.y, w, h);
+                            *ray = Ray::new(cam.eye, dir);
+                        }
+                        accel.intersect_camera_packet(&rays[..n], &mut hits[..n]);
+                        for k in 0..n {
+                            let (ray, (tx, ty)) = (&rays[k], pixels[k]);
+                            let dir = ray.dir;
+                            let Some(hit) = hits[k] else {
+                                sums[k] += background_radiance(scene, dir);
+                                continue;
+                            };
+                            // The surface layer at the base level of textures.
+                            let ss = prepared.shading_surface(ray, &hit, None);
+                            let surf = ss.hit;
+                            let wo = -dir;
+                            // Face the viewer: the eye light lights whatever side we see.
+                            let (n, ng) = if surf.ng.dot(wo) < 0.0 {
+                                (-ss.ns, -surf.ng)
+                            } else {
+                                (ss.ns, surf.ng)
+                            };
+                            let sp = ShadingPoint {
+                                p: surf.p,
+                                n,
+                                ng,
+                                wo,
+                            };
+                            let m = ss.material;
+                            sums[k] += shade_local(
+                                &m,
+                                &sp,
+                                &lighting,
+                                |_, _| Vec2::splat(0.5),
+                                |_, _| Vec3::ONE,
+                            );
+                            if s == 0 {
+                                let i = (ty * rect.width + tx) as usize;
+                                tile.depth[i] = hit.t * dir.length();
+                                tile.normal[i] = n;
+                            }
+                        }
+                    }
+                    for (&(tx, ty), sum) in pixels[..n].iter().zip(&sums) {
+                        tile.color[(ty * rect.width + tx) as usize] = sanitize(*sum / spp as f32);
+                    }
                 }
             }
             tile

@@ -70,6 +70,19 @@ impl Culled {
         })
     }
 
+    /// `first` (the inner accelerator's hit of `ray`), or when it is culled
+    /// the first hit beyond it that is not.
+    fn past_culled(&self, ray: &Ray, first: Option<Hit>) -> Option<Hit> {
+        let mut r = *ray;
+        let mut hit = first?;
+        while self.is_culled(ray, &hit) {
+            // Continue past the back face along the same ray.
+            r.t_min = hit.t;
+            hit = self.inner.intersect(&r)?;
+        }
+        Some(hit)
+    }
+
     /// True when `hit` is on the back of a culling material: the ray leaves
     /// the surface's front half-space (`ng . dir > 0`).
     fn is_culled(&self, ray: &Ray, hit: &Hit) -> bool {
@@ -93,19 +106,26 @@ impl Accelerator for Culled {
     }
 
     fn intersect_camera(&self, ray: &Ray) -> Option<Hit> {
-        let mut r = *ray;
-        loop {
-            let hit = self.inner.intersect(&r)?;
-            if !self.is_culled(ray, &hit) {
-                return Some(hit);
-            }
-            // Continue past the back face along the same ray.
-            r.t_min = hit.t;
+        self.past_culled(ray, self.inner.intersect(ray))
+    }
+
+    fn intersect_camera_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.inner.intersect_packet(rays, hits);
+        for (ray, hit) in rays.iter().zip(hits) {
+            *hit = self.past_culled(ray, *hit);
         }
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
         self.inner.occluded(ray)
+    }
+
+    fn intersect_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.inner.intersect_packet(rays, hits);
+    }
+
+    fn occluded_packet(&self, rays: &[Ray], occluded: &mut [bool]) {
+        self.inner.occluded_packet(rays, occluded);
     }
 
     fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool {

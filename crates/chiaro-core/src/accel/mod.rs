@@ -39,6 +39,32 @@ pub trait Accelerator: Send + Sync {
     }
     /// True if anything is hit with `t` in `(ray.t_min, ray.t_max)`.
     fn occluded(&self, ray: &Ray) -> bool;
+    /// [`Self::intersect`] of each of `rays` into `hits` (of the same
+    /// length). Accelerators may trace coherent rays (a tile of camera
+    /// rays) together; the answers are `intersect`'s bit for bit.
+    fn intersect_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        debug_assert_eq!(rays.len(), hits.len());
+        for (r, h) in rays.iter().zip(hits) {
+            *h = self.intersect(r);
+        }
+    }
+    /// [`Self::intersect_camera`] of each of `rays` into `hits`, as
+    /// [`Self::intersect_packet`].
+    fn intersect_camera_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        debug_assert_eq!(rays.len(), hits.len());
+        for (r, h) in rays.iter().zip(hits) {
+            *h = self.intersect_camera(r);
+        }
+    }
+    /// [`Self::occluded`] of each of `rays` into `occluded` (of the same
+    /// length), as [`Self::intersect_packet`] (shadow rays towards one
+    /// light).
+    fn occluded_packet(&self, rays: &[Ray], occluded: &mut [bool]) {
+        debug_assert_eq!(rays.len(), occluded.len());
+        for (r, o) in rays.iter().zip(occluded) {
+            *o = self.occluded(r);
+        }
+    }
     /// Calls `visit(hit)` for every intersection with `t` in
     /// `(ray.t_min, ray.t_max)`, in no particular order (a sphere crossed
     /// twice reports both roots), until `visit` returns true; returns true

@@ -48,9 +48,17 @@
 //! exits are widened by `1 + 2 gamma(3)`
 //! (pbrt-v4 section 6.8.2) so that rounding never culls a primitive the
 //! exact test would hit.
+//!
+//! Coherent rays can also walk the tree as packets of [`PACKET`]
+//! ([`SceneBvh::intersect_packet`], [`SceneBvh::occluded_packet`]): one node
+//! load per packet, the single-ray node and leaf tests per ray, and answers
+//! bit-identical to single rays (`packet.rs` says how ties are kept). The
+//! `Accelerator` packet queries use them only on trees of at least
+//! [`PACKET_MIN_NODES`] nodes, where they pay.
 
 mod build;
 mod node;
+mod packet;
 mod partition;
 mod scene;
 #[cfg(test)]
@@ -59,6 +67,7 @@ mod traverse;
 mod wide;
 
 pub use node::{BvhNode, Child};
+pub use packet::{PACKET, PACKET_MIN_NODES};
 pub use scene::SceneBvh;
 
 use super::pages::HugeArray;

@@ -108,7 +108,7 @@ impl TriBlock {
 /// Starts loading the triangle block holding slot `first` (a leaf's first
 /// block; see [`prefetch`](super::traverse::prefetch)).
 #[inline(always)]
-fn prefetch_block(blocks: &[TriBlock], first: u32) {
+pub(super) fn prefetch_block(blocks: &[TriBlock], first: u32) {
     #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
     if let Some(b) = blocks.get(first as usize / BLOCK) {
         // 160 bytes: at most four cache lines, starting at v[0], v[4],
@@ -124,7 +124,7 @@ fn prefetch_block(blocks: &[TriBlock], first: u32) {
 
 /// The lane mask of slots `first..end` inside block `b`.
 #[inline(always)]
-fn block_lanes(b: usize, first: usize, end: usize) -> u32 {
+pub(super) fn block_lanes(b: usize, first: usize, end: usize) -> u32 {
     let lo = first.saturating_sub(BLOCK * b).min(BLOCK);
     let hi = (end - BLOCK * b).min(BLOCK);
     ((1u32 << hi) - 1) & !((1u32 << lo) - 1)
@@ -140,7 +140,7 @@ pub struct SceneBvh {
     /// Slot `s` is lane `s % 4` of block `s / 4`.
     pub(super) blocks: HugeArray<TriBlock>,
     /// Mask per block of the lanes holding spheres.
-    sphere_lanes: Vec<u8>,
+    pub(super) sphere_lanes: Vec<u8>,
     pub(super) spheres: Vec<(Vec3, f32)>,
     triangle_count: u32,
 }
@@ -243,7 +243,7 @@ impl SceneBvh {
     /// constants, which triangle scenes never use.
     #[cold]
     #[inline(never)]
-    fn sphere_hit(&self, ray: &Ray, prim: u32, t_max: f32) -> Option<f32> {
+    pub(super) fn sphere_hit(&self, ray: &Ray, prim: u32, t_max: f32) -> Option<f32> {
         let (c, rad) = self.sphere(prim);
         intersect_sphere(&Ray { t_max, ..*ray }, c, rad)
     }
@@ -325,7 +325,7 @@ impl SceneBvh {
 /// own, which the store-to-load forwarding can serve (BENCHMARKS.md, "Path
 /// tracing vs Mitsuba 3").
 #[inline(always)]
-fn read_ray(ray: &Ray) -> Ray {
+pub(super) fn read_ray(ray: &Ray) -> Ray {
     let bb = std::hint::black_box::<f32>;
     Ray {
         origin: Vec3::new(bb(ray.origin.x), bb(ray.origin.y), bb(ray.origin.z)),
@@ -384,6 +384,30 @@ impl Accelerator for SceneBvh {
             },
         );
         best
+    }
+
+    fn intersect_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        if self.packets_pay() {
+            SceneBvh::intersect_packet(self, rays, hits);
+        } else {
+            for (r, h) in rays.iter().zip(hits) {
+                *h = self.intersect(r);
+            }
+        }
+    }
+
+    fn intersect_camera_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        Accelerator::intersect_packet(self, rays, hits);
+    }
+
+    fn occluded_packet(&self, rays: &[Ray], occluded: &mut [bool]) {
+        if self.packets_pay() {
+            SceneBvh::occluded_packet(self, rays, occluded);
+        } else {
+            for (r, o) in rays.iter().zip(occluded) {
+                *o = self.occluded(r);
+            }
+        }
     }
 
     fn for_each_hit(&self, ray: &Ray, visit: &mut dyn FnMut(&Hit) -> bool) -> bool {

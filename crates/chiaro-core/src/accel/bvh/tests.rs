@@ -9,7 +9,7 @@ use super::traverse::{Entry, Stack};
 use super::*;
 use crate::accel::intersect_triangle;
 use crate::accel::list::ListAccel;
-use crate::accel::{Accelerator, WatertightRay};
+use crate::accel::{Accelerator, Hit, WatertightRay};
 use crate::geometry::Ray;
 use crate::prepared::PrepareOptions;
 use crate::prepared::PreparedScene;
@@ -665,4 +665,298 @@ fn watertight_ray_agrees_with_free_function() {
             intersect_triangle(&r, p[0], p[1], p[2])
         );
     }
+}
+
+/// Camera rays over a `w` x `h` image from `eye` towards `target`, in 4 x 2
+/// pixel tiles (packet order); the middle pixel's direction is `target -
+/// eye` exactly, so with an axis-aligned view it has zero components.
+fn tiled_camera_rays(eye: Vec3, target: Vec3, w: u32, h: u32, fov: f32) -> Vec<Ray> {
+    let fwd = target - eye;
+    let up = if fwd.cross(Vec3::Y).length_squared() > 0.0 {
+        Vec3::Y
+    } else {
+        Vec3::Z
+    };
+    let right = fwd.cross(up).normalize() * fwd.length() * fov;
+    let up = right.cross(fwd).normalize() * fwd.length() * fov;
+    let mut rays = Vec::new();
+    for ty in (0..h).step_by(2) {
+        for tx in (0..w).step_by(4) {
+            for y in ty..(ty + 2).min(h) {
+                for x in tx..(tx + 4).min(w) {
+                    let sx = (x as f32 - (w / 2) as f32) / w as f32;
+                    let sy = (y as f32 - (h / 2) as f32) / h as f32;
+                    rays.push(Ray::new(eye, fwd + right * sx + up * sy));
+                }
+            }
+        }
+    }
+    rays
+}
+
+/// Asserts that the packet queries give every ray's single-ray answers bit
+/// for bit (distance, primitive, barycentrics; occlusion), for packets cut
+/// at several offsets so that partial packets are covered too.
+fn check_packets_match_single(bvh: &SceneBvh, rays: &[Ray], what: &str) {
+    let single: Vec<Option<Hit>> = rays.iter().map(|r| bvh.intersect(r)).collect();
+    let single_occ: Vec<bool> = rays.iter().map(|r| bvh.occluded(r)).collect();
+    let bits = |h: &Option<Hit>| h.map(|h| (h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()));
+    for skip in [0, 3] {
+        let rays = &rays[skip..];
+        let mut hits = vec![None; rays.len()];
+        let mut occ = vec![false; rays.len()];
+        // Whole slices, and slices of 13 rays (a partial packet each).
+        for chunk in [rays.len(), 13] {
+            for ((rs, hs), os) in rays
+                .chunks(chunk)
+                .zip(hits.chunks_mut(chunk))
+                .zip(occ.chunks_mut(chunk))
+            {
+                bvh.intersect_packet(rs, hs);
+                bvh.occluded_packet(rs, os);
+            }
+            for (i, r) in rays.iter().enumerate() {
+                assert_eq!(
+                    bits(&hits[i]),
+                    bits(&single[i + skip]),
+                    "{what}: closest hit of {r:?} (ray {i}, chunk {chunk})"
+                );
+                assert_eq!(
+                    occ[i],
+                    single_occ[i + skip],
+                    "{what}: occlusion of {r:?} (ray {i}, chunk {chunk})"
+                );
+            }
+        }
+    }
+}
+
+/// A grid of unit quads in the plane z = 0 (shared edges everywhere), a
+/// second copy of every fourth quad lying exactly on the first (ties at
+/// equal distances), and an icosphere above it.
+fn tie_scene() -> Scene {
+    let mut mesh = Mesh::default();
+    let n = 24u32;
+    for j in 0..=n {
+        for i in 0..=n {
+            mesh.positions.push(Vec3::new(
+                i as f32 - n as f32 / 2.0,
+                j as f32 - n as f32 / 2.0,
+                0.0,
+            ));
+        }
+    }
+    let at = |i: u32, j: u32| j * (n + 1) + i;
+    for j in 0..n {
+        for i in 0..n {
+            let q = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+            mesh.indices.push([q[0], q[1], q[2]]);
+            mesh.indices.push([q[0], q[2], q[3]]);
+            if (i + j) % 4 == 0 {
+                // The same quad again, split along the other diagonal.
+                mesh.indices.push([q[0], q[1], q[3]]);
+                mesh.indices.push([q[1], q[2], q[3]]);
+            }
+        }
+    }
+    let sphere = crate::geometry::primitives::icosphere(2.0, 3);
+    let base = mesh.positions.len() as u32;
+    mesh.positions.extend(
+        sphere
+            .positions
+            .iter()
+            .map(|&p| p + Vec3::new(1.5, -2.0, 3.0)),
+    );
+    mesh.indices
+        .extend(sphere.indices.iter().map(|t| t.map(|k| k + base)));
+    scene_of(
+        mesh,
+        &[
+            (Vec3::new(-4.0, 3.0, 1.0), 1.0),
+            (Vec3::new(-4.0, 3.0, 1.0), 1.0),
+            (Vec3::new(5.0, 5.0, 0.5), 2.0),
+        ],
+    )
+}
+
+#[test]
+fn packets_match_single_rays_bit_for_bit() {
+    let s = tie_scene();
+    let ps = PreparedScene::new(
+        &s,
+        PrepareOptions {
+            analytic_spheres: true,
+            ..Default::default()
+        },
+    );
+    let bvh = SceneBvh::new(&ps);
+    // Straight down the z axis (zero x and y components in the middle),
+    // obliquely, from inside the grown bounds, and along the grid's plane.
+    let views = [
+        (Vec3::new(0.0, 0.0, 20.0), Vec3::ZERO),
+        (Vec3::new(0.5, 0.5, 9.0), Vec3::new(0.5, 0.5, 0.0)),
+        (Vec3::new(14.0, -9.0, 7.0), Vec3::new(-1.0, 2.0, 0.0)),
+        (Vec3::new(-20.0, 0.0, 0.0), Vec3::ZERO),
+        (Vec3::new(0.0, 0.0, -6.0), Vec3::new(2.0, 0.0, 4.0)),
+    ];
+    for (k, (eye, target)) in views.into_iter().enumerate() {
+        let rays = tiled_camera_rays(eye, target, 64, 48, 0.8);
+        check_packets_match_single(&bvh, &rays, &format!("view {k}"));
+    }
+    // Random rays; axis-aligned ones (two zero components) through vertices
+    // and edges of the grid; rays with a short range and a t_min.
+    check_packets_match_single(&bvh, &random_rays(&ps, 4000, 7), "random");
+    let mut axis = Vec::new();
+    for i in -13..13 {
+        for j in -13..13 {
+            let o = Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 5.0);
+            axis.push(Ray::new(o, Vec3::NEG_Z));
+            axis.push(Ray::new(o, Vec3::new(0.0, 0.25, -1.0)));
+            axis.push(Ray {
+                t_min: 4.0,
+                t_max: 5.5,
+                ..Ray::new(o, Vec3::NEG_Z)
+            });
+            axis.push(Ray::new(o, Vec3::Z));
+        }
+    }
+    check_packets_match_single(&bvh, &axis, "axis-aligned");
+    // The whole bunny, where the shared assets are present.
+    if let Some(mesh) = bunny() {
+        let s = scene_of(mesh, &[(Vec3::new(0.0, 0.1, 0.0), 0.03)]);
+        let ps = PreparedScene::new(
+            &s,
+            PrepareOptions {
+                analytic_spheres: true,
+                ..Default::default()
+            },
+        );
+        let bvh = SceneBvh::new(&ps);
+        let c = ps.bounds.center();
+        let eye = c + Vec3::new(0.05, 0.02, 0.3);
+        check_packets_match_single(
+            &bvh,
+            &tiled_camera_rays(eye, c, 96, 64, 0.4),
+            "bunny camera",
+        );
+        check_packets_match_single(&bvh, &random_rays(&ps, 4000, 8), "bunny random");
+    }
+}
+
+#[test]
+fn packet_queries_of_other_accelerators_loop_over_single_rays() {
+    let s = tie_scene();
+    let ps = PreparedScene::new(&s, PrepareOptions::default());
+    let list = ListAccel::new(&ps);
+    let rays = random_rays(&ps, 200, 11);
+    let mut hits = vec![None; rays.len()];
+    let mut occ = vec![false; rays.len()];
+    list.intersect_packet(&rays, &mut hits);
+    list.occluded_packet(&rays, &mut occ);
+    for (i, r) in rays.iter().enumerate() {
+        assert_eq!(hits[i], list.intersect(r));
+        assert_eq!(occ[i], list.occluded(r));
+    }
+}
+
+#[test]
+fn culled_camera_packets_match_single_rays() {
+    // Every surface single-sided: camera rays from below the grid pass
+    // through its back and meet what lies beyond (or nothing).
+    let mut s = tie_scene();
+    for m in &mut s.materials {
+        m.cull_backface = true;
+    }
+    let ps = PreparedScene::new(
+        &s,
+        PrepareOptions {
+            analytic_spheres: true,
+            ..Default::default()
+        },
+    );
+    let accel = crate::accel::cull::Culled::wrap(&ps, Box::new(SceneBvh::new(&ps)));
+    let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()));
+    let mut culled = 0;
+    for (eye, target) in [
+        (Vec3::new(0.0, 0.0, -6.0), Vec3::new(2.0, 0.0, 4.0)),
+        (Vec3::new(3.0, -2.0, 9.0), Vec3::new(0.0, 1.0, 0.0)),
+    ] {
+        let rays = tiled_camera_rays(eye, target, 48, 32, 0.8);
+        let mut hits = vec![None; rays.len()];
+        accel.intersect_camera_packet(&rays, &mut hits);
+        for (r, h) in rays.iter().zip(&hits) {
+            assert_eq!(bits(*h), bits(accel.intersect_camera(r)), "{r:?}");
+            culled += usize::from(bits(*h) != bits(accel.intersect(r)));
+        }
+    }
+    assert!(culled > 100, "the views see back faces ({culled})");
+}
+
+#[test]
+fn packet_node_test_matches_the_per_ray_one() {
+    use super::packet::{PACKET, PacketPre, node_packet, node_per_ray};
+    let s = tie_scene();
+    let ps = PreparedScene::new(&s, PrepareOptions::default());
+    let bvh = SceneBvh::new(&ps);
+    let mut rays = random_rays(&ps, 400, 5);
+    rays.extend(tiled_camera_rays(
+        Vec3::new(0.0, 0.0, 20.0),
+        Vec3::ZERO,
+        16,
+        8,
+        0.8,
+    ));
+    rays.extend(tiled_camera_rays(
+        Vec3::new(-20.0, 0.0, 0.0),
+        Vec3::ZERO,
+        16,
+        8,
+        0.8,
+    ));
+    let mut compared = 0;
+    for (k, chunk) in rays.chunks_exact(PACKET).enumerate() {
+        let rr: [Ray; PACKET] = std::array::from_fn(|i| Ray {
+            t_min: [0.0, 0.5][(i + k) % 2],
+            ..chunk[i]
+        });
+        let pre: [RayPre; PACKET] = std::array::from_fn(|i| RayPre::new(&rr[i]));
+        let t_min = rr.map(|r| r.t_min);
+        let soa = PacketPre::new(&rr, &pre, &t_min);
+        let cull: [f32; PACKET] = std::array::from_fn(|i| [f32::INFINITY, 3.0, 12.0][(i + k) % 3]);
+        let path: [f32; PACKET] = std::array::from_fn(|i| [f32::NEG_INFINITY, 2.0][(i + k) % 2]);
+        for n in bvh.bvh().nodes() {
+            for mask in [0xff, 0x5a] {
+                let a = node_packet(n, &pre, &soa, &t_min, &cull, mask, &path);
+                let b = node_per_ray(n, &pre, &t_min, &cull, mask, &path);
+                assert_eq!(a.0, b.0, "rays per child");
+                for i in 0..WIDTH {
+                    if a.0[i] != 0 {
+                        compared += 1;
+                        assert_eq!(a.2[i].to_bits(), b.2[i].to_bits(), "order key");
+                    }
+                    for r in 0..PACKET {
+                        if a.0[i] >> r & 1 == 1 {
+                            assert_eq!(a.1[i][r].to_bits(), b.1[i][r].to_bits(), "entry");
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(compared > 1000, "children met: {compared}");
+}
+
+#[test]
+fn packet_stack_is_lifo_across_its_parts() {
+    let mut s = super::packet::PacketStack::new();
+    for i in 0..100u32 {
+        s.push(super::packet::PacketEntry {
+            child: i,
+            ..Default::default()
+        });
+    }
+    for i in (0..100u32).rev() {
+        assert_eq!(s.pop().map(|e| e.child), Some(i));
+    }
+    assert!(s.pop().is_none());
 }
