@@ -63,6 +63,29 @@ pub(crate) struct Patches {
     pub normal: Vec<Vec3>,
     /// Largest distance from the centre to a member's corner.
     pub radius: Vec<f32>,
+    /// Smallest cosine between a member's normal and `normal`.
+    pub cos_spread: Vec<f32>,
+    /// [`FAR_RAYS`] points (with normals) spread over each patch.
+    points: Vec<[(Vec3, Vec3); FAR_RAYS]>,
+}
+
+/// Whether a surface with normals within the cone (`n`, `cos_a`) can face a
+/// point at `d` plus any offset of length up to `r`: the largest `n' . d`
+/// over the cone, plus `r`, is positive (conservative).
+fn reaches(n: Vec3, cos_a: f32, d: Vec3, r: f32) -> bool {
+    let len = d.length();
+    if len <= r {
+        return true;
+    }
+    let cos_t = (n.dot(d) / len).clamp(-1.0, 1.0);
+    if cos_t >= cos_a {
+        return true;
+    }
+    let (sin_t, sin_a) = (
+        (1.0 - cos_t * cos_t).max(0.0).sqrt(),
+        (1.0 - cos_a * cos_a).max(0.0).sqrt(),
+    );
+    len * (cos_t * cos_a + sin_t * sin_a) + r > 0.0
 }
 
 fn normal_bin(n: Vec3) -> u32 {
@@ -180,7 +203,16 @@ impl Patches {
                 .map(|q| q.distance(centre[p]))
                 .fold(0.0f32, f32::max);
         }
-        Self {
+        let cos_spread = (0..np)
+            .map(|p| {
+                let m = &members[start[p] as usize..start[p + 1] as usize];
+                m.iter()
+                    .map(|&e| mesh.elements[e as usize].n.dot(normal[p]))
+                    .fold(1.0f32, f32::min)
+                    .clamp(-1.0, 1.0)
+            })
+            .collect();
+        let mut out = Self {
             members,
             start,
             of,
@@ -188,7 +220,21 @@ impl Patches {
             centre,
             normal,
             radius,
-        }
+            cos_spread,
+            points: Vec::new(),
+        };
+        out.points = (0..np).map(|p| out.spread_points(mesh, p)).collect();
+        out
+    }
+
+    /// Whether some point of patch `q` may lie in front of some element of
+    /// `p` and the other way round (a necessary condition for light to pass
+    /// between them, from bounding spheres and normal cones).
+    pub fn may_face(&self, p: usize, q: usize) -> bool {
+        let d = self.centre[q] - self.centre[p];
+        let r = (self.radius[p] + self.radius[q]) * 1.001;
+        reaches(self.normal[p], self.cos_spread[p], d, r)
+            && reaches(self.normal[q], self.cos_spread[q], -d, r)
     }
 
     /// Number of patches.
@@ -209,7 +255,7 @@ impl Patches {
 
     /// Up to [`FAR_RAYS`] points (with normals) spread over patch `p`: the
     /// centroids of evenly spaced elements, or points of its one element.
-    fn points(&self, mesh: &ElementMesh, p: usize) -> [(Vec3, Vec3); FAR_RAYS] {
+    fn spread_points(&self, mesh: &ElementMesh, p: usize) -> [(Vec3, Vec3); FAR_RAYS] {
         let m = self.elements(p);
         let mut out = [(Vec3::ZERO, Vec3::ZERO); FAR_RAYS];
         if m.len() >= FAR_RAYS {
@@ -230,11 +276,11 @@ impl Patches {
 
     /// The fraction of [`FAR_RAYS`] segments between points of `p` and of
     /// `q` that are unoccluded.
-    pub fn visibility(&self, mesh: &ElementMesh, p: usize, q: usize, vis: &Visibility<'_>) -> f32 {
-        let (a, b) = (self.points(mesh, p), self.points(mesh, q));
+    pub fn visibility(&self, p: usize, q: usize, vis: &Visibility<'_>) -> f32 {
+        let (a, b) = (&self.points[p], &self.points[q]);
         let seen = a
             .iter()
-            .zip(&b)
+            .zip(b)
             .filter(|((x, nx), (y, ny))| vis.visible(*x, *nx, *y, *ny))
             .count();
         seen as f32 / FAR_RAYS as f32
@@ -288,17 +334,24 @@ impl PatchShooter<'_> {
                 .sum::<Vec3>()
                 / pt.area[p].max(f32::MIN_POSITIVE)
         };
-        let points = self.patches.points(mesh, p);
+        let points = &pt.points[p];
         // Per receiving patch: its visibility when it is received in bulk,
-        // or a negative value when its elements need element form factors.
+        // NEAR when its elements need element form factors, or BEHIND when
+        // it cannot face the shooter.
+        const NEAR: f32 = -1.0;
+        const BEHIND: f32 = -2.0;
         let bulk: Vec<f32> = (0..pt.len())
             .into_par_iter()
             .map(|q| {
-                if q == p || (single && pt.elements(q).len() == 1) || !pt.far(p, q) {
-                    -1.0
+                if q == p || (single && pt.elements(q).len() == 1) {
+                    NEAR
+                } else if !pt.may_face(p, q) {
+                    BEHIND
+                } else if !pt.far(p, q) {
+                    NEAR
                 } else {
                     match self.vis {
-                        Some(v) => pt.visibility(mesh, p, q, v),
+                        Some(v) => pt.visibility(p, q, v),
                         None => 1.0,
                     }
                 }
@@ -310,7 +363,9 @@ impl PatchShooter<'_> {
             .for_each(|(j, (fj, gj))| {
                 let recv = &mesh.elements[j];
                 let v = bulk[pt.of[j] as usize];
-                if v >= 0.0 {
+                if v == BEHIND {
+                    (*fj, *gj) = (0.0, Vec3::ZERO);
+                } else if v >= 0.0 {
                     let ff = if v > 0.0 {
                         v * point_to_disc(recv.c, recv.n, pt.centre[p], pt.normal[p], pt.area[p])
                     } else {
