@@ -114,8 +114,9 @@ struct EmitterGroup {
 /// Reflected radiance at each element due to *direct* light: point-like
 /// lights (`point_direct`) plus every emissive source triangle, gathered
 /// with ray-cast form factors (16 visibility rays per receiver point), or,
-/// for a group of emitters far from the receiver, the group's point-to-disc
-/// form factor and four visibility rays.
+/// for a group of several emitters, their unoccluded form factors (the
+/// group's point-to-disc form factor when it is far from the receiver)
+/// times the free fraction of four rays to the group.
 fn direct_light(
     ps: &PreparedScene<'_>,
     mesh: &ElementMesh,
@@ -192,11 +193,29 @@ fn direct_light(
                 }
                 continue;
             }
-            for s in &g.sources {
-                if s.source == e.source {
-                    continue;
+            if let [s] = g.sources.as_slice() {
+                if s.source != e.source {
+                    sum += s.le * pair(e, s, rule, Some(vis), tol);
                 }
-                sum += s.le * pair(e, s, rule, Some(vis), tol);
+                continue;
+            }
+            // Near a group of several emitters: their unoccluded form
+            // factors, times the free fraction of four rays to the group.
+            let mut near = Vec3::ZERO;
+            for s in &g.sources {
+                if s.source != e.source {
+                    near += s.le * pair(e, s, rule, None, tol);
+                }
+            }
+            if near != Vec3::ZERO {
+                let n = g.sources.len();
+                let seen = (0..4)
+                    .filter(|&k| {
+                        let s = &g.sources[k * n / 4];
+                        vis.visible(e.c, e.n, s.c, s.n)
+                    })
+                    .count();
+                sum += near * (seen as f32 / 4.0);
             }
         }
         *pd + e.rho * sum

@@ -7,8 +7,9 @@
 //! groups such elements into *patches*: elements of one object (or one area
 //! light) whose normals fall in the same direction bin and whose centroids
 //! fall in the same grid cell of side `patch_size / 2`, built in one hashed
-//! pass over the elements. An element of a source triangle that meshing
-//! subdivided (or that is at least half the patch size) is a patch of its
+//! pass over the elements. Only elements with edges under half the patch
+//! size are grouped (fine input triangles, or small triangles that meshing
+//! subdivided with a larger neighbour); any other element is a patch of its
 //! own, so scenes of large input triangles (the Cornell box) keep their
 //! element-by-element solution exactly.
 //!
@@ -128,10 +129,11 @@ impl Patches {
                 return Err(CoreError::Cancelled);
             }
             let s = &mesh.sources[e.source as usize];
+            // The element's longest edge (its source's over k).
             let longest = (0..3)
-                .map(|k| (s.p[(k + 1) % 3] - s.p[k]).length())
+                .map(|k| (e.p[(k + 1) % 3] - e.p[k]).length())
                 .fold(0.0f32, f32::max);
-            let fine = mesh.k[e.source as usize] == 1 && longest < 0.5 * patch_size;
+            let fine = longest < 0.5 * patch_size;
             let id = if fine {
                 let group = match s.kind {
                     SourceKind::Prepared(_) => s.object,
