@@ -1,7 +1,8 @@
 //! Radiosity for chiaro: patches, form factors, solvers, view-independent solutions.
 //!
 //! [`solve`] meshes every surface and area light into triangular elements
-//! ([`mesh`]), computes form factors ([`formfactor`], [`hemicube`]), solves
+//! ([`mesh`]), groups fine elements into shooting patches (`patch.rs`),
+//! computes form factors ([`formfactor`], [`hemicube`]), solves
 //! the radiosity system with the chosen solver ([`solver`],
 //! [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
 //! draws it from the scene's camera through chiaro-raster's z-buffer (item
@@ -30,8 +31,11 @@
 //! # Glossary
 //! - **source triangle**: a triangle of the prepared scene (or of a meshed
 //!   area light) before subdivision.
-//! - **element / patch**: one of the `k x k` triangles a source triangle is
-//!   cut into; constant albedo, emission and radiance.
+//! - **element**: one of the `k x k` triangles a source triangle is cut
+//!   into; constant albedo, emission and radiance.
+//! - **patch** (progressive refinement): a group of neighbouring,
+//!   near-coplanar elements finer than the patch size that shoots as one
+//!   (`patch.rs`); an element of patch size is its own patch.
 //! - **F_ij**: the form factor, the fraction of the energy leaving `i` that
 //!   reaches `j`; `A_i F_ij = A_j F_ji` (reciprocity).
 //! - **unshot fraction**: power not yet distributed over emitted power, the

@@ -35,8 +35,9 @@ use std::f32::consts::PI;
 /// A receiving patch is far from the shooter when their centres are more
 /// than `FAR` times the sum of their radii apart: every receiving point is
 /// then at least two shooter radii away, where the point-to-disc form
-/// factor of the whole patch is within a few per cent of the sum over its
-/// elements, and the receiving patch spans under 30 degrees from the
+/// factor of the whole patch is close to the sum over its elements (the
+/// test against the element-by-element solution bounds the difference),
+/// and the receiving patch spans under 30 degrees from the
 /// shooter, so a few rays stand for its visibility.
 pub(crate) const FAR: f32 = 2.0;
 
