@@ -1,7 +1,8 @@
 //! Radiosity for chiaro: patches, form factors, solvers, view-independent solutions.
 //!
 //! [`solve`] meshes every surface and area light into triangular elements
-//! ([`mesh`]), computes form factors ([`formfactor`], [`hemicube`]), solves
+//! ([`mesh`]), groups fine elements into shooting patches (`patch.rs`),
+//! computes form factors ([`formfactor`], [`hemicube`]), solves
 //! the radiosity system with the chosen solver ([`solver`],
 //! [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
 //! draws it from the scene's camera through chiaro-raster's z-buffer (item
@@ -30,8 +31,11 @@
 //! # Glossary
 //! - **source triangle**: a triangle of the prepared scene (or of a meshed
 //!   area light) before subdivision.
-//! - **element / patch**: one of the `k x k` triangles a source triangle is
-//!   cut into; constant albedo, emission and radiance.
+//! - **element**: one of the `k x k` triangles a source triangle is cut
+//!   into; constant albedo, emission and radiance.
+//! - **patch** (progressive refinement): a group of neighbouring,
+//!   near-coplanar elements finer than the patch size that shoots as one
+//!   (`patch.rs`); an element of patch size is its own patch.
 //! - **F_ij**: the form factor, the fraction of the energy leaving `i` that
 //!   reaches `j`; `A_i F_ij = A_j F_ji` (reciprocity).
 //! - **unshot fraction**: power not yet distributed over emitted power, the
@@ -44,6 +48,7 @@ pub mod hemicube;
 pub mod hierarchical;
 pub mod mesh;
 mod nearest;
+mod patch;
 pub mod solution;
 pub mod solver;
 
@@ -55,6 +60,7 @@ use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::Film;
 use chiaro_core::prepared::PreparedScene;
+use chiaro_core::progress::Progress;
 use chiaro_core::scene::Scene;
 use chiaro_core::shading::texture::background_radiance;
 use formfactor::{PairFormFactor, PairRule, Visibility, pair, point_light_direct};
@@ -77,49 +83,147 @@ impl Renderer for Radiosity {
     }
 }
 
+/// Elements per cancellation check of the per-element passes.
+const CHUNK: usize = 16_384;
+
+/// `f(i)` for `i` in `0..n`, in parallel, polling `progress` for
+/// cancellation between chunks.
+fn par_map<T: Send>(
+    n: usize,
+    progress: &dyn Progress,
+    f: impl Fn(usize) -> T + Sync + Send,
+) -> Result<Vec<T>, CoreError> {
+    let mut out = Vec::with_capacity(n);
+    for lo in (0..n).step_by(CHUNK) {
+        if progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
+        out.par_extend((lo..(lo + CHUNK).min(n)).into_par_iter().map(&f));
+    }
+    Ok(out)
+}
+
+/// Emissive source triangles grouped by the patch of their first element:
+/// a group of one is gathered triangle by triangle, a larger group as one
+/// disc from receivers far from it (see [`patch::FAR`]).
+struct EmitterGroup {
+    sources: Vec<Element>,
+    area: f32,
+    le: Vec3,
+    centre: Vec3,
+    normal: Vec3,
+    radius: f32,
+}
+
 /// Reflected radiance at each element due to *direct* light: point-like
 /// lights (`point_direct`) plus every emissive source triangle, gathered
-/// with ray-cast form factors (16 visibility rays per receiver point).
+/// with ray-cast form factors (16 visibility rays per receiver point), or,
+/// for a group of several emitters, their unoccluded form factors (the
+/// group's point-to-disc form factor when it is far from the receiver)
+/// times the free fraction of four rays to the group.
 fn direct_light(
     ps: &PreparedScene<'_>,
     mesh: &ElementMesh,
+    patches: &patch::Patches,
     point_direct: &[Vec3],
     vis: &Visibility<'_>,
     tol: f32,
-) -> Vec<Vec3> {
-    let emitters: Vec<Element> = mesh
-        .sources
-        .iter()
-        .enumerate()
-        .filter_map(|(si, s)| {
-            let (_, le) = material_at(ps, s, 1.0 / 3.0, 1.0 / 3.0);
-            (le.max_element() > 0.0)
-                .then(|| Element::new(s.p, s.n, Vec3::ZERO, le, [0; 3], si as u32))
-        })
-        .collect();
+    progress: &dyn Progress,
+) -> Result<Vec<Vec3>, CoreError> {
+    let mut groups: Vec<EmitterGroup> = Vec::new();
+    let mut group_of: std::collections::HashMap<u32, usize> = Default::default();
+    for (si, s) in mesh.sources.iter().enumerate() {
+        let (_, le) = material_at(ps, s, 1.0 / 3.0, 1.0 / 3.0);
+        if le.max_element() <= 0.0 {
+            continue;
+        }
+        let el = Element::new(s.p, s.n, Vec3::ZERO, le, [0; 3], si as u32);
+        let key = patches.of[mesh.first[si] as usize];
+        let g = *group_of.entry(key).or_insert_with(|| {
+            groups.push(EmitterGroup {
+                sources: Vec::new(),
+                area: 0.0,
+                le: Vec3::ZERO,
+                centre: Vec3::ZERO,
+                normal: Vec3::ZERO,
+                radius: 0.0,
+            });
+            groups.len() - 1
+        });
+        groups[g].sources.push(el);
+    }
+    for g in &mut groups {
+        for s in &g.sources {
+            g.area += s.area;
+            g.le += s.le * s.area;
+            g.centre += s.c * s.area;
+            g.normal += s.n * s.area;
+        }
+        let a = g.area.max(f32::MIN_POSITIVE);
+        (g.le, g.centre) = (g.le / a, g.centre / a);
+        g.normal = g.normal.normalize_or(g.sources[0].n);
+        g.radius = g
+            .sources
+            .iter()
+            .flat_map(|s| s.p)
+            .map(|q| q.distance(g.centre))
+            .fold(0.0f32, f32::max);
+    }
     let rule = PairRule {
         far_m: 2,
         mid_m: 2,
         near_m: 4,
         vis_m: 4,
     };
-    mesh.elements
-        .par_iter()
-        .zip(point_direct.par_iter())
-        .map(|(e, pd)| {
-            if e.rho == Vec3::ZERO {
-                return Vec3::ZERO;
-            }
-            let mut sum = Vec3::ZERO;
-            for s in &emitters {
-                if s.source == e.source {
-                    continue;
+    par_map(mesh.elements.len(), progress, |i| {
+        let (e, pd) = (&mesh.elements[i], &point_direct[i]);
+        if e.rho == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        let radius = e.p.iter().map(|q| q.distance(e.c)).fold(0.0f32, f32::max);
+        let mut sum = Vec3::ZERO;
+        for g in &groups {
+            if g.sources.len() > 1 && e.c.distance(g.centre) > patch::FAR * (g.radius + radius) {
+                let f = patch::point_to_disc(e.c, e.n, g.centre, g.normal, g.area);
+                if f > 0.0 {
+                    let n = g.sources.len();
+                    let seen = (0..4)
+                        .filter(|&k| {
+                            let s = &g.sources[k * n / 4];
+                            vis.visible(e.c, e.n, s.c, s.n)
+                        })
+                        .count();
+                    sum += g.le * (f * seen as f32 / 4.0);
                 }
-                sum += s.le * pair(e, s, rule, Some(vis), tol);
+                continue;
             }
-            *pd + e.rho * sum
-        })
-        .collect()
+            if let [s] = g.sources.as_slice() {
+                if s.source != e.source {
+                    sum += s.le * pair(e, s, rule, Some(vis), tol);
+                }
+                continue;
+            }
+            // Near a group of several emitters: their unoccluded form
+            // factors, times the free fraction of four rays to the group.
+            let mut near = Vec3::ZERO;
+            for s in &g.sources {
+                if s.source != e.source {
+                    near += s.le * pair(e, s, rule, None, tol);
+                }
+            }
+            if near != Vec3::ZERO {
+                let n = g.sources.len();
+                let seen = (0..4)
+                    .filter(|&k| {
+                        let s = &g.sources[k * n / 4];
+                        vis.visible(e.c, e.n, s.c, s.n)
+                    })
+                    .count();
+                sum += near * (seen as f32 / 4.0);
+            }
+        }
+        *pd + e.rho * sum
+    })
 }
 
 /// Solves the radiosity of the context's scene with `settings.radiosity`
@@ -130,6 +234,15 @@ fn direct_light(
 /// [`CoreError::Unsupported`] when the mesh is too large for the solver;
 /// [`CoreError::Cancelled`] when the progress asks.
 pub fn solve(ctx: &RenderContext<'_>) -> Result<RadiositySolution, CoreError> {
+    solve_with(ctx, true)
+}
+
+/// [`solve`], with progressive refinement shooting from patches of
+/// several elements when `clustered` (else from every element).
+pub(crate) fn solve_with(
+    ctx: &RenderContext<'_>,
+    clustered: bool,
+) -> Result<RadiositySolution, CoreError> {
     let cfg = &ctx.settings().radiosity;
     let (scene, progress) = (ctx.scene(), ctx.progress());
     let start = Instant::now();
@@ -146,19 +259,27 @@ pub fn solve(ctx: &RenderContext<'_>) -> Result<RadiositySolution, CoreError> {
         eps: size * 1e-4,
     };
     progress.begin("radiosity meshing", 1);
-    let mesh = mesh::build(ps, patch, cfg.solver == Solver::Hierarchical)?;
+    let mesh = mesh::build(ps, patch, cfg.solver == Solver::Hierarchical, progress)?;
+    // Patches above elements shoot in progressive refinement with element
+    // form factors (hemicubes are cast from one element's centre, so their
+    // shots stay per element); the other solvers work on elements.
+    let patches =
+        if clustered && cfg.solver == Solver::Progressive && cfg.formfactor != Method::Hemicube {
+            patch::Patches::build(&mesh, patch, progress)?
+        } else {
+            patch::Patches::singletons(&mesh)
+        };
     progress.advance(1);
     let n = mesh.elements.len();
     progress.message(&format!(
-        "radiosity: {n} elements (patch size {patch}), solver {}, form factors {}",
+        "radiosity: {n} elements in {} patches (patch size {patch}), solver {}, form factors {}",
+        patches.len(),
         cfg.solver.name(),
         cfg.formfactor.name()
     ));
-    let point_direct: Vec<Vec3> = mesh
-        .elements
-        .par_iter()
-        .map(|e| point_light_direct(e, &scene.lights, &vis))
-        .collect();
+    let point_direct: Vec<Vec3> = par_map(n, progress, |i| {
+        point_light_direct(&mesh.elements[i], &scene.lights, &vis)
+    })?;
     let e: Vec<Vec3> = mesh
         .elements
         .iter()
@@ -170,10 +291,12 @@ pub fn solve(ctx: &RenderContext<'_>) -> Result<RadiositySolution, CoreError> {
         formfactor: cfg.formfactor.name().into(),
         patch_size: patch,
         elements: n,
+        patches: patches.len(),
         ..SolveStats::default()
     };
     let hemi;
     let pairs;
+    let mut pair_rule = None;
     let ff: &dyn FormFactor = match cfg.formfactor {
         Method::Hemicube => {
             hemi = hemicube::HemicubeFormFactor::new(
@@ -193,10 +316,12 @@ pub fn solve(ctx: &RenderContext<'_>) -> Result<RadiositySolution, CoreError> {
                 },
                 tol,
             );
+            pair_rule = Some(pairs.rule);
             &pairs
         }
         Method::Analytic => {
             pairs = PairFormFactor::analytic(&mesh.elements, tol);
+            pair_rule = Some(pairs.rule);
             &pairs
         }
     };
@@ -227,10 +352,34 @@ pub fn solve(ctx: &RenderContext<'_>) -> Result<RadiositySolution, CoreError> {
             out.l
         }
         Solver::Progressive => {
+            let columns = |i: usize, du: &[Vec3], f: &mut [f32], g: &mut [Vec3]| {
+                ff.column(i, f);
+                g.par_iter_mut()
+                    .zip(f.par_iter())
+                    .for_each(|(g, f)| *g = *f * du[i]);
+            };
+            let shooter = pair_rule.map(|rule| patch::PatchShooter {
+                mesh: &mesh,
+                patches: &patches,
+                rule,
+                vis: (cfg.formfactor == Method::Raycast).then_some(&vis),
+                tol,
+            });
+            let by_patch = |p: usize, du: &[Vec3], f: &mut [f32], g: &mut [Vec3]| {
+                if let Some(s) = &shooter {
+                    s.shoot(p, du, f, g);
+                }
+            };
+            let shoot: &solver::Shoot<'_> = if shooter.is_some() {
+                &by_patch
+            } else {
+                &columns
+            };
             let out = solver::progressive(
                 &mesh.elements,
+                &patches,
                 &e,
-                ff,
+                shoot,
                 cfg.tolerance,
                 cfg.max_iterations,
                 progress,
@@ -277,7 +426,7 @@ pub fn solve(ctx: &RenderContext<'_>) -> Result<RadiositySolution, CoreError> {
     let l: Vec<Vec3> = l.into_iter().map(chiaro_core::shading::sanitize).collect();
     // Irradiance for the display, pi (L - Le) / rho, and its indirect part
     // for the hybrid, pi (L - Le - direct) / rho.
-    let direct = direct_light(ps, &mesh, &point_direct, &vis, tol);
+    let direct = direct_light(ps, &mesh, &patches, &point_direct, &vis, tol, progress)?;
     let (irradiance, indirect): (Vec<Vec3>, Vec<Vec3>) = mesh
         .elements
         .iter()

@@ -16,6 +16,7 @@ use chiaro_core::error::CoreError;
 use chiaro_core::geometry::face_normal;
 use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::PreparedScene;
+use chiaro_core::progress::Progress;
 use chiaro_core::scene::{AreaShape, Light};
 use glam::Vec3;
 use std::collections::HashMap;
@@ -298,11 +299,13 @@ pub(crate) fn subdivision(sources: &[SourceTri], patch_size: f32, power_of_two: 
 /// most `patch_size` (see the module docs).
 ///
 /// # Errors
-/// [`CoreError::Unsupported`] when the mesh would exceed [`MAX_ELEMENTS`].
+/// [`CoreError::Unsupported`] when the mesh would exceed [`MAX_ELEMENTS`];
+/// [`CoreError::Cancelled`] when `progress` asks.
 pub(crate) fn build(
     ps: &PreparedScene<'_>,
     patch_size: f32,
     power_of_two: bool,
+    progress: &dyn Progress,
 ) -> Result<ElementMesh, CoreError> {
     let sources = source_triangles(ps);
     let k = subdivision(&sources, patch_size, power_of_two);
@@ -323,6 +326,9 @@ pub(crate) fn build(
     let mut keyed: HashMap<VKey, u32> = HashMap::new();
     let mut grid: Vec<u32> = Vec::new();
     for si in 0..mesh.sources.len() {
+        if si % 4096 == 0 && progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
         let s = mesh.sources[si];
         let k = mesh.k[si];
         mesh.first.push(mesh.elements.len() as u32);
@@ -456,7 +462,7 @@ mod tests {
             ..Default::default()
         });
         let ps = PreparedScene::new(&s, PrepareOptions::default());
-        let mesh = build(&ps, 0.3, false).expect("mesh");
+        let mesh = build(&ps, 0.3, false, &chiaro_core::progress::NoProgress).expect("mesh");
         // Both triangles share the diagonal, so they get the same k.
         assert_eq!(mesh.k[0], mesh.k[1]);
         let k = mesh.k[0] as usize;

@@ -25,6 +25,10 @@ pub struct SolveStats {
     pub patch_size: f32,
     /// Number of display elements.
     pub elements: usize,
+    /// Progressive refinement: shooting patches (groups of elements; equal
+    /// to `elements` where no input triangle is finer than the patch size).
+    #[serde(default)]
+    pub patches: usize,
     /// Iterations (sweeps, shots, or hierarchical gathers).
     pub iterations: u32,
     /// Final unshot-energy (or residual) fraction.

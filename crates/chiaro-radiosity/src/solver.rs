@@ -11,6 +11,7 @@
 
 use crate::formfactor::FormFactor;
 use crate::mesh::Element;
+use crate::patch::Patches;
 use chiaro_core::error::CoreError;
 use chiaro_core::progress::{Convergence, Progress};
 use glam::Vec3;
@@ -202,17 +203,25 @@ fn iterate(
     Ok(out)
 }
 
-/// Progressive refinement (Cohen, Chen, Wallace and Greenberg 1988): shoot
-/// the unshot radiosity of the element with the most unshot power, until
-/// the unshot fraction falls below `tol`. Form factors are computed one
-/// column at a time (no matrix), so memory is O(N). The result includes
+/// What one shot of [`progressive`] computes: `shoot(p, unshot, f, g)`
+/// writes, for every element `j`, `f[j] = F_{j <- p}` and `g[j] = sum_{i in
+/// p} F_{j <- i} dL_i` for the shooting patch `p`.
+pub(crate) type Shoot<'a> = dyn Fn(usize, &[Vec3], &mut [f32], &mut [Vec3]) + Sync + 'a;
+
+/// Progressive refinement (Cohen, Chen, Wallace and Greenberg 1988) with
+/// patches above elements (Cohen et al. 1986): shoot the unshot radiance
+/// of the patch with the most unshot power to every element, until the
+/// unshot fraction falls below `tol`. Form factors are computed one shot
+/// at a time (no matrix), so memory is O(N). The result includes
 /// the paper's ambient correction `rho_j * R * sum_i A_i dL_i / sum_i A_i`,
 /// `R = 1 / (1 - rho_avg)`, which estimates the light not yet shot, scaled
 /// for open scenes by the measured share of shot light that stays in them.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn progressive(
     elements: &[Element],
+    patches: &Patches,
     e: &[Vec3],
-    ff: &dyn FormFactor,
+    shoot: &Shoot<'_>,
     tol: f32,
     max_iter: u32,
     progress: &dyn Progress,
@@ -231,6 +240,7 @@ pub(crate) fn progressive(
         return Ok(out);
     }
     let mut col = vec![0.0f32; n];
+    let mut gathered = vec![Vec3::ZERO; n];
     let (mut shot_power, mut landed_power) = (0.0f32, 0.0f32);
     let mut bar = Convergence::begin(progress, "radiosity progressive", tol);
     out.unshot = 1.0;
@@ -240,36 +250,43 @@ pub(crate) fn progressive(
         }
         // The shooter: most unshot power.
         let (mut best, mut best_p, mut total) = (0usize, -1.0f32, 0.0f32);
-        for (i, (el, u)) in elements.iter().zip(&unshot).enumerate() {
-            let p = el.area * u.element_sum();
-            total += p;
-            if p > best_p {
-                (best, best_p) = (i, p);
+        for p in 0..patches.len() {
+            let pw = match patches.elements(p) {
+                [i] => elements[*i as usize].area * unshot[*i as usize].element_sum(),
+                m => m
+                    .iter()
+                    .map(|&i| elements[i as usize].area * unshot[i as usize].element_sum())
+                    .sum(),
+            };
+            total += pw;
+            if pw > best_p {
+                (best, best_p) = (p, pw);
             }
         }
         out.unshot = total / p0;
         if out.unshot < tol {
             break;
         }
-        ff.column(best, &mut col);
-        // The share of the shot power that lands on elements: sum_j F_ij =
-        // sum_j F_ji A_j / A_i (below 1 where light leaves an open scene).
+        shoot(best, &unshot, &mut col, &mut gathered);
+        // The share of the shot power that lands on elements: sum_j F_pj =
+        // sum_j F_jp A_j / A_p (below 1 where light leaves an open scene).
         let landed: f32 = col
             .iter()
             .zip(elements)
             .map(|(f, el)| f * el.area)
             .sum::<f32>()
-            / elements[best].area.max(f32::MIN_POSITIVE);
+            / patches.area[best].max(f32::MIN_POSITIVE);
         shot_power += best_p;
         landed_power += best_p * landed.clamp(0.0, 1.0);
-        let du = unshot[best];
-        unshot[best] = Vec3::ZERO;
+        for &i in patches.elements(best) {
+            unshot[i as usize] = Vec3::ZERO;
+        }
         l.par_iter_mut()
             .zip(unshot.par_iter_mut())
             .zip(elements.par_iter())
-            .zip(col.par_iter())
-            .for_each(|(((lj, uj), el), f)| {
-                let d = el.rho * (*f * du);
+            .zip(gathered.par_iter())
+            .for_each(|(((lj, uj), el), g)| {
+                let d = el.rho * *g;
                 *lj += d;
                 *uj += d;
             });

@@ -135,7 +135,7 @@ fn settings(solver: Solver, ff: Method, patch: f32) -> RenderSettings {
 /// `F_01 = sum_{i in 0} A_i sum_{j in 1} F_ij / A_0`.
 fn object_form_factor(scene: &Scene, patch: f32, method: Method, res: u32) -> f32 {
     let ps = PreparedScene::new(scene, PrepareOptions::default());
-    let mesh = mesh::build(&ps, patch, false).expect("mesh");
+    let mesh = mesh::build(&ps, patch, false, &NoProgress).expect("mesh");
     let accel = chiaro_core::accel::instanced::build_accelerator(&ps);
     let size = ps.bounds.diagonal();
     let vis = Visibility {
@@ -249,7 +249,7 @@ fn closed_box_form_factors_are_reciprocal_and_rows_sum_to_one() {
     s.add_material(Material::default());
     unit_box(&mut s, [0; 6], true);
     let ps = PreparedScene::new(&s, PrepareOptions::default());
-    let mesh = mesh::build(&ps, 0.5, false).expect("mesh");
+    let mesh = mesh::build(&ps, 0.5, false, &NoProgress).expect("mesh");
     let accel = chiaro_core::accel::instanced::build_accelerator(&ps);
     let vis = Visibility {
         accel: accel.as_ref(),
@@ -566,3 +566,6 @@ fn cornell_render_is_clean_and_shows_colour_bleeding() {
         let _ = img.save(format!("{dir}/cornell_radiosity.png"));
     }
 }
+
+#[path = "tests_patches.rs"]
+mod patches;
