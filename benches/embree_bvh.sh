@@ -2,8 +2,8 @@
 # BVH build time and ray throughput of chiaro's BVH (single rays, and packets
 # of 8: camera rays in 4 x 2 tiles, random rays 8 in a row) next to native
 # Embree 3 (rtcIntersect1, rtcIntersect16), on the same 1,003,520-triangle
-# grid of icospheres and the same rays (the workload of
-# shared/peers/embree_rays.py), both on $THREADS threads.
+# grid of icospheres and the same rays (a pinhole camera over the grid and
+# uniformly random rays), both on $THREADS threads.
 #
 #   benches/embree_bvh.sh [THREADS] [REPS] [PAIRS]
 #
@@ -12,14 +12,14 @@
 # Needs root for apt-get (libembree-dev, g++) the first time. The chiaro
 # side (crates/chiaro-ray/examples/bvh_bench.rs) writes the mesh and rays to
 # $OUT/wl_*.bin, which the Embree program below then reads, so both trace
-# identical rays. The Embree program is shared/peers/embree3_native.cpp
-# (rtcIntersect1 / rtcIntersect16 per ray, OpenMP dynamic schedule) plus the
+# identical rays. The Embree program below traces them with rtcIntersect1 /
+# rtcIntersect16 (OpenMP dynamic schedule) and reports the
 # process CPU time of every measured interval, the figure chiaro also prints:
 # on a machine shared with other work, CPU time leaves out the time a
 # process spent descheduled. OMP_WAIT_POLICY=passive keeps idle OpenMP
 # threads from spinning into that CPU time. Embree's build runs on its own
 # TBB threads, which do spin, so compare builds by wall clock on a quiet
-# machine (shared/peers/wait_quiet.sh).
+# machine (benches/wait_quiet.sh).
 set -euo pipefail
 THREADS=${1:-2}
 REPS=${2:-5}
@@ -32,7 +32,7 @@ if ! [ -f /usr/include/embree3/rtcore.h ] || ! command -v g++ >/dev/null; then
     apt-get update -qq && apt-get install -y -qq libembree-dev g++ >/dev/null
 fi
 cat > "$OUT/embree3_cpu.cpp" <<'CPP'
-// Native Embree 3 on the wl_*.bin workload (after shared/peers/embree3_native.cpp),
+// Native Embree 3 on the wl_*.bin workload,
 // with wall-clock and process-CPU time per measurement.
 #include <embree3/rtcore.h>
 #include <omp.h>
@@ -131,6 +131,6 @@ for pair in $(seq "$PAIRS"); do
     DUMP=()
     [ "$pair" = 1 ] && DUMP=(--dump "$OUT")
     "$ROOT/target/release/examples/bvh_bench" --threads "$THREADS" --reps "$REPS" "${DUMP[@]}"
-    echo "-- Embree $EMBREE_VERSION (embree3_cpu, after shared/peers/embree3_native.cpp)"
+    echo "-- Embree $EMBREE_VERSION (embree3_cpu)"
     OMP_WAIT_POLICY=passive PEERS_OUT="$OUT" "$OUT/embree3_cpu" "$THREADS" "$REPS"
 done

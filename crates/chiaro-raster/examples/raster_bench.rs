@@ -1,6 +1,6 @@
 //! Scan-conversion benchmark: the llvmpipe peer's scene (a 14x14 grid of
 //! 5120-triangle icospheres, 1,003,520 triangles, 1920x1080, two point
-//! lights, `/work/shared/peers/gl_llvmpipe.py`) rendered with flat, Gouraud
+//! lights, as `benches/llvmpipe_raster.py` draws it) rendered with flat, Gouraud
 //! and Phong shading, each into one film reused across frames
 //! (`render_prepared_into`, as the peer reuses its framebuffer). Prints
 //! ms/frame (median of `frames` after one warm-up) and the peak resident

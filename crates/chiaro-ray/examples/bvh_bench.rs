@@ -1,4 +1,4 @@
-//! BVH benchmark (chiaro's 8-wide BVH, [`SceneBvh`]) on the workload of `shared/peers/embree_rays.py`: a 14 x 14
+//! BVH benchmark (chiaro's 8-wide BVH, [`SceneBvh`]) on the workload of `benches/embree_bvh.sh`: a 14 x 14
 //! grid of 5120-triangle icospheres (1,003,520 triangles), 1000 x 1000
 //! coherent pinhole camera rays and 1M incoherent random rays, closest hit,
 //! one ray at a time and as packets of [`PACKET`] (camera rays in 4 x 2
