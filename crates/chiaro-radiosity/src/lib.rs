@@ -358,12 +358,14 @@ pub(crate) fn solve_with(
                     .zip(f.par_iter())
                     .for_each(|(g, f)| *g = *f * du[i]);
             };
-            let shooter = pair_rule.map(|rule| patch::PatchShooter {
-                mesh: &mesh,
-                patches: &patches,
-                rule,
-                vis: (cfg.formfactor == Method::Raycast).then_some(&vis),
-                tol,
+            let shooter = pair_rule.map(|rule| {
+                patch::PatchShooter::new(
+                    &mesh,
+                    &patches,
+                    rule,
+                    (cfg.formfactor == Method::Raycast).then_some(&vis),
+                    tol,
+                )
             });
             let by_patch = |p: usize, du: &[Vec3], f: &mut [f32], g: &mut [Vec3]| {
                 if let Some(s) = &shooter {

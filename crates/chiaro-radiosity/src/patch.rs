@@ -20,8 +20,10 @@
 //! fraction per receiving patch (four rays) and, per element, the
 //! point-to-disc form factor `A cos cos / (pi d^2 + A)` of the shooting
 //! patch from geometry alone; to near patches the unoccluded element form
-//! factors summed over the shooter's elements, times one visibility
-//! fraction per receiving element (four rays to points of the shooter).
+//! factors summed over the shooter's elements (the point-to-disc form
+//! factor for a shooting element that is far from the receiving one by the
+//! same criterion), times one visibility fraction per receiving element
+//! (four rays to points of the shooter).
 
 use crate::formfactor::{PairRule, Visibility, pair, sub_centroids};
 use crate::mesh::{ElementMesh, SourceKind};
@@ -309,17 +311,56 @@ pub(crate) fn point_to_disc(x: Vec3, n: Vec3, c: Vec3, nc: Vec3, area: f32) -> f
     area * cos_c * cos_x / (PI * d2 + area)
 }
 
+/// What a shot reads of an element, packed: centroid, normal, area and
+/// the largest distance from the centroid to a corner.
+#[derive(Debug, Clone, Copy)]
+struct Geo {
+    c: Vec3,
+    n: Vec3,
+    area: f32,
+    radius: f32,
+}
+
 /// Shots of progressive refinement from patches to elements, with
 /// ray-cast (or, without visibility, analytic) element form factors.
 pub(crate) struct PatchShooter<'a> {
-    pub mesh: &'a ElementMesh,
-    pub patches: &'a Patches,
-    pub rule: PairRule,
-    pub vis: Option<&'a Visibility<'a>>,
-    pub tol: f32,
+    mesh: &'a ElementMesh,
+    patches: &'a Patches,
+    rule: PairRule,
+    vis: Option<&'a Visibility<'a>>,
+    tol: f32,
+    geo: Vec<Geo>,
 }
 
-impl PatchShooter<'_> {
+impl<'a> PatchShooter<'a> {
+    /// A shooter over `mesh` and its `patches`; `vis` None: unoccluded.
+    pub fn new(
+        mesh: &'a ElementMesh,
+        patches: &'a Patches,
+        rule: PairRule,
+        vis: Option<&'a Visibility<'a>>,
+        tol: f32,
+    ) -> Self {
+        let geo = mesh
+            .elements
+            .par_iter()
+            .map(|e| Geo {
+                c: e.c,
+                n: e.n,
+                area: e.area,
+                radius: e.p.iter().map(|q| q.distance(e.c)).fold(0.0f32, f32::max),
+            })
+            .collect();
+        Self {
+            mesh,
+            patches,
+            rule,
+            vis,
+            tol,
+            geo,
+        }
+    }
+
     /// Shoots patch `p` with the unshot radiance `du` of every element:
     /// writes `f[j] = F_{j <- p}` (summed over the patch's elements) and
     /// `g[j] = sum_{e in p} F_{j <- e} du_e` for every element `j`.
@@ -364,18 +405,19 @@ impl PatchShooter<'_> {
             .zip(g.par_iter_mut())
             .enumerate()
             .for_each(|(j, (fj, gj))| {
-                let recv = &mesh.elements[j];
                 let v = bulk[pt.of[j] as usize];
                 if v == BEHIND {
                     (*fj, *gj) = (0.0, Vec3::ZERO);
                 } else if v >= 0.0 {
                     let ff = if v > 0.0 {
-                        v * point_to_disc(recv.c, recv.n, pt.centre[p], pt.normal[p], pt.area[p])
+                        let r = &self.geo[j];
+                        v * point_to_disc(r.c, r.n, pt.centre[p], pt.normal[p], pt.area[p])
                     } else {
                         0.0
                     };
                     (*fj, *gj) = (ff, ff * du_p);
                 } else if single {
+                    let recv = &mesh.elements[j];
                     let i = shooter[0] as usize;
                     let ff = if j == i {
                         0.0
@@ -386,12 +428,22 @@ impl PatchShooter<'_> {
                 } else {
                     // Near a shooting patch of several elements: the
                     // unoccluded element form factors summed over it, times
-                    // the fraction of rays from the receiver to it that are free.
+                    // the fraction of rays from the receiver to it that are
+                    // free. Shooting elements far from the receiver by the
+                    // patches' criterion send the point-to-disc form factor.
+                    let recv = &mesh.elements[j];
+                    let rg = &self.geo[j];
                     let (mut sf, mut sg) = (0.0f32, Vec3::ZERO);
                     for &i in shooter {
                         let i = i as usize;
                         if i != j {
-                            let ff = pair(recv, &mesh.elements[i], self.rule, None, self.tol);
+                            let s = &self.geo[i];
+                            let reach = FAR * (s.radius + rg.radius);
+                            let ff = if rg.c.distance_squared(s.c) > reach * reach {
+                                point_to_disc(rg.c, rg.n, s.c, s.n, s.area)
+                            } else {
+                                pair(recv, &mesh.elements[i], self.rule, None, self.tol)
+                            };
                             sf += ff;
                             sg += ff * du[i];
                         }

@@ -241,6 +241,17 @@ pub(crate) fn progressive(
     }
     let mut col = vec![0.0f32; n];
     let mut gathered = vec![Vec3::ZERO; n];
+    // Per-element data the per-shot passes read, packed so that a pass over
+    // a million elements streams a few bytes per element instead of the
+    // whole element; `epow[j]` is the unshot power `A_j sum(dL_j)`, kept up
+    // to date by the update.
+    let area: Vec<f32> = elements.iter().map(|e| e.area).collect();
+    let rho: Vec<Vec3> = elements.iter().map(|e| e.rho).collect();
+    let mut epow: Vec<f32> = area
+        .iter()
+        .zip(&unshot)
+        .map(|(a, u)| *a * u.element_sum())
+        .collect();
     let (mut shot_power, mut landed_power) = (0.0f32, 0.0f32);
     let mut bar = Convergence::begin(progress, "radiosity progressive", tol);
     out.unshot = 1.0;
@@ -252,11 +263,8 @@ pub(crate) fn progressive(
         let (mut best, mut best_p, mut total) = (0usize, -1.0f32, 0.0f32);
         for p in 0..patches.len() {
             let pw = match patches.elements(p) {
-                [i] => elements[*i as usize].area * unshot[*i as usize].element_sum(),
-                m => m
-                    .iter()
-                    .map(|&i| elements[i as usize].area * unshot[i as usize].element_sum())
-                    .sum(),
+                [i] => epow[*i as usize],
+                m => m.iter().map(|&i| epow[i as usize]).sum(),
             };
             total += pw;
             if pw > best_p {
@@ -270,11 +278,7 @@ pub(crate) fn progressive(
         shoot(best, &unshot, &mut col, &mut gathered);
         // The share of the shot power that lands on elements: sum_j F_pj =
         // sum_j F_jp A_j / A_p (below 1 where light leaves an open scene).
-        let landed: f32 = col
-            .iter()
-            .zip(elements)
-            .map(|(f, el)| f * el.area)
-            .sum::<f32>()
+        let landed: f32 = col.iter().zip(&area).map(|(f, a)| f * a).sum::<f32>()
             / patches.area[best].max(f32::MIN_POSITIVE);
         shot_power += best_p;
         landed_power += best_p * landed.clamp(0.0, 1.0);
@@ -283,12 +287,14 @@ pub(crate) fn progressive(
         }
         l.par_iter_mut()
             .zip(unshot.par_iter_mut())
-            .zip(elements.par_iter())
+            .zip(epow.par_iter_mut())
+            .zip(rho.par_iter().zip(&area))
             .zip(gathered.par_iter())
-            .for_each(|(((lj, uj), el), g)| {
-                let d = el.rho * *g;
+            .for_each(|((((lj, uj), pj), (r, a)), g)| {
+                let d = *r * *g;
                 *lj += d;
                 *uj += d;
+                *pj = *a * uj.element_sum();
             });
         out.iterations = it;
         bar.update(progress, out.unshot);
