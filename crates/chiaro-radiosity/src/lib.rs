@@ -115,6 +115,19 @@ struct EmitterGroup {
     radius: f32,
 }
 
+impl EmitterGroup {
+    /// The free fraction of four rays from element `e` to sources spread
+    /// over the group.
+    fn free_fraction(&self, e: &Element, vis: &Visibility<'_>) -> f32 {
+        let n = self.sources.len();
+        let points = (0..4).map(|k| {
+            let s = &self.sources[k * n / 4];
+            (s.c, s.n)
+        });
+        patch::free_fraction(vis, e.c, e.n, points)
+    }
+}
+
 /// Reflected radiance at each element due to *direct* light: point-like
 /// lights (`point_direct`) plus every emissive source triangle, gathered
 /// with ray-cast form factors (16 visibility rays per receiver point), or,
@@ -186,14 +199,7 @@ fn direct_light(
             if g.sources.len() > 1 && e.c.distance(g.centre) > patch::FAR * (g.radius + radius) {
                 let f = patch::point_to_disc(e.c, e.n, g.centre, g.normal, g.area);
                 if f > 0.0 {
-                    let n = g.sources.len();
-                    let seen = (0..4)
-                        .filter(|&k| {
-                            let s = &g.sources[k * n / 4];
-                            vis.visible(e.c, e.n, s.c, s.n)
-                        })
-                        .count();
-                    sum += g.le * (f * seen as f32 / 4.0);
+                    sum += g.le * (f * g.free_fraction(e, vis));
                 }
                 continue;
             }
@@ -212,14 +218,7 @@ fn direct_light(
                 }
             }
             if near != Vec3::ZERO {
-                let n = g.sources.len();
-                let seen = (0..4)
-                    .filter(|&k| {
-                        let s = &g.sources[k * n / 4];
-                        vis.visible(e.c, e.n, s.c, s.n)
-                    })
-                    .count();
-                sum += near * (seen as f32 / 4.0);
+                sum += near * g.free_fraction(e, vis);
             }
         }
         *pd + e.rho * sum

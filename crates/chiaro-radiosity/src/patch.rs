@@ -292,6 +292,21 @@ impl Patches {
     }
 }
 
+/// The fraction of the [`FAR_RAYS`] segments from `x` (normal `n`) to
+/// `points` (with their normals) that are unoccluded.
+pub(crate) fn free_fraction(
+    vis: &Visibility<'_>,
+    x: Vec3,
+    n: Vec3,
+    points: impl Iterator<Item = (Vec3, Vec3)>,
+) -> f32 {
+    let seen = points
+        .take(FAR_RAYS)
+        .filter(|&(y, ny)| vis.visible(x, n, y, ny))
+        .count();
+    seen as f32 / FAR_RAYS as f32
+}
+
 /// The point-to-disc form factor from a receiving point `x` (normal `n`) to
 /// a source of area `area` at `c` with normal `nc`: `A cos_c cos_x / (pi
 /// d^2 + A)`, exact on the axis of a disc (Wallace, Elmquist and Haines
@@ -451,11 +466,7 @@ impl<'a> PatchShooter<'a> {
                     if sf > 0.0
                         && let Some(v) = self.vis
                     {
-                        let seen = points
-                            .iter()
-                            .filter(|(y, ny)| v.visible(recv.c, recv.n, *y, *ny))
-                            .count();
-                        let frac = seen as f32 / FAR_RAYS as f32;
+                        let frac = free_fraction(v, recv.c, recv.n, points.iter().copied());
                         (sf, sg) = (sf * frac, sg * frac);
                     }
                     (*fj, *gj) = (sf, sg);

@@ -27,7 +27,7 @@
 
 use super::node::RayPre;
 use super::scene::{TriBlock, block_lanes, prefetch_block, read_ray};
-use super::traverse::prefetch;
+use super::traverse::{FixedStack, prefetch};
 use super::{BLOCK, Bvh, BvhNode, SceneBvh, WIDTH};
 use crate::accel::{Hit, WatertightRay};
 use crate::geometry::Ray;
@@ -78,73 +78,8 @@ const PACKET_STACK_FIRST: usize = 12;
 /// it; deeper trees spill into a `Vec`.
 const PACKET_STACK_MORE: usize = 36;
 
-/// A packet traversal stack: two fixed arrays, the second made only when
-/// the first is full, then a `Vec` (never allocated for ordinary trees).
-pub(super) struct PacketStack {
-    first: [PacketEntry; PACKET_STACK_FIRST],
-    more: Option<[PacketEntry; PACKET_STACK_MORE]>,
-    len: usize,
-    spill: Vec<PacketEntry>,
-}
-
-impl PacketStack {
-    #[inline(always)]
-    pub(super) fn new() -> Self {
-        Self {
-            first: [PacketEntry::default(); PACKET_STACK_FIRST],
-            more: None,
-            len: 0,
-            spill: Vec::new(),
-        }
-    }
-
-    #[inline(always)]
-    pub(super) fn push(&mut self, e: PacketEntry) {
-        if self.len < PACKET_STACK_FIRST {
-            self.first[self.len] = e;
-            self.len += 1;
-        } else {
-            self.push_more(e);
-        }
-    }
-
-    /// [`PacketStack::push`] past the first part.
-    #[inline(never)]
-    fn push_more(&mut self, e: PacketEntry) {
-        if self.len < PACKET_STACK_FIRST + PACKET_STACK_MORE {
-            let more = self
-                .more
-                .get_or_insert([PacketEntry::default(); PACKET_STACK_MORE]);
-            more[self.len - PACKET_STACK_FIRST] = e;
-            self.len += 1;
-        } else {
-            self.spill.push(e);
-        }
-    }
-
-    #[inline(always)]
-    pub(super) fn pop(&mut self) -> Option<PacketEntry> {
-        // (The spill holds entries only when both fixed parts are full.)
-        if self.len > PACKET_STACK_FIRST {
-            self.pop_more()
-        } else if self.len > 0 {
-            self.len -= 1;
-            Some(self.first[self.len])
-        } else {
-            None
-        }
-    }
-
-    /// [`PacketStack::pop`] past the first part.
-    #[inline(never)]
-    fn pop_more(&mut self) -> Option<PacketEntry> {
-        if let Some(e) = self.spill.pop() {
-            return Some(e);
-        }
-        self.len -= 1;
-        self.more.as_ref().map(|m| m[self.len - PACKET_STACK_FIRST])
-    }
-}
+/// The packet traversal stack.
+pub(super) type PacketStack = FixedStack<PacketEntry, PACKET_STACK_FIRST, PACKET_STACK_MORE>;
 
 /// Iterates over the set bits of a mask, lowest first.
 #[inline(always)]

@@ -45,21 +45,25 @@ const STACK_FIRST: usize = 8;
 /// or two; deeper trees spill into a `Vec`.
 const STACK_MORE: usize = 24;
 
-/// The traversal stack: two fixed arrays, the second made only when the
+/// A traversal stack: two fixed arrays, the second made only when the
 /// first is full (an `Option`, whose `None` is one tag store), then a
 /// `Vec` (never allocated for ordinary trees), so that no tree is too deep.
-pub(super) struct Stack {
-    pub(super) first: [Entry; STACK_FIRST],
-    more: Option<[Entry; STACK_MORE]>,
-    pub(super) len: usize,
-    spill: Vec<Entry>,
+/// Single rays use [`Stack`], packets `packet::PacketStack`.
+pub(super) struct FixedStack<E: Copy + Default, const FIRST: usize, const MORE: usize> {
+    first: [E; FIRST],
+    more: Option<[E; MORE]>,
+    len: usize,
+    spill: Vec<E>,
 }
 
-impl Stack {
+/// The single-ray traversal stack.
+pub(super) type Stack = FixedStack<Entry, STACK_FIRST, STACK_MORE>;
+
+impl<E: Copy + Default, const FIRST: usize, const MORE: usize> FixedStack<E, FIRST, MORE> {
     #[inline(always)]
     pub(super) fn new() -> Self {
         Self {
-            first: [Entry::default(); STACK_FIRST],
+            first: [E::default(); FIRST],
             more: None,
             len: 0,
             spill: Vec::new(),
@@ -67,8 +71,8 @@ impl Stack {
     }
 
     #[inline(always)]
-    pub(super) fn push(&mut self, e: Entry) {
-        if self.len < STACK_FIRST {
+    pub(super) fn push(&mut self, e: E) {
+        if self.len < FIRST {
             self.first[self.len] = e;
             self.len += 1;
         } else {
@@ -76,13 +80,13 @@ impl Stack {
         }
     }
 
-    /// [`Stack::push`] past the first part (out of line: the traversal
+    /// [`FixedStack::push`] past the first part (out of line: the traversal
     /// loop keeps only the common case).
     #[inline(never)]
-    fn push_more(&mut self, e: Entry) {
-        if self.len < STACK_FIRST + STACK_MORE {
-            let more = self.more.get_or_insert([Entry::default(); STACK_MORE]);
-            more[self.len - STACK_FIRST] = e;
+    fn push_more(&mut self, e: E) {
+        if self.len < FIRST + MORE {
+            let more = self.more.get_or_insert([E::default(); MORE]);
+            more[self.len - FIRST] = e;
             self.len += 1;
         } else {
             self.spill.push(e);
@@ -90,9 +94,9 @@ impl Stack {
     }
 
     #[inline(always)]
-    pub(super) fn pop(&mut self) -> Option<Entry> {
+    pub(super) fn pop(&mut self) -> Option<E> {
         // (The spill holds entries only when both fixed parts are full.)
-        if self.len > STACK_FIRST {
+        if self.len > FIRST {
             self.pop_more()
         } else if self.len > 0 {
             self.len -= 1;
@@ -102,14 +106,14 @@ impl Stack {
         }
     }
 
-    /// [`Stack::pop`] past the first part.
+    /// [`FixedStack::pop`] past the first part.
     #[inline(never)]
-    fn pop_more(&mut self) -> Option<Entry> {
+    fn pop_more(&mut self) -> Option<E> {
         if let Some(e) = self.spill.pop() {
             return Some(e);
         }
         self.len -= 1;
-        self.more.as_ref().map(|m| m[self.len - STACK_FIRST])
+        self.more.as_ref().map(|m| m[self.len - FIRST])
     }
 }
 
