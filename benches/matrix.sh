@@ -13,7 +13,7 @@
 #   BIN=/tmp/chiaro-old benches/matrix.sh    # another build, not rebuilt
 #
 # The glTF models are read from ASSETS (default: the Khronos folder of the
-# shared test assets, $CHIARO_ASSETS or ../shared/assets; not part of
+# test assets named by $CHIARO_ASSETS; not part of
 # the repository); models that are not there are left out of the table.
 set -u
 cd "$(dirname "$0")/.."
@@ -21,7 +21,7 @@ WIDTH=${WIDTH:-640}
 HEIGHT=${HEIGHT:-480}
 LIMIT=${LIMIT:-120}
 MODELS=${MODELS:-1}
-ASSETS=${ASSETS:-${CHIARO_ASSETS:-../shared/assets}/khronos-gltf-sample-assets}
+ASSETS=${ASSETS:-${CHIARO_ASSETS:-assets-not-set}/khronos-gltf-sample-assets}
 TECHS=${TECHS:-"preview flat gouraud phong whitted radiosity hybrid path"}
 # BIN=path: time that binary instead of building this tree's.
 if [ -z "${BIN:-}" ]; then

@@ -133,13 +133,15 @@ pub const ASSETS_VAR: &str = "CHIARO_ASSETS";
 
 /// The shared test-asset folder (third-party models, textures and scenes
 /// read in place, never copied into the repository): `$CHIARO_ASSETS` when
-/// set (a relative path is taken from the workspace root), else
-/// `../shared/assets` beside the workspace. `None`, after printing a skip
-/// message that names the folder and the variable, when it is absent: the
-/// tests that need it then skip.
+/// set (a relative path is taken from the workspace root). `None`, after
+/// printing a skip message that names the variable (and the folder), when
+/// it is unset or the folder is absent: the tests that need it then skip.
 pub fn shared_assets() -> Option<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let p = assets_folder(&root, std::env::var_os(ASSETS_VAR));
+    let Some(p) = assets_folder(&root, std::env::var_os(ASSETS_VAR)) else {
+        eprintln!("skipped: {ASSETS_VAR} does not name the test-asset folder");
+        return None;
+    };
     if p.is_dir() {
         Some(p)
     } else {
@@ -164,12 +166,9 @@ pub fn shared_asset(relative: &str) -> Option<PathBuf> {
 }
 
 /// Where [`shared_assets`] looks, given the workspace root and the
-/// variable's value: the value (relative to the root), else the default.
-fn assets_folder(root: &Path, var: Option<std::ffi::OsString>) -> PathBuf {
-    match var {
-        Some(v) if !v.is_empty() => root.join(v),
-        _ => root.join("../shared/assets"),
-    }
+/// variable's value: the value (relative to the root); `None` when unset.
+fn assets_folder(root: &Path, var: Option<std::ffi::OsString>) -> Option<PathBuf> {
+    var.filter(|v| !v.is_empty()).map(|v| root.join(v))
 }
 
 #[cfg(test)]
@@ -177,23 +176,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_assets_folder_is_the_variable_else_beside_the_workspace() {
+    fn the_assets_folder_is_the_variable_or_none() {
         let root = Path::new("/ws/chiaro");
+        assert_eq!(assets_folder(root, None), None);
+        assert_eq!(assets_folder(root, Some("".into())), None);
         assert_eq!(
-            assets_folder(root, None),
-            Path::new("/ws/chiaro/../shared/assets")
+            assets_folder(root, Some("/data/assets".into())).as_deref(),
+            Some(Path::new("/data/assets"))
         );
         assert_eq!(
-            assets_folder(root, Some("".into())),
-            Path::new("/ws/chiaro/../shared/assets")
-        );
-        assert_eq!(
-            assets_folder(root, Some("/data/assets".into())),
-            Path::new("/data/assets")
-        );
-        assert_eq!(
-            assets_folder(root, Some("assets".into())),
-            Path::new("/ws/chiaro/assets")
+            assets_folder(root, Some("assets".into())).as_deref(),
+            Some(Path::new("/ws/chiaro/assets"))
         );
     }
 }
