@@ -230,8 +230,12 @@ where
     F: Fn(TileRect) -> TilePixels + Sync,
 {
     progress.begin(stage, rects.len() as u64);
+    // One task per tile: rayon's default splitting leaves a thread running a
+    // long unsplit run of tiles alone while the other idles when costs are
+    // uneven (a quarter of Whitted's adaptive render; BENCHMARKS.md).
     let done: Vec<Option<TilePixels>> = rects
         .par_iter()
+        .with_max_len(1)
         .map(|&r| {
             if progress.cancelled() {
                 return None;
