@@ -110,11 +110,40 @@ impl Camera {
     /// `(x, y)` in pixels, where `(0, 0)` is the top-left corner of the image
     /// and `(width, height)` the bottom-right one.
     pub fn ray_direction(&self, x: f32, y: f32, width: u32, height: u32) -> Vec3 {
-        let f = self.frame();
-        let tan_half = (self.fov_y_degrees.to_radians() * 0.5).tan();
-        let aspect = width as f32 / height as f32;
-        let ndc_x = (2.0 * x / width as f32 - 1.0) * tan_half * aspect;
-        let ndc_y = (1.0 - 2.0 * y / height as f32) * tan_half;
+        self.pixel_rays(width, height).direction(x, y)
+    }
+
+    /// The primary rays of a `width x height` image: the frame and the film
+    /// plane's scale computed once, for renderers that trace many rays.
+    pub fn pixel_rays(&self, width: u32, height: u32) -> PixelRays {
+        PixelRays {
+            frame: self.frame(),
+            tan_half: (self.fov_y_degrees.to_radians() * 0.5).tan(),
+            aspect: width as f32 / height as f32,
+            width: width as f32,
+            height: height as f32,
+        }
+    }
+}
+
+/// The primary ray directions of one camera and image size
+/// ([`Camera::pixel_rays`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelRays {
+    frame: CameraFrame,
+    tan_half: f32,
+    aspect: f32,
+    width: f32,
+    height: f32,
+}
+
+impl PixelRays {
+    /// [`Camera::ray_direction`] through film position `(x, y)` in pixels.
+    #[inline]
+    pub fn direction(&self, x: f32, y: f32) -> Vec3 {
+        let f = &self.frame;
+        let ndc_x = (2.0 * x / self.width - 1.0) * self.tan_half * self.aspect;
+        let ndc_y = (1.0 - 2.0 * y / self.height) * self.tan_half;
         (f.forward + ndc_x * f.right + ndc_y * f.up).normalize()
     }
 }

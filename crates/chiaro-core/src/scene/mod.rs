@@ -13,7 +13,7 @@ mod settings;
 mod texture;
 mod validate;
 
-pub use camera::{Camera, NamedCamera};
+pub use camera::{Camera, NamedCamera, PixelRays};
 pub use light::{AreaShape, Attenuation, Flap, Light, SpotLight};
 pub use material::{
     AlphaMode, Bump, Distribution, Material, MetallicRoughness, Occlusion, ReflectanceModel,

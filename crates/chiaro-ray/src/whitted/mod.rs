@@ -44,7 +44,7 @@ use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::{PreparedScene, RayDifferentials, SurfaceHit};
 use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
-use chiaro_core::scene::{AaMode, RenderSettings, ShadowMethod};
+use chiaro_core::scene::{AaMode, PixelRays, RenderSettings, ShadowMethod};
 use chiaro_core::shading::texture::{environment_diffuse, environment_specular, miss_radiance};
 use chiaro_core::shading::{
     EmitterGroup, LightSample, LocalLighting, SampleKey, ShadingPoint, SurfaceMaterial,
@@ -191,6 +191,8 @@ pub struct Tracer<'s> {
     /// strata centres, as the scan converter takes them, so that both
     /// techniques estimate direct light with the same samples.
     centre_light_samples: bool,
+    /// The camera's ray directions at the settings' image size.
+    pixel_rays: PixelRays,
 }
 
 impl std::fmt::Debug for Tracer<'_> {
@@ -220,6 +222,10 @@ impl<'s> Tracer<'s> {
             casters,
             emitters,
             centre_light_samples: settings.aa != AaMode::Adaptive && settings.samples <= 1,
+            pixel_rays: prepared
+                .scene
+                .camera
+                .pixel_rays(settings.width.max(1), settings.height.max(1)),
         }
     }
 
@@ -387,14 +393,13 @@ impl<'s> Tracer<'s> {
     /// the top-left corner) with the generator `rng`.
     pub fn trace_camera(&self, film: Vec2, rng: Rng, rays: &mut u64) -> PrimarySample {
         let scene = self.prepared.scene;
-        let (w, h) = (self.settings.width.max(1), self.settings.height.max(1));
-        let dir = scene.camera.ray_direction(film.x, film.y, w, h);
-        let ray = Ray::new(scene.camera.eye, dir);
+        let pr = &self.pixel_rays;
+        let ray = Ray::new(scene.camera.eye, pr.direction(film.x, film.y));
         // The rays through the neighbouring pixels, for texture filtering.
         let differentials = (!scene.textures.is_empty()).then(|| RayDifferentials {
             origin: ray.origin,
-            dir_dx: scene.camera.ray_direction(film.x + 1.0, film.y, w, h),
-            dir_dy: scene.camera.ray_direction(film.x, film.y + 1.0, w, h),
+            dir_dx: pr.direction(film.x + 1.0, film.y),
+            dir_dy: pr.direction(film.x, film.y + 1.0),
         });
         let mut state = TraceState::new(rng);
         // A pixel-centre ray names its pixel (the scan converter's rule).
