@@ -513,7 +513,8 @@ impl<'s> Tracer<'s> {
     /// to `adaptive_max_depth`; a square's value is the mean of its
     /// corners (sub-squares averaged). Corners are keyed by their position
     /// on the finest grid, so neighbouring pixels and tiles share them
-    /// exactly.
+    /// exactly; within a tile each is traced once (a corner on the edge
+    /// between two subdivided pixels serves both), across tiles twice.
     fn adaptive_tile(&self, rect: TileRect, count: &mut (u64, u64)) -> TilePixels {
         let s = &self.settings;
         let max_depth = s.whitted.adaptive_max_depth.min(MAX_ADAPTIVE_DEPTH);
@@ -533,6 +534,7 @@ impl<'s> Tracer<'s> {
                 ));
             }
         }
+        // Subdivision corners traced so far in this tile.
         let mut cache: HashMap<(u32, u32), Vec3> = HashMap::new();
         for ty in 0..rect.height {
             for tx in 0..rect.width {
@@ -546,7 +548,6 @@ impl<'s> Tracer<'s> {
                 let idx = ty_ * rect.width as usize + tx_;
                 tile.depth[idx] = c[0].depth;
                 tile.normal[idx] = c[0].normal;
-                cache.clear();
                 let x0 = (rect.x + tx) * fine;
                 let y0 = (rect.y + ty) * fine;
                 let colors = c.map(|p| p.color);
