@@ -10,7 +10,9 @@
 # needs what benches/mitsuba_cbox.sh needs ($MITSUBA_VENV, libllvm19).
 # CHIARO_TARGET_RUSTFLAGS, when set, builds chiaro with those flags for the
 # target only (e.g. "-C target-cpu=x86-64-v4 -C target-feature=-prefer-256-bit"
-# for the AVX-512 kernel; BENCHMARKS.md, session 14) into target/bench-flags.
+# for the AVX-512 kernel; BENCHMARKS.md, session 14) into target/bench-flags;
+# with BOTH=1 as well, each pair also renders with the default build, so the
+# two builds are compared render by render (columns chiaro_s, flags_s).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 pairs=${1:-9}
@@ -26,20 +28,48 @@ if [ -n "${CHIARO_TARGET_RUSTFLAGS:-}" ]; then
         cargo build --profile "$profile" -q -p chiaro-ray --example path_bench --target "$triple"
     bench=target/bench-flags/$triple/$profile/examples/path_bench
 else
-    cargo build --profile "$profile" -q -p chiaro-ray --example path_bench
-    bench=target/$profile/examples/path_bench
+    bench=""
+fi
+cargo build --profile "$profile" -q -p chiaro-ray --example path_bench
+default=target/$profile/examples/path_bench
+flags=""
+if [ -z "$bench" ]; then
+    bench=$default
+elif [ "${BOTH:-0}" = 1 ]; then
+    flags=$bench
+    bench=$default
 fi
 out=target/mitsuba-bench
 mkdir -p "$out"
 fastest() { grep -o 'render\[[0-9]*\]=[0-9.]*' "$1" | cut -d= -f2 | sort -n | head -1; }
-echo "pair  mitsuba_s  chiaro_s  ratio (chiaro samples/s over Mitsuba's)"
+if [ -n "$flags" ]; then
+    echo "pair  mitsuba_s  chiaro_s  ratio  flags_s  flags_ratio (chiaro samples/s over Mitsuba's)"
+else
+    echo "pair  mitsuba_s  chiaro_s  ratio (chiaro samples/s over Mitsuba's)"
+fi
 for i in $(seq "$pairs"); do
     "$venv/bin/python" benches/mitsuba_cbox.py render llvm_ad_rgb "$spp" box "$i" "$out/pair_mi.npy" 2 > "$out/pair_mi.log"
     "$bench" scenes/mitsuba-cbox.toml "$out/pair_chiaro" --spp "$spp" --repeats 2 --seed "$i" > "$out/pair_chiaro.log"
     m=$(fastest "$out/pair_mi.log")
     c=$(fastest "$out/pair_chiaro.log")
-    awk -v i="$i" -v m="$m" -v c="$c" 'BEGIN { printf "%4d  %9.3f  %8.3f  %.3f\n", i, m, c, m / c }'
+    if [ -n "$flags" ]; then
+        "$flags" scenes/mitsuba-cbox.toml "$out/pair_flags" --spp "$spp" --repeats 2 --seed "$i" > "$out/pair_flags.log"
+        f=$(fastest "$out/pair_flags.log")
+        awk -v i="$i" -v m="$m" -v c="$c" -v f="$f" \
+            'BEGIN { printf "%4d  %9.3f  %8.3f  %.3f  %7.3f  %.3f\n", i, m, c, m / c, f, m / f }'
+    else
+        awk -v i="$i" -v m="$m" -v c="$c" 'BEGIN { printf "%4d  %9.3f  %8.3f  %.3f\n", i, m, c, m / c }'
+    fi
 done | tee "$out/pairs.log"
-awk '{ print $4 }' "$out/pairs.log" | sort -n | awk '{ r[NR] = $1 } END {
-    printf "median ratio %.3f over %d pairs (range %.3f-%.3f)\n", r[int((NR + 1) / 2)], NR, r[1], r[NR]
-}'
+median_of() {
+    awk -v k="$1" '{ print $k }' "$out/pairs.log" | sort -n | awk -v name="$2" '{ r[NR] = $1 } END {
+        printf "median %s %.3f over %d pairs (range %.3f-%.3f)\n", name, r[int((NR + 1) / 2)], NR, r[1], r[NR]
+    }'
+}
+median_of 4 ratio
+if [ -n "$flags" ]; then
+    median_of 6 "flags ratio"
+    awk '{ print $5 / $3 }' "$out/pairs.log" | sort -n | awk '{ r[NR] = $1 } END {
+        printf "median flags_s / chiaro_s %.3f (range %.3f-%.3f)\n", r[int((NR + 1) / 2)], r[1], r[NR]
+    }'
+fi
