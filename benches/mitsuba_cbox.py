@@ -11,6 +11,10 @@ $MITSUBA_SAMPLER, default the scene's `independent`) with VARIANT
 default), prints `render[i]=SECONDS s  M Msamples/s` per repeat (the render
 call only, as mi.render + dr.eval + sync) and writes the last image as .npy
 (float32, H x W x 3, linear RGB).
+MITSUBA_LLVM_AVX2=1 makes llvm_ad_rgb's JIT compile 8-wide AVX2 kernels
+(CPU `haswell`) instead of the host's own choice (16-wide on an AVX-512
+host), through Dr.Jit's `jit_llvm_set_target`, which its Python module does
+not expose; Embree, inside Mitsuba, still picks its own kernels.
 `compare` prints the RMSE (over all pixels and channels) of each image
 against REF, and its mean. `regions` prints the mean colour of a few
 regions (walls, floor, boxes, light) for checking that two scenes match.
@@ -21,11 +25,28 @@ import time
 import numpy as np
 
 
+def llvm_avx2(dr):
+    """Dr.Jit's LLVM backend set to 8-wide AVX2 kernels (see the docstring)."""
+    import ctypes
+
+    core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+    # jit_llvm_set_target(const char *cpu, const char *features, uint32_t vector_width)
+    core._Z19jit_llvm_set_targetPKcS0_j(
+        b"haswell", b"+avx,+avx2,+fma,+f16c,+sse4.2,+popcnt,+bmi,+bmi2,+lzcnt,+movbe,-avx512f", 8
+    )
+    core._Z19jit_llvm_target_cpuv.restype = ctypes.c_char_p
+    core._Z21jit_llvm_vector_widthv.restype = ctypes.c_uint32
+    cpu, width = core._Z19jit_llvm_target_cpuv(), core._Z21jit_llvm_vector_widthv()
+    print(f"llvm target {cpu.decode()} width {width}", flush=True)
+
+
 def render(variant, spp, filt, seed, out, repeats):
     import mitsuba as mi
     import drjit as dr
 
     mi.set_variant(variant)
+    if os.environ.get("MITSUBA_LLVM_AVX2") == "1" and variant.startswith("llvm"):
+        llvm_avx2(dr)
     d = mi.cornell_box()
     d["integrator"] = {"type": "path", "max_depth": 8}
     d["sensor"]["sampler"]["sample_count"] = spp
