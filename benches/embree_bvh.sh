@@ -19,7 +19,8 @@
 # process spent descheduled. OMP_WAIT_POLICY=passive keeps idle OpenMP
 # threads from spinning into that CPU time. Embree's build runs on its own
 # TBB threads, which do spin, so compare builds by wall clock on a quiet
-# machine (benches/wait_quiet.sh).
+# machine (benches/wait_quiet.sh). EMBREE_ISA (e.g. avx2) caps the kernels
+# Embree picks (its device config `isa=`), to see what an AVX-512 host gives it.
 set -euo pipefail
 THREADS=${1:-2}
 REPS=${2:-5}
@@ -58,7 +59,8 @@ int main(int argc, char** argv) {
   omp_set_num_threads(threads);
   auto V = load(wl("V")), F = load(wl("F"));
   size_t nv = V.size() / 12, nf = F.size() / 12;
-  char cfg[64]; snprintf(cfg, sizeof cfg, "threads=%d", threads);
+  const char* isa = getenv("EMBREE_ISA");
+  char cfg[96]; snprintf(cfg, sizeof cfg, isa && *isa ? "threads=%d,isa=%s" : "threads=%d", threads, isa);
   RTCDevice dev = rtcNewDevice(cfg);
   std::vector<double> bw, bc; RTCScene scene = nullptr;
   for (int r = 0; r < reps; r++) {
