@@ -180,7 +180,7 @@ pub struct CompareArgs {
     /// Techniques to compare, comma separated (e.g. `phong,whitted`).
     #[arg(long, value_delimiter = ',', required = true, num_args = 1..)]
     pub techniques: Vec<String>,
-    /// The reference, TECHNIQUE:SPP (`path:1024`) or TECHNIQUE:auto[:CAP]
+    /// The reference, TECHNIQUE:SPP (`path:1024`) or `TECHNIQUE:auto[:CAP]`
     /// (samples added until its own estimated relMSE is below a tenth of
     /// the smallest it judges; at most CAP, default 4096). Its seeds are
     /// derived from --seed, its size and --set options are those of the

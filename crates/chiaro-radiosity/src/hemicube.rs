@@ -11,7 +11,7 @@
 //!
 //! They sum to 1 (up to the pixel quadrature), so the row sums of a closed
 //! scene are 1 by construction. The hemicube gives `F_ij` from a point (the
-//! centroid of `i`); [`HemicubeFormFactor::column`] turns it into `F_ji` by
+//! centroid of `i`); `HemicubeFormFactor::column` turns it into `F_ji` by
 //! reciprocity.
 
 use crate::formfactor::FormFactor;

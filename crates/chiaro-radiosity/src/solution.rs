@@ -200,7 +200,7 @@ impl RadiositySolution {
 
     /// Incident irradiance (W/m^2, all of it: direct and reflected light)
     /// of each vertex, the area-weighted mean over the elements around it
-    /// that reflect (see [`irradiance_from`]): the display multiplies it by
+    /// that reflect (see `irradiance_from`): the display multiplies it by
     /// the textured `kd / pi` at each pixel.
     pub fn vertex_irradiance(&self) -> &[Vec3] {
         &self.vertex_irradiance

@@ -59,7 +59,7 @@ pub enum Error {
     Io(#[from] chiaro_io::IoError),
 }
 
-/// Result with [`Error`].
+/// Result with [`enum@Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// Checks `settings` alone ([`RenderSettings::validate`]), before a scene

@@ -3,7 +3,7 @@
 //!
 //! Data: the 306 control points and 32 patch index lists of the classic
 //! "teaset" (as in markkilgard/opengl4_examples `tessellation/teapot.cpp`,
-//! "adapted from http://www.sjbaker.org/teapot/teaset.tgz"). Licence: the teapot data
+//! "adapted from <http://www.sjbaker.org/teapot/teaset.tgz>"). Licence: the teapot data
 //! (Martin Newell, 1975) is conventionally treated as public domain. Patch
 //! groups (0-based): 0-3 rim, 4-11 body, 12-15 handle, 16-19 spout, 20-27
 //! lid, 28-31 bottom (the bottom was not part of Newell's original 28).

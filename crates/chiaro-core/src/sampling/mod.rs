@@ -52,8 +52,8 @@ pub fn uniform2(rng: &mut Rng) -> Vec2 {
 ///
 /// Both wedges (|x| > |y| or not) need the sine and cosine of one angle in
 /// `[-pi/4, pi/4]` (the second wedge's angle `pi/2 - a` swaps them),
-/// evaluated by [`sin_cos_quarter`] instead of the library's full-range
-/// `sin_cos`. See [`concentric_disk_polar`] for why it has no branch.
+/// evaluated by `sin_cos_quarter` instead of the library's full-range
+/// `sin_cos`. See `concentric_disk_polar` for why it has no branch.
 #[inline]
 pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
     concentric_disk_polar(u).0
