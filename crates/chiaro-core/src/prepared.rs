@@ -50,6 +50,19 @@ pub struct PreparedSphere {
     pub object_from_world: Mat4,
 }
 
+impl PreparedSphere {
+    /// The point of `ray` at `t` and the unit outward normal there (up
+    /// if the point is the centre): what every surface of it starts from.
+    #[inline]
+    pub fn point_normal(&self, ray: &Ray, t: f32) -> (Vec3, Vec3) {
+        let p = ray.at(t);
+        let n = ((p - self.center) / self.radius)
+            .try_normalize()
+            .unwrap_or(Vec3::Y);
+        (p, n)
+    }
+}
+
 /// The flattened scene.
 #[derive(Debug)]
 pub struct PreparedScene<'s> {
@@ -363,10 +376,7 @@ impl<'s> PreparedScene<'s> {
             self.triangle_surface(hit.prim, hit.u, hit.v)
         } else {
             let s = &self.spheres[(hit.prim - nt) as usize];
-            let p = ray.at(hit.t);
-            let n = ((p - s.center) / s.radius)
-                .try_normalize()
-                .unwrap_or(Vec3::Y);
+            let (p, n) = s.point_normal(ray, hit.t);
             let po = s.object_from_world.transform_point3(p);
             let d = po.normalize_or_zero();
             let uv = Vec2::new(

@@ -37,6 +37,10 @@ pub(super) struct PathTracer<'a, 's> {
     pub(super) triangle_light: Vec<u32>,
     /// Per-triangle geometry cached for the common untextured case.
     tris: Vec<TriInfo>,
+    /// Per sphere: true when its material is the cached one unchanged
+    /// (untextured, no maps, not metallic-roughness), so that
+    /// [`Self::plain_sphere`] shades it.
+    plain_spheres: Vec<bool>,
     /// Per-material constants, by material id.
     pub(super) materials: Vec<MaterialInfo>,
     /// Shadow rays' casters when the scene has BLEND surfaces (they pass
@@ -83,6 +87,10 @@ pub(super) struct MaterialInfo {
     /// transmission lobe), chosen with probability 1 and weighted by `kd`:
     /// the vertices that [`lanes`] shades.
     pub(super) lambert: bool,
+    /// True when `Bsdf::eval` is zero for every pair of directions (no
+    /// diffuse colour, no specular lobe): next-event estimation then finds
+    /// nothing, and skips its light sample.
+    pub(super) dark: bool,
     /// A glTF BLEND material: its transmission is a straight pass-through.
     pub(super) blend: bool,
 }
@@ -97,6 +105,7 @@ impl MaterialInfo {
         let lambert = wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular;
         Self {
             lambert: lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd,
+            dark: surface.kd == Vec3::ZERO && !lobes.specular,
             emissive: surface.emission.max_element() > 0.0,
             bsdf,
             two_sided: m.two_sided,
@@ -247,6 +256,16 @@ impl<'a, 's> PathTracer<'a, 's> {
                 }
             })
             .collect();
+        let plain_spheres = prepared
+            .spheres
+            .iter()
+            .map(|sp| {
+                let m = prepared.material(sp.material);
+                materials
+                    .get(sp.material.index())
+                    .is_some_and(|info| !info.textured && m.metallic_roughness.is_none())
+            })
+            .collect();
         let select_lights = if tri_lights.len() <= lanes::SELECT_LIGHTS {
             // (`None` if any light is not a triangle.)
             let all: Option<Vec<TriangleEmitter>> = tri_lights.iter().copied().collect();
@@ -264,6 +283,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             select_lights,
             triangle_light,
             tris,
+            plain_spheres,
             materials,
             shadows: ShadowCasters::blend_only(prepared),
             max_depth: settings.path.max_depth,
@@ -273,7 +293,7 @@ impl<'a, 's> PathTracer<'a, 's> {
 
     /// The vertex at `hit` and its cached material when `hit` is on a plain
     /// triangle (`None`: evaluate it through the surface layer,
-    /// `PreparedScene::shading_surface`).
+    /// `PreparedScene::shading_surface`, or a sphere's).
     #[inline(always)]
     pub(super) fn plain_surface(
         &self,
@@ -306,6 +326,45 @@ impl<'a, 's> PathTracer<'a, 's> {
         };
         let material = self.materials.get(self.prepared.tri_material[t].index())?;
         Some((v, material))
+    }
+
+    /// The vertex at `ray`'s hit at `t` on sphere `s` (counted after the
+    /// triangles) and its cached material when the sphere is plain: the
+    /// surface layer's point and normal (`PreparedSphere::point_normal`,
+    /// which `PreparedScene::surface` uses) and the untextured material.
+    #[inline]
+    pub(super) fn plain_sphere(
+        &self,
+        ray: &Ray,
+        t: f32,
+        s: u32,
+    ) -> Option<(Vertex, &MaterialInfo)> {
+        let s = s as usize;
+        if !self.plain_spheres.get(s).copied().unwrap_or(false) {
+            return None;
+        }
+        let sphere = &self.prepared.spheres[s];
+        let (p, n) = sphere.point_normal(ray, t);
+        let material = self.materials.get(sphere.material.index())?;
+        Some((Vertex { p, ng: n, ns: n }, material))
+    }
+
+    /// The vertex of a hit (`t`, `prim`, barycentrics `u`, `v`) on a plain
+    /// triangle ([`Self::plain_surface`]) or sphere ([`Self::plain_sphere`]);
+    /// `None`: evaluate it through the surface layer.
+    #[inline(always)]
+    pub(super) fn plain_vertex(
+        &self,
+        ray: &Ray,
+        t: f32,
+        prim: u32,
+        u: f32,
+        v: f32,
+    ) -> Option<(Vertex, &MaterialInfo)> {
+        match prim.checked_sub(self.tris.len() as u32) {
+            None => self.plain_surface(prim, u, v),
+            Some(s) => self.plain_sphere(ray, t, s),
+        }
     }
 
     /// Radiance along camera ray `ray`, and the first hit's distance and normal.
@@ -364,7 +423,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             // would load 16 bytes that `intersect` stored in pieces, which
             // stalls store-to-load forwarding.
             let Hit { t, prim, u, v: hv } = hit;
-            let (v, info) = match self.plain_surface(prim, u, hv) {
+            let (v, info) = match self.plain_vertex(&ray, t, prim, u, hv) {
                 Some(plain) => plain,
                 None => {
                     let hit = Hit { t, prim, u, v: hv };

@@ -7,11 +7,14 @@
 //! sample, bit for bit: every lane does the scalar loop's operations in
 //! the scalar loop's order (Rust never fuses or reorders float operations,
 //! so a loop over lanes gives each lane the scalar result), and draws its
-//! numbers from the same Sobol pairs ([`SobolSampler::lanes_2d`]). A lane
-//! whose vertex the kernel does not shade (a material with a glossy,
-//! mirror or transmission lobe, a textured or vertex-coloured triangle, a
-//! sphere) leaves the batch there and finishes in the scalar loop from the
-//! same state and the same pair ([`PathTracer::radiance_from`]).
+//! numbers from the same Sobol pairs ([`SobolSampler::lanes_2d`]). It
+//! shades Lambertian vertices on plain triangles and spheres
+//! ([`PathTracer::plain_vertex`]); a lane whose vertex it does not shade
+//! (a material with a glossy, mirror or transmission lobe, a textured or
+//! vertex-coloured surface) leaves the batch there and finishes in the
+//! scalar loop from the same state and the same pair
+//! ([`PathTracer::radiance_from`]), and so do the last few lanes of a
+//! batch ([`SCALAR_TAIL`]).
 //!
 //! Rays are still traced one at a time; what runs lane-parallel is the
 //! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
@@ -34,6 +37,11 @@ use chiaro_core::sampling::{
 use chiaro_core::shading::TriangleEmitter;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
+
+/// Live lanes at or below which a batch hands its paths to the scalar
+/// loop at the next bounce (BENCHMARKS.md, "Plain spheres, dark materials
+/// and a scalar tail in the path tracer": 0, 2, 4 and 8 measured).
+const SCALAR_TAIL: usize = 4;
 
 /// One `f32` per lane.
 type F = [f32; LANES];
@@ -220,6 +228,29 @@ impl PathTracer<'_, '_> {
         let mut lights = LightLanes::default();
         let mut u_next = [[0.0; LANES]; 2];
         for depth in 0..self.max_depth {
+            // A few lanes left: the scalar loop finishes them from their
+            // state and pair (a lane loop costs the same for one lane as
+            // for sixteen).
+            if alive.iter().filter(|&&a| a).count() <= SCALAR_TAIL {
+                for i in set_lanes(&alive) {
+                    let state = PathState {
+                        ray: Ray::new(org.get(i), dir.get(i)),
+                        depth,
+                        beta: beta.get(i),
+                        l: l.get(i),
+                        prev_pdf: prev_pdf[i],
+                        prev_p: prev_p.get(i),
+                    };
+                    rng.set_sample(first + i as u32);
+                    rng.skip(dim);
+                    let (li, fh) = self.radiance_from(state, None, rng, rays);
+                    out[i] = li;
+                    if depth == 0 && i == 0 {
+                        first_hit = fh;
+                    }
+                }
+                break;
+            }
             // Trace; sort the lanes into escaped, handed to the scalar
             // loop, and shaded here (whose emission is added now).
             let mut shade = [false; LANES];
@@ -239,7 +270,9 @@ impl PathTracer<'_, '_> {
                     continue;
                 };
                 let Hit { t, prim, u, v: hv } = hit;
-                let Some((v, m)) = self.plain_surface(prim, u, hv).filter(|(_, m)| m.lambert)
+                let Some((v, m)) = self
+                    .plain_vertex(&ray, t, prim, u, hv)
+                    .filter(|(_, m)| m.lambert)
                 else {
                     // The scalar loop from this vertex, at this pair.
                     let state = PathState {

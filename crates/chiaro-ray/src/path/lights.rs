@@ -122,7 +122,9 @@ impl PathTracer<'_, '_> {
         rays: &mut u64,
     ) -> Vec3 {
         let pick = self.light_pick_pdf(li);
-        if pick <= 0.0 {
+        // (A dark material, a mirror or glass: `eval` would be zero for
+        // any light sample, found before any shadow ray.)
+        if pick <= 0.0 || info.dark {
             return Vec3::ZERO;
         }
         if let Some(tl) = &self.tri_lights[li] {
