@@ -591,6 +591,7 @@ pub fn render_solution(
     // infinite depth); each pixel depends only on its own samples, so the
     // window equals the same pixels of a full render.
     let [cx0, cy0, cx1, cy1] = settings.crop_rect();
+    let pixel_rays = cam.pixel_rays(sw, sh);
     let rows: Vec<Vec<(Vec3, f32, Vec3)>> = (cy0..cy1.min(h))
         .into_par_iter()
         .map(|y| {
@@ -601,7 +602,7 @@ pub fn render_solution(
                         for sx in 0..ss {
                             let (px, py) = (x * ss + sx, y * ss + sy);
                             let id = buf.id[(py * sw + px) as usize];
-                            let d = cam.ray_direction(px as f32 + 0.5, py as f32 + 0.5, sw, sh);
+                            let d = pixel_rays.direction(px as f32 + 0.5, py as f32 + 0.5);
                             if id == chiaro_raster::zbuffer::NO_ITEM {
                                 col += background_radiance(scene, d);
                                 continue;

@@ -65,6 +65,7 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
         group: None,
     };
     let (w, h) = (settings.width, settings.height);
+    let pixel_rays = cam.pixel_rays(w, h);
     let spp = settings.samples.max(1);
     render_tiles_in(
         w,
@@ -101,7 +102,7 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
                                 uniform2(&mut rng)
                             };
                             let dir =
-                                cam.ray_direction(px as f32 + offset.x, py as f32 + offset.y, w, h);
+                                pixel_rays.direction(px as f32 + offset.x, py as f32 + offset.y);
                             *ray = Ray::new(cam.eye, dir);
                         }
                         accel.intersect_camera_packet(&rays[..n], &mut hits[..n]);

@@ -136,18 +136,9 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
     let (w, h) = (settings.width, settings.height);
     let spp = settings.samples.max(1);
     let cam = &scene.camera;
-    // `Camera::ray_direction` with the frame and field of view computed once.
-    let frame = cam.frame();
-    let tan_half = (cam.fov_y_degrees.to_radians() * 0.5).tan();
-    let aspect = w as f32 / h as f32;
-    // (Multiplications by 2 / w and 2 / h, exact for power-of-two sizes and
-    // within an ulp otherwise.)
-    let (two_over_w, two_over_h) = (2.0 / w as f32, 2.0 / h as f32);
-    let camera_dir = |x: f32, y: f32| {
-        let ndc_x = (x * two_over_w - 1.0) * tan_half * aspect;
-        let ndc_y = (1.0 - y * two_over_h) * tan_half;
-        (frame.forward + ndc_x * frame.right + ndc_y * frame.up).normalize()
-    };
+    // The camera's rays, its frame and field of view computed once.
+    let pixel_rays = cam.pixel_rays(w, h);
+    let camera_dir = |x: f32, y: f32| pixel_rays.direction(x, y);
     let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
         let mut tile = TilePixels::new(rect);
         let mut count = 0u64;
