@@ -233,17 +233,10 @@ impl PathTracer<'_, '_> {
             // for sixteen).
             if alive.iter().filter(|&&a| a).count() <= SCALAR_TAIL {
                 for i in set_lanes(&alive) {
-                    let state = PathState {
-                        ray: Ray::new(org.get(i), dir.get(i)),
-                        depth,
-                        beta: beta.get(i),
-                        l: l.get(i),
-                        prev_pdf: prev_pdf[i],
-                        prev_p: prev_p.get(i),
-                    };
-                    rng.set_sample(first + i as u32);
-                    rng.skip(dim);
-                    let (li, fh) = self.radiance_from(state, None, rng, rays);
+                    let ray = Ray::new(org.get(i), dir.get(i));
+                    let path = (&beta, &l, &prev_pdf, &prev_p);
+                    let (li, fh) =
+                        self.hand_off(i, ray, None, depth, path, (first, dim), rng, rays);
                     out[i] = li;
                     if depth == 0 && i == 0 {
                         first_hit = fh;
@@ -275,17 +268,9 @@ impl PathTracer<'_, '_> {
                     .filter(|(_, m)| m.lambert)
                 else {
                     // The scalar loop from this vertex, at this pair.
-                    let state = PathState {
-                        ray,
-                        depth,
-                        beta: beta.get(i),
-                        l: l.get(i),
-                        prev_pdf: prev_pdf[i],
-                        prev_p: prev_p.get(i),
-                    };
-                    rng.set_sample(first + i as u32);
-                    rng.skip(dim);
-                    let (li, fh) = self.radiance_from(state, Some(hit), rng, rays);
+                    let path = (&beta, &l, &prev_pdf, &prev_p);
+                    let pair = (first, dim);
+                    let (li, fh) = self.hand_off(i, ray, Some(hit), depth, path, pair, rng, rays);
                     out[i] = li;
                     if depth == 0 && i == 0 {
                         first_hit = fh;
@@ -409,6 +394,36 @@ impl PathTracer<'_, '_> {
             alive = shade;
         }
         (out, first_hit)
+    }
+
+    /// Lane `i`'s path finished by the scalar loop: from segment `depth`
+    /// with ray `ray` (already traced when `traced` is its hit), the lane's
+    /// throughput, radiance, MIS pdf and previous vertex in `path`, at pair
+    /// `dim` of sample `first + i`. Its radiance, and its first hit when
+    /// `depth` is 0.
+    #[allow(clippy::too_many_arguments)]
+    fn hand_off(
+        &self,
+        i: usize,
+        ray: Ray,
+        traced: Option<Hit>,
+        depth: u32,
+        (beta, l, prev_pdf, prev_p): (&V3, &V3, &F, &V3),
+        (first, dim): (u32, u32),
+        rng: &mut SobolSampler,
+        rays: &mut u64,
+    ) -> (Vec3, Option<(f32, Vec3)>) {
+        let state = PathState {
+            ray,
+            depth,
+            beta: beta.get(i),
+            l: l.get(i),
+            prev_pdf: prev_pdf[i],
+            prev_p: prev_p.get(i),
+        };
+        rng.set_sample(first + i as u32);
+        rng.skip(dim);
+        self.radiance_from(state, traced, rng, rays)
     }
 
     /// [`PathTracer::pick_light`] of each lane's `u` (`None` without

@@ -359,15 +359,7 @@ fn lock_step_kernel_with_one_light() {
     // One emissive triangle: the light choice's pair is skipped.
     let mut s = mitsuba_cbox(12);
     s.render.samples = 9;
-    replace_emitter(
-        &mut s,
-        vec![
-            Vec3::new(-0.3, 0.98, -0.3),
-            Vec3::new(0.3, 0.98, -0.3),
-            Vec3::new(0.0, 0.98, 0.3),
-        ],
-        vec![[0, 1, 2]],
-    );
+    one_emitter_triangle(&mut s);
     assert_kernels_agree(&s, "one light");
 }
 
@@ -387,6 +379,20 @@ fn replace_emitter(s: &mut Scene, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) 
         .expect("the light");
     light.geometry = Geometry::Mesh(mesh);
     light.transform = Default::default();
+}
+
+/// The scene's emitter replaced by one triangle under the ceiling (one
+/// light: its choice's pair is skipped).
+fn one_emitter_triangle(s: &mut Scene) {
+    replace_emitter(
+        s,
+        vec![
+            Vec3::new(-0.3, 0.98, -0.3),
+            Vec3::new(0.3, 0.98, -0.3),
+            Vec3::new(0.0, 0.98, 0.3),
+        ],
+        vec![[0, 1, 2]],
+    );
 }
 
 #[test]
@@ -913,15 +919,7 @@ fn lock_step_kernel_equals_the_scalar_loop_with_mirror_and_glass() {
     // skipped), then with a point light beside it (sampled by the scalar
     // loop's code), then without Russian roulette before the last bounce.
     let mut s = delta_box(10);
-    replace_emitter(
-        &mut s,
-        vec![
-            Vec3::new(-0.3, 0.98, -0.3),
-            Vec3::new(0.3, 0.98, -0.3),
-            Vec3::new(0.0, 0.98, 0.3),
-        ],
-        vec![[0, 1, 2]],
-    );
+    one_emitter_triangle(&mut s);
     assert!(assert_samples_agree(&s, "one light") > 1000);
     let mut s = delta_box(10);
     s.lights.push(Light::Point {
