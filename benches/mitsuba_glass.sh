@@ -14,6 +14,9 @@
 #   4. chiaro at equal time with llvm_ad_rgb, and the RMSE of each 64-spp image
 #      against the reference (whose own noise is in the figures).
 # usage: benches/mitsuba_glass.sh [REPEATS=3] [REF_SPP=4096] [CHIARO_SPP=1024]
+# MITSUBA_BENCH=env runs the same steps on the environment-lit glossy scene
+# instead (benches/env_spheres.toml, built in Mitsuba by benches/mitsuba_env.py;
+# 256x192, max depth 8; no scene-file check, the TOML is written by hand).
 # needs: a venv with mitsuba, numpy ($MITSUBA_VENV, default /tmp/mvenv) and
 # Debian's libllvm19 for the llvm variant.
 set -euo pipefail
@@ -23,23 +26,28 @@ ref_spp=${2:-4096}
 chiaro_spp=${3:-1024}
 venv=${MITSUBA_VENV:-/tmp/mvenv}
 py="$venv/bin/python"
-out=target/mitsuba-glass
+case "${MITSUBA_BENCH:-glass}" in
+    glass) mod=benches/mitsuba_glass.py scene=benches/glass_cbox.toml out=target/mitsuba-glass ;;
+    env) mod=benches/mitsuba_env.py scene=benches/env_spheres.toml out=target/mitsuba-env ;;
+    *) echo "MITSUBA_BENCH: expected glass or env" >&2; exit 2 ;;
+esac
 mkdir -p "$out"
 export DRJIT_LIBLLVM_PATH=${DRJIT_LIBLLVM_PATH:-/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1}
-scene=benches/glass_cbox.toml
 
 cargo build --release -q -p chiaro-ray --example path_bench
 bench=target/release/examples/path_bench
-"$py" benches/mitsuba_glass.py scene "$out/scene-check.toml"
-cmp -s "$out/scene-check.toml" "$scene" || {
-    echo "$scene differs from benches/mitsuba_glass.py's scene: rerun its \`scene\` command" >&2
-    exit 1
-}
+if [ "$mod" = benches/mitsuba_glass.py ]; then
+    "$py" "$mod" scene "$out/scene-check.toml"
+    cmp -s "$out/scene-check.toml" "$scene" || {
+        echo "$scene differs from $mod's scene: rerun its \`scene\` command" >&2
+        exit 1
+    }
+fi
 
 ref="$out/ref_llvm_${ref_spp}spp.npy"
 if [ ! -f "$ref" ]; then
     echo "rendering the ${ref_spp}-spp Mitsuba reference (cached in $ref)"
-    "$py" benches/mitsuba_glass.py render llvm_ad_rgb "$ref_spp" 1000 "$ref" 1 | tee "$out/ref.log"
+    "$py" "$mod" render llvm_ad_rgb "$ref_spp" 1000 "$ref" 1 | tee "$out/ref.log"
 fi
 high="$out/chiaro_${chiaro_spp}"
 if [ ! -f "$high.npy" ]; then
@@ -47,14 +55,14 @@ if [ ! -f "$high.npy" ]; then
     "$bench" "$scene" "$high" --spp "$chiaro_spp" --threads 2 --seed 7 | tee "$out/chiaro_high.log"
 fi
 echo "== correctness: chiaro ${chiaro_spp} spp against Mitsuba ${ref_spp} spp"
-"$py" benches/mitsuba_glass.py compare "$ref" "$high.npy"
+"$py" "$mod" compare "$ref" "$high.npy"
 
 secs() { grep -o "$2=[0-9.]*" "$1" | tail -1 | cut -d= -f2; }
 echo "== speed, 64 spp, $repeats rounds; load before: $(cut -d' ' -f1-3 /proc/loadavg)"
 : > "$out/rounds.txt"
 for r in $(seq 1 "$repeats"); do
-    "$py" benches/mitsuba_glass.py render llvm_ad_rgb 64 0 "$out/mi_llvm_64.npy" 2 > "$out/mi_llvm_$r.log"
-    "$py" benches/mitsuba_glass.py render scalar_rgb 64 0 "$out/mi_scalar_64.npy" 1 > "$out/mi_scalar_$r.log"
+    "$py" "$mod" render llvm_ad_rgb 64 0 "$out/mi_llvm_64.npy" 2 > "$out/mi_llvm_$r.log"
+    "$py" "$mod" render scalar_rgb 64 0 "$out/mi_scalar_64.npy" 1 > "$out/mi_scalar_$r.log"
     "$bench" "$scene" "$out/chiaro_64" --spp 64 --threads 2 --repeats 2 > "$out/chiaro_64_$r.log"
     tl=$(secs "$out/mi_llvm_$r.log" 'render\[1\]')
     ts=$(secs "$out/mi_scalar_$r.log" 'render\[0\]')
@@ -80,8 +88,9 @@ pixels = ref.shape[0] * ref.shape[1]
 rounds = np.loadtxt(f"{out}/rounds.txt", ndmin=2)
 ratio = np.median(rounds[:, 0] / rounds[:, 2])
 ratio_s = np.median(rounds[:, 1] / rounds[:, 2])
-# The emitter and the point light's hotspot on the ceiling (radiance above 3,
-# against ~0.5 elsewhere) dominate the plain RMSE: also give it without them.
+# The brightest pixels (radiance above 3: the glass box's emitter and the
+# point light's hotspot, the environment's lamps seen in the metals) dominate
+# the plain RMSE: also give it without them.
 off_light = ref.max(axis=2) < 3.0
 def rmse(p, mask=None):
     d2 = ((np.load(p).astype(np.float64) - ref) ** 2).mean(axis=2)
