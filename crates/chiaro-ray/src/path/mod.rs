@@ -138,7 +138,6 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
     let cam = &scene.camera;
     // The camera's rays, its frame and field of view computed once.
     let pixel_rays = cam.pixel_rays(w, h);
-    let camera_dir = |x: f32, y: f32| pixel_rays.direction(x, y);
     let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
         let mut tile = TilePixels::new(rect);
         let mut count = 0u64;
@@ -153,7 +152,7 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                     for s in 0..spp {
                         let mut rng = pixel_rng(settings.seed, px, py, s);
                         let j = uniform2(&mut rng);
-                        let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
+                        let dir = pixel_rays.direction(px as f32 + j.x, py as f32 + j.y);
                         let ray = Ray::new(cam.eye, dir);
                         let (l, fh) = tracer.reference_radiance(ray, &mut rng, &mut count);
                         sum += sanitize(l);
@@ -162,8 +161,12 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                         }
                     }
                 } else if lanes {
-                    let camera =
-                        |j: Vec2| Ray::new(cam.eye, camera_dir(px as f32 + j.x, py as f32 + j.y));
+                    let camera = |j: Vec2| {
+                        Ray::new(
+                            cam.eye,
+                            pixel_rays.direction(px as f32 + j.x, py as f32 + j.y),
+                        )
+                    };
                     for first in (0..spp).step_by(LANES) {
                         let n = ((spp - first) as usize).min(LANES);
                         let (ls, fh) =
@@ -179,7 +182,7 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                     for s in 0..spp {
                         rng.set_sample(s);
                         let j = rng.next_2d();
-                        let dir = camera_dir(px as f32 + j.x, py as f32 + j.y);
+                        let dir = pixel_rays.direction(px as f32 + j.x, py as f32 + j.y);
                         let (l, fh) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
                         sum += sanitize(l);
                         if s == 0 {

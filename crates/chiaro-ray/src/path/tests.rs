@@ -223,15 +223,21 @@ fn depth_one_point_light_is_the_lambert_term() {
     }
 }
 
-/// The shipped scene `scenes/NAME.toml` at `size` x `size` pixels.
-fn shipped(name: &str, size: u32) -> Scene {
-    let path = format!("{}/../../scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+/// The scene file `relative` to the repository root at `size` x `size`
+/// pixels.
+fn repo_scene(relative: &str, size: u32) -> Scene {
+    let path = format!("{}/../../{relative}", env!("CARGO_MANIFEST_DIR"));
     let mut s = chiaro_io::load_scene(std::path::Path::new(&path))
-        .expect("the shipped scene loads")
+        .expect("the repository's scene loads")
         .scene;
     s.render.width = size;
     s.render.height = size;
     s
+}
+
+/// The shipped scene `scenes/NAME.toml` at `size` x `size` pixels.
+fn shipped(name: &str, size: u32) -> Scene {
+    repo_scene(&format!("scenes/{name}.toml"), size)
 }
 
 /// Mitsuba's Cornell box as shipped (`scenes/mitsuba-cbox.toml`).
@@ -938,15 +944,7 @@ fn lock_step_kernel_equals_the_scalar_loop_with_mirror_and_glass() {
 #[test]
 fn lock_step_kernel_equals_the_scalar_loop_on_the_glass_box() {
     // The benchmark scene of the Mitsuba comparison (benches/glass_cbox.toml).
-    let path = format!(
-        "{}/../../benches/glass_cbox.toml",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let mut s = chiaro_io::load_scene(std::path::Path::new(&path))
-        .expect("the glass box loads")
-        .scene;
-    s.render.width = 12;
-    s.render.height = 12;
+    let mut s = repo_scene("benches/glass_cbox.toml", 12);
     s.render.samples = 19;
     assert!(assert_samples_agree(&s, "glass box") > 1000);
 }
