@@ -161,6 +161,26 @@ fn every_technique_is_described_once_by_its_renderer() {
 }
 
 #[test]
+fn the_scan_converters_sample_cap_is_its_own_settings_check() {
+    let mut s = chiaro::RenderSettings {
+        technique: Technique::Phong,
+        samples: 100,
+        ..Default::default()
+    };
+    let warned = |s: &chiaro::RenderSettings| {
+        chiaro::settings_issues(s)
+            .iter()
+            .any(|i| i.path == "render.samples" && i.severity == chiaro::scene::Severity::Warning)
+    };
+    assert!(warned(&s), "phong at 100 samples is capped, and says so");
+    s.technique = Technique::Path;
+    assert!(!warned(&s), "the path tracer takes 100 samples");
+    s.technique = Technique::Flat;
+    s.samples = 64;
+    assert!(!warned(&s), "64 is within the cap");
+}
+
+#[test]
 fn readme_and_architecture_show_the_tables_the_code_knows() {
     let table = markdown_table();
     let methods = chiaro::limitations::methods_table();
