@@ -121,6 +121,33 @@ fn check_output_options(args: &RenderArgs, format: ImageFormat) -> Result<()> {
     Ok(())
 }
 
+/// Renders through the one render path; for `radiosity` and `hybrid` the
+/// context is given the solution read from `load`, and the solution (read
+/// or solved) is written to `save` before it is displayed.
+fn render_solution_files(
+    scene: &chiaro::Scene,
+    settings: &chiaro::RenderSettings,
+    progress: &dyn chiaro::Progress,
+    load: Option<&Path>,
+    save: Option<&Path>,
+) -> Result<(chiaro::Film, chiaro::RenderStats)> {
+    if load.is_some() || save.is_some() {
+        chiaro::check_solution_technique(settings.technique)?;
+    }
+    let mut ctx = chiaro::RenderContext::new(scene, settings, progress)?;
+    if let Some(path) = load {
+        ctx = ctx.with_solution(chiaro::load_solution(path, scene)?);
+    }
+    if let Some(path) = save {
+        let solution = chiaro::radiosity_solution(&ctx)?;
+        chiaro::save_solution(&solution, path)?;
+    }
+    Ok(chiaro::render_with(
+        &ctx,
+        chiaro::renderer(settings.technique),
+    )?)
+}
+
 /// `chiaro render`.
 pub fn render(args: RenderArgs) -> Result<()> {
     let format = check_output(&args.output)?;
@@ -145,13 +172,10 @@ pub fn render(args: RenderArgs) -> Result<()> {
             .context("setting the thread count")?;
     }
     let bar = crate::progress::Bar::new();
-    let files = chiaro::SolutionFiles {
-        load: args.solution.as_deref(),
-        save: args.save_solution.as_deref(),
-    };
+    let (load, save) = (args.solution.as_deref(), args.save_solution.as_deref());
     let result = match &args.display_server {
         Some(addr) => {
-            if files.load.is_some() || files.save.is_some() {
+            if load.is_some() || save.is_some() {
                 bar.finish();
                 anyhow::bail!(
                     "--display-server cannot be combined with --solution or --save-solution"
@@ -164,8 +188,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
             chiaro_serve::tev::render_to_tev(&scene, &settings, &bar, addr, &name)
                 .map_err(anyhow::Error::from)
         }
-        None => chiaro::render_with_solution_files(&scene, &settings, &bar, files)
-            .map_err(anyhow::Error::from),
+        None => render_solution_files(&scene, &settings, &bar, load, save),
     };
     bar.finish();
     let (film, stats) = result?;
@@ -344,6 +367,9 @@ pub fn info(path: &Path) -> Result<()> {
         println!("warning    {w}");
     }
     for i in s.validate() {
+        println!("{i}");
+    }
+    for i in chiaro::renderer(r.technique).check_settings(r) {
         println!("{i}");
     }
     Ok(())

@@ -12,10 +12,15 @@ use crate::accel::Accelerator;
 use crate::budget::{Estimate, bytes_of};
 use crate::error::{CoreError, Result};
 use crate::film::Film;
+use crate::geometry::primitives::MeshSize;
 use crate::prepared::{PrepareOptions, PreparedScene};
 use crate::progress::Progress;
-use crate::scene::{RenderSettings, Scene, Severity, Technique};
-use std::sync::OnceLock;
+use crate::scene::{
+    Geometry, Issue, RenderSettings, Scene, Severity, ShadowMethod, Technique, Texture,
+};
+use crate::technique::Description;
+use std::any::Any;
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 /// Statistics of one render.
@@ -27,6 +32,8 @@ pub struct RenderStats {
     pub triangles: u64,
     /// Rays traced, where the technique counts them (0 otherwise).
     pub rays: u64,
+    /// Of `rays`, those from the camera (Whitted counts them; 0 otherwise).
+    pub camera_rays: u64,
 }
 
 /// A technique: renders the context's scene with its settings. `aa =
@@ -40,10 +47,28 @@ pub trait Renderer: Sync {
     /// [`CoreError::Cancelled`] when the progress asks to stop;
     /// [`CoreError::Unsupported`] for what the technique cannot render.
     fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats)>;
+
+    /// The techniques this renderer draws, each described: what it is,
+    /// shows and cannot show.
+    fn descriptions(&self) -> &'static [Description];
+
+    /// The technique's own settings checks, beyond those every render has
+    /// ([`RenderSettings::validate`]).
+    fn check_settings(&self, _settings: &RenderSettings) -> Vec<Issue> {
+        Vec::new()
+    }
+
+    /// Adds what the technique allocates beyond what every render does
+    /// ([`memory_estimate`]) to `estimate`, without allocating it.
+    fn memory(&self, _scene: &Scene, _settings: &RenderSettings, _estimate: &mut Estimate) {}
 }
 
 /// Builds the accelerator over a prepared scene.
 pub type AccelBuilder<'f> = dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator> + Sync + 'f;
+
+/// The context's slot for a view-independent solution (radiosity's),
+/// shared by the contexts [`RenderContext::with_settings`] derives.
+type SolutionSlot = Arc<OnceLock<Arc<dyn Any + Send + Sync>>>;
 
 /// One render's validated inputs and the state every technique shares,
 /// prepared lazily: the flattened scene with analytic spheres (ray tracers)
@@ -59,6 +84,7 @@ pub struct RenderContext<'a> {
     analytic_accel: OnceLock<Box<dyn Accelerator>>,
     tessellated: OnceLock<PreparedScene<'a>>,
     tessellated_accel: OnceLock<Box<dyn Accelerator>>,
+    solution: SolutionSlot,
 }
 
 impl std::fmt::Debug for RenderContext<'_> {
@@ -73,14 +99,14 @@ impl std::fmt::Debug for RenderContext<'_> {
 
 impl<'a> RenderContext<'a> {
     /// Validates `scene` rendered with `settings` (which replace
-    /// `scene.render`) and its memory estimate against the settings'
-    /// budget. Every error found is reported at once; warnings about the
-    /// settings go to `progress`.
+    /// `scene.render`). Every error found is reported at once; warnings
+    /// about the settings go to `progress`. The memory budget depends on
+    /// the technique too ([`Renderer::memory`]): the facade checks it
+    /// before a renderer runs, as it checks the technique's own settings.
     ///
     /// # Errors
     /// [`CoreError::InvalidScene`] listing every error, each naming its
-    /// setting or scene item; [`CoreError::Unsupported`] when the render
-    /// would exceed its memory budget.
+    /// setting or scene item.
     pub fn new(
         scene: &'a Scene,
         settings: &RenderSettings,
@@ -99,9 +125,6 @@ impl<'a> RenderContext<'a> {
         if !errors.is_empty() {
             return Err(CoreError::InvalidScene { issues: errors });
         }
-        memory_estimate(scene, settings)
-            .check(settings.memory_budget())
-            .map_err(CoreError::Unsupported)?;
         Ok(Self {
             scene,
             settings: settings.clone(),
@@ -112,12 +135,14 @@ impl<'a> RenderContext<'a> {
             analytic_accel: OnceLock::new(),
             tessellated: OnceLock::new(),
             tessellated_accel: OnceLock::new(),
+            solution: SolutionSlot::default(),
         })
     }
 
     /// The same context with `settings` changed by `f` (validated again),
     /// for a render that derives its settings from another's (one sample
-    /// per pixel before a post filter).
+    /// per pixel before a post filter). Both share the solution while `f`
+    /// leaves `settings.radiosity` as it is.
     ///
     /// # Errors
     /// As [`Self::new`].
@@ -126,7 +151,47 @@ impl<'a> RenderContext<'a> {
         f(&mut settings);
         let mut ctx = Self::new(self.scene, &settings, self.progress)?;
         ctx.make_accel = self.make_accel;
+        if settings.radiosity == self.settings.radiosity {
+            ctx.solution = Arc::clone(&self.solution);
+        }
         Ok(ctx)
+    }
+
+    /// The context with a view-independent solution given rather than
+    /// solved (one loaded from a file, or kept by the viewer between
+    /// frames). The technique that reads it checks it belongs to the scene.
+    pub fn with_solution<T: Any + Send + Sync>(mut self, solution: Arc<T>) -> Self {
+        let slot = OnceLock::new();
+        let _ = slot.set(solution as Arc<dyn Any + Send + Sync>);
+        self.solution = Arc::new(slot);
+        self
+    }
+
+    /// The context's view-independent solution (radiosity's): the one
+    /// given to [`Self::with_solution`] or solved before, else `solve`d
+    /// now and kept, as the prepared scenes are.
+    ///
+    /// # Errors
+    /// What `solve` returns; [`CoreError::Unsupported`] when the context
+    /// holds a solution of another type.
+    pub fn solution<T: Any + Send + Sync>(
+        &self,
+        solve: impl FnOnce(&Self) -> Result<T>,
+    ) -> Result<Arc<T>> {
+        if self.solution.get().is_none() {
+            let solved = Arc::new(solve(self)?);
+            let _ = self.solution.set(solved);
+        }
+        self.solved().ok_or_else(|| {
+            CoreError::Unsupported("the context holds another kind of solution".into())
+        })
+    }
+
+    /// The solution held, if one was given or solved, without solving.
+    pub fn solved<T: Any + Send + Sync>(&self) -> Option<Arc<T>> {
+        self.solution
+            .get()
+            .and_then(|s| Arc::clone(s).downcast::<T>().ok())
     }
 
     /// Uses `make` instead of the BVH to build the ray accelerators (the
@@ -196,32 +261,19 @@ impl<'a> RenderContext<'a> {
             elapsed: self.start.elapsed(),
             triangles: self.scene.triangle_count() as u64,
             rays,
+            camera_rays: 0,
         }
     }
 }
 
-/// What rendering `scene` with `settings` will allocate, by consumer, in
-/// bytes: the prepared triangles and vertices (with the spheres the scan
-/// converter and radiosity tessellate), texture mip levels, the film and
-/// the scan converter's supersamples, shadow maps (up to their share of the
-/// budget, [`crate::budget::MemoryBudget::shadow_map_bytes`]), and a dense
-/// radiosity matrix. The per-item sizes are the constants of
-/// [`crate::budget`]; the sum is an estimate of the peak, made without
-/// allocating anything.
-pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
-    use crate::geometry::primitives::MeshSize;
-    use crate::scene::{Geometry, ShadowMethod, Texture};
-    let analytic = matches!(
-        settings.technique,
-        Technique::Preview | Technique::Whitted | Technique::Path
-    );
-    let (mut meshes, mut spheres) = (
-        MeshSize {
-            vertices: 0,
-            triangles: 0,
-        },
-        0u64,
-    );
+/// The triangles of `scene`'s meshes, and of its spheres once tessellated
+/// as the scan converter and radiosity tessellate them.
+fn triangle_counts(scene: &Scene) -> (MeshSize, MeshSize) {
+    let mut meshes = MeshSize {
+        vertices: 0,
+        triangles: 0,
+    };
+    let mut spheres = 0u64;
     for obj in &scene.objects {
         match obj.geometry {
             Geometry::Mesh(id) => {
@@ -235,7 +287,39 @@ pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
         }
     }
     let slices = PrepareOptions::default().sphere_slices;
-    let sphere = MeshSize::uv_sphere(slices, slices / 2).times(spheres);
+    (
+        meshes,
+        MeshSize::uv_sphere(slices, slices / 2).times(spheres),
+    )
+}
+
+/// Triangles of the tessellated scene (meshes and tessellated spheres), as
+/// the scan converter and radiosity see it.
+pub fn tessellated_triangles(scene: &Scene) -> u64 {
+    let (meshes, spheres) = triangle_counts(scene);
+    meshes.triangles.saturating_add(spheres.triangles)
+}
+
+/// What every render of `scene` with `settings` allocates, by consumer, in
+/// bytes: the prepared triangles and vertices (with the spheres the scan
+/// converter and radiosity tessellate), texture mip levels, the film, and
+/// shadow maps (up to their share of the budget,
+/// [`crate::budget::MemoryBudget::shadow_map_bytes`]). A technique adds
+/// its own ([`Renderer::memory`]: the scan converter's supersamples, a
+/// dense radiosity matrix). The per-item sizes are the constants of
+/// [`crate::budget`]; the sum is an estimate of the peak, made without
+/// allocating anything.
+pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
+    let analytic = matches!(
+        settings.technique,
+        Technique::Preview | Technique::Whitted | Technique::Path
+    );
+    let (meshes, sphere) = triangle_counts(scene);
+    let spheres = scene
+        .objects
+        .iter()
+        .filter(|o| matches!(o.geometry, Geometry::Sphere { .. }))
+        .count();
     let mut e = Estimate::default();
     e.add(
         format!("{} mesh triangles", meshes.triangles),
@@ -263,16 +347,6 @@ pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
     let pixels = u64::from(settings.width) * u64::from(settings.height);
     // Colour, depth and normal a pixel.
     e.add("film", bytes_of(pixels, 28));
-    if settings.technique.is_scan_conversion() {
-        // Colour, depth and item a supersample.
-        e.add(
-            "supersamples",
-            bytes_of(
-                pixels.saturating_mul(u64::from(settings.samples.max(1))),
-                20,
-            ),
-        );
-    }
     if settings.shadows == ShadowMethod::Map {
         // Up to six depth faces of f32 per light; lights past the shadow-map
         // share of the budget use shadow rays instead, so no more than it.
@@ -284,11 +358,6 @@ pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
                 .saturating_mul(lights)
                 .min(settings.memory_budget().shadow_map_bytes()),
         );
-    }
-    if settings.technique.solves_radiosity() && settings.radiosity.solver.is_matrix() {
-        // Two f32 matrices over at least one element a triangle.
-        let n = meshes.triangles.saturating_add(sphere.triangles);
-        e.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
     }
     e
 }

@@ -35,6 +35,7 @@ pub mod sampling;
 pub mod scene;
 pub mod shading;
 pub mod shadow;
+pub mod technique;
 
 pub use glam;
 pub use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A, Vec4};

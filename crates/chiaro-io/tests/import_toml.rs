@@ -4,7 +4,7 @@
 
 use chiaro_core::Vec3;
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Geometry, Light, ProceduralKind, ReflectanceModel, Severity, ShadeMode,
+    AreaShape, Attenuation, Geometry, Light, ProceduralKind, ReflectanceModel, ShadeMode,
     Technique, Texture,
 };
 use chiaro_io::{IoError, load_scene_str};
@@ -508,12 +508,6 @@ fn settings_warnings_are_not_load_warnings() {
         l.warnings
     );
     assert_eq!(l.scene.render.samples, 100);
-    assert!(
-        l.scene
-            .validate()
-            .iter()
-            .any(|i| i.path == "render.samples" && i.severity == Severity::Warning)
-    );
 }
 
 /// Checks `Scene::validate` makes for every scene (camera, material and

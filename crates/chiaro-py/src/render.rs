@@ -17,9 +17,9 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use serde_json::Value;
 use std::path::Path;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// How often the calling thread wakes up during a render to check for
@@ -241,23 +241,6 @@ where
     })
 }
 
-/// Renders `scene` with `settings` through [`run_polling`].
-///
-/// # Errors
-/// As [`run_polling`], and the facade's errors mapped by [`to_pyerr`].
-pub fn render_polling(
-    py: Python<'_>,
-    scene: &Scene,
-    settings: &RenderSettings,
-    callback: Option<Py<PyAny>>,
-    threads: Option<usize>,
-) -> PyResult<(Film, chiaro::RenderStats)> {
-    run_polling(py, callback, threads, |p| {
-        chiaro::render_with_stats(scene, settings, p)
-    })?
-    .map_err(to_pyerr)
-}
-
 /// `chiaro._chiaro.compare`: see `chiaro.compare` in
 /// python/chiaro/__init__.py. Returns the facade's JSON report as a dict.
 #[pyfunction]
@@ -455,13 +438,15 @@ pub fn render<'py>(
         None => &scene.inner,
     };
     let callback = progress.map(Bound::unbind);
-    let (film, stats) = match &solution {
-        Some(sol) => run_polling(py, callback, threads, |p| {
-            chiaro::render_from_solution(scene_ref, &settings, &sol.inner, p)
-        })?
-        .map_err(to_pyerr)?,
-        None => render_polling(py, scene_ref, &settings, callback, threads)?,
-    };
+    let solution = solution.map(|s| Arc::clone(&s.inner));
+    let (film, stats) = run_polling(py, callback, threads, |p| {
+        let mut ctx = chiaro::RenderContext::new(scene_ref, &settings, p)?;
+        if let Some(solution) = solution {
+            ctx = ctx.with_solution(solution);
+        }
+        chiaro::render_with(&ctx, chiaro::renderer(settings.technique))
+    })?
+    .map_err(to_pyerr)?;
     let out = PyDict::new(py);
     film_arrays(py, &film, r, aovs, &out)?;
     out.set_item("seconds", stats.elapsed.as_secs_f64())?;

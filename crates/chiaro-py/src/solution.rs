@@ -129,16 +129,36 @@ pub fn solve_radiosity<'py>(
     let overrides = overrides_json(overrides)?;
     let settings = resolve_settings(&scene.inner, None, None, None, None, None, &overrides)?;
     let inner = &scene.inner;
-    let s = run_polling(py, progress.map(Bound::unbind), threads, |p| {
-        chiaro::solve_radiosity(inner, &settings, p)
+    let inner = run_polling(py, progress.map(Bound::unbind), threads, |p| {
+        chiaro::radiosity_solution(&chiaro::RenderContext::new(inner, &settings, p)?)
     })?
     .map_err(to_pyerr)?;
-    Ok(PySolution { inner: Arc::new(s) })
+    Ok(PySolution { inner })
 }
 
 #[cfg(test)]
 mod tests {
-    use chiaro::{NoProgress, RenderSettings, Scene, Technique, Vec3};
+    use chiaro::{
+        Film, NoProgress, RenderContext, RenderSettings, RenderStats, Scene, Technique, Vec3,
+    };
+    use std::sync::Arc;
+
+    fn solve(scene: &Scene, s: &RenderSettings) -> Arc<chiaro::RadiositySolution> {
+        let ctx = RenderContext::new(scene, s, &NoProgress).expect("valid");
+        chiaro::radiosity_solution(&ctx).expect("solve")
+    }
+
+    /// What `render(..., solution=)` does: the technique checked, the
+    /// context given the solution, one render path.
+    fn from_solution(
+        scene: &Scene,
+        s: &RenderSettings,
+        sol: &Arc<chiaro::RadiositySolution>,
+    ) -> chiaro::Result<(Film, RenderStats)> {
+        chiaro::check_solution_technique(s.technique)?;
+        let ctx = RenderContext::new(scene, s, &NoProgress)?.with_solution(Arc::clone(sol));
+        chiaro::render_with(&ctx, chiaro::renderer(s.technique))
+    }
 
     fn cornell() -> Scene {
         let path =
@@ -162,17 +182,15 @@ mod tests {
     fn a_crop_window_equals_the_full_render_inside_and_is_black_outside() {
         let scene = cornell();
         let base = settings(&scene, Technique::Radiosity);
-        let sol = chiaro::solve_radiosity(&scene, &base, &NoProgress).expect("solve");
+        let sol = solve(&scene, &base);
         for technique in [Technique::Radiosity, Technique::Hybrid] {
             let s = settings(&scene, technique);
-            let (full, _) =
-                chiaro::render_from_solution(&scene, &s, &sol, &NoProgress).expect("full");
+            let (full, _) = from_solution(&scene, &s, &sol).expect("full");
             let cropped_s = RenderSettings {
                 crop: Some([5, 3, 17, 14]),
                 ..s.clone()
             };
-            let (crop, _) =
-                chiaro::render_from_solution(&scene, &cropped_s, &sol, &NoProgress).expect("crop");
+            let (crop, _) = from_solution(&scene, &cropped_s, &sol).expect("crop");
             let mut lit = 0;
             for y in 0..s.height {
                 for x in 0..s.width {
@@ -198,28 +216,18 @@ mod tests {
     fn a_solution_of_another_scene_is_refused() {
         let scene = cornell();
         let s = settings(&scene, Technique::Radiosity);
-        let sol = chiaro::solve_radiosity(&scene, &s, &NoProgress).expect("solve");
+        let sol = solve(&scene, &s);
         let mut other = scene.clone();
         other.objects.pop();
         for technique in [Technique::Radiosity, Technique::Hybrid] {
-            let r = chiaro::render_from_solution(
-                &other,
-                &settings(&other, technique),
-                &sol,
-                &NoProgress,
-            );
+            let r = from_solution(&other, &settings(&other, technique), &sol);
             let msg = r.err().map(|e| e.to_string()).unwrap_or_default();
             assert!(
                 msg.contains("does not match this scene"),
                 "{technique:?}: {msg}"
             );
         }
-        let r = chiaro::render_from_solution(
-            &scene,
-            &settings(&scene, Technique::Phong),
-            &sol,
-            &NoProgress,
-        );
+        let r = from_solution(&scene, &settings(&scene, Technique::Phong), &sol);
         assert!(r.is_err(), "phong cannot render from a solution");
     }
 }

@@ -4,7 +4,9 @@
 //! ([`mesh`]), groups fine elements into shooting patches (`patch.rs`),
 //! computes form factors ([`formfactor`]: [`ray_cast`], [`analytic`],
 //! [`hemicube`]), solves the radiosity system with the chosen solver
-//! ([`solver`]: [`gathering`], [`progressive`], [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
+//! ([`solver`]: [`gathering`], [`progressive`], [`hierarchical`]) and
+//! returns a [`RadiositySolution`], which the render context keeps
+//! ([`solution()`]); `render_solution`
 //! draws it from the scene's camera through chiaro-raster's z-buffer (item
 //! buffer): the textured colour from the surface layer times the Gouraud
 //! interpolation of the vertex irradiance; [`Radiosity`] does both, as the
@@ -62,32 +64,104 @@ pub use formfactor::{FormFactor, disc_to_disc, perpendicular_rectangles};
 use solution::{RHO_MIN, clamped_weights, irradiance_from};
 pub use solution::{RadiositySolution, SolveStats, fingerprint};
 
+use chiaro_core::budget::{Estimate, bytes_of};
 use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::Film;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::Scene;
+use chiaro_core::scene::{RenderSettings, Scene, Technique};
 use chiaro_core::shading::texture::background_radiance;
+use chiaro_core::technique::{Description, Feature};
 use direct::point_light_direct;
 use glam::{Vec2, Vec3};
 use mesh::{Element, ElementMesh, SourceKind, material_at};
 use ray_cast::{PairFormFactor, PairRule, Visibility, pair};
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 pub use chiaro_core::scene::{FormFactorMethod as Method, RadiositySolver as Solver};
 
-/// The radiosity technique: [`solve`], then [`render_solution`].
+/// The radiosity technique: the context's [`solution()`], displayed by
+/// `render_solution`.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Radiosity;
 
 impl Renderer for Radiosity {
     fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats), CoreError> {
-        let solution = solve(ctx)?;
+        let solution = solution(ctx)?;
         let film = render_solution(ctx, &solution)?;
         Ok((film, ctx.stats(0)))
     }
+
+    fn descriptions(&self) -> &'static [Description] {
+        std::slice::from_ref(&DESCRIPTION)
+    }
+
+    fn memory(&self, scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
+        solver_memory(scene, settings, estimate);
+    }
+}
+
+/// The radiosity technique, described.
+pub const DESCRIPTION: Description = Description {
+    technique: Technique::Radiosity,
+    title: "radiosity",
+    method: "elements, with patches grouped from fine input triangles to shoot from; hemicube / ray-cast / analytic form factors, Jacobi, Gauss-Seidel, progressive and hierarchical solvers; the view-independent solution drawn with Gouraud interpolation",
+    shows: "diffuse interreflection and colour bleeding, soft shadows, textures (the texture times the patches' light)",
+    cannot_show: &[
+        (
+            Feature::Mirrors,
+            "mirror reflections: mirrors are drawn matte",
+        ),
+        (
+            Feature::Transparency,
+            "transparency and refraction: drawn opaque",
+        ),
+        (
+            Feature::Highlights,
+            "specular highlights: surfaces are drawn diffuse",
+        ),
+        (
+            Feature::NormalMaps,
+            "normal and bump maps: patches are lit with their face normal",
+        ),
+        (
+            Feature::AmbientLight,
+            "ambient lights: interreflection is computed instead",
+        ),
+        (Feature::EnvironmentLight, "light from the environment map"),
+        (Feature::DepthCue, "depth cueing"),
+        (
+            Feature::AlphaMask,
+            "cut-outs of alpha-masked (glTF MASK) surfaces: patches are drawn whole",
+        ),
+    ],
+};
+
+/// Adds what the radiosity solver allocates to `estimate`: with the
+/// matrix solvers, two dense f32 matrices over at least one element a
+/// triangle of the tessellated scene.
+pub fn solver_memory(scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
+    if settings.radiosity.solver.is_matrix() {
+        let n = chiaro_core::context::tessellated_triangles(scene);
+        estimate.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
+    }
+}
+
+/// The context's radiosity solution: the one it was given (a saved
+/// solution, or the viewer's from the last frame), checked to belong to the
+/// scene, else [`solve`]d on first use and kept for the context's later
+/// renders.
+///
+/// # Errors
+/// As [`solve`]; [`CoreError::Unsupported`] for a given solution of
+/// another scene.
+pub fn solution(ctx: &RenderContext<'_>) -> Result<Arc<RadiositySolution>, CoreError> {
+    let solution = ctx.solution(solve)?;
+    solution.check_scene(ctx.scene())?;
+    Ok(solution)
 }
 
 /// Elements per cancellation check of the per-element passes.
@@ -538,7 +612,7 @@ fn build_solution(
 /// # Errors
 /// [`CoreError::Unsupported`] if the solution belongs to another scene;
 /// [`CoreError::Cancelled`] when `progress` asks.
-pub fn render_solution(
+pub(crate) fn render_solution(
     ctx: &RenderContext<'_>,
     solution: &RadiositySolution,
 ) -> Result<Film, CoreError> {

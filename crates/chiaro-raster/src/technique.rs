@@ -3,10 +3,14 @@
 //! tessellated scene.
 
 use crate::{RasterOptions, RasterWork, render_work};
+use chiaro_core::budget::{Estimate, bytes_of};
 use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::{CoreError, Result};
 use chiaro_core::film::Film;
-use chiaro_core::scene::ShadeMode;
+use chiaro_core::scene::{
+    Issue, MAX_RASTER_SAMPLES, RenderSettings, Scene, Severity, ShadeMode, Technique,
+};
+use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature};
 
 /// The scan-conversion techniques (flat, Gouraud, Phong).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -70,7 +74,107 @@ impl Renderer for ScanConversion {
         self.render_into(ctx, &mut film, &RasterWork::default())?;
         Ok((film, ctx.stats(0)))
     }
+
+    fn descriptions(&self) -> &'static [Description] {
+        &[FLAT, GOURAUD, PHONG]
+    }
+
+    fn check_settings(&self, settings: &RenderSettings) -> Vec<Issue> {
+        let mut issues = Vec::new();
+        if settings.samples > MAX_RASTER_SAMPLES {
+            issues.push(Issue {
+                severity: Severity::Warning,
+                path: "render.samples".into(),
+                message: format!(
+                    "scan conversion takes at most {MAX_RASTER_SAMPLES} samples per pixel; {} are rendered as {MAX_RASTER_SAMPLES}",
+                    settings.samples
+                ),
+            });
+        }
+        issues
+    }
+
+    fn memory(&self, _scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
+        // Colour, depth and item a supersample.
+        let pixels = u64::from(settings.width) * u64::from(settings.height);
+        let samples = pixels.saturating_mul(u64::from(settings.samples.max(1)));
+        estimate.add("supersamples", bytes_of(samples, 20));
+    }
 }
+
+/// What the scan converter shows of other objects in a mirror.
+const NO_MIRRORS: &str =
+    "mirror reflections of other objects: only the environment map is reflected";
+/// What it shows of refraction.
+const NO_REFRACTION: &str = "refraction: transparent surfaces do not bend light";
+/// Polygon shadows (volume, object, scan-line) do not cut alpha-masked texels.
+const WHOLE_MASK_SHADOWS: &str = "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)";
+
+/// Flat shading, described.
+pub const FLAT: Description = Description {
+    technique: Technique::Flat,
+    title: "flat",
+    method: "z-buffer scan conversion, one illumination per polygon",
+    shows: "direct light and shadows per polygon, textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
+    cannot_show: &[
+        (Feature::Mirrors, NO_MIRRORS),
+        (Feature::Refraction, NO_REFRACTION),
+        (
+            Feature::NormalMaps,
+            "normal and bump maps: polygons are lit with the face normal",
+        ),
+        (
+            Feature::InsideLargePolygons,
+            "highlights and shadows inside a polygon: each polygon is lit once, at its centre",
+        ),
+        (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
+        (
+            Feature::VolumeShadows,
+            "shadows with `shadows = \"volume\"`: the volumes exist per sample, not at polygon centres",
+        ),
+        (Feature::AlphaMaskShadows, WHOLE_MASK_SHADOWS),
+    ],
+};
+
+/// Gouraud shading, described.
+pub const GOURAUD: Description = Description {
+    technique: Technique::Gouraud,
+    title: "Gouraud",
+    method: "illumination at the vertices, colours interpolated",
+    shows: "direct light and shadows per vertex, interpolated; textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
+    cannot_show: &[
+        (Feature::Mirrors, NO_MIRRORS),
+        (Feature::Refraction, NO_REFRACTION),
+        (
+            Feature::NormalMaps,
+            "normal and bump maps: vertices are lit with the interpolated normal",
+        ),
+        (
+            Feature::InsideLargePolygons,
+            "highlights and shadows inside a polygon: light is computed at the vertices only",
+        ),
+        (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
+        (
+            Feature::VolumeShadows,
+            "shadows with `shadows = \"volume\"`: the volumes exist per sample, not at vertices",
+        ),
+        (Feature::AlphaMaskShadows, WHOLE_MASK_SHADOWS),
+    ],
+};
+
+/// Phong shading, described.
+pub const PHONG: Description = Description {
+    technique: Technique::Phong,
+    title: "Phong",
+    method: "normals interpolated, illumination per pixel",
+    shows: "direct light, highlights and shadows per pixel, textures, normal and bump maps, non-refractive transparency, environment reflection maps and the environment's light",
+    cannot_show: &[
+        (Feature::Mirrors, NO_MIRRORS),
+        (Feature::Refraction, NO_REFRACTION),
+        (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
+        (Feature::AlphaMaskShadows, WHOLE_MASK_SHADOWS),
+    ],
+};
 
 /// The scan converter driven the ways the crate's tests drive it: from a
 /// scene through a render context, or over a prepared scene they built.

@@ -51,7 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t0 = Instant::now();
     let (film, stats) = pool.install(|| -> chiaro_core::error::Result<_> {
         let ctx = RenderContext::new(&scene, &settings, &NoProgress)?;
-        whitted::Tracer::new(&ctx).render(&NoProgress)
+        whitted::Tracer::new(&ctx).render(&ctx)
     })?;
     let secs = t0.elapsed().as_secs_f64();
     println!(
@@ -61,7 +61,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         settings.aa,
         settings.samples,
         stats.rays,
-        stats.primary_rays,
+        stats.camera_rays,
         stats.rays as f64 / secs / 1e6
     );
     // Clamp and encode sRGB (IEC 61966-2-1).

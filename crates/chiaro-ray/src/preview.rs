@@ -7,12 +7,13 @@
 
 use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::Result;
-use chiaro_core::film::{Film, TilePixels, render_tiles_in};
+use chiaro_core::film::{Film, TilePixels, render_tiles};
 use chiaro_core::geometry::Ray;
 use chiaro_core::sampling::{pixel_rng, uniform2};
-use chiaro_core::scene::{Attenuation, Light};
+use chiaro_core::scene::{Attenuation, Light, Technique};
 use chiaro_core::shading::texture::background_radiance;
 use chiaro_core::shading::{LocalLighting, ShadingPoint, sanitize, shade_local};
+use chiaro_core::technique::{Description, Feature};
 use glam::{Vec2, Vec3};
 
 /// Tile side in pixels.
@@ -37,7 +38,35 @@ impl Renderer for Preview {
         let pixels = u64::from(settings.width) * u64::from(settings.height);
         Ok((film, ctx.stats(pixels * u64::from(settings.samples.max(1)))))
     }
+
+    fn descriptions(&self) -> &'static [Description] {
+        std::slice::from_ref(&DESCRIPTION)
+    }
 }
+
+/// The preview technique, described.
+pub const DESCRIPTION: Description = Description {
+    technique: Technique::Preview,
+    title: "preview",
+    method: "ray cast, eye-light shading, no shadows: the fastest look",
+    shows: "surfaces, textures, normal maps and highlights under an eye light; the background",
+    cannot_show: &[
+        (
+            Feature::Lights,
+            "the scene's lights and shadows: preview lights every surface with an eye light",
+        ),
+        (
+            Feature::Mirrors,
+            "mirror reflections: mirrors show their own colour",
+        ),
+        (
+            Feature::Transparency,
+            "transparency and refraction: drawn opaque",
+        ),
+        (Feature::EnvironmentLight, "light from the environment map"),
+        (Feature::DepthCue, "depth cueing"),
+    ],
+};
 
 fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
     let (scene, settings, progress) = (ctx.scene(), ctx.settings(), ctx.progress());
@@ -67,7 +96,7 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
     let (w, h) = (settings.width, settings.height);
     let pixel_rays = cam.pixel_rays(w, h);
     let spp = settings.samples.max(1);
-    render_tiles_in(
+    render_tiles(
         w,
         h,
         settings.crop_rect(),

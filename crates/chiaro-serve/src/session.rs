@@ -393,37 +393,37 @@ impl From<chiaro::Error> for Stop {
 /// hybrid render does not solve again.
 #[derive(Default)]
 struct SolutionCache {
-    cached: Option<((u64, String), RadiositySolution)>,
+    cached: Option<((u64, String), Arc<RadiositySolution>)>,
     /// Solutions solved on this connection (reported in `done`).
     solves: u64,
 }
 
 impl SolutionCache {
-    /// [`chiaro::render_with_stats`], reusing the cached solution for the
-    /// techniques that solve radiosity.
+    /// [`chiaro::render_with_stats`], giving the render context the cached
+    /// solution for the techniques that solve radiosity, and keeping the
+    /// context's solution for the next frame.
     fn render(
         &mut self,
         scene: &Scene,
         settings: &RenderSettings,
         progress: &dyn Progress,
     ) -> Result<(Film, chiaro::RenderStats), chiaro::Error> {
-        if !matches!(settings.technique, Technique::Radiosity | Technique::Hybrid) {
+        if !settings.technique.solves_radiosity() {
             return chiaro::render_with_stats(scene, settings, progress);
         }
         let key = (
             chiaro::radiosity_fingerprint(scene, 0.0),
             serde_json::to_string(&settings.radiosity).unwrap_or_default(),
         );
-        let solution = match self.cached.take() {
-            Some((k, solution)) if k == key => solution,
-            _ => {
-                let solution = chiaro::solve_radiosity(scene, settings, progress)?;
-                self.solves += 1;
-                solution
-            }
-        };
-        let result = chiaro::render_from_solution(scene, settings, &solution, progress);
-        self.cached = Some((key, solution));
+        let mut ctx = chiaro::RenderContext::new(scene, settings, progress)?;
+        match self.cached.take() {
+            Some((k, solution)) if k == key => ctx = ctx.with_solution(solution),
+            _ => self.solves += 1,
+        }
+        let result = chiaro::render_with(&ctx, chiaro::renderer(settings.technique));
+        if let Some(solution) = ctx.solved::<RadiositySolution>() {
+            self.cached = Some((key, solution));
+        }
         result
     }
 }

@@ -334,7 +334,7 @@ pub fn band_height(height: u32) -> u32 {
 ///
 /// # Errors
 /// The render's error, or the first error `on_band` returns.
-pub fn render_in_bands<E: From<chiaro::Error>>(
+pub(crate) fn render_in_bands<E: From<chiaro::Error>>(
     scene: &Scene,
     settings: &RenderSettings,
     progress: &dyn Progress,
@@ -360,6 +360,7 @@ pub fn render_in_bands<E: From<chiaro::Error>>(
         copy_rows(&film, &mut full, y0, y1);
         total.elapsed += stats.elapsed;
         total.rays += stats.rays;
+        total.camera_rays += stats.camera_rays;
         total.triangles = stats.triangles;
         on_band(&full, y0, y1)?;
         y0 = y1;

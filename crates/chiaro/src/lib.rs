@@ -4,10 +4,11 @@
 //! use. It re-exports the scene model and renders through one path: the
 //! settings are validated once into a [`RenderContext`] and the technique
 //! they name renders it through the [`Renderer`] interface ([`renderer`]).
-//! [`render`] and [`render_with_stats`] do both; [`solve_radiosity`] and
-//! [`render_from_solution`] split the radiosity techniques at their
-//! view-independent solution; [`settings::apply_override`] is `--set
-//! key=value`.
+//! [`render`] and [`render_with_stats`] do both; [`render_with`] renders a
+//! context a front built itself (one given a saved radiosity solution with
+//! [`RenderContext::with_solution`], or whose solution it then saves with
+//! [`radiosity_solution`] and [`save_solution`]); [`settings::apply_override`]
+//! is `--set key=value`.
 //!
 //! ```
 //! use chiaro::scene::{Scene, Material, Object, Geometry, Technique};
@@ -40,12 +41,17 @@ pub use chiaro_core::{Vec2, Vec3};
 pub use chiaro_io as io;
 pub use limitations::{Limitation, limitations};
 
-pub use chiaro_core::context::{RenderContext, RenderStats, Renderer, memory_estimate};
+pub use chiaro_core::budget::Estimate;
+pub use chiaro_core::context::{RenderContext, RenderStats, Renderer};
+pub use chiaro_core::scene::Issue;
+pub use chiaro_core::technique::Description;
 pub use chiaro_radiosity::{RadiositySolution, SolveStats, fingerprint as radiosity_fingerprint};
 
 use chiaro_core::error::CoreError;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::{AaMode, Severity};
+use std::path::Path;
+use std::sync::Arc;
 use thiserror::Error;
 
 /// Anything that can go wrong between a file and a picture.
@@ -62,11 +68,19 @@ pub enum Error {
 /// Result with [`enum@Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
-/// Checks `settings` alone ([`RenderSettings::validate`]), before a scene
-/// is loaded: every error at once, each naming its setting.
+/// Every issue with `settings` alone, before a scene is loaded: those of
+/// every render ([`RenderSettings::validate`]) and the technique's own
+/// ([`Renderer::check_settings`]).
+pub fn settings_issues(settings: &RenderSettings) -> Vec<Issue> {
+    let mut issues = settings.validate();
+    issues.extend(renderer(settings.technique).check_settings(settings));
+    issues
+}
+
+/// Checks `settings` alone ([`settings_issues`]), before a scene is
+/// loaded: every error at once, each naming its setting.
 pub fn check_settings(settings: &RenderSettings) -> Result<(), CoreError> {
-    let issues: Vec<String> = settings
-        .validate()
+    let issues: Vec<String> = settings_issues(settings)
         .into_iter()
         .filter(|i| i.severity == Severity::Error)
         .map(|i| i.to_string())
@@ -87,7 +101,25 @@ pub fn technique_list() -> String {
         .join(", ")
 }
 
-/// The renderer of `technique`.
+/// The description of `technique`, written beside its renderer: what it
+/// is, shows and cannot show.
+pub fn description(technique: Technique) -> Option<&'static Description> {
+    renderer(technique)
+        .descriptions()
+        .iter()
+        .find(|d| d.technique == technique)
+}
+
+/// What rendering `scene` with `settings` will allocate, by consumer:
+/// what every render allocates ([`chiaro_core::context::memory_estimate`])
+/// and what the technique adds ([`Renderer::memory`]).
+pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
+    let mut e = chiaro_core::context::memory_estimate(scene, settings);
+    renderer(settings.technique).memory(scene, settings, &mut e);
+    e
+}
+
+/// The renderer of `technique`: the one line a new technique adds here.
 pub fn renderer(technique: Technique) -> &'static dyn Renderer {
     match technique {
         Technique::Preview => &chiaro_ray::preview::Preview,
@@ -114,44 +146,61 @@ pub fn render_with_stats(
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> Result<(Film, RenderStats)> {
-    render_with(scene, settings, progress, renderer(settings.technique))
-}
-
-/// [`render_with_stats`] with a given renderer in place of the one the
-/// settings' technique names (a path tracer's other kernels, for tests and
-/// benchmarks that compare them).
-pub fn render_with(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-    renderer: &dyn Renderer,
-) -> Result<(Film, RenderStats)> {
     let ctx = RenderContext::new(scene, settings, progress)?;
-    render_context(&ctx, |ctx| renderer.render(ctx))
+    render_with(&ctx, renderer(settings.technique))
 }
 
-/// Runs `render` on `ctx` as every front does: the limitations of the
-/// technique said once, and `aa = post` (the seeds' "render, then remove
-/// the aliasing") as one sample per pixel followed by an edge-aware post
-/// filter (FXAA).
-fn render_context(
+/// Renders `ctx` with `renderer` as every front does: the limitations of
+/// the technique said once, and `aa = post` (render, then remove the
+/// aliasing) as one sample per pixel followed by an edge-aware post filter
+/// (FXAA). The one render path: [`render_with_stats`] calls it with the
+/// settings' technique ([`renderer`]); a front that gives the context a
+/// saved radiosity solution ([`RenderContext::with_solution`]) or saves
+/// the one solved ([`save_solution`]) calls it directly, as do tests and
+/// benchmarks that compare a technique's kernels.
+pub fn render_with(
     ctx: &RenderContext<'_>,
-    render: impl Fn(&RenderContext<'_>) -> Result<(Film, RenderStats), CoreError>,
+    renderer: &dyn Renderer,
 ) -> Result<(Film, RenderStats)> {
     if ctx.settings().aa == AaMode::Post {
         let one = ctx.with_settings(|s| {
             s.aa = AaMode::Supersample;
             s.samples = 1;
         })?;
-        let (film, stats) = render_context(&one, render)?;
+        let (film, stats) = render_with(&one, renderer)?;
         return Ok((chiaro_core::film::postfilter::fxaa(&film), stats));
     }
+    check_context(ctx, renderer)?;
     for l in limitations::limitations_of_render(ctx.scene(), ctx.settings()) {
         ctx.progress().warning(&l.to_string());
     }
-    let (film, stats) = render(ctx)?;
+    let (film, stats) = renderer.render(ctx)?;
     debug_assert!(film.is_clean());
     Ok((film, stats))
+}
+
+/// What the context's validation leaves to the technique: its settings
+/// checks (errors refused, warnings to the progress) and its memory
+/// estimate against the budget.
+fn check_context(ctx: &RenderContext<'_>, renderer: &dyn Renderer) -> Result<(), CoreError> {
+    let (scene, settings) = (ctx.scene(), ctx.settings());
+    let mut errors = Vec::new();
+    for issue in renderer.check_settings(settings) {
+        match issue.severity {
+            Severity::Error => errors.push(issue.to_string()),
+            Severity::Warning => ctx
+                .progress()
+                .warning(&format!("{}: {}", issue.path, issue.message)),
+        }
+    }
+    if !errors.is_empty() {
+        return Err(CoreError::InvalidScene { issues: errors });
+    }
+    let mut estimate = chiaro_core::context::memory_estimate(scene, settings);
+    renderer.memory(scene, settings, &mut estimate);
+    estimate
+        .check(settings.memory_budget())
+        .map_err(CoreError::Unsupported)
 }
 
 /// World-space bounds of everything in the scene.
@@ -185,80 +234,28 @@ pub fn check_solution_technique(technique: Technique) -> Result<(), CoreError> {
     }
 }
 
-/// Solves the radiosity of `scene` with `settings.radiosity` (validated as
-/// for a render): the view-independent solution that `radiosity` and
-/// `hybrid` render from ([`render_from_solution`]).
-pub fn solve_radiosity(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-) -> Result<RadiositySolution> {
-    let ctx = RenderContext::new(scene, settings, progress)?;
-    Ok(chiaro_radiosity::solve(&ctx)?)
+/// The radiosity solution of `ctx` (`settings.radiosity`; view
+/// independent): the one it was given, else solved now and kept, so that a
+/// render of the same context after this call does not solve again.
+pub fn radiosity_solution(ctx: &RenderContext<'_>) -> Result<Arc<RadiositySolution>> {
+    check_context(ctx, &chiaro_radiosity::Radiosity)?;
+    Ok(chiaro_radiosity::solution(ctx)?)
 }
 
-/// Renders `scene` from an existing radiosity `solution` with
-/// `settings.technique` (`radiosity`: the solution displayed; `hybrid`:
-/// Whitted ray tracing with the solution's indirect light). Nothing is
-/// solved.
-///
-/// # Errors
-/// [`CoreError::BadSetting`] for another technique; a solution of another
-/// scene is [`CoreError::Unsupported`].
-pub fn render_from_solution(
-    scene: &Scene,
-    settings: &RenderSettings,
-    solution: &RadiositySolution,
-    progress: &dyn Progress,
-) -> Result<(Film, RenderStats)> {
-    check_solution_technique(settings.technique)?;
-    let ctx = RenderContext::new(scene, settings, progress)?;
-    render_context(&ctx, |ctx| match ctx.settings().technique {
-        Technique::Hybrid => hybrid::render_with_solution(ctx, solution),
-        _ => {
-            let film = chiaro_radiosity::render_solution(ctx, solution)?;
-            Ok((film, ctx.stats(0)))
-        }
-    })
+/// Reads a radiosity solution saved by [`save_solution`], refusing one of
+/// another scene than `scene`; give it to a context with
+/// [`RenderContext::with_solution`].
+pub fn load_solution(path: &Path, scene: &Scene) -> Result<Arc<RadiositySolution>> {
+    let file = std::fs::File::open(path).map_err(|e| chiaro_io::IoError::io(path, e))?;
+    let solution = RadiositySolution::load(std::io::BufReader::new(file), scene)
+        .map_err(|e| Error::Io(chiaro_io::IoError::format(path, e.to_string())))?;
+    Ok(Arc::new(solution))
 }
 
-/// Where a radiosity solution comes from and goes to, for the techniques
-/// that solve radiosity (`radiosity`, `hybrid`): a solution is view
-/// independent, so it can be solved once, saved, and rendered from other
-/// cameras without solving again.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct SolutionFiles<'a> {
-    /// Read the solution from this file instead of solving (refused with a
-    /// clear error when it belongs to another scene).
-    pub load: Option<&'a std::path::Path>,
-    /// Write the solution to this file (atomically) after solving.
-    pub save: Option<&'a std::path::Path>,
-}
-
-/// [`render_with_stats`] for `radiosity` and `hybrid` with a saved or
-/// to-be-saved solution. Other techniques with a file given are an error.
-pub fn render_with_solution_files(
-    scene: &Scene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-    files: SolutionFiles<'_>,
-) -> Result<(Film, RenderStats)> {
-    if files.load.is_none() && files.save.is_none() {
-        return render_with_stats(scene, settings, progress);
-    }
-    check_solution_technique(settings.technique)?;
-    let solution = match files.load {
-        Some(path) => {
-            let file = std::fs::File::open(path).map_err(|e| chiaro_io::IoError::io(path, e))?;
-            RadiositySolution::load(std::io::BufReader::new(file), scene)
-                .map_err(|e| Error::Io(chiaro_io::IoError::format(path, e.to_string())))?
-        }
-        None => solve_radiosity(scene, settings, progress)?,
-    };
-    if let Some(path) = files.save {
-        let mut bytes = Vec::new();
-        solution.save(&mut bytes)?;
-        chiaro_io::output::write_atomically(path, &bytes)?;
-    }
-    render_from_solution(scene, settings, &solution, progress)
+/// Writes `solution` to `path` whole or not at all.
+pub fn save_solution(solution: &RadiositySolution, path: &Path) -> Result<()> {
+    let mut bytes = Vec::new();
+    solution.save(&mut bytes)?;
+    chiaro_io::output::write_atomically(path, &bytes)?;
+    Ok(())
 }

@@ -3,273 +3,22 @@
 //! [`limitations`] lists, for a scene and a technique, the features the
 //! scene has that the technique does not draw (radiosity's mirrors and
 //! glass, scan conversion's refraction, ...), each with the objects that
-//! have it. [`crate::render_with_stats`] emits each one as a
+//! have it. [`crate::render_with`] emits each one as a
 //! `Progress::warning`, `chiaro info` lists them per technique, and
-//! [`markdown_table`] is the README's table of what each technique shows,
-//! so the three say the same. [`CANNOT_SHOW`] holds the technique-feature
-//! pairs, each checked against the technique's code.
+//! [`markdown_table`] and [`methods_table`] are the README's tables of the
+//! techniques, so all say the same. Each technique's features and words
+//! come from its renderer's [`Description`] ([`crate::description`]),
+//! written beside its code.
 
 use chiaro_core::scene::{
     AlphaMode, Geometry, Light, Material, MaterialId, RenderSettings, Scene, ShadowMethod,
     Technique,
 };
+use chiaro_core::technique::Description;
 use std::collections::HashMap;
 use std::fmt;
 
-/// Something a scene can have that some technique does not draw.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Feature {
-    /// The scene's lights, shadows included (preview lights with an eye light).
-    Lights,
-    /// Ambient lights (`Ia ka kd`).
-    AmbientLight,
-    /// Light from the environment map falling on surfaces.
-    EnvironmentLight,
-    /// Mirror reflection of the scene (`reflect > 0`, or a Fresnel dielectric).
-    Mirrors,
-    /// Refraction: light bent through a transmitting surface with `ior != 1`.
-    Refraction,
-    /// Surfaces that let light through (`transmit > 0`, glTF `BLEND`).
-    Transparency,
-    /// Specular highlights (`specular > 0`).
-    Highlights,
-    /// Normal and bump maps.
-    NormalMaps,
-    /// Highlights and shadows that fall inside one large polygon.
-    InsideLargePolygons,
-    /// Light that mirrors and glass send onto other surfaces (caustics).
-    SpecularIndirect,
-    /// Depth cueing (`render.depth_cue`).
-    DepthCue,
-    /// Shadows with `shadows = "volume"` (the volumes exist per sample).
-    VolumeShadows,
-    /// Alpha-masked surfaces (glTF `alphaMode: MASK`): cut-out texels.
-    AlphaMask,
-    /// Alpha-masked shadow casters under `shadows` = volume, object or
-    /// scanline (polygon shadows that do not cut texels).
-    AlphaMaskShadows,
-}
-
-/// What each technique cannot show, in words: `(technique, feature, what
-/// the picture shows instead)`. Each entry is what the technique's code
-/// does (see the module docs of chiaro-ray, chiaro-raster, chiaro-radiosity
-/// and `chiaro::hybrid`).
-pub const CANNOT_SHOW: &[(Technique, Feature, &str)] = &[
-    (
-        Technique::Preview,
-        Feature::Lights,
-        "the scene's lights and shadows: preview lights every surface with an eye light",
-    ),
-    (
-        Technique::Preview,
-        Feature::Mirrors,
-        "mirror reflections: mirrors show their own colour",
-    ),
-    (
-        Technique::Preview,
-        Feature::Transparency,
-        "transparency and refraction: drawn opaque",
-    ),
-    (
-        Technique::Preview,
-        Feature::EnvironmentLight,
-        "light from the environment map",
-    ),
-    (Technique::Preview, Feature::DepthCue, "depth cueing"),
-    (
-        Technique::Flat,
-        Feature::Mirrors,
-        "mirror reflections of other objects: only the environment map is reflected",
-    ),
-    (
-        Technique::Flat,
-        Feature::Refraction,
-        "refraction: transparent surfaces do not bend light",
-    ),
-    (
-        Technique::Flat,
-        Feature::NormalMaps,
-        "normal and bump maps: polygons are lit with the face normal",
-    ),
-    (
-        Technique::Flat,
-        Feature::InsideLargePolygons,
-        "highlights and shadows inside a polygon: each polygon is lit once, at its centre",
-    ),
-    (
-        Technique::Flat,
-        Feature::EnvironmentLight,
-        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
-    ),
-    (
-        Technique::Flat,
-        Feature::VolumeShadows,
-        "shadows with `shadows = \"volume\"`: the volumes exist per sample, not at polygon centres",
-    ),
-    (
-        Technique::Gouraud,
-        Feature::Mirrors,
-        "mirror reflections of other objects: only the environment map is reflected",
-    ),
-    (
-        Technique::Gouraud,
-        Feature::Refraction,
-        "refraction: transparent surfaces do not bend light",
-    ),
-    (
-        Technique::Gouraud,
-        Feature::NormalMaps,
-        "normal and bump maps: vertices are lit with the interpolated normal",
-    ),
-    (
-        Technique::Gouraud,
-        Feature::InsideLargePolygons,
-        "highlights and shadows inside a polygon: light is computed at the vertices only",
-    ),
-    (
-        Technique::Gouraud,
-        Feature::EnvironmentLight,
-        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
-    ),
-    (
-        Technique::Gouraud,
-        Feature::VolumeShadows,
-        "shadows with `shadows = \"volume\"`: the volumes exist per sample, not at vertices",
-    ),
-    (
-        Technique::Phong,
-        Feature::Mirrors,
-        "mirror reflections of other objects: only the environment map is reflected",
-    ),
-    (
-        Technique::Phong,
-        Feature::Refraction,
-        "refraction: transparent surfaces do not bend light",
-    ),
-    (
-        Technique::Phong,
-        Feature::EnvironmentLight,
-        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
-    ),
-    (
-        Technique::Whitted,
-        Feature::EnvironmentLight,
-        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
-    ),
-    (
-        Technique::Radiosity,
-        Feature::Mirrors,
-        "mirror reflections: mirrors are drawn matte",
-    ),
-    (
-        Technique::Radiosity,
-        Feature::Transparency,
-        "transparency and refraction: drawn opaque",
-    ),
-    (
-        Technique::Radiosity,
-        Feature::Highlights,
-        "specular highlights: surfaces are drawn diffuse",
-    ),
-    (
-        Technique::Radiosity,
-        Feature::NormalMaps,
-        "normal and bump maps: patches are lit with their face normal",
-    ),
-    (
-        Technique::Radiosity,
-        Feature::AmbientLight,
-        "ambient lights: interreflection is computed instead",
-    ),
-    (
-        Technique::Radiosity,
-        Feature::EnvironmentLight,
-        "light from the environment map",
-    ),
-    (Technique::Radiosity, Feature::DepthCue, "depth cueing"),
-    (
-        Technique::Radiosity,
-        Feature::AlphaMask,
-        "cut-outs of alpha-masked (glTF MASK) surfaces: patches are drawn whole",
-    ),
-    (
-        Technique::Hybrid,
-        Feature::SpecularIndirect,
-        "light that mirrors and glass send onto other surfaces (caustics): the radiosity pass sees them as matte and opaque",
-    ),
-    (
-        Technique::Flat,
-        Feature::AlphaMaskShadows,
-        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
-    ),
-    (
-        Technique::Gouraud,
-        Feature::AlphaMaskShadows,
-        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
-    ),
-    (
-        Technique::Phong,
-        Feature::AlphaMaskShadows,
-        "shadows of alpha-masked cut-outs with `shadows` = volume, object or scanline: masked surfaces cast whole shadows (`shadows` = ray or map cut them)",
-    ),
-    (
-        Technique::Hybrid,
-        Feature::AlphaMask,
-        "cut-outs of alpha-masked (glTF MASK) surfaces in the indirect light: the radiosity pass sees them whole",
-    ),
-    (
-        Technique::Hybrid,
-        Feature::AmbientLight,
-        "ambient lights: interreflection is computed instead",
-    ),
-    (
-        Technique::Hybrid,
-        Feature::EnvironmentLight,
-        "occlusion of the environment map's light: the map lights every surface (diffuse from its irradiance, glossy from its prefiltered levels) as if nothing stood in its way, and glossy surfaces reflect the map, not the objects beside them",
-    ),
-    (
-        Technique::Path,
-        Feature::AmbientLight,
-        "ambient lights: interreflection is computed instead",
-    ),
-    (Technique::Path, Feature::DepthCue, "depth cueing"),
-];
-
-/// What each technique draws, for the README's table.
-pub const SHOWS: &[(Technique, &str)] = &[
-    (
-        Technique::Preview,
-        "surfaces, textures, normal maps and highlights under an eye light; the background",
-    ),
-    (
-        Technique::Flat,
-        "direct light and shadows per polygon, textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
-    ),
-    (
-        Technique::Gouraud,
-        "direct light and shadows per vertex, interpolated; textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
-    ),
-    (
-        Technique::Phong,
-        "direct light, highlights and shadows per pixel, textures, normal and bump maps, non-refractive transparency, environment reflection maps and the environment's light",
-    ),
-    (
-        Technique::Whitted,
-        "direct light with shadow rays (soft from area lights), highlights, mirror reflection, refraction, textures and normal maps; ambient light for the rest",
-    ),
-    (
-        Technique::Radiosity,
-        "diffuse interreflection and colour bleeding, soft shadows, textures (the texture times the patches' light)",
-    ),
-    (
-        Technique::Hybrid,
-        "Whitted's direct light, highlights, mirrors and glass, with radiosity's diffuse interreflection in place of ambient light",
-    ),
-    (
-        Technique::Path,
-        "all light transport: interreflection, soft shadows, glossy and mirror reflection, refraction, caustics (slowly), environment light",
-    ),
-];
+pub use chiaro_core::technique::Feature;
 
 /// One feature of a scene that a technique does not draw, with the objects
 /// (or lights) that have it.
@@ -310,7 +59,7 @@ impl fmt::Display for Limitation {
 }
 
 /// The features of `scene` that `technique` does not draw, in the order of
-/// [`CANNOT_SHOW`], each with the objects that have it (with the scene's
+/// its description's `cannot_show`, each with the objects that have it (with the scene's
 /// own render settings).
 pub fn limitations(scene: &Scene, technique: Technique) -> Vec<Limitation> {
     let settings = RenderSettings {
@@ -324,10 +73,10 @@ pub fn limitations(scene: &Scene, technique: Technique) -> Vec<Limitation> {
 /// settings such as depth cueing).
 pub fn limitations_of_render(scene: &Scene, settings: &RenderSettings) -> Vec<Limitation> {
     let objects = Objects::of(scene);
-    CANNOT_SHOW
-        .iter()
-        .filter(|(t, _, _)| *t == settings.technique)
-        .filter_map(|&(technique, feature, text)| {
+    let technique = settings.technique;
+    descriptions_of(technique)
+        .flat_map(|d| d.cannot_show)
+        .filter_map(|&(feature, text)| {
             let (present, objects) = present(scene, settings, &objects, feature);
             present.then_some(Limitation {
                 technique,
@@ -337,6 +86,12 @@ pub fn limitations_of_render(scene: &Scene, settings: &RenderSettings) -> Vec<Li
             })
         })
         .collect()
+}
+
+/// The description of `technique` (none only for a renderer that forgot
+/// it, which the tests refuse).
+fn descriptions_of(technique: Technique) -> impl Iterator<Item = &'static Description> {
+    crate::description(technique).into_iter()
 }
 
 /// The scene's objects as the messages name them, with the materials each
@@ -521,22 +276,32 @@ fn present(
     }
 }
 
-/// The README's table: for each technique, what it shows and what it
-/// cannot (every entry of [`CANNOT_SHOW`]).
+/// The README's table of what each technique shows and what it cannot
+/// (every `cannot_show` entry of its description).
 pub fn markdown_table() -> String {
     let mut out = String::from("| technique | shows | cannot show |\n| --- | --- | --- |\n");
-    for &(t, shows) in SHOWS {
-        let cannot: Vec<&str> = CANNOT_SHOW
-            .iter()
-            .filter(|(u, _, _)| *u == t)
-            .map(|(_, _, text)| *text)
-            .collect();
-        let cannot = if cannot.is_empty() {
-            "-".to_string()
-        } else {
-            cannot.join("; ")
-        };
-        out += &format!("| {} | {shows} | {cannot} |\n", t.name());
+    for t in Technique::ALL {
+        for d in descriptions_of(t) {
+            let cannot: Vec<&str> = d.cannot_show.iter().map(|(_, text)| *text).collect();
+            let cannot = if cannot.is_empty() {
+                "-".to_string()
+            } else {
+                cannot.join("; ")
+            };
+            out += &format!("| {} | {} | {cannot} |\n", t.name(), d.shows);
+        }
+    }
+    out
+}
+
+/// The README's table of what each technique is and its `--technique`
+/// name.
+pub fn methods_table() -> String {
+    let mut out = String::from("| technique | `--technique` | what it is |\n| --- | --- | --- |\n");
+    for t in Technique::ALL {
+        for d in descriptions_of(t) {
+            out += &format!("| {} | `{}` | {} |\n", d.title, t.name(), d.method);
+        }
     }
     out
 }

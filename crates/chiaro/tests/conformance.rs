@@ -359,19 +359,21 @@ fn render(scene: &Scene, s: &RenderSettings, tech: Tech) -> Result<Cell, String>
                 rays: st.rays,
             })
             .map_err(|e| e.to_string()),
-        Tech::PathReference => chiaro::render_with(
-            scene,
-            s,
-            &NoProgress,
-            &chiaro_ray::path::PathTracing {
-                kernel: Kernel::Reference,
-            },
-        )
-        .map(|(film, st)| Cell {
-            film,
-            rays: st.rays,
-        })
-        .map_err(|e| e.to_string()),
+        Tech::PathReference => chiaro::RenderContext::new(scene, s, &NoProgress)
+            .map_err(chiaro::Error::from)
+            .and_then(|ctx| {
+                chiaro::render_with(
+                    &ctx,
+                    &chiaro_ray::path::PathTracing {
+                        kernel: Kernel::Reference,
+                    },
+                )
+            })
+            .map(|(film, st)| Cell {
+                film,
+                rays: st.rays,
+            })
+            .map_err(|e| e.to_string()),
     }
 }
 
@@ -822,15 +824,11 @@ fn rule_fast_path_is_reference(m: &mut Matrix, case: &Case) {
                 s.height = h;
                 s.samples = 4;
                 s.seed = 1000 + k;
-                chiaro::render_with(
-                    &case.scene,
-                    &s,
-                    &NoProgress,
-                    &chiaro_ray::path::PathTracing { kernel },
-                )
-                .expect("renders")
-                .0
-                .color
+                let ctx = chiaro::RenderContext::new(&case.scene, &s, &NoProgress).expect("valid");
+                chiaro::render_with(&ctx, &chiaro_ray::path::PathTracing { kernel })
+                    .expect("renders")
+                    .0
+                    .color
             })
             .collect();
         let n = SEEDS as f32;

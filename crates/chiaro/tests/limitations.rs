@@ -146,10 +146,50 @@ fn long_lists_end_with_a_count() {
 }
 
 #[test]
-fn readme_and_architecture_show_the_table_the_code_knows() {
+fn every_technique_is_described_once_by_its_renderer() {
+    for t in Technique::ALL {
+        let described: Vec<_> = chiaro::renderer(t)
+            .descriptions()
+            .iter()
+            .filter(|d| d.technique == t)
+            .collect();
+        assert_eq!(described.len(), 1, "{}: {described:?}", t.name());
+        let d = described[0];
+        assert!(!d.method.is_empty() && !d.shows.is_empty(), "{}", t.name());
+        assert_eq!(d.title.to_lowercase(), t.name(), "{}", t.name());
+    }
+}
+
+#[test]
+fn the_scan_converters_sample_cap_is_its_own_settings_check() {
+    let mut s = chiaro::RenderSettings {
+        technique: Technique::Phong,
+        samples: 100,
+        ..Default::default()
+    };
+    let warned = |s: &chiaro::RenderSettings| {
+        chiaro::settings_issues(s)
+            .iter()
+            .any(|i| i.path == "render.samples" && i.severity == chiaro::scene::Severity::Warning)
+    };
+    assert!(warned(&s), "phong at 100 samples is capped, and says so");
+    s.technique = Technique::Path;
+    assert!(!warned(&s), "the path tracer takes 100 samples");
+    s.technique = Technique::Flat;
+    s.samples = 64;
+    assert!(!warned(&s), "64 is within the cap");
+}
+
+#[test]
+fn readme_and_architecture_show_the_tables_the_code_knows() {
     let table = markdown_table();
-    for (t, _, text) in chiaro::limitations::CANNOT_SHOW {
-        assert!(table.contains(text), "{} {text}", t.name());
+    let methods = chiaro::limitations::methods_table();
+    for t in Technique::ALL {
+        let d = chiaro::description(t).expect("described");
+        for (_, text) in d.cannot_show {
+            assert!(table.contains(text), "{} {text}", t.name());
+        }
+        assert!(methods.contains(d.method), "{}", t.name());
     }
     for doc in ["README.md", "ARCHITECTURE.md"] {
         let text = std::fs::read_to_string(repo().join(doc)).expect("reads");
@@ -158,6 +198,11 @@ fn readme_and_architecture_show_the_table_the_code_knows() {
             "{doc} must hold the table of `chiaro::limitations::markdown_table()`:\n{table}"
         );
     }
+    let readme = std::fs::read_to_string(repo().join("README.md")).expect("reads");
+    assert!(
+        readme.contains(&methods),
+        "README.md must hold the table of `chiaro::limitations::methods_table()`:\n{methods}"
+    );
 }
 
 const DARK: &str = r#"

@@ -193,16 +193,17 @@ fn work(scene: &Scene, technique: Technique) -> Vec<(&'static str, u64)> {
             ]
         }
         Technique::Radiosity | Technique::Hybrid => {
-            let solution = chiaro::solve_radiosity(scene, &settings, &NoProgress).expect("solves");
+            let ctx = chiaro::RenderContext::new(scene, &settings, &NoProgress).expect("valid");
+            let solution = chiaro::radiosity_solution(&ctx).expect("solves");
             let s = solution.stats.clone();
             let mut out = vec![
                 ("elements", s.elements as u64),
                 ("form factors", form_factors(&s)),
             ];
             if technique == Technique::Hybrid {
+                // The context keeps the solution: the render does not solve again.
                 let (_, stats) =
-                    chiaro::render_from_solution(scene, &settings, &solution, &NoProgress)
-                        .expect("renders");
+                    chiaro::render_with(&ctx, chiaro::renderer(technique)).expect("renders");
                 out.push(("rays", stats.rays));
             }
             out

@@ -158,38 +158,16 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<TileRect> {
     out
 }
 
-/// Renders every tile in parallel with `render_tile` and assembles the film.
-/// Reports one unit of progress per tile under the stage `stage`, and stops
-/// with [`crate::error::CoreError::Cancelled`] when the progress asks to.
-/// The result does not depend on the number of threads as long as
-/// `render_tile` depends only on the tile.
+/// Renders every tile of the `crop` window (`[x0, y0, x1, y1]`, see
+/// `RenderSettings::crop_rect`; the whole image is `[0, 0, width, height]`)
+/// in parallel with `render_tile` and assembles the film. Tiles are cut to
+/// the window; pixels outside it stay black with infinite depth. Reports
+/// one unit of progress per tile under the stage `stage`, and stops with
+/// [`crate::error::CoreError::Cancelled`] when the progress asks to. The
+/// result does not depend on the number of threads, and every pixel inside
+/// a window has its full-render value, as long as `render_tile` depends
+/// only on the tile.
 pub fn render_tiles<F>(
-    width: u32,
-    height: u32,
-    tile_size: u32,
-    stage: &str,
-    progress: &dyn Progress,
-    render_tile: F,
-) -> crate::error::Result<Film>
-where
-    F: Fn(TileRect) -> TilePixels + Sync,
-{
-    render_tiles_in(
-        width,
-        height,
-        [0, 0, width, height],
-        tile_size,
-        stage,
-        progress,
-        render_tile,
-    )
-}
-
-/// [`render_tiles`] restricted to the pixels of `crop` (`[x0, y0, x1, y1]`,
-/// see `RenderSettings::crop_rect`): tiles are cut to the window, pixels
-/// outside it stay black with infinite depth. Because tiles are rendered
-/// independently, every pixel inside has its full-render value.
-pub fn render_tiles_in<F>(
     width: u32,
     height: u32,
     crop: [u32; 4],
@@ -283,8 +261,8 @@ mod tests {
             t
         };
         let np = crate::progress::NoProgress;
-        let full = render_tiles(30, 20, 8, "t", &np, shade).expect("renders");
-        let crop = render_tiles_in(30, 20, [5, 3, 17, 19], 8, "t", &np, shade).expect("renders");
+        let full = render_tiles(30, 20, [0, 0, 30, 20], 8, "t", &np, shade).expect("renders");
+        let crop = render_tiles(30, 20, [5, 3, 17, 19], 8, "t", &np, shade).expect("renders");
         for y in 0..20 {
             for x in 0..30 {
                 let inside = (5..17).contains(&x) && (3..19).contains(&y);

@@ -37,10 +37,12 @@
 
 use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::Result;
-use chiaro_core::film::{Film, TilePixels, render_tiles_in};
+use chiaro_core::film::{Film, TilePixels, render_tiles};
 use chiaro_core::geometry::Ray;
 use chiaro_core::sampling::{SobolSampler, pixel_rng, uniform2};
+use chiaro_core::scene::Technique;
 use chiaro_core::shading::sanitize;
+use chiaro_core::technique::{Description, Feature};
 use glam::{Vec2, Vec3};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -87,7 +89,26 @@ impl Renderer for PathTracing {
         let (film, rays) = render_impl(ctx, self.kernel, true)?;
         Ok((film, ctx.stats(rays)))
     }
+
+    fn descriptions(&self) -> &'static [Description] {
+        std::slice::from_ref(&DESCRIPTION)
+    }
 }
+
+/// The path technique, described.
+pub const DESCRIPTION: Description = Description {
+    technique: Technique::Path,
+    title: "path",
+    method: "unbiased path tracing with next-event estimation and MIS, Owen-scrambled Sobol samples: the reference",
+    shows: "all light transport: interreflection, soft shadows, glossy and mirror reflection, refraction, caustics (slowly), environment light",
+    cannot_show: &[
+        (
+            Feature::AmbientLight,
+            "ambient lights: interreflection is computed instead",
+        ),
+        (Feature::DepthCue, "depth cueing"),
+    ],
+};
 
 /// The path tracer over `make_accel`'s accelerator with `kernel`, from a
 /// scene: how the crate's tests drive it.
@@ -138,7 +159,7 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
     let cam = &scene.camera;
     // The camera's rays, its frame and field of view computed once.
     let pixel_rays = cam.pixel_rays(w, h);
-    let film = render_tiles_in(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
+    let film = render_tiles(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
         let mut tile = TilePixels::new(rect);
         let mut count = 0u64;
         let mut rng = SobolSampler::new(settings.seed, rect.x, rect.y, 0, spp);

@@ -37,20 +37,20 @@
 //! ambient term, and cross-technique tests call [`Tracer::light_visibility`].
 
 use chiaro_core::accel::Accelerator;
-use chiaro_core::context::{RenderContext, RenderStats as ContextStats, Renderer};
+use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::Result;
-use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles_in};
+use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::{PreparedScene, RayDifferentials, SurfaceHit};
-use chiaro_core::progress::Progress;
 use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
-use chiaro_core::scene::{AaMode, PixelRays, RenderSettings, ShadowMethod};
+use chiaro_core::scene::{AaMode, PixelRays, RenderSettings, ShadowMethod, Technique};
 use chiaro_core::shading::texture::{environment_diffuse, environment_specular, miss_radiance};
 use chiaro_core::shading::{
     EmitterGroup, LightSample, LocalLighting, SampleKey, ShadingPoint, SurfaceMaterial,
     delta_split, depth_cue, group_jitter, sanitize, shade_local,
 };
 use chiaro_core::shadow::ShadowCasters;
+use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature};
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -61,15 +61,6 @@ const TILE: u32 = 16;
 const MAX_ADAPTIVE_DEPTH: u32 = 8;
 /// Salt separating adaptive corner seeds from supersampling seeds.
 const ADAPTIVE_SALT: u64 = 0xAD47_1BE5_0000_0001;
-
-/// Counters of one render.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct RenderStats {
-    /// Every ray traced: camera, reflected, refracted and shadow rays.
-    pub rays: u64,
-    /// Camera rays alone.
-    pub primary_rays: u64,
-}
 
 /// An indirect-diffuse lookup: for a surface point, the indirect incident
 /// light expressed as the radiance a white Lambertian surface would reflect
@@ -162,15 +153,27 @@ pub fn specular_rays(
 pub struct Whitted;
 
 impl Renderer for Whitted {
-    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, ContextStats)> {
+    fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats)> {
         let progress = ctx.progress();
         progress.begin("prepare", 1);
         let tracer = Tracer::new(ctx);
         progress.advance(1);
-        let (film, stats) = tracer.render(progress)?;
-        Ok((film, ctx.stats(stats.rays)))
+        tracer.render(ctx)
+    }
+
+    fn descriptions(&self) -> &'static [Description] {
+        std::slice::from_ref(&DESCRIPTION)
     }
 }
+
+/// The Whitted technique, described.
+pub const DESCRIPTION: Description = Description {
+    technique: Technique::Whitted,
+    title: "Whitted",
+    method: "recursive ray tracing: shadow rays, mirror reflection, refraction with total internal reflection, soft shadows from area lights, adaptive anti-aliasing",
+    shows: "direct light with shadow rays (soft from area lights), highlights, mirror reflection, refraction, textures and normal maps; ambient light for the rest",
+    cannot_show: &[(Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED)],
+};
 
 /// The Whitted ray tracer over one prepared scene: the context's flattened
 /// scene and accelerator, the settings, and optionally an indirect-diffuse
@@ -422,16 +425,18 @@ impl<'s> Tracer<'s> {
     }
 
     /// Renders the image (or its `settings.crop` window; pixels outside stay
-    /// black) with the tracer's settings, tiles in parallel. Returns the film (colour, plus depth and normal of the
-    /// first sample of each pixel, or of its top-left corner for adaptive
-    /// sampling) and the ray counts.
-    pub fn render(&self, progress: &dyn Progress) -> Result<(Film, RenderStats)> {
-        let s = &self.settings;
+    /// black) with the tracer's settings, tiles in parallel, reporting to
+    /// `ctx`, the context the tracer was made from. Returns the film
+    /// (colour, plus depth and normal of the first sample of each pixel, or
+    /// of its top-left corner for adaptive sampling) and the statistics,
+    /// with every ray and the camera rays counted.
+    pub fn render(&self, ctx: &RenderContext<'_>) -> Result<(Film, RenderStats)> {
+        let (s, progress) = (&self.settings, ctx.progress());
         let rays = AtomicU64::new(0);
         let primary = AtomicU64::new(0);
         // Tiles are cut to the crop window; every pixel depends only on its
         // own position, so a cropped render equals the full one inside it.
-        let film = render_tiles_in(
+        let film = render_tiles(
             s.width,
             s.height,
             s.crop_rect(),
@@ -449,13 +454,9 @@ impl<'s> Tracer<'s> {
                 tile
             },
         )?;
-        Ok((
-            film,
-            RenderStats {
-                rays: rays.into_inner(),
-                primary_rays: primary.into_inner(),
-            },
-        ))
+        let mut stats = ctx.stats(rays.into_inner());
+        stats.camera_rays = primary.into_inner();
+        Ok((film, stats))
     }
 
     /// Stratified supersampling: one ray through the centre for one

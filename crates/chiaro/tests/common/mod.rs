@@ -10,14 +10,10 @@ pub fn render_cell(scene: &Scene, s: &RenderSettings, kernel: Option<Kernel>) ->
     match kernel {
         None => chiaro::render(scene, s, &NoProgress).expect("renders"),
         Some(k) => {
-            chiaro::render_with(
-                scene,
-                s,
-                &NoProgress,
-                &chiaro_ray::path::PathTracing { kernel: k },
-            )
-            .expect("renders")
-            .0
+            let ctx = chiaro::RenderContext::new(scene, s, &NoProgress).expect("valid");
+            chiaro::render_with(&ctx, &chiaro_ray::path::PathTracing { kernel: k })
+                .expect("renders")
+                .0
         }
     }
 }
