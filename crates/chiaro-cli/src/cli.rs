@@ -76,9 +76,8 @@ pub enum ToneMapArg {
 /// Options shared by every command that renders.
 #[derive(Debug, Args, Clone)]
 pub struct RenderOptions {
-    /// Technique: preview, flat, gouraud, phong, whitted, radiosity, hybrid or
-    /// path, in any case (default: the scene's `[render] technique`).
-    #[arg(short, long)]
+    /// The technique, by name (the list comes from `chiaro::technique_list`).
+    #[arg(short, long, help = technique_help())]
     pub technique: Option<String>,
     /// Image width in pixels.
     #[arg(long)]
@@ -203,4 +202,12 @@ pub struct CompareArgs {
     /// Render options (`--technique` is not allowed: use --techniques).
     #[command(flatten)]
     pub opts: RenderOptions,
+}
+
+/// `--technique`'s help: the technique names as the facade lists them.
+fn technique_help() -> String {
+    format!(
+        "Technique: {}, in any case (default: the scene's `[render] technique`)",
+        chiaro::technique_list()
+    )
 }
