@@ -131,7 +131,7 @@ pub fn render_with(
 }
 
 /// Runs `render` on `ctx` as every front does: the limitations of the
-/// technique said once, and `aa = post` (the seeds' "render, then remove
+/// technique said once, and `aa = post` (the magazine series' "render, then remove
 /// the aliasing") as one sample per pixel followed by an edge-aware post
 /// filter (FXAA).
 fn render_context(
