@@ -56,7 +56,7 @@ pub enum Command {
 /// Palette output modes (8-bit indexed PNG).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum PaletteArg {
-    /// The seeds' 256-entry palette of 64-level colour bands (make_range).
+    /// The magazine series' 256-entry palette of 64-level colour bands (make_range).
     Vga,
     /// Heckbert's median-cut palette with Floyd-Steinberg dithering.
     MedianCut,

@@ -81,7 +81,7 @@ fn teapot_ray_cast_faces_the_camera_and_writes() {
     let err = (back.mean() - film.mean()).abs().max_element();
     assert!(err < 2e-3, "mean changed by {err}");
 
-    // The seed's VGA bands (one band for the pot's colour) and a dithered
+    // The magazine series' VGA bands (one band for the pot's colour) and a dithered
     // 16-colour median cut: both decode to pictures close to the original.
     let variants = [
         (

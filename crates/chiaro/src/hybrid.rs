@@ -1,5 +1,6 @@
-//! The hybrid technique (the seeds' two-pass method, Wallace, Cohen and
-//! Greenberg 1987): a radiosity solution supplies the diffuse
+//! The hybrid technique (the lecture notes' "radiosity for diffuse, ray
+//! tracing for specular", as Wallace, Cohen and Greenberg's two-pass method,
+//! 1987): a radiosity solution supplies the diffuse
 //! interreflection, Whitted ray tracing supplies direct light with shadow
 //! rays, specular reflection and refraction. Where the ray tracer would add
 //! the ambient term `Ia ka kd`, it adds `kd / pi * E_indirect` instead, with

@@ -151,8 +151,8 @@ pub fn render_with_stats(
 }
 
 /// Renders `ctx` with `renderer` as every front does: the limitations of
-/// the technique said once, and `aa = post` (render, then remove the
-/// aliasing) as one sample per pixel followed by an edge-aware post filter
+/// the technique said once, and `aa = post` (the magazine series' "render,
+/// then remove the aliasing") as one sample per pixel followed by an edge-aware post filter
 /// (FXAA). The one render path: [`render_with_stats`] calls it with the
 /// settings' technique ([`renderer`]); a front that gives the context a
 /// saved radiosity solution ([`RenderContext::with_solution`]) or saves

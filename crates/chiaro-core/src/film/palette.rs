@@ -1,4 +1,4 @@
-//! 8-bit indexed (palette) images: the seed's VGA colour bands and a
+//! 8-bit indexed (palette) images: the magazine series' VGA colour bands and a
 //! median-cut quantizer.
 //!
 //! **VGA bands** (seed 002, "Palette Definition" and "Colours"): the 256
@@ -32,12 +32,12 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
-/// Levels per VGA colour band (the seed's "about 64 grey levels").
+/// Levels per VGA colour band (the magazine series' "about 64 grey levels").
 pub const BAND_LEVELS: usize = 64;
 /// Number of VGA colour bands: 256 / 64.
 pub const MAX_BANDS: usize = 4;
 /// Where each VGA band turns from black-to-colour into colour-to-white, as a
-/// fraction of the band (the seed's `make_range(..., 0.5)`).
+/// fraction of the band (the magazine series' `make_range(..., 0.5)`).
 pub const BAND_KNEE: f32 = 0.5;
 
 /// An image of palette indices.
@@ -67,7 +67,7 @@ impl IndexedImage {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", tag = "mode", deny_unknown_fields)]
 pub enum PaletteMode {
-    /// The seed's 256-entry palette of up to four black-colour-white bands,
+    /// The magazine series' 256-entry palette of up to four black-colour-white bands,
     /// one per colour (linear RGB, e.g. the materials' diffuse colours).
     Vga {
         /// Band colours (linear RGB); up to four are used.
@@ -96,7 +96,7 @@ pub fn quantize(rgb8: &[[u8; 3]], width: u32, height: u32, mode: &PaletteMode) -
 }
 
 /// Fills `palette[start..start + len]` with a ramp from black through
-/// `color` (8-bit sRGB codes, as the seed's DAC values) to white, linearly
+/// `color` (8-bit sRGB codes, as the magazine series' DAC values) to white, linearly
 /// interpolated in code values, turning at `knee` (fraction of the range,
 /// clamped to `[0, 1]`): entry `start` is black and entry `start + len - 1`
 /// is white (for `len >= 2`). Entries past the end of `palette` are skipped.
@@ -180,7 +180,7 @@ fn nearest_band(c: Vec3, bands: &[(f32, f32)]) -> usize {
     best.1
 }
 
-/// Maps an 8-bit sRGB image to the seed's VGA palette ([`vga_palette`]):
+/// Maps an 8-bit sRGB image to the magazine series' VGA palette ([`vga_palette`]):
 /// each pixel picks the band of nearest chromaticity and the level of
 /// nearest luminance (see the module docs). With more than four
 /// `band_colors` (linear RGB), the four chosen by the most pixels are kept,

@@ -3,9 +3,9 @@
 //! Vertex normals are the angle-weighted average of the normals of the faces
 //! around a vertex (Thürmer and Wüthrich 1998), skipping faces whose normal
 //! differs by more than a crease angle from the face being drawn, so a cube
-//! stays faceted and a sphere is smooth (the seeds' "keep real edges sharp").
-//! Zero-area faces contribute nothing: coincident points never produce a
-//! zero normal and a dark corner (the seed's warning).
+//! stays faceted and a sphere is smooth (the textbook chapter's "keep real
+//! edges sharp"). Zero-area faces contribute nothing: coincident points never
+//! produce a zero normal and a dark corner (the magazine series' warning).
 
 use glam::{Vec2, Vec3, Vec4};
 use std::collections::HashMap;

@@ -20,8 +20,8 @@
 //! and bottom patches have a collapsed row of control points (a pole) where
 //! one derivative vanishes; there the normal is taken from the nearest
 //! parameter point inside the patch where the cross product is not
-//! degenerate, so no vertex ever gets a zero or NaN normal (the seed's
-//! "dark corner" from coincident points). The surface is not watertight:
+//! degenerate, so no vertex ever gets a zero or NaN normal (the magazine
+//! series' "dark corner" from coincident points). The surface is not watertight:
 //! the original data has small gaps and T-junctions between patches.
 
 use crate::scene::Mesh;

@@ -13,7 +13,7 @@ pub enum Attenuation {
     /// Physical: `f_att = 1 / d^2`.
     #[default]
     InverseSquare,
-    /// The seeds' empirical compromise `f_att = min(1 / (c1 + c2 d + c3 d^2), 1)`.
+    /// The lecture notes' empirical compromise `f_att = min(1 / (c1 + c2 d + c3 d^2), 1)`.
     Empirical { c1: f32, c2: f32, c3: f32 },
 }
 

@@ -1,4 +1,4 @@
-//! Materials: the classic coefficients of the seeds plus the physical ones.
+//! Materials: the lecture notes' classic coefficients plus the physical ones.
 
 use super::TextureId;
 use glam::Vec3;

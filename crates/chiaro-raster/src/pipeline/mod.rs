@@ -41,7 +41,7 @@
 //! Gouraud shading evaluate shadow rays and maps at their vertices or
 //! polygon centre, and ignore shadow volumes, which only exist per sample).
 //!
-//! Transparency without refraction (the seeds' three models) is chosen per
+//! Transparency without refraction (the lecture notes' three models) is chosen per
 //! material (`Material::transparency`, overridden by
 //! `RenderSettings::transparency`) for surfaces with `transmit > 0`:
 //! - *screen-door*: an 8x8 ordered-dither mask (Bayer) keeps the surface in

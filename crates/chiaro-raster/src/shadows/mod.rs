@@ -7,7 +7,7 @@
 //!   point to the light sample against the scene BVH; transparent surfaces
 //!   multiply the light by their transmit colour, by the one query the
 //!   Whitted tracer also calls ([`chiaro_core::shadow`]).
-//! - **Shadow z-buffers** ([`ShadowMethod::Map`], Williams 1978, the seeds'
+//! - **Shadow z-buffers** ([`ShadowMethod::Map`], Williams 1978, the lecture notes'
 //!   "two-pass z-buffer", [`maps`]): a depth image of the scene from each
 //!   light (orthographic for directional lights, perspective for narrow
 //!   spots, a cube of six 90-degree views for point lights and wide spots),

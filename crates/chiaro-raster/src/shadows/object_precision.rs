@@ -325,8 +325,8 @@ impl ShadowFrustum {
 }
 
 /// The shadow casters of a scene for the exact shadow methods: a BVH over
-/// the boxes of the triangles whose objects cast shadows (the seed's
-/// light-cube projection, which pairs polygons whose projections from the
+/// the boxes of the triangles whose objects cast shadows (the lecture
+/// notes' light-cube projection, which pairs polygons whose projections from the
 /// light overlap, done instead as a frustum query against the BVH).
 #[derive(Debug, Clone)]
 pub(crate) struct Casters {

@@ -23,8 +23,8 @@ use std::collections::HashMap;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum VolumeCounting {
     /// Crow's count from the eye to the sample: +1 for each front face of a
-    /// volume in front of the sample, -1 for each back face (the seeds'
-    /// parity count). Wrong when the eye is itself inside a shadow volume.
+    /// volume in front of the sample, -1 for each back face (the textbook
+    /// chapter's parity count). Wrong when the eye is itself inside a shadow volume.
     ZPass,
     /// Carmack's reverse (Everitt and Kilgard 2002): count from the sample
     /// to infinity, +1 for each back face behind the sample, -1 for each
