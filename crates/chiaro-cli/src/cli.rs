@@ -80,19 +80,19 @@ pub struct RenderOptions {
     #[arg(short, long, help = technique_help())]
     pub technique: Option<String>,
     /// Image width in pixels.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub width: Option<u32>,
     /// Image height in pixels.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub height: Option<u32>,
     /// Samples per pixel.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub samples: Option<u32>,
     /// Random seed.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub seed: Option<u64>,
     /// Worker threads (default: all cores).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub threads: Option<usize>,
     /// Override any render setting, e.g. `--set shadows=map --set whitted.max_depth=3`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -116,7 +116,7 @@ pub struct CameraFlags {
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub look_at: Option<String>,
     /// Vertical field of view in degrees.
-    #[arg(long, value_name = "DEG")]
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
     pub fov: Option<String>,
     /// The up axis, y or z; alone it frames the model again with that axis
     /// up (a Z-up OBJ stands upright with `--up z`).
@@ -155,7 +155,7 @@ pub struct RenderArgs {
     #[arg(long, value_enum)]
     pub tonemap: Option<ToneMapArg>,
     /// Exposure in stops before tone mapping.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub exposure: Option<f32>,
     /// Write 16-bit PNG.
     #[arg(long)]

@@ -287,3 +287,40 @@ fn camera_flags_move_the_camera_and_bad_values_name_the_flag() {
         "--camera: no camera named \"top\" (the scene has no named cameras)",
     );
 }
+
+#[test]
+fn numeric_flags_take_negative_numbers_as_values() {
+    let dir = fresh_dir("negative");
+    let out = dir.join("dark.png");
+    let args = |exposure: &str| {
+        vec![
+            "render".to_string(),
+            cornell(),
+            "--technique".into(),
+            "preview".into(),
+            "--width".into(),
+            "16".into(),
+            "--height".into(),
+            "12".into(),
+            "--exposure".into(),
+            exposure.into(),
+            "-o".into(),
+            out.display().to_string(),
+        ]
+    };
+    let run = |e: &str| chiaro(&args(e).iter().map(String::as_str).collect::<Vec<_>>());
+    let o = run("-1");
+    assert!(o.status.success(), "--exposure -1: {}", stderr(&o));
+    let dark = std::fs::read(&out).expect("written");
+    let o = run("0");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_ne!(
+        dark,
+        std::fs::read(&out).expect("written"),
+        "-1 stop darkens"
+    );
+    // A negative where only a positive fits is a value error naming the flag.
+    let o = chiaro(&["render", &cornell(), "--width", "-16", "-o", "x.png"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("'-16' for '--width"), "{}", stderr(&o));
+}
