@@ -833,47 +833,19 @@ fn rule_fast_path_is_reference(m: &mut Matrix, case: &Case) {
                 .color
             })
             .collect();
-        let n = SEEDS as f32;
-        let mean: Vec<Vec3> = (0..films[0].len())
-            .map(|i| films.iter().map(|f| f[i]).sum::<Vec3>() / n)
-            .collect();
-        let var = (0..films[0].len())
-            .map(|i| {
-                films
-                    .iter()
-                    .map(|f| (f[i] - mean[i]) * (f[i] - mean[i]))
-                    .sum::<Vec3>()
-                    / (n - 1.0)
-            })
-            .collect();
-        (mean, var)
+        chiaro_testkit::stats::pixel_mean_and_variance(&films)
     };
     let (fast, fast_var) = means(Kernel::Lanes);
     let (reference, ref_var) = means(Kernel::Reference);
-    let mut worst = 0.0f32;
-    for by in 0..h / 8 {
-        for bx in 0..w / 8 {
-            let (mut d, mut var) = (Vec3::ZERO, Vec3::ZERO);
-            for y in by * 8..by * 8 + 8 {
-                for x in bx * 8..bx * 8 + 8 {
-                    let i = (y * w + x) as usize;
-                    d += fast[i] - reference[i];
-                    var += fast_var[i] + ref_var[i];
-                }
-            }
-            let d = d / 64.0;
-            let se = (var / (64.0 * 64.0 * SEEDS as f32)).powf(0.5);
-            for c in 0..3 {
-                // A block that is black in both (no light reaches it) agrees.
-                let z = if d[c] == 0.0 {
-                    0.0
-                } else {
-                    d[c].abs() / se[c].max(1e-6)
-                };
-                worst = worst.max(z);
-            }
-        }
-    }
+    let worst = chiaro_testkit::stats::worst_block(
+        (&fast, &fast_var),
+        (&reference, &ref_var),
+        w,
+        h,
+        8,
+        SEEDS,
+    )
+    .z;
     m.check(
         "fast path = reference",
         &case.name,

@@ -3,38 +3,12 @@
 
 use chiaro::scene::{Light, ShadowMethod, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
-use chiaro_testkit::{diff_films, dump_ppm, scenes};
+use chiaro_testkit::{
+    diff_films, diff_films_relative_to_first, dump_ppm, same_surface, scenes, smooth_colour,
+};
 
 fn render(scene: &Scene, settings: &RenderSettings) -> Film {
     chiaro::render(scene, settings, &NoProgress).expect("renders")
-}
-
-/// Pixels where both films see a surface at the same depth with the same
-/// normal, away from silhouettes (all four neighbours agree too).
-fn same_surface(a: &Film, b: &Film) -> impl Fn(usize) -> bool {
-    let w = a.width as usize;
-    let h = a.height as usize;
-    let ok: Vec<bool> = (0..a.color.len())
-        .map(|i| {
-            let (da, db) = (a.depth[i], b.depth[i]);
-            da.is_finite()
-                && db.is_finite()
-                && (da - db).abs() <= 1e-3 * da.max(1.0)
-                && a.normal[i].dot(b.normal[i]) > 0.999
-        })
-        .collect();
-    move |i| {
-        let (x, y) = (i % w, i / w);
-        ok[i]
-            && x > 0
-            && y > 0
-            && x + 1 < w
-            && y + 1 < h
-            && ok[i - 1]
-            && ok[i + 1]
-            && ok[i - w]
-            && ok[i + w]
-    }
 }
 
 /// Pixels of `f` inside a surface: finite depth, and the four neighbours
@@ -82,7 +56,7 @@ fn phong_and_whitted_shadow_rays_agree_through_transparent_occluders() {
     // horizontal. On the horizontal surfaces both techniques call the one
     // shadow-ray query, so the shadows tinted by kt (pane) and kt^2 (cube,
     // crossed twice) are the same.
-    use chiaro::scene::{Geometry, Material, Object, Transform};
+    use chiaro::scene::{Geometry, Material, Transform};
     let mut scene = scenes::shadow_test(64);
     let pane = scene.add_material(Material {
         transmit: Vec3::new(0.9, 0.5, 0.2),
@@ -95,30 +69,31 @@ fn phong_and_whitted_shadow_rays_agree_through_transparent_occluders() {
     });
     let quad = scene.add_mesh(chiaro_core::geometry::primitives::plane(0.6, 1));
     let cube = scene.add_mesh(chiaro_core::geometry::primitives::cube());
-    scene.objects.push(Object {
-        name: "pane".into(),
-        geometry: Geometry::Mesh(quad),
-        material: pane,
-        transform: Transform {
-            translate: Vec3::new(0.2, 2.2, 0.8),
-            rotate_degrees: Vec3::new(20.0, 0.0, 10.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
-    scene.objects.push(Object {
-        name: "glass".into(),
-        geometry: Geometry::Mesh(cube),
-        material: glass,
-        smooth: false,
-        transform: Transform {
-            translate: Vec3::new(-1.2, 2.6, -1.0),
-            rotate_degrees: Vec3::new(30.0, 20.0, 0.0),
-            scale: Vec3::splat(0.35),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    let pane_at = Transform {
+        translate: Vec3::new(0.2, 2.2, 0.8),
+        rotate_degrees: Vec3::new(20.0, 0.0, 10.0),
+        ..Transform::default()
+    };
+    scenes::add_named(
+        &mut scene,
+        "pane",
+        (Geometry::Mesh(quad), pane),
+        pane_at,
+        true,
+    );
+    let glass_at = Transform {
+        translate: Vec3::new(-1.2, 2.6, -1.0),
+        rotate_degrees: Vec3::new(30.0, 20.0, 0.0),
+        scale: Vec3::splat(0.35),
+        ..Transform::default()
+    };
+    scenes::add_named(
+        &mut scene,
+        "glass",
+        (Geometry::Mesh(cube), glass),
+        glass_at,
+        false,
+    );
     let mut s = scene.render.clone();
     s.shadows = ShadowMethod::Ray;
     s.technique = Technique::Phong;
@@ -195,25 +170,9 @@ fn path_tracer_at_depth_one_equals_direct_local_shading() {
     // (stratified vs random), so their pixel means differ by the coverage
     // noise: compare only pixels away from image edges (every neighbour
     // within 10% of the pixel), relative to brightness.
-    let w = whitted.width as usize;
-    let flat = |i: usize| {
-        let c = whitted.color[i].max_element().max(0.02);
-        [i - 1, i + 1, i - w, i + w]
-            .iter()
-            .all(|&j| (whitted.color[j] - whitted.color[i]).abs().max_element() <= 0.1 * c)
-    };
-    let mut compared = 0;
-    let mut bad = 0;
-    for i in 0..whitted.color.len() {
-        if !mask(i) || !flat(i) {
-            continue;
-        }
-        compared += 1;
-        let (a, b) = (whitted.color[i], path.color[i]);
-        if (a - b).abs().max_element() > 0.02 * a.max_element().max(0.05) {
-            bad += 1;
-        }
-    }
+    let flat = smooth_colour(&whitted, 0.1, 0.02);
+    let d = diff_films_relative_to_first(&whitted, &path, 0.02, 0.05, |i| mask(i) && flat(i));
+    let (compared, bad) = (d.compared, d.over);
     if bad > compared / 100 {
         dump_ppm(&whitted, "depth1_whitted");
         dump_ppm(&path, "depth1_path");
@@ -241,14 +200,6 @@ fn every_technique_renders_the_test_scene_without_nan() {
         );
         let _ = Vec3::ZERO;
     }
-}
-
-/// The shipped Cornell box (walls in millimetres).
-fn cornell() -> Scene {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/cornell-box.toml");
-    chiaro::io::load_scene(std::path::Path::new(path))
-        .expect("the shipped scene loads")
-        .scene
 }
 
 /// Mean colour per Cornell wall (floor, ceiling, back, left, right) over the
@@ -306,10 +257,8 @@ fn wall_means(scene: &Scene, f: &Film) -> [Vec3; 5] {
 fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     // A converged radiosity solution and a converged path tracer must agree
     // on a purely Lambertian scene: within 4% relative error per wall.
-    let scene = cornell();
+    let scene = scenes::cornell_box(40);
     let mut s = scene.render.clone();
-    s.width = 40;
-    s.height = 40;
     s.technique = Technique::Radiosity;
     s.samples = 1;
     s.radiosity.solver = chiaro::scene::RadiositySolver::Hierarchical;

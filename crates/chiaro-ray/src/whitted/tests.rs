@@ -6,9 +6,10 @@ use chiaro_core::error::CoreError;
 use chiaro_core::geometry::primitives;
 use chiaro_core::progress::{CountingProgress, NoProgress};
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Geometry, Light, Material, MaterialId, Mesh, Object, Scene, Transform,
+    AreaShape, Geometry, Light, Material, MaterialId, Mesh, Object, Scene, Transform,
 };
 use chiaro_core::shading::{fresnel_dielectric, refract};
+use chiaro_testkit::scenes::point_light;
 
 fn lambert(kd: f32) -> Material {
     Material {
@@ -127,12 +128,7 @@ fn floor_scene() -> Scene {
         color: Vec3::ONE,
         intensity: 1.0,
     });
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 4.0, 0.0),
-        color: Vec3::ONE,
-        intensity: 16.0,
-        attenuation: Attenuation::InverseSquare,
-    });
+    s.lights.push(point_light(Vec3::new(0.0, 4.0, 0.0), 16.0));
     s.background = Vec3::new(0.1, 0.2, 0.3);
     s.camera.eye = Vec3::new(0.0, 3.0, 6.0);
     s.camera.look_at = Vec3::ZERO;
