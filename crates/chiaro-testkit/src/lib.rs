@@ -9,6 +9,7 @@ pub mod scenes;
 pub mod stats;
 
 use chiaro_core::film::Film;
+use chiaro_core::scene::{RenderSettings, ShadowMethod, Technique};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
@@ -169,6 +170,36 @@ pub fn central_mean(film: &Film, half: usize) -> Vec3 {
         }
     }
     sum / (4 * half * half) as f32
+}
+
+/// The pair that must agree on surfaces seen directly: the scan converter
+/// (Phong) and Whitted at depth 0, each rendered by `render` from `s`,
+/// which is left set for the second.
+pub fn phong_and_whitted_at_depth_0(
+    s: &mut RenderSettings,
+    render: impl Fn(&RenderSettings) -> Film,
+) -> (Film, Film) {
+    s.technique = Technique::Phong;
+    let raster = render(s);
+    s.technique = Technique::Whitted;
+    s.whitted.max_depth = 0;
+    (raster, render(s))
+}
+
+/// The pair that must agree on direct light: Whitted at depth 0 and the
+/// path tracer at depth 1, both with shadow rays, each rendered by
+/// `render` from `s`, which is left set for the second.
+pub fn whitted_and_path_direct(
+    s: &mut RenderSettings,
+    render: impl Fn(&RenderSettings) -> Film,
+) -> (Film, Film) {
+    s.shadows = ShadowMethod::Ray;
+    s.technique = Technique::Whitted;
+    s.whitted.max_depth = 0;
+    let whitted = render(s);
+    s.technique = Technique::Path;
+    s.path.max_depth = 1;
+    (whitted, render(s))
 }
 
 /// Where failing tests write images: `target/test-output/<name>.ppm`.

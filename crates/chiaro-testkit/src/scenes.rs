@@ -5,8 +5,8 @@
 
 use chiaro_core::geometry::primitives;
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Camera, Geometry, ImageTexture, Light, Material, MaterialId, Object,
-    Scene, ShadowMethod, Transform, WrapMode,
+    AreaShape, Attenuation, Camera, Environment, Geometry, ImageTexture, Light, Material,
+    MaterialId, Object, Scene, ShadowMethod, Texture, Transform, WrapMode,
 };
 use glam::Vec3;
 
@@ -19,6 +19,12 @@ pub fn point_light(position: Vec3, intensity: f32) -> Light {
         intensity,
         attenuation: Attenuation::InverseSquare,
     }
+}
+
+/// Removes `s`'s ambient lights: what is left is direct light that
+/// casts shadows, which every technique computes alike.
+pub fn drop_ambient(s: &mut Scene) {
+    s.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
 }
 
 /// A camera at `eye` looking at `look_at` with a vertical field of view of
@@ -101,6 +107,26 @@ pub fn sky_image() -> ImageTexture {
     }
 }
 
+/// Lights `s` by the latitude-longitude `image` (added as a texture) as
+/// its environment: radiance times `intensity`, turned by
+/// `rotate_y_degrees` about +y, and seen as the background where
+/// `as_background`.
+pub fn set_environment(
+    s: &mut Scene,
+    image: ImageTexture,
+    intensity: f32,
+    rotate_y_degrees: f32,
+    as_background: bool,
+) {
+    let texture = s.add_texture(Texture::Image(image));
+    s.environment = Some(Environment {
+        texture,
+        intensity,
+        rotate_y_degrees,
+        as_background,
+    });
+}
+
 /// The Cornell box's white albedo (Cornell's measured data as the
 /// community's RGB, as in `scenes/cornell-box.toml`).
 pub const CORNELL_WHITE: Vec3 = Vec3::new(0.725, 0.71, 0.68);
@@ -161,12 +187,8 @@ pub fn unit_cornell_box() -> Scene {
         two_sided: false,
     });
     s.camera = Camera {
-        eye: Vec3::new(0.5, 0.5, 2.3),
-        look_at: Vec3::new(0.5, 0.5, 0.0),
-        up: Vec3::Y,
-        fov_y_degrees: 32.0,
-        near: 0.01,
         far: 100.0,
+        ..camera(Vec3::new(0.5, 0.5, 2.3), Vec3::new(0.5, 0.5, 0.0), 32.0)
     };
     s
 }
@@ -191,13 +213,8 @@ pub fn shadow_test(size: u32) -> Scene {
     let plane = s.add_mesh(primitives::plane(4.0, 8));
     let sphere = s.add_mesh(primitives::uv_sphere(0.8, 32, 16));
     let cube = s.add_mesh(primitives::cube());
-    add_named(
-        &mut s,
-        "floor",
-        (Geometry::Mesh(plane), white),
-        Transform::default(),
-        false,
-    );
+    let part = (Geometry::Mesh(plane), white);
+    add_named(&mut s, "floor", part, Transform::default(), false);
     let ball = translate(Vec3::new(-0.9, 0.8, 0.3));
     add_named(&mut s, "ball", (Geometry::Mesh(sphere), red), ball, true);
     let placed = Transform {
@@ -211,18 +228,8 @@ pub fn shadow_test(size: u32) -> Scene {
         color: Vec3::ONE,
         intensity: 0.1,
     });
-    s.lights.push(Light::Point {
-        position: Vec3::new(-1.5, 5.0, -2.0),
-        color: Vec3::ONE,
-        intensity: 20.0,
-        attenuation: Attenuation::InverseSquare,
-    });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 4.5, -6.0),
-        look_at: Vec3::new(0.0, 0.3, 0.0),
-        fov_y_degrees: 45.0,
-        ..Camera::default()
-    };
+    s.lights.push(point_light(Vec3::new(-1.5, 5.0, -2.0), 20.0));
+    s.camera = camera(Vec3::new(0.0, 4.5, -6.0), Vec3::new(0.0, 0.3, 0.0), 45.0);
     s.render.width = size;
     s.render.height = size;
     s.render.samples = 1;

@@ -1,14 +1,23 @@
 //! Invariants across techniques (ARCHITECTURE.md, "How correctness is
 //! shown"): techniques that should agree do, pixel by pixel, on small images.
 
-use chiaro::scene::{Light, ShadowMethod, Technique};
+use chiaro::scene::{ShadowMethod, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
 use chiaro_testkit::{
-    diff_films, diff_films_relative_to_first, dump_ppm, same_surface, scenes, smooth_colour,
+    diff_films, diff_films_relative_to_first, dump_ppm, phong_and_whitted_at_depth_0, same_surface,
+    scenes, smooth_colour, whitted_and_path_direct,
 };
 
 fn render(scene: &Scene, settings: &RenderSettings) -> Film {
     chiaro::render(scene, settings, &NoProgress).expect("renders")
+}
+
+/// `scene`'s own settings with `technique`.
+fn with_technique(scene: &Scene, technique: Technique) -> RenderSettings {
+    RenderSettings {
+        technique,
+        ..scene.render.clone()
+    }
 }
 
 /// Pixels of `f` inside a surface: finite depth, and the four neighbours
@@ -32,13 +41,9 @@ fn smooth_region(f: &Film) -> impl Fn(usize) -> bool + '_ {
 #[test]
 fn phong_scan_conversion_equals_whitted_at_depth_zero() {
     let scene = scenes::shadow_test(64);
-    let mut s = scene.render.clone();
+    let mut s = with_technique(&scene, Technique::Phong);
     s.shadows = ShadowMethod::None;
-    s.technique = Technique::Phong;
-    let raster = render(&scene, &s);
-    s.technique = Technique::Whitted;
-    s.whitted.max_depth = 0;
-    let traced = render(&scene, &s);
+    let (raster, traced) = phong_and_whitted_at_depth_0(&mut s, |s| render(&scene, s));
     let mask = same_surface(&raster, &traced);
     let d = diff_films(&raster, &traced, 1e-3, &mask);
     if d.over > 0 {
@@ -74,33 +79,19 @@ fn phong_and_whitted_shadow_rays_agree_through_transparent_occluders() {
         rotate_degrees: Vec3::new(20.0, 0.0, 10.0),
         ..Transform::default()
     };
-    scenes::add_named(
-        &mut scene,
-        "pane",
-        (Geometry::Mesh(quad), pane),
-        pane_at,
-        true,
-    );
+    let part = (Geometry::Mesh(quad), pane);
+    scenes::add_named(&mut scene, "pane", part, pane_at, true);
     let glass_at = Transform {
         translate: Vec3::new(-1.2, 2.6, -1.0),
         rotate_degrees: Vec3::new(30.0, 20.0, 0.0),
         scale: Vec3::splat(0.35),
         ..Transform::default()
     };
-    scenes::add_named(
-        &mut scene,
-        "glass",
-        (Geometry::Mesh(cube), glass),
-        glass_at,
-        false,
-    );
-    let mut s = scene.render.clone();
+    let part = (Geometry::Mesh(cube), glass);
+    scenes::add_named(&mut scene, "glass", part, glass_at, false);
+    let mut s = with_technique(&scene, Technique::Phong);
     s.shadows = ShadowMethod::Ray;
-    s.technique = Technique::Phong;
-    let raster = render(&scene, &s);
-    s.technique = Technique::Whitted;
-    s.whitted.max_depth = 0;
-    let traced = render(&scene, &s);
+    let (raster, traced) = phong_and_whitted_at_depth_0(&mut s, |s| render(&scene, s));
     s.shadows = ShadowMethod::None;
     let unshadowed = render(&scene, &s);
     // Horizontal surfaces (not the pane or the cube, which the scan
@@ -138,8 +129,7 @@ fn gouraud_and_phong_agree_on_flat_lit_faces_only_where_they_should() {
     // specular sphere they must differ, on the diffuse faceted box (one
     // normal per face, distant light) they nearly agree.
     let scene = scenes::shadow_test(64);
-    let mut s = scene.render.clone();
-    s.technique = Technique::Phong;
+    let mut s = with_technique(&scene, Technique::Phong);
     let phong = render(&scene, &s);
     s.technique = Technique::Gouraud;
     let gouraud = render(&scene, &s);
@@ -155,16 +145,10 @@ fn path_tracer_at_depth_one_equals_direct_local_shading() {
     // Direct light only, inverse-square point light, no ambient: the path
     // tracer's mean per pixel equals Whitted's depth-0 shading with shadow rays.
     let mut scene = scenes::shadow_test(48);
-    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     let mut s = scene.render.clone();
     s.samples = 64;
-    s.shadows = ShadowMethod::Ray;
-    s.technique = Technique::Whitted;
-    s.whitted.max_depth = 0;
-    let whitted = render(&scene, &s);
-    s.technique = Technique::Path;
-    s.path.max_depth = 1;
-    let path = render(&scene, &s);
+    let (whitted, path) = whitted_and_path_direct(&mut s, |s| render(&scene, s));
     let mask = smooth_region(&whitted);
     // Silhouettes and shadow edges inside a pixel are sampled differently
     // (stratified vs random), so their pixel means differ by the coverage
@@ -258,8 +242,7 @@ fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     // A converged radiosity solution and a converged path tracer must agree
     // on a purely Lambertian scene: within 4% relative error per wall.
     let scene = scenes::cornell_box(40);
-    let mut s = scene.render.clone();
-    s.technique = Technique::Radiosity;
+    let mut s = with_technique(&scene, Technique::Radiosity);
     s.samples = 1;
     s.radiosity.solver = chiaro::scene::RadiositySolver::Hierarchical;
     s.radiosity.formfactor = chiaro::scene::FormFactorMethod::Raycast;
@@ -306,8 +289,7 @@ fn post_filter_antialiasing_changes_only_edges() {
     // aa=post renders one sample per pixel and filters it (FXAA): inside
     // smooth regions the picture is the one-sample picture.
     let scene = scenes::shadow_test(48);
-    let mut s = scene.render.clone();
-    s.technique = Technique::Phong;
+    let mut s = with_technique(&scene, Technique::Phong);
     s.samples = 1;
     let plain = render(&scene, &s);
     s.aa = chiaro::scene::AaMode::Post;

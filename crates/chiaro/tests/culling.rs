@@ -139,22 +139,13 @@ fn a_single_sided_quad_is_invisible_from_behind_in_every_technique() {
 /// light both see the quad's back.
 const SHADOW_SCENE: &str = r#"
 background = [0, 0, 0]
+camera = { eye = [0, 6, 0], look_at = [0, 0, 0], up = [0, 0, 1], fov = 40 }
+light = [{ type = "point", position = [0, 4, 0], intensity = 16 }]
 
 [render]
 technique = "whitted"
 width = 64
 height = 64
-
-[camera]
-eye = [0, 6, 0]
-look_at = [0, 0, 0]
-up = [0, 0, 1]
-fov = 40
-
-[[light]]
-type = "point"
-position = [0, 4, 0]
-intensity = 16
 
 [material.floor]
 diffuse = 0.8

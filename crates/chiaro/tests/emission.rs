@@ -9,7 +9,7 @@ use chiaro::scene::Technique;
 use chiaro::{Film, NoProgress, Scene, Vec3};
 use chiaro_ray::path::Kernel;
 use chiaro_testkit::central_mean;
-use chiaro_testkit::scenes::load_text;
+use chiaro_testkit::scenes::{load_text, repo_scene};
 
 /// A 2 x 2 quad in the plane z = 0 facing +z, with a black base colour and
 /// the emissive factor (0.1, 0.5, 0.9) times `strength`, seen by a camera
@@ -98,9 +98,7 @@ fn emissive_strength_is_seen_directly_by_every_technique() {
 /// technique (the gallery's copy in `scenes/gltf/`, with its licence).
 #[test]
 fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenes/gltf/EmissiveStrengthTest.glb");
-    let scene = chiaro::io::load_scene(&path).expect("loads").scene;
+    let scene = repo_scene("scenes/gltf/EmissiveStrengthTest.glb", 96);
     let strengths: Vec<f32> = scene
         .materials
         .iter()
@@ -125,9 +123,7 @@ fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
 /// its own triangles (its glow on the panels is noisy at 16 samples).
 #[test]
 fn phong_equals_whitted_at_depth_0_under_an_emitter_group() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenes/gltf/EmissiveStrengthTest.glb");
-    let scene = chiaro::io::load_scene(&path).expect("loads").scene;
+    let scene = repo_scene("scenes/gltf/EmissiveStrengthTest.glb", 96);
     let mut s = scene.render.clone();
     s.technique = Technique::Phong;
     s.width = 96;

@@ -3,11 +3,11 @@
 //! of the same shapes): the scan converter, Whitted and the path tracer shade
 //! the same normal-mapped, textured surface.
 
-use chiaro::scene::{Light, ShadowMethod, Technique};
+use chiaro::scene::{ShadowMethod, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
 use chiaro_testkit::{
     diff_films, diff_films_relative, diff_films_relative_to_first, dump_ppm, same_surface,
-    smooth_colour,
+    smooth_colour, whitted_and_path_direct,
 };
 use std::path::Path;
 use std::sync::OnceLock;
@@ -98,7 +98,7 @@ fn whitted_and_path_show_the_normal_map() {
 #[test]
 fn path_at_depth_one_equals_direct_local_shading_on_a_normal_mapped_model() {
     let mut scene = model().clone();
-    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     // The studio environment is a light the path tracer samples at depth 1
     // and Whitted does not integrate (as conformance.rs's depth-one rule
     // skips environment-lit cases): the key light alone.
@@ -122,11 +122,7 @@ fn path_at_depth_one_equals_direct_local_shading_on_a_normal_mapped_model() {
     cam.fov_y_degrees = 1.2;
     let mut s = settings(&scene, 64, Technique::Whitted);
     s.samples = 64;
-    s.shadows = ShadowMethod::Ray;
-    let whitted = render(&scene, &s);
-    s.technique = Technique::Path;
-    s.path.max_depth = 1;
-    let path = render(&scene, &s);
+    let (whitted, path) = whitted_and_path_direct(&mut s, |s| render(&scene, s));
     let mask = same_surface(&whitted, &whitted);
     // As in cross_technique.rs: the two techniques place their samples in
     // a pixel differently, so pixels across an edge of the image (here the

@@ -25,7 +25,7 @@ use chiaro_core::scene::{Material, RenderSettings, Scene, ShadeMode, Technique};
 use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::environment_radiance;
 use chiaro_core::shading::{LocalLighting, ShadingPoint, SurfaceMaterial, shade_local};
-use chiaro_testkit::scenes::{add_object, camera, point_light};
+use chiaro_testkit::scenes::{add_named, add_object, camera, point_light, translate};
 use glam::{Vec2, Vec3};
 
 fn settings(technique: Technique, w: u32, h: u32) -> RenderSettings {
@@ -59,20 +59,10 @@ fn test_scene() -> Scene {
         ..Material::default()
     });
     let plane = s.add_mesh(primitives::plane(3.0, 4));
-    s.objects.push(Object {
-        geometry: Geometry::Sphere { radius: 1.0 },
-        material: shiny,
-        ..Object::default()
-    });
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: floor,
-        transform: Transform {
-            translate: Vec3::new(0.0, -1.0, 0.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    let ball = (Geometry::Sphere { radius: 1.0 }, shiny);
+    add_named(&mut s, "", ball, Transform::default(), true);
+    let below = translate(Vec3::new(0.0, -1.0, 0.0));
+    add_named(&mut s, "", (Geometry::Mesh(plane), floor), below, true);
     s.lights = vec![
         Light::Ambient {
             color: Vec3::ONE,

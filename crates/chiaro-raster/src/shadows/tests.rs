@@ -61,7 +61,7 @@ fn render_with(scene: &Scene, s: &RenderSettings, counting: VolumeCounting) -> F
 /// The shared shadow test scene lit by its point light only.
 fn light_only(size: u32) -> Scene {
     let mut s = chiaro_testkit::scenes::shadow_test(size);
-    s.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut s);
     s
 }
 
@@ -256,20 +256,13 @@ fn crossing_quads(mode: TransparencyMode, kt: f32) -> Scene {
     let red = scene.add_material(mat("red", Vec3::X));
     let blue = scene.add_material(mat("blue", Vec3::Z));
     let plane = scene.add_mesh(primitives::plane(1.0, 2));
-    scene.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: red,
-        ..Object::default()
-    });
-    scene.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: blue,
-        transform: Transform {
-            rotate_degrees: Vec3::new(0.0, 0.0, 20.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    let tilted = Transform {
+        rotate_degrees: Vec3::new(0.0, 0.0, 20.0),
+        ..Transform::default()
+    };
+    let part = (Geometry::Mesh(plane), red);
+    add_named(&mut scene, "", part, Transform::default(), true);
+    add_named(&mut scene, "", (Geometry::Mesh(plane), blue), tilted, true);
     scene.lights.push(Light::Ambient {
         color: Vec3::ONE,
         intensity: 1.0,
@@ -436,7 +429,7 @@ impl Progress for Warnings {
 /// The shipped Cornell box without the ambient light.
 fn cornell_box() -> Scene {
     let mut scene = chiaro_testkit::scenes::cornell_box(64);
-    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     scene
 }
 
@@ -534,33 +527,18 @@ fn light_in_a_polygon_plane() -> Scene {
     let shelf = scene.add_mesh(primitives::plane(1.0, 1));
     let cube = scene.add_mesh(primitives::cube());
     let no_move = Transform::default();
-    add_named(
-        &mut scene,
-        "floor",
-        (Geometry::Mesh(floor), grey),
-        no_move,
-        true,
-    );
+    let part = (Geometry::Mesh(floor), grey);
+    add_named(&mut scene, "floor", part, no_move, true);
     let shelf_at = translate(Vec3::new(-2.0, 1.0, 1.0));
-    add_named(
-        &mut scene,
-        "shelf",
-        (Geometry::Mesh(shelf), grey),
-        shelf_at,
-        true,
-    );
+    let part = (Geometry::Mesh(shelf), grey);
+    add_named(&mut scene, "shelf", part, shelf_at, true);
     let box_at = Transform {
         translate: Vec3::new(0.5, 0.5, 0.0),
         scale: Vec3::splat(0.5),
         ..Transform::default()
     };
-    add_named(
-        &mut scene,
-        "box",
-        (Geometry::Mesh(cube), grey),
-        box_at,
-        false,
-    );
+    let part = (Geometry::Mesh(cube), grey);
+    add_named(&mut scene, "box", part, box_at, false);
     // A 0.4 x 0.4 quad light in the plane y = 1, centre (2, 1, 0).
     scene.lights.push(Light::Area {
         shape: chiaro_core::scene::AreaShape::Quad {

@@ -260,31 +260,24 @@ mod tests {
             }
         }
         let (w, h) = (16u32, 8u32);
-        let env = s.add_texture(chiaro_core::scene::Texture::Image(
-            chiaro_core::scene::ImageTexture {
-                source: "patch".into(),
-                width: w,
-                height: h,
-                texels: (0..w * h)
-                    .map(|i| {
-                        let (x, y) = (i % w, i / w);
-                        let v = if (7..=9).contains(&x) && (2..=3).contains(&y) {
-                            20.0
-                        } else {
-                            0.2
-                        };
-                        [v, v * 0.8, v * 0.6, 1.0]
-                    })
-                    .collect(),
-                ..Default::default()
-            },
-        ));
-        s.environment = Some(chiaro_core::scene::Environment {
-            texture: env,
-            intensity: 1.0,
-            rotate_y_degrees: 0.0,
-            as_background: true,
-        });
+        let env = chiaro_core::scene::ImageTexture {
+            source: "patch".into(),
+            width: w,
+            height: h,
+            texels: (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    let v = if (7..=9).contains(&x) && (2..=3).contains(&y) {
+                        20.0
+                    } else {
+                        0.2
+                    };
+                    [v, v * 0.8, v * 0.6, 1.0]
+                })
+                .collect(),
+            ..Default::default()
+        };
+        chiaro_testkit::scenes::set_environment(&mut s, env, 1.0, 0.0, true);
         assert_tracers_agree(&s, "environment");
     }
 

@@ -8,9 +8,11 @@ use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{
-    AreaShape, Geometry, Light, Material, MaterialId, Object, Scene, Technique, Transform,
+    AreaShape, Geometry, Light, Material, Object, Scene, Technique, Transform,
 };
-use chiaro_testkit::scenes::{add_object, camera, point_light, repo_scene, shipped};
+use chiaro_testkit::scenes::{
+    add_object, camera, point_light, repo_scene, set_environment, shipped,
+};
 use chiaro_testkit::stats;
 use std::f32::consts::PI;
 
@@ -164,30 +166,39 @@ fn images_do_not_depend_on_the_thread_count() {
     assert_eq!(one.color, three.color);
 }
 
+/// A faceted `size` x `size` plane of grey albedo `rho` (material 0) at
+/// y = 0, facing up: no lights, the default camera.
+fn grey_plane(rho: f32, size: f32) -> Scene {
+    let mut s = Scene::default();
+    let grey = s.add_material(Material::diffuse("grey", Vec3::splat(rho)));
+    let plane = s.add_mesh(primitives::plane(size, 1));
+    add_object(&mut s, Geometry::Mesh(plane), grey, Transform::default());
+    s
+}
+
+/// `s` rendered by the lock-step kernel at `size` x `size` pixels, `spp`
+/// samples per pixel and paths of at most `depth` bounces.
+fn render_lanes(s: &mut Scene, size: u32, spp: u32, depth: u32) -> Film {
+    s.render.width = size;
+    s.render.height = size;
+    s.render.samples = spp;
+    s.render.path.max_depth = depth;
+    render_with_kernel(s, &s.render, &NoProgress, &bvh, Kernel::Lanes)
+        .expect("renders")
+        .0
+}
+
 #[test]
 fn depth_one_point_light_is_the_lambert_term() {
     // A plane under a point light: L = kd Ip cos / d^2 exactly at depth 1.
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
-    let plane = s.add_mesh(primitives::plane(2.0, 1));
-    add_object(
-        &mut s,
-        Geometry::Mesh(plane),
-        MaterialId(0),
-        Transform::default(),
-    );
+    let mut s = grey_plane(0.5, 2.0);
     s.lights.push(point_light(Vec3::new(0.0, 2.0, 0.0), 8.0));
     s.lights.push(Light::Ambient {
         color: Vec3::ONE,
         intensity: 1.0,
     });
     s.camera = camera(Vec3::new(0.0, 3.0, -0.001), Vec3::ZERO, 1.0);
-    s.render.width = 4;
-    s.render.height = 4;
-    s.render.samples = 4;
-    s.render.path.max_depth = 1;
-    let (film, _) =
-        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
+    let film = render_lanes(&mut s, 4, 4, 1);
     // Straight below the light: cos = 1, d = 2, ambient ignored.
     let expect = 0.5 * 8.0 / 4.0;
     for c in &film.color {
@@ -404,15 +415,8 @@ fn lock_step_kernel_with_only_an_environment() {
     s.render.samples = 8;
     let light = s.material_by_name("light").expect("the light").index();
     s.materials[light].emission = Vec3::ZERO;
-    let env = s.add_texture(chiaro_core::scene::Texture::Image(
-        chiaro_testkit::scenes::sky_image(),
-    ));
-    s.environment = Some(chiaro_core::scene::Environment {
-        texture: env,
-        intensity: 2.0,
-        rotate_y_degrees: 0.0,
-        as_background: true,
-    });
+    let env = chiaro_testkit::scenes::sky_image();
+    set_environment(&mut s, env, 2.0, 0.0, true);
     assert_kernels_agree(&s, "environment only");
 }
 
@@ -424,18 +428,8 @@ fn lock_step_kernel_with_an_environment_and_lights() {
     s.render.samples = 11;
     s.render.path.max_depth = 5;
     s.render.path.rr_depth = 2;
-    let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
-        16,
-        8,
-        (5, 3),
-        50.0,
-    )));
-    s.environment = Some(chiaro_core::scene::Environment {
-        texture: env,
-        intensity: 1.0,
-        rotate_y_degrees: 200.0,
-        as_background: false,
-    });
+    let env = spot_map(16, 8, (5, 3), 50.0);
+    set_environment(&mut s, env, 1.0, 200.0, false);
     let prepared = PreparedScene::new(&s, PrepareOptions::default());
     let accel = bvh(&prepared);
     let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render, true);
@@ -488,18 +482,8 @@ fn diffuse_sphere_under_a_white_environment_reflects_its_albedo() {
             smooth: false,
             ..Default::default()
         });
-        let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
-            8,
-            4,
-            (0, 0),
-            0.05,
-        )));
-        s.environment = Some(chiaro_core::scene::Environment {
-            texture: env,
-            intensity: le / 0.05,
-            rotate_y_degrees: 10.0,
-            as_background: false,
-        });
+        let env = spot_map(8, 4, (0, 0), 0.05);
+        set_environment(&mut s, env, le / 0.05, 10.0, false);
         s.camera = camera(Vec3::new(0.3, 0.4, -4.0), Vec3::new(0.0, 0.2, 0.0), 8.0);
         s.render.width = 16;
         s.render.height = 16;
@@ -536,27 +520,9 @@ fn environment_sampling_cuts_the_variance_of_a_small_bright_spot() {
     // environment sampled and without (BSDF sampling alone) the mean
     // must be that; at equal samples the variance must be far lower.
     let rho = 0.5;
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("grey", Vec3::splat(rho)));
-    let plane = s.add_mesh(primitives::plane(400.0, 1));
-    add_object(
-        &mut s,
-        Geometry::Mesh(plane),
-        MaterialId(0),
-        Transform::default(),
-    );
-    let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
-        64,
-        32,
-        (40, 8),
-        2000.0,
-    )));
-    s.environment = Some(chiaro_core::scene::Environment {
-        texture: env,
-        intensity: 1.0,
-        rotate_y_degrees: 25.0,
-        as_background: false,
-    });
+    let mut s = grey_plane(rho, 400.0);
+    let env = spot_map(64, 32, (40, 8), 2000.0);
+    set_environment(&mut s, env, 1.0, 25.0, false);
     s.camera = camera(Vec3::new(0.0, 1.0, -0.001), Vec3::ZERO, 30.0);
     s.render.width = 16;
     s.render.height = 16;
@@ -637,8 +603,7 @@ fn lanes_pick_the_lights_the_scalar_pick_does() {
 fn glass_sphere_of_ior_one_is_invisible() {
     // A non-absorbing dielectric with ior 1 refracts straight through:
     // the image equals the image without it (up to ray offsets).
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
+    let mut s = grey_plane(0.5, 5.0);
     let glass = s.add_material(Material {
         diffuse: Vec3::ZERO,
         transmit: Vec3::ONE,
@@ -646,21 +611,9 @@ fn glass_sphere_of_ior_one_is_invisible() {
         fresnel: true,
         ..Material::default()
     });
-    let plane = s.add_mesh(primitives::plane(5.0, 1));
-    add_object(
-        &mut s,
-        Geometry::Mesh(plane),
-        MaterialId(0),
-        Transform::default(),
-    );
     s.lights.push(point_light(Vec3::new(0.0, 4.0, 0.0), 10.0));
     s.camera = camera(Vec3::new(0.0, 3.0, -3.0), Vec3::ZERO, 45.0);
-    s.render.width = 12;
-    s.render.height = 12;
-    s.render.samples = 2;
-    s.render.path.max_depth = 4;
-    let (without, _) =
-        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
+    let without = render_lanes(&mut s, 12, 2, 4);
     s.objects.push(Object {
         geometry: Geometry::Sphere { radius: 0.7 },
         material: glass,
