@@ -6,7 +6,7 @@
 use chiaro_core::geometry::primitives;
 use chiaro_core::scene::{
     AreaShape, Attenuation, Camera, Environment, Geometry, ImageTexture, Light, Material,
-    MaterialId, Object, Scene, ShadowMethod, Texture, Transform, WrapMode,
+    MaterialId, MeshId, Object, Scene, ShadowMethod, Texture, Transform, WrapMode,
 };
 use glam::Vec3;
 
@@ -125,6 +125,29 @@ pub fn set_environment(
         rotate_y_degrees,
         as_background,
     });
+}
+
+/// Adds a 14 x 14 grid of `mesh` objects of `material`, one unit apart in
+/// the plane z = 0 and centred on the origin, and the camera that frames
+/// it (from (0, -4.5, 8), z up, 60 degrees): the scene of the scan
+/// converter's and the web viewer's grid benchmarks.
+pub fn add_grid_of(s: &mut Scene, mesh: MeshId, material: MaterialId) {
+    for i in 0..14 {
+        for j in 0..14 {
+            s.objects.push(Object {
+                geometry: Geometry::Mesh(mesh),
+                material,
+                transform: translate(Vec3::new(i as f32 - 6.5, j as f32 - 6.5, 0.0)),
+                ..Object::default()
+            });
+        }
+    }
+    s.camera = Camera {
+        up: Vec3::Z,
+        near: 0.1,
+        far: 100.0,
+        ..camera(Vec3::new(0.0, -4.5, 8.0), Vec3::ZERO, 60.0)
+    };
 }
 
 /// The Cornell box's white albedo (Cornell's measured data as the
