@@ -518,12 +518,8 @@ fn rule_bounded_work(m: &mut Matrix, case: &Case, tech: Tech, s: &RenderSettings
         }
         Tech::Facade(Technique::Preview) => 1,
         _ => {
-            m.not_applicable(
-                "bounded work",
-                &case.name,
-                tech.name(),
-                "no ray count (scan conversion, radiosity)",
-            );
+            let why = "no ray count (scan conversion, radiosity)";
+            m.not_applicable("bounded work", &case.name, tech.name(), why);
             return;
         }
     };
@@ -614,11 +610,12 @@ fn rule_phong_equals_whitted(m: &mut Matrix, case: &Case) {
         chiaro_testkit::dump_ppm(&traced, &format!("conformance-{}-whitted0", case.name));
     }
     if d.compared == 0 {
+        let why = "no mesh surface (spheres are tessellated by the scan converter)";
         m.not_applicable(
             "phong = whitted at depth 0",
             &case.name,
             "phong, whitted",
-            "no mesh surface (spheres are tessellated by the scan converter)",
+            why,
         );
         return;
     }
@@ -734,12 +731,8 @@ fn rule_shadow_methods_agree(m: &mut Matrix, case: &Case, ids: &Ids) {
 fn rule_path_depth_one_is_direct(m: &mut Matrix, case: &Case, ids: &Ids) {
     let rule = "path depth 1 = direct";
     if case.scene.environment.is_some() {
-        m.not_applicable(
-            rule,
-            &case.name,
-            "path, whitted",
-            "environment lighting: Whitted does not integrate it (its method)",
-        );
+        let why = "environment lighting: Whitted does not integrate it (its method)";
+        m.not_applicable(rule, &case.name, "path, whitted", why);
         return;
     }
     let mut scene = case.scene.clone();
@@ -889,12 +882,8 @@ fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
         .filter(|&i| textured(ids.material[i]) && !ids.silhouette(i))
         .collect();
     if px.len() < 20 {
-        m.not_applicable(
-            rule,
-            &case.name,
-            "radiosity",
-            "fewer than 20 textured interior pixels",
-        );
+        let why = "fewer than 20 textured interior pixels";
+        m.not_applicable(rule, &case.name, "radiosity", why);
         return;
     }
     // Both copies diffuse only, and textured surfaces not emissive: radiosity

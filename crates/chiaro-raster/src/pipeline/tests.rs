@@ -105,6 +105,14 @@ fn test_scene() -> Scene {
     s
 }
 
+/// [`test_scene`] with its first three lights (ambient and the two point
+/// lights): the lights of the point-light model.
+fn point_lit_scene() -> Scene {
+    let mut s = test_scene();
+    s.lights.truncate(3);
+    s
+}
+
 /// The per-pixel ray cast of the same prepared scene, shaded by the same
 /// function: the oracle of the cross-technique invariant.
 fn ray_cast(ps: &PreparedScene<'_>, w: u32, h: u32) -> Vec<Option<(u32, Vec3)>> {
@@ -286,16 +294,9 @@ fn emitting_quad(s: &mut Scene, image: ImageTexture, corner: Vec3, u: Vec3, v: V
 fn textures_are_interpolated_perspective_correctly() {
     let mut s = Scene::default();
     let n = 64u32;
-    let ramp = ImageTexture {
-        source: "ramp".into(),
-        width: 1,
-        height: n,
-        texels: (0..n)
-            .map(|i| [(i as f32 + 0.5) / n as f32, 0.0, 0.0, 1.0])
-            .collect(),
-        wrap: WrapMode::Clamp,
-        ..Default::default()
-    };
+    let texels = (0..n).map(|i| [(i as f32 + 0.5) / n as f32, 0.0, 0.0, 1.0]);
+    let mut ramp = ImageTexture::new("ramp".into(), 1, n, texels.collect());
+    ramp.wrap = WrapMode::Clamp;
     // Two big triangles, uv u along the depth axis.
     let (u, v) = (Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -40.0));
     emitting_quad(&mut s, ramp, Vec3::new(-2.0, 0.0, 2.0), u, v);
@@ -714,8 +715,7 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
 
 #[test]
 fn vertex_split_equals_corner_split_of_every_face() {
-    let mut s = test_scene();
-    s.lights.truncate(3);
+    let s = point_lit_scene();
     // Vertex colours, so that kd varies per vertex.
     let ps0 = tessellated(&s);
     let mut ps = ps0;
@@ -747,8 +747,7 @@ fn vertex_split_equals_corner_split_of_every_face() {
 
 #[test]
 fn uniform_vertex_shading_lights_the_vertices_of_the_samples_triangles() {
-    let mut s = test_scene();
-    s.lights.truncate(3);
+    let mut s = point_lit_scene();
     for two_sided in [false, true] {
         s.materials[0].two_sided = two_sided;
         let ps = tessellated(&s);
@@ -913,8 +912,7 @@ fn tent_filter_widens_edges_keeps_interiors_and_crops_exactly() {
 /// the vertex cache has evicted and refilled its slots.
 #[test]
 fn on_demand_corners_are_the_vertex_illumination() {
-    let mut s = test_scene();
-    s.lights.truncate(3);
+    let mut s = point_lit_scene();
     let one = s.objects[0].material;
     for o in &mut s.objects {
         o.material = one;
