@@ -6,9 +6,9 @@
 use chiaro_core::geometry::primitives;
 use chiaro_core::scene::{
     AreaShape, Attenuation, Camera, Environment, Geometry, ImageTexture, Light, Material,
-    MaterialId, MeshId, Object, Scene, ShadowMethod, Texture, Transform, WrapMode,
+    MaterialId, Mesh, MeshId, Object, Scene, ShadowMethod, Texture, Transform, WrapMode,
 };
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// A white point light of `intensity` at `position`, falling off with the
 /// inverse square of the distance.
@@ -35,6 +35,29 @@ pub fn camera(eye: Vec3, look_at: Vec3, fov_y_degrees: f32) -> Camera {
         look_at,
         fov_y_degrees,
         ..Camera::default()
+    }
+}
+
+/// The square `|x|, |y| <= half` in the plane `z`, facing +z, two
+/// triangles, with uv (0, 0) at its lower left corner and (1, 1) at its
+/// upper right.
+pub fn square_mesh(half: f32, z: f32) -> Mesh {
+    let r = half;
+    Mesh {
+        positions: vec![
+            Vec3::new(-r, -r, z),
+            Vec3::new(r, -r, z),
+            Vec3::new(r, r, z),
+            Vec3::new(-r, r, z),
+        ],
+        uvs: vec![
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(0.0, 1.0),
+        ],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        ..Mesh::default()
     }
 }
 

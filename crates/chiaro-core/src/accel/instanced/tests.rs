@@ -90,22 +90,12 @@ fn instanced_scene() -> Scene {
         },
         ..Object::default()
     });
-    s.objects.push(Object {
-        geometry: Geometry::Sphere { radius: 1.2 },
-        transform: Transform {
-            translate: Vec3::new(0.5, 0.0, 4.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(floor),
-        transform: Transform {
-            translate: Vec3::new(0.0, -4.0, 0.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    place(
+        &mut s,
+        Geometry::Sphere { radius: 1.2 },
+        Vec3::new(0.5, 0.0, 4.0),
+    );
+    place(&mut s, Geometry::Mesh(floor), Vec3::new(0.0, -4.0, 0.0));
     s.camera = Camera {
         eye: Vec3::new(0.0, 3.0, 18.0),
         look_at: Vec3::new(0.0, 0.0, 0.0),
@@ -367,18 +357,12 @@ fn scenes_without_sharing_or_geometry() {
     assert!(!bvh.occluded(&Ray::new(Vec3::ZERO, Vec3::X)));
     // A mesh used once and a sphere: one flat level, same hits.
     let m = s.add_mesh(icosphere(1.0, 1));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(m),
-        ..Object::default()
-    });
-    s.objects.push(Object {
-        geometry: Geometry::Sphere { radius: 0.5 },
-        transform: Transform {
-            translate: Vec3::new(3.0, 0.0, 0.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    place(&mut s, Geometry::Mesh(m), Vec3::ZERO);
+    place(
+        &mut s,
+        Geometry::Sphere { radius: 0.5 },
+        Vec3::new(3.0, 0.0, 0.0),
+    );
     let ps = prepare(&s, true);
     let bvh = InstancedBvh::new(&ps);
     assert_eq!((bvh.level_count(), bvh.instance_count()), (1, 1));
@@ -523,4 +507,16 @@ fn render_matches_the_flat_bvh() {
         .map(|(i, (a, b))| (i, *a, *b))
         .collect();
     assert!(differing.len() <= 3, "{differing:?}");
+}
+
+/// Adds an object of `geometry` (material 0, smooth) moved by `offset`.
+fn place(s: &mut Scene, geometry: Geometry, offset: Vec3) {
+    s.objects.push(Object {
+        geometry,
+        transform: Transform {
+            translate: offset,
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
 }
