@@ -503,40 +503,7 @@ fn rays_leaving_a_surface_do_not_hit_it_again() {
         },
     );
     let bvh = SceneBvh::new(&ps);
-    let nt = ps.triangles.len() as u32;
-    let mut rng = pixel_rng(5, 0, 0, 0);
-    for i in 0..20_000u32 {
-        let (prim, p, ng) = if i % 4 == 0 {
-            let d = sample_uniform_sphere(uniform2(&mut rng));
-            (nt, Vec3::new(5.0, 0.0, 0.0) + 0.5 * d, d)
-        } else {
-            let t = (uniform(&mut rng) * nt as f32) as u32 % nt;
-            let uv = crate::sampling::sample_uniform_triangle(uniform2(&mut rng));
-            let sh = ps.triangle_surface(t, uv.x, uv.y);
-            (t, sh.p, sh.ng)
-        };
-        // Directions on both sides, down to grazing angles (1e-3 rad).
-        let f = crate::geometry::Frame::from_normal(ng);
-        let side = if i % 2 == 0 { 1.0 } else { -1.0 };
-        let graze = if i % 3 == 0 { 1e-3 } else { uniform(&mut rng) };
-        let phi = std::f32::consts::TAU * uniform(&mut rng);
-        let cos_t = graze.max(1e-3);
-        let sin_t = (1.0 - cos_t * cos_t).sqrt();
-        let dir = f.to_world(Vec3::new(
-            sin_t * phi.cos(),
-            sin_t * phi.sin(),
-            side * cos_t,
-        ));
-        let o = crate::geometry::offset_ray_origin(p, ng, dir);
-        let ray = Ray::new(o, dir);
-        if let Some(h) = bvh.intersect(&ray).filter(|h| h.prim == prim) {
-            // Only a sphere can be re-entered, and then far away.
-            assert!(
-                prim >= nt && side < 0.0 && h.t > 1e-2,
-                "self-hit {h:?} at {i}"
-            );
-        }
-    }
+    crate::accel::assert_rays_leave_surfaces(&ps, &bvh, (Vec3::new(5.0, 0.0, 0.0), 0.5), 4);
 }
 
 /// The node test used in traversal (eight AVX lanes on x86-64-v3)

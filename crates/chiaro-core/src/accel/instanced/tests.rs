@@ -3,7 +3,7 @@
 use super::*;
 use crate::accel::list::ListAccel;
 use crate::geometry::primitives::{cube, cylinder, icosphere};
-use crate::geometry::{Frame, offset_ray_origin};
+use crate::geometry::offset_ray_origin;
 use crate::sampling::{
     pixel_rng, sample_uniform_sphere, sample_uniform_triangle, uniform, uniform2,
 };
@@ -419,40 +419,8 @@ fn rays_leaving_a_surface_do_not_hit_it_again() {
     let s = instanced_scene();
     let ps = prepare(&s, true);
     let bvh = InstancedBvh::new(&ps);
-    let nt = ps.triangles.len() as u32;
     let sphere = ps.spheres[0];
-    let mut rng = pixel_rng(5, 0, 0, 0);
-    for i in 0..20_000u32 {
-        let (prim, p, ng) = if i % 8 == 0 {
-            let d = sample_uniform_sphere(uniform2(&mut rng));
-            (nt, sphere.center + sphere.radius * d, d)
-        } else {
-            let t = (uniform(&mut rng) * nt as f32) as u32 % nt;
-            let uv = sample_uniform_triangle(uniform2(&mut rng));
-            let sh = ps.triangle_surface(t, uv.x, uv.y);
-            (t, sh.p, sh.ng)
-        };
-        // Directions on both sides, down to grazing angles (1e-3 rad).
-        let f = Frame::from_normal(ng);
-        let side = if i % 2 == 0 { 1.0 } else { -1.0 };
-        let graze = if i % 3 == 0 { 1e-3 } else { uniform(&mut rng) };
-        let phi = std::f32::consts::TAU * uniform(&mut rng);
-        let cos_t = graze.max(1e-3);
-        let sin_t = (1.0 - cos_t * cos_t).sqrt();
-        let dir = f.to_world(Vec3::new(
-            sin_t * phi.cos(),
-            sin_t * phi.sin(),
-            side * cos_t,
-        ));
-        let ray = Ray::new(offset_ray_origin(p, ng, dir), dir);
-        if let Some(h) = bvh.intersect(&ray).filter(|h| h.prim == prim) {
-            // Only a sphere can be re-entered, and then far away.
-            assert!(
-                prim >= nt && side < 0.0 && h.t > 1e-2,
-                "self-hit {h:?} at {i}"
-            );
-        }
-    }
+    crate::accel::assert_rays_leave_surfaces(&ps, &bvh, (sphere.center, sphere.radius), 8);
 }
 
 /// A small shaded image: Lambert under a point light with shadow rays,
