@@ -238,6 +238,20 @@ pub(crate) fn sphere_roots(ray: &Ray, center: glam::Vec3, radius: f32) -> [Optio
     [Some(t0), intersect_sphere(&rest, center, radius)]
 }
 
+/// A random point of `ps`'s bounds grown by a fifth of their extent on
+/// every side (a ray origin in the tests' random ray sets).
+#[cfg(test)]
+pub(crate) fn random_origin(
+    ps: &crate::prepared::PreparedScene<'_>,
+    rng: &mut crate::sampling::Rng,
+) -> glam::Vec3 {
+    use crate::sampling::uniform;
+    let b = ps.bounds;
+    let grow = b.extent() * 0.2;
+    b.min - grow
+        + (b.extent() + 2.0 * grow) * glam::Vec3::new(uniform(rng), uniform(rng), uniform(rng))
+}
+
 /// Asserts that rays leaving a surface of `ps` do not hit it again through
 /// `accel` (rustracer's shape-test invariant): 20,000 rays from random
 /// points of its triangles and, every `sphere_every`-th, of its analytic

@@ -2,8 +2,8 @@
 
 use super::*;
 use crate::accel::list::ListAccel;
-use crate::geometry::primitives::{cube, cylinder, icosphere};
 use crate::geometry::offset_ray_origin;
+use crate::geometry::primitives::{cube, cylinder, icosphere};
 use crate::sampling::{
     pixel_rng, sample_uniform_sphere, sample_uniform_triangle, uniform, uniform2,
 };
@@ -119,14 +119,10 @@ fn prepare(s: &Scene, analytic_spheres: bool) -> PreparedScene<'_> {
 /// directions, half aimed at random triangles with unnormalised
 /// directions.
 fn random_rays(ps: &PreparedScene<'_>, count: u32, seed: u64) -> Vec<Ray> {
-    let b = ps.bounds;
-    let grow = b.extent() * 0.2;
     (0..count)
         .map(|i| {
             let mut rng = pixel_rng(seed, i, 0, 0);
-            let o = b.min - grow
-                + (b.extent() + 2.0 * grow)
-                    * Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+            let o = crate::accel::random_origin(ps, &mut rng);
             if i % 2 == 0 {
                 Ray::new(o, sample_uniform_sphere(uniform2(&mut rng)))
             } else {
