@@ -77,43 +77,22 @@ pub(crate) fn build_matrix(
 
 /// How one iteration of `L <- E + rho (F L)` updates `L`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Sweep {
-    /// Every row from the previous iterate (rows in parallel).
+pub(crate) enum Sweep {
+    /// Jacobi: every row from the previous iterate (rows in parallel).
     Jacobi,
-    /// Rows in order, in place, so later rows already use the new values
-    /// (about twice as fast to converge).
+    /// Gauss-Seidel: rows in order, in place, so later rows already use
+    /// the new values (about twice as fast to converge).
     GaussSeidel,
 }
 
-/// Jacobi iteration `L <- E + rho (F L)` from `L = E`.
-pub(crate) fn jacobi(
-    elements: &[Element],
-    e: &[Vec3],
-    m: &[f32],
-    tol: f32,
-    max_iter: u32,
-    progress: &dyn Progress,
-) -> Result<SolveOutput, CoreError> {
-    iterate(elements, e, m, tol, max_iter, progress, Sweep::Jacobi)
-}
-
-/// Gauss-Seidel iteration: like [`jacobi`] but each `L_j` is updated in
-/// place, so later rows already use the new values (about twice as fast).
-pub(crate) fn gauss_seidel(
-    elements: &[Element],
-    e: &[Vec3],
-    m: &[f32],
-    tol: f32,
-    max_iter: u32,
-    progress: &dyn Progress,
-) -> Result<SolveOutput, CoreError> {
-    iterate(elements, e, m, tol, max_iter, progress, Sweep::GaussSeidel)
-}
-
-/// The full-matrix gathering solver behind [`jacobi`] and
-/// [`gauss_seidel`]: iterates from `L = E` until the power of an
-/// iteration's change falls below `tol` times the emitted power.
-fn iterate(
+/// The full-matrix gathering solver: Jacobi or Gauss-Seidel iteration
+/// (`sweep`) of `L <- E + rho (F L)` from `L = E`, with `m` the matrix of
+/// [`build_matrix`], until the power of an iteration's change falls below
+/// `tol` times the emitted power or after `max_iter` iterations.
+///
+/// # Errors
+/// [`CoreError::Cancelled`] when the progress asks.
+pub(crate) fn iterate(
     elements: &[Element],
     e: &[Vec3],
     m: &[f32],

@@ -405,31 +405,18 @@ pub(crate) fn solve_with(
             &pairs
         }
     };
-    let l = match cfg.solver {
+    // Each solver's radiance per element, iterations and final unshot fraction.
+    let (stop, max_iter) = (cfg.tolerance, cfg.max_iterations);
+    let (l, iterations, unshot) = match cfg.solver {
         Solver::Jacobi | Solver::GaussSeidel => {
             let m = gathering::build_matrix(&mesh.elements, ff, progress)?;
-            let out = if cfg.solver == Solver::Jacobi {
-                gathering::jacobi(
-                    &mesh.elements,
-                    &e,
-                    &m,
-                    cfg.tolerance,
-                    cfg.max_iterations,
-                    progress,
-                )?
+            let sweep = if cfg.solver == Solver::Jacobi {
+                gathering::Sweep::Jacobi
             } else {
-                gathering::gauss_seidel(
-                    &mesh.elements,
-                    &e,
-                    &m,
-                    cfg.tolerance,
-                    cfg.max_iterations,
-                    progress,
-                )?
+                gathering::Sweep::GaussSeidel
             };
-            stats.iterations = out.iterations;
-            stats.unshot = out.unshot;
-            out.l
+            let out = gathering::iterate(&mesh.elements, &e, &m, stop, max_iter, progress, sweep)?;
+            (out.l, out.iterations, out.unshot)
         }
         Solver::Progressive => {
             let columns = |i: usize, du: &[Vec3], f: &mut [f32], g: &mut [Vec3]| {
@@ -462,13 +449,11 @@ pub(crate) fn solve_with(
                 &patches,
                 &e,
                 shoot,
-                cfg.tolerance,
-                cfg.max_iterations,
+                stop,
+                max_iter,
                 progress,
             )?;
-            stats.iterations = out.iterations;
-            stats.unshot = out.unshot;
-            out.l
+            (out.l, out.iterations, out.unshot)
         }
         Solver::Hierarchical => {
             let (rule, v) = match cfg.formfactor {
@@ -486,25 +471,13 @@ pub(crate) fn solve_with(
                     Some(&vis),
                 ),
             };
-            let (l, hs) = hierarchical::solve(
-                ps,
-                &mesh,
-                &e,
-                v,
-                rule,
-                tol,
-                cfg.tolerance,
-                cfg.max_iterations,
-                progress,
-            )?;
-            stats.iterations = hs.iterations;
-            stats.unshot = hs.unshot;
-            stats.nodes = hs.nodes;
-            stats.leaves = hs.leaves;
-            stats.links = hs.links;
-            l
+            let (l, hs) =
+                hierarchical::solve(ps, &mesh, &e, v, rule, tol, stop, max_iter, progress)?;
+            (stats.nodes, stats.leaves, stats.links) = (hs.nodes, hs.leaves, hs.links);
+            (l, hs.iterations, hs.unshot)
         }
     };
+    (stats.iterations, stats.unshot) = (iterations, unshot);
     let l: Vec<Vec3> = l.into_iter().map(chiaro_core::shading::sanitize).collect();
     // Irradiance for the display, pi (L - Le) / rho, and its indirect part
     // for the hybrid, pi (L - Le - direct) / rho.

@@ -7,9 +7,10 @@ use super::*;
 use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::PrepareOptions;
 use chiaro_core::progress::{NoProgress, Progress};
-use chiaro_core::scene::RenderSettings;
-use chiaro_core::scene::{
-    AreaShape, Attenuation, Camera, Geometry, Light, Material, Object, Transform,
+use chiaro_core::scene::{Geometry, Light, Material, MaterialId, RenderSettings, Transform};
+use chiaro_testkit::scenes::{
+    CORNELL_GREEN, CORNELL_RED, CORNELL_WHITE, add_object, add_quad, add_unit_box, point_light,
+    unit_cornell_box,
 };
 
 /// [`super::solve`] through a render context of `scene` with `settings`.
@@ -42,79 +43,10 @@ fn render(
         .map(|(film, _)| film)
 }
 
-const WHITE: Vec3 = Vec3::new(0.725, 0.71, 0.68);
-const RED: Vec3 = Vec3::new(0.63, 0.065, 0.05);
-const GREEN: Vec3 = Vec3::new(0.14, 0.45, 0.091);
-
-fn add_quad(s: &mut Scene, corner: Vec3, eu: Vec3, ev: Vec3, material: u32) {
-    let m = s.add_mesh(primitives::quad(corner, eu, ev));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(m),
-        material: chiaro_core::scene::MaterialId(material),
-        smooth: false,
-        ..Default::default()
-    });
-}
-
-/// The unit box's walls, all facing inwards: floor, ceiling, back, left,
-/// right, and (if `closed`) front, as objects 0..5 (6).
-fn unit_box(s: &mut Scene, mats: [u32; 6], closed: bool) {
-    let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
-    add_quad(s, Vec3::ZERO, z, x, mats[0]);
-    add_quad(s, y, x, z, mats[1]);
-    add_quad(s, Vec3::ZERO, x, y, mats[2]);
-    add_quad(s, Vec3::ZERO, y, z, mats[3]);
-    add_quad(s, x, z, y, mats[4]);
-    if closed {
-        add_quad(s, z, y, x, mats[5]);
-    }
-}
-
-/// A small Cornell box (unit size, official RGB albedos, a ceiling light
-/// of radiance (17, 12, 4)). Objects: 0 floor, 1 ceiling, 2 back, 3 left
-/// (red), 4 right (green), 5 short block, 6 tall block.
+/// The unit Cornell box (objects: 0 floor, 1 ceiling, 2 back, 3 left
+/// (red), 4 right (green), 5 short block, 6 tall block).
 fn cornell() -> Scene {
-    let mut s = Scene::default();
-    let white = s.add_material(Material::diffuse("white", WHITE)).0;
-    let red = s.add_material(Material::diffuse("red", RED)).0;
-    let green = s.add_material(Material::diffuse("green", GREEN)).0;
-    unit_box(&mut s, [white, white, white, red, green, white], false);
-    for (half, at, rot) in [
-        (Vec3::splat(0.15), Vec3::new(0.34, 0.15, 0.62), -17.0f32),
-        (Vec3::new(0.15, 0.3, 0.15), Vec3::new(0.66, 0.3, 0.36), 17.0),
-    ] {
-        let m = s.add_mesh(primitives::box_mesh(half));
-        s.objects.push(Object {
-            geometry: Geometry::Mesh(m),
-            material: chiaro_core::scene::MaterialId(white),
-            smooth: false,
-            transform: Transform {
-                translate: at,
-                rotate_degrees: Vec3::new(0.0, rot, 0.0),
-                ..Default::default()
-            },
-            ..Default::default()
-        });
-    }
-    s.lights.push(Light::Area {
-        shape: AreaShape::Quad {
-            corner: Vec3::new(0.375, 0.999, 0.4),
-            edge_u: Vec3::new(0.25, 0.0, 0.0),
-            edge_v: Vec3::new(0.0, 0.0, 0.2),
-        },
-        color: Vec3::new(17.0, 12.0, 4.0),
-        intensity: 1.0,
-        two_sided: false,
-    });
-    s.camera = Camera {
-        eye: Vec3::new(0.5, 0.5, 2.3),
-        look_at: Vec3::new(0.5, 0.5, 0.0),
-        up: Vec3::Y,
-        fov_y_degrees: 32.0,
-        near: 0.01,
-        far: 100.0,
-    };
-    s
+    unit_cornell_box()
 }
 
 fn settings(solver: Solver, ff: Method, patch: f32) -> RenderSettings {
@@ -131,6 +63,29 @@ fn settings(solver: Solver, ff: Method, patch: f32) -> RenderSettings {
     r
 }
 
+/// The form factors of `method` over `mesh`'s elements: hemicubes of `res`
+/// pixels in a scene of diagonal `size`, ray-cast visibility through `vis`,
+/// `tol` the facing tolerance of the pair methods.
+fn form_factors<'a>(
+    method: Method,
+    mesh: &'a ElementMesh,
+    res: u32,
+    size: f32,
+    vis: Visibility<'a>,
+    tol: f32,
+) -> Box<dyn FormFactor + 'a> {
+    match method {
+        Method::Hemicube => Box::new(hemicube::HemicubeFormFactor::new(
+            &mesh.elements,
+            &mesh.vertices,
+            res,
+            size,
+        )),
+        Method::Raycast => Box::new(PairFormFactor::raycast(&mesh.elements, vis, tol)),
+        Method::Analytic => Box::new(PairFormFactor::analytic(&mesh.elements, tol)),
+    }
+}
+
 /// `F` from object 0 to object 1 of `scene`, summed over elements:
 /// `F_01 = sum_{i in 0} A_i sum_{j in 1} F_ij / A_0`.
 fn object_form_factor(scene: &Scene, patch: f32, method: Method, res: u32) -> f32 {
@@ -142,23 +97,7 @@ fn object_form_factor(scene: &Scene, patch: f32, method: Method, res: u32) -> f3
         accel: accel.as_ref(),
         eps: size * 1e-4,
     };
-    let tol = size * 1e-6;
-    let hemi;
-    let pairs;
-    let ff: &dyn FormFactor = match method {
-        Method::Hemicube => {
-            hemi = hemicube::HemicubeFormFactor::new(&mesh.elements, &mesh.vertices, res, size);
-            &hemi
-        }
-        Method::Raycast => {
-            pairs = PairFormFactor::raycast(&mesh.elements, vis, tol);
-            &pairs
-        }
-        Method::Analytic => {
-            pairs = PairFormFactor::analytic(&mesh.elements, tol);
-            &pairs
-        }
-    };
+    let ff = form_factors(method, &mesh, res, size, vis, size * 1e-6);
     let obj = |e: &Element| mesh.sources[e.source as usize].object;
     let n = mesh.elements.len();
     let mut col = vec![0.0; n];
@@ -183,26 +122,38 @@ fn object_form_factor(scene: &Scene, patch: f32, method: Method, res: u32) -> f3
     (sum / a0 as f64) as f32
 }
 
-#[test]
-fn perpendicular_rectangles_all_methods_match_closed_form() {
-    // A 1 x 1.5 floor and a 1 x 1 wall sharing the unit edge along x.
-    let mut s = Scene::default();
-    s.add_material(Material::default());
-    add_quad(&mut s, Vec3::ZERO, Vec3::new(0.0, 0.0, 1.5), Vec3::X, 0);
-    add_quad(&mut s, Vec3::ZERO, Vec3::X, Vec3::Y, 0);
-    let expect = perpendicular_rectangles(1.5, 1.0, 1.0);
+/// Asserts that every method's `F` from object 0 to object 1 of `s`
+/// (elements of `patch` size, hemicubes of 128 pixels) is `expect` within
+/// 1 % (analytic, ray-cast) or 2 % (hemicube).
+fn assert_methods_match(s: &Scene, patch: f32, expect: f32) {
     for (method, tol) in [
         (Method::Analytic, 0.01),
         (Method::Raycast, 0.01),
         (Method::Hemicube, 0.02),
     ] {
-        let f = object_form_factor(&s, 0.15, method, 128);
+        let f = object_form_factor(s, patch, method, 128);
         assert!(
             ((f - expect) / expect).abs() < tol,
             "{}: {f} vs {expect}",
             method.name()
         );
     }
+}
+
+#[test]
+fn perpendicular_rectangles_all_methods_match_closed_form() {
+    // A 1 x 1.5 floor and a 1 x 1 wall sharing the unit edge along x.
+    let mut s = Scene::default();
+    s.add_material(Material::default());
+    add_quad(
+        &mut s,
+        Vec3::ZERO,
+        Vec3::new(0.0, 0.0, 1.5),
+        Vec3::X,
+        MaterialId(0),
+    );
+    add_quad(&mut s, Vec3::ZERO, Vec3::X, Vec3::Y, MaterialId(0));
+    assert_methods_match(&s, 0.15, perpendicular_rectangles(1.5, 1.0, 1.0));
 }
 
 #[test]
@@ -212,42 +163,26 @@ fn coaxial_discs_all_methods_match_closed_form() {
     let (r, h, seg) = (1.0f32, 1.0f32, 48u32);
     for (y, flip) in [(0.0f32, false), (h, true)] {
         let m = s.add_mesh(primitives::disk(r, seg));
-        s.objects.push(Object {
-            geometry: Geometry::Mesh(m),
-            smooth: false,
-            transform: Transform {
-                translate: Vec3::new(0.0, y, 0.0),
-                rotate_degrees: Vec3::new(if flip { 180.0 } else { 0.0 }, 0.0, 0.0),
-                ..Default::default()
-            },
+        let place = Transform {
+            translate: Vec3::new(0.0, y, 0.0),
+            rotate_degrees: Vec3::new(if flip { 180.0 } else { 0.0 }, 0.0, 0.0),
             ..Default::default()
-        });
+        };
+        add_object(&mut s, Geometry::Mesh(m), MaterialId(0), place);
     }
     // The polygonal discs have the area of a disc of this radius.
     let r_eq = (0.5 * seg as f32 * (std::f32::consts::TAU / seg as f32).sin()
         / std::f32::consts::PI)
         .sqrt()
         * r;
-    let expect = disc_to_disc(r_eq, r_eq, h);
-    for (method, tol) in [
-        (Method::Analytic, 0.01),
-        (Method::Raycast, 0.01),
-        (Method::Hemicube, 0.02),
-    ] {
-        let f = object_form_factor(&s, 0.25, method, 128);
-        assert!(
-            ((f - expect) / expect).abs() < tol,
-            "{}: {f} vs {expect}",
-            method.name()
-        );
-    }
+    assert_methods_match(&s, 0.25, disc_to_disc(r_eq, r_eq, h));
 }
 
 #[test]
 fn closed_box_form_factors_are_reciprocal_and_rows_sum_to_one() {
     let mut s = Scene::default();
     s.add_material(Material::default());
-    unit_box(&mut s, [0; 6], true);
+    add_unit_box(&mut s, [MaterialId(0); 6], true);
     let ps = PreparedScene::new(&s, PrepareOptions::default());
     let mesh = mesh::build(&ps, 0.5, false, &NoProgress).expect("mesh");
     let accel = chiaro_core::accel::instanced::build_accelerator(&ps);
@@ -258,25 +193,11 @@ fn closed_box_form_factors_are_reciprocal_and_rows_sum_to_one() {
     let el = &mesh.elements;
     let n = el.len();
     for method in [Method::Raycast, Method::Hemicube] {
-        let hemi;
-        let pairs;
-        let ff: &dyn FormFactor = match method {
-            Method::Hemicube => {
-                hemi = hemicube::HemicubeFormFactor::new(el, &mesh.vertices, 256, 2.0);
-                &hemi
-            }
-            _ => {
-                pairs = PairFormFactor::raycast(
-                    el,
-                    Visibility {
-                        accel: vis.accel,
-                        eps: vis.eps,
-                    },
-                    1e-6,
-                );
-                &pairs
-            }
+        let vis = Visibility {
+            accel: vis.accel,
+            eps: vis.eps,
         };
+        let ff = form_factors(method, &mesh, 256, 2.0, vis, 1e-6);
         // f[i][j] = F_ij, from the method's natural output.
         let mut f = vec![vec![0.0f32; n]; n];
         for i in 0..n {
@@ -331,6 +252,53 @@ fn closed_box_form_factors_are_reciprocal_and_rows_sum_to_one() {
     }
 }
 
+/// The largest relative difference of `a` from `b` over the channels.
+fn relative_error(a: Vec3, b: Vec3) -> f32 {
+    ((a - b) / b).abs().max_element()
+}
+
+/// Solves `s` (elements of `patch` size) with each case's solver and form
+/// factors, and hands each solution to `check` with the case's name
+/// ("solver/form factors") and tolerance.
+fn for_each_solver(
+    s: &Scene,
+    patch: f32,
+    cases: &[(Solver, Method, f32)],
+    check: impl Fn(&RadiositySolution, &str, f32),
+) {
+    for &(solver, ff, tol) in cases {
+        let sol = solve(s, &settings(solver, ff, patch), &NoProgress).expect("solve");
+        check(&sol, &format!("{}/{}", solver.name(), ff.name()), tol);
+    }
+}
+
+/// Progressive refinement with ray-cast form factors, elements of `patch`
+/// size: the solution of `s`.
+fn solve_progressive(s: &Scene, patch: f32) -> RadiositySolution {
+    solve(
+        s,
+        &settings(Solver::Progressive, Method::Raycast, patch),
+        &NoProgress,
+    )
+    .expect("solve")
+}
+
+/// A 2 x 2 floor quad of albedo `rho` at y = 0 under a white point light of
+/// intensity 8 at height 2 (object 0).
+fn lit_floor(rho: f32) -> Scene {
+    let mut s = Scene::default();
+    s.add_material(Material::diffuse("m", Vec3::splat(rho)));
+    add_quad(
+        &mut s,
+        Vec3::new(-1.0, 0.0, -1.0),
+        Vec3::new(0.0, 0.0, 2.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        MaterialId(0),
+    );
+    s.lights.push(point_light(Vec3::new(0.0, 2.0, 0.0), 8.0));
+    s
+}
+
 #[test]
 fn furnace_gives_e_over_one_minus_rho_for_every_solver() {
     let rho = 0.6f32;
@@ -339,34 +307,31 @@ fn furnace_gives_e_over_one_minus_rho_for_every_solver() {
     let mut m = Material::diffuse("furnace", Vec3::splat(rho));
     m.emission = e;
     s.add_material(m);
-    unit_box(&mut s, [0; 6], true);
+    add_unit_box(&mut s, [MaterialId(0); 6], true);
     let expect = e / (1.0 - rho);
-    for (solver, ff, tol) in [
-        (Solver::Jacobi, Method::Raycast, 0.01),
-        (Solver::GaussSeidel, Method::Hemicube, 0.01),
-        (Solver::Progressive, Method::Raycast, 0.01),
-        (Solver::Hierarchical, Method::Raycast, 0.01),
-        (Solver::GaussSeidel, Method::Analytic, 0.01),
-        // Not ("progressive", "hemicube"): shooting with hemicubes uses
-        // F_ji = F_ij A_i / A_j from a hemicube at the shooter's centre only,
-        // so power is conserved but its spread carries the point-sampling
-        // error of near patches (up to ~7% per element on this coarse mesh).
-    ] {
-        let sol = solve(&s, &settings(solver, ff, 0.34), &NoProgress).expect("solve");
-        for (k, l) in sol.element_radiance().iter().enumerate() {
-            let err = ((*l - expect) / expect).abs().max_element();
-            assert!(
-                err < tol,
-                "{}/{}: element {k} has {l} vs {expect}",
-                solver.name(),
-                ff.name()
-            );
-        }
-    }
+    // Every solver with ray-cast form factors, and Gauss-Seidel with the
+    // hemicube and analytic ones, each within 1 %. Not progressive with
+    // hemicubes: shooting with hemicubes uses F_ji = F_ij A_i / A_j from a
+    // hemicube at the shooter's centre only, so power is conserved but its
+    // spread carries the point-sampling error of near patches (up to ~7% per
+    // element on this coarse mesh).
+    let raycast = [Solver::Jacobi, Solver::Progressive, Solver::Hierarchical];
+    let cases: Vec<_> = (raycast.map(|solver| (solver, Method::Raycast)).into_iter())
+        .chain([Method::Hemicube, Method::Analytic].map(|ff| (Solver::GaussSeidel, ff)))
+        .map(|(solver, ff)| (solver, ff, 0.01))
+        .collect();
+    for_each_solver(&s, 0.34, &cases, |sol, case, tol| {
+        // The first element off by `tol` or more (or NaN), if any.
+        let off = (sol.element_radiance().iter().enumerate()).find(|(_, l)| {
+            relative_error(**l, expect).partial_cmp(&tol) != Some(std::cmp::Ordering::Less)
+        });
+        assert!(off.is_none(), "{case}: element {off:?} vs {expect}");
+    });
 }
 
-fn wall_means(sol: &RadiositySolution) -> Vec<Vec3> {
-    (0..7)
+/// The mean radiance of each of the first `n` objects.
+fn object_means(sol: &RadiositySolution, n: u32) -> Vec<Vec3> {
+    (0..n)
         .map(|o| sol.object_mean_radiance(o).expect("object"))
         .collect()
 }
@@ -380,8 +345,8 @@ fn solvers_agree_on_the_cornell_box_and_the_ceiling_is_pink() {
         &NoProgress,
     )
     .expect("gs");
-    let ref_means = wall_means(&reference);
-    for (solver, ff, tol) in [
+    let ref_means = object_means(&reference, 7);
+    let cases = [
         (Solver::Jacobi, Method::Raycast, 0.01),
         (Solver::Progressive, Method::Raycast, 0.01),
         (Solver::Hierarchical, Method::Raycast, 0.04),
@@ -389,18 +354,13 @@ fn solvers_agree_on_the_cornell_box_and_the_ceiling_is_pink() {
         // (Wallace et al. 1989), and these patches are coarse.
         (Solver::Progressive, Method::Hemicube, 0.1),
         (Solver::GaussSeidel, Method::Hemicube, 0.1),
-    ] {
-        let sol = solve(&s, &settings(solver, ff, 0.25), &NoProgress).expect("solve");
-        for (o, (a, b)) in wall_means(&sol).iter().zip(&ref_means).enumerate() {
-            let err = ((*a - *b) / *b).abs().max_element();
-            assert!(
-                err < tol,
-                "{}/{}: object {o}: {a} vs {b} ({err})",
-                solver.name(),
-                ff.name()
-            );
+    ];
+    for_each_solver(&s, 0.25, &cases, |sol, case, tol| {
+        for (o, (a, b)) in object_means(sol, 7).iter().zip(&ref_means).enumerate() {
+            let err = relative_error(*a, *b);
+            assert!(err < tol, "{case}: object {o}: {a} vs {b} ({err})");
         }
-    }
+    });
     // Colour bleeding: the ceiling near the red wall is redder than near the green wall.
     let near_red = reference
         .radiance_at(1, Vec3::new(0.05, 1.0, 0.5), -Vec3::Y)
@@ -421,12 +381,7 @@ fn energy_is_conserved_in_the_open_cornell_box() {
     // Power leaving all surfaces (emission excluded) never exceeds the
     // emitted power times the largest albedo's geometric series.
     let s = cornell();
-    let sol = solve(
-        &s,
-        &settings(Solver::Progressive, Method::Raycast, 0.3),
-        &NoProgress,
-    )
-    .expect("solve");
+    let sol = solve_progressive(&s, 0.3);
     let mut emitted = Vec3::ZERO;
     let mut reflected = Vec3::ZERO;
     for (e, t) in sol.triangles().iter().enumerate() {
@@ -435,7 +390,7 @@ fn energy_is_conserved_in_the_open_cornell_box() {
         emitted += sol.element_emission()[e] * a;
         reflected += (sol.element_radiance()[e] - sol.element_emission()[e]) * a;
     }
-    let rho_max = WHITE.max(RED).max(GREEN);
+    let rho_max = CORNELL_WHITE.max(CORNELL_RED).max(CORNELL_GREEN);
     let bound = emitted * rho_max / (Vec3::ONE - rho_max);
     assert!(reflected.cmple(bound).all(), "{reflected} > {bound}");
     assert!(reflected.min_element() > 0.0);
@@ -445,31 +400,12 @@ fn energy_is_conserved_in_the_open_cornell_box() {
 fn point_light_direct_matches_the_shading_convention() {
     // A single floor quad under a point light: no interreflection, so the
     // radiance is rho * Ip * cos / d^2 (the radiometric convention, ARCHITECTURE.md).
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("m", Vec3::splat(0.5)));
-    add_quad(
-        &mut s,
-        Vec3::new(-1.0, 0.0, -1.0),
-        Vec3::new(0.0, 0.0, 2.0),
-        Vec3::new(2.0, 0.0, 0.0),
-        0,
-    );
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 2.0, 0.0),
-        color: Vec3::ONE,
-        intensity: 8.0,
-        attenuation: Attenuation::InverseSquare,
-    });
+    let mut s = lit_floor(0.5);
     s.lights.push(Light::Ambient {
         color: Vec3::ONE,
         intensity: 10.0,
     });
-    let sol = solve(
-        &s,
-        &settings(Solver::Progressive, Method::Raycast, 0.05),
-        &NoProgress,
-    )
-    .expect("solve");
+    let sol = solve_progressive(&s, 0.05);
     let l = sol.radiance_at(0, Vec3::ZERO, Vec3::Y).expect("floor");
     // rho * Ip / d^2 = 0.5 * 8 / 4 = 1 straight below.
     assert!((l.x - 1.0).abs() < 0.02, "{l}");
@@ -486,21 +422,7 @@ fn the_ambient_correction_adds_nothing_where_no_shot_light_lands() {
     // unshot light leaves the scene, so the estimate of what is not yet
     // shot must add nothing (Cohen's closed-room R = 1 / (1 - rho) = 20
     // would add twenty times the unshot radiance).
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("m", Vec3::splat(0.95)));
-    add_quad(
-        &mut s,
-        Vec3::new(-1.0, 0.0, -1.0),
-        Vec3::new(0.0, 0.0, 2.0),
-        Vec3::new(2.0, 0.0, 0.0),
-        0,
-    );
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 2.0, 0.0),
-        color: Vec3::ONE,
-        intensity: 8.0,
-        attenuation: Attenuation::InverseSquare,
-    });
+    let s = lit_floor(0.95);
     let mut r = settings(Solver::Progressive, Method::Raycast, 0.25);
     r.radiosity.max_iterations = 1;
     let sol = solve(&s, &r, &NoProgress).expect("solve");
@@ -512,12 +434,7 @@ fn the_ambient_correction_adds_nothing_where_no_shot_light_lands() {
 #[test]
 fn save_load_round_trip_and_refuse_another_scene() {
     let s = cornell();
-    let sol = solve(
-        &s,
-        &settings(Solver::Progressive, Method::Raycast, 0.4),
-        &NoProgress,
-    )
-    .expect("solve");
+    let sol = solve_progressive(&s, 0.4);
     let mut bytes = Vec::new();
     sol.save(&mut bytes).expect("save");
     let back = RadiositySolution::load(bytes.as_slice(), &s).expect("load");

@@ -2,45 +2,32 @@
 //! than the patch size, solved with patches and element by element.
 
 use super::*;
+use chiaro_testkit::scenes::{
+    CORNELL_GREEN, CORNELL_RED, CORNELL_WHITE, add_object, add_quad, point_light,
+};
 
 /// The unit box with a floor of `2 n^2` triangles (object 0) and walls of
 /// two triangles each (objects 1..6), lit by a point light under the
 /// ceiling.
 fn fine_floor_box(n: u32) -> Scene {
     let mut s = Scene::default();
-    let white = s.add_material(Material::diffuse("white", WHITE)).0;
-    let red = s.add_material(Material::diffuse("red", RED)).0;
-    let green = s.add_material(Material::diffuse("green", GREEN)).0;
+    let white = s.add_material(Material::diffuse("white", CORNELL_WHITE));
+    let red = s.add_material(Material::diffuse("red", CORNELL_RED));
+    let green = s.add_material(Material::diffuse("green", CORNELL_GREEN));
     let floor = s.add_mesh(primitives::plane(0.5, n));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(floor),
-        material: chiaro_core::scene::MaterialId(white),
-        smooth: false,
-        transform: Transform {
-            translate: Vec3::new(0.5, 0.0, 0.5),
-            ..Default::default()
-        },
+    let place = Transform {
+        translate: Vec3::new(0.5, 0.0, 0.5),
         ..Default::default()
-    });
+    };
+    add_object(&mut s, Geometry::Mesh(floor), white, place);
     let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
     add_quad(&mut s, y, x, z, white);
     add_quad(&mut s, Vec3::ZERO, x, y, white);
     add_quad(&mut s, Vec3::ZERO, y, z, red);
     add_quad(&mut s, x, z, y, green);
     add_quad(&mut s, z, y, x, white);
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.5, 0.9, 0.5),
-        color: Vec3::ONE,
-        intensity: 0.5,
-        attenuation: Attenuation::InverseSquare,
-    });
+    s.lights.push(point_light(Vec3::new(0.5, 0.9, 0.5), 0.5));
     s
-}
-
-fn means(sol: &RadiositySolution) -> Vec<Vec3> {
-    (0..6)
-        .map(|o| sol.object_mean_radiance(o).expect("object"))
-        .collect()
 }
 
 #[test]
@@ -59,9 +46,9 @@ fn patches_shoot_for_fine_triangles_and_agree_with_elements() {
     // 512 floor triangles (edge 1/16, under half the patch size) plus
     // 5 x 2 x 5^2 wall elements.
     assert_eq!(cs.elements, 512 + 5 * 50);
-    let errs: Vec<f32> = means(&clustered)
+    let errs: Vec<f32> = object_means(&clustered, 6)
         .iter()
-        .zip(&means(&elements))
+        .zip(&object_means(&elements, 6))
         .enumerate()
         .map(|(o, (a, b))| {
             let err = ((*a - *b) / *b).abs().max_element();

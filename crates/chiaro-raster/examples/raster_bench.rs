@@ -92,20 +92,7 @@ fn scene() -> Scene {
         ..Material::default()
     });
     let mesh = s.add_mesh(chiaro_core::geometry::primitives::icosphere(0.45, 4));
-    let n = 14;
-    for i in 0..n {
-        for j in 0..n {
-            s.objects.push(Object {
-                geometry: Geometry::Mesh(mesh),
-                material: m,
-                transform: Transform {
-                    translate: Vec3::new(i as f32 - 6.5, j as f32 - 6.5, 0.0),
-                    ..Transform::default()
-                },
-                ..Object::default()
-            });
-        }
-    }
+    chiaro_testkit::scenes::add_grid_of(&mut s, mesh, m);
     s.lights = vec![
         Light::Ambient {
             color: Vec3::ONE,
@@ -124,14 +111,6 @@ fn scene() -> Scene {
             attenuation: Attenuation::None,
         },
     ];
-    s.camera = Camera {
-        eye: Vec3::new(0.0, -4.5, 8.0),
-        look_at: Vec3::ZERO,
-        up: Vec3::Z,
-        fov_y_degrees: 60.0,
-        near: 0.1,
-        far: 100.0,
-    };
     s
 }
 

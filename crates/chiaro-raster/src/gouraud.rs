@@ -383,7 +383,7 @@ pub(crate) fn shade(ctx: &Ctx<'_, '_>, poly: &PolyShading, td: &TriData, at: &Sa
     let split = match corners {
         Some(c) => Split::lerp3(*c, w),
         None => {
-            let table = if at.flip {
+            let table = if at.sign < 0.0 {
                 &poly.vertex_back
             } else {
                 &poly.vertex_front

@@ -59,23 +59,23 @@ pub(crate) fn shade(
                 counts,
             ),
         };
+        let lobe = prefiltered.map(|_| SurfaceMaterial {
+            kd: base.kd * hit.color,
+            ..*base
+        });
         return Lit {
             color: c,
             n,
-            kr: base.kr,
-            lobe: prefiltered.map(|_| SurfaceMaterial {
-                kd: base.kd * hit.color,
-                ..*base
-            }),
             specular: Vec3::ZERO,
             coverage_kt: None,
+            reflects: (base.kr, lobe),
         };
     }
     let mut coverage_kt = None;
     let (sm, n) = if needs_footprint {
         // The surface layer: textures, normal and bump maps.
         let (dpdu, dpdv) = ps.triangle_dpduv(t);
-        let ss = ps.shading_surface_at(*hit, dpdu, dpdv, at.duv_dx, at.duv_dy);
+        let ss = ps.shading_surface_at(*hit, dpdu, dpdv, at.duv[0], at.duv[1]);
         if td.material.alpha_mode == AlphaMode::Blend {
             coverage_kt = Some(ss.material.kt);
         }
@@ -94,7 +94,7 @@ pub(crate) fn shade(
         wo,
     };
     // A sample at a pixel centre (one sample per pixel) names its pixel.
-    let (sx, sy) = (at.sx, at.sy);
+    let (sx, sy) = (at.film.x, at.film.y);
     let pixel = (sx.fract() == 0.5 && sy.fract() == 0.5 && sx >= 0.0 && sy >= 0.0)
         .then_some((sx as u32, sy as u32));
     let c = ctx.illuminate(t, pixel, &sm, &sp, counts);
@@ -110,10 +110,9 @@ pub(crate) fn shade(
     Lit {
         color: c,
         n,
-        kr: sm.kr,
-        lobe: prefiltered.map(|_| sm),
         specular,
         coverage_kt,
+        reflects: (sm.kr, prefiltered.map(|_| sm)),
     }
 }
 

@@ -162,6 +162,16 @@ mod tests {
     use super::*;
     use chiaro_core::scene::Camera;
 
+    /// The triangle (-1, -1), (1, -1), (0, 1) in the plane at depth `z`,
+    /// counter-clockwise seen from +z.
+    fn triangle_at(z: f32) -> [Vec3; 3] {
+        [
+            Vec3::new(-1.0, -1.0, z),
+            Vec3::new(1.0, -1.0, z),
+            Vec3::new(0.0, 1.0, z),
+        ]
+    }
+
     fn cam() -> (Camera, Mat4) {
         let cam = Camera {
             eye: Vec3::new(0.0, 0.0, 3.0),
@@ -175,14 +185,7 @@ mod tests {
     #[test]
     fn nearer_item_wins_regardless_of_order() {
         let (_, m) = cam();
-        let p = [
-            Vec3::new(-1.0, -1.0, 0.0),
-            Vec3::new(1.0, -1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(-1.0, -1.0, 1.0),
-            Vec3::new(1.0, -1.0, 1.0),
-            Vec3::new(0.0, 1.0, 1.0),
-        ];
+        let p = [triangle_at(0.0), triangle_at(1.0)].concat();
         for tris in [[[0, 1, 2], [3, 4, 5]], [[3, 4, 5], [0, 1, 2]]] {
             let ids = if tris[0][0] == 0 { [10, 20] } else { [20, 10] };
             let b = item_buffer(m, 16, 16, &p, &tris, &ids);
@@ -234,11 +237,7 @@ mod tests {
     #[test]
     fn culling_option_drops_back_faces() {
         let (_, m) = cam();
-        let p = [
-            Vec3::new(-1.0, -1.0, 0.0),
-            Vec3::new(1.0, -1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-        ];
+        let p = triangle_at(0.0);
         let opts = ItemBufferOptions {
             cull_back_faces: true,
             ..Default::default()

@@ -199,6 +199,11 @@ fn check_tiling(scene: &Scene, light_pos: Vec3, lit: f32, what: &str) {
     );
 }
 
+/// [`check_tiling`] of the triangles `tris` under a point light at `light`.
+fn point_tiling(tris: &[[Vec3; 3]], light: Vec3, lit: f32, what: &str) {
+    check_tiling(&scene_of(tris, point(light)), light, lit, what);
+}
+
 fn point(at: Vec3) -> Light {
     Light::Point {
         position: at,
@@ -219,23 +224,13 @@ fn lit_fragments_tile_the_lit_area() {
     let mut tris = floor.to_vec();
     tris.extend(occ);
     let shadow = 0.9 * 1.0 * (4.0f32 / 3.0).powi(2);
-    check_tiling(
-        &scene_of(&tris, point(light)),
-        light,
-        full - shadow,
-        "one square",
-    );
+    point_tiling(&tris, light, full - shadow, "one square");
     // 2. Two overlapping squares at the same height: the union's shadow.
     let mut tris = floor.to_vec();
     tris.extend(quad(-0.9, 0.3, -0.9, 0.3, 2.0));
     tris.extend(quad(-0.3, 0.9, -0.3, 0.9, 2.0));
     let union = 1.2 * 1.2 * 2.0 - 0.6 * 0.6;
-    check_tiling(
-        &scene_of(&tris, point(light)),
-        light,
-        full - union * 4.0,
-        "overlap",
-    );
+    point_tiling(&tris, light, full - union * 4.0, "overlap");
     // 3. Touching: a vertical wall standing on the floor along x = 0.5,
     //    lit from the side; its shadow touches its foot. Wall height 1,
     //    depth [-1, 1] in z, light at x = -1, y = 4: the shadow reaches
@@ -248,18 +243,13 @@ fn lit_fragments_tile_the_lit_area() {
     // The top edge (y = 1, z in [-1, 1]) projects to x = 1.0, z in
     // [-4/3, 4/3]: a trapezoid with parallel sides 2 and 8/3, width 0.5.
     let shadow3 = 0.5 * (2.0 + 8.0 / 3.0) * 0.5;
-    check_tiling(
-        &scene_of(&tris, point(light3)),
-        light3,
-        full - shadow3,
-        "touching wall",
-    );
+    point_tiling(&tris, light3, full - shadow3, "touching wall");
     // 4. Coplanar and touching neighbours: more floor triangles in the
     //    same plane, sharing edges, cast nothing.
     let mut tris = floor.to_vec();
     tris.extend(quad(2.0, 3.0, -2.0, 2.0, 0.0));
     tris.push([p(-1.0, 0.0, -1.0), p(-1.0, 0.0, 1.0), p(1.0, 0.0, 1.0)]);
-    check_tiling(&scene_of(&tris, point(light)), light, full, "coplanar");
+    point_tiling(&tris, light, full, "coplanar");
     // 5. A directional light straight down: the shadow is the occluder.
     let mut tris = floor.to_vec();
     let t = [p(-1.0, 1.5, -1.0), p(0.0, 1.5, 1.0), p(1.0, 1.5, -0.5)];

@@ -20,13 +20,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Err("usage: whitted_render SCENE OUT.png [--size WxH] [--samples N] [--adaptive] [--light-samples N] [--threads N]".into());
     };
     let arg = |name: &str| flag_value(&args, name);
-    let loaded = chiaro_io::load_scene(Path::new(scene_path))?;
-    for w in &loaded.warnings {
-        eprintln!("warning: {w}");
-    }
-    let scene = loaded.scene;
-    let mut settings = scene.render.clone();
-    settings.technique = Technique::Whitted;
+    let (scene, mut settings) =
+        chiaro_testkit::scenes::load_for(Path::new(scene_path), Technique::Whitted)?;
     if let Some(size) = arg("--size") {
         let (w, h) = size.split_once('x').ok_or("--size WxH")?;
         settings.width = w.parse()?;
@@ -64,27 +59,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         stats.camera_rays,
         stats.rays as f64 / secs / 1e6
     );
-    // Clamp and encode sRGB (IEC 61966-2-1).
-    let srgb = |x: f32| {
-        let x = x.clamp(0.0, 1.0);
-        let y = if x <= 0.003_130_8 {
-            12.92 * x
-        } else {
-            1.055 * x.powf(1.0 / 2.4) - 0.055
-        };
-        (y * 255.0 + 0.5) as u8
-    };
-    let bytes: Vec<u8> = film
-        .color
-        .iter()
-        .flat_map(|c| [srgb(c.x), srgb(c.y), srgb(c.z)])
-        .collect();
-    image::save_buffer(
-        out,
-        &bytes,
-        film.width,
-        film.height,
-        image::ExtendedColorType::Rgb8,
-    )?;
+    chiaro_testkit::scenes::save_png(&film, out)?;
     Ok(())
 }

@@ -12,7 +12,7 @@
 //! quick pass and to full quality of a refining render once it stops.
 
 use chiaro::Vec3;
-use chiaro::scene::{Attenuation, Camera, Geometry, Light, Material, Object, Scene, Transform};
+use chiaro::scene::{Attenuation, Light, Material, Scene};
 use chiaro_core::geometry::primitives::uv_sphere;
 use chiaro_serve::{ServeOptions, Server};
 use serde_json::{Value, json};
@@ -21,7 +21,21 @@ use std::time::Instant;
 use tungstenite::Message;
 
 fn grid_scene() -> Scene {
-    let mut s = Scene::default();
+    let mut s = Scene {
+        lights: vec![
+            Light::Ambient {
+                color: Vec3::ONE,
+                intensity: 0.2,
+            },
+            Light::Point {
+                position: Vec3::new(5.0, -5.0, 10.0),
+                color: Vec3::ONE,
+                intensity: 60.0,
+                attenuation: Attenuation::default(),
+            },
+        ],
+        ..Scene::default()
+    };
     let m = s.add_material(Material {
         diffuse: Vec3::new(0.7, 0.3, 0.2),
         specular: Vec3::ONE,
@@ -29,39 +43,7 @@ fn grid_scene() -> Scene {
         ..Material::default()
     });
     let mesh = s.add_mesh(uv_sphere(0.45, 72, 36));
-    for i in 0..14 {
-        for j in 0..14 {
-            s.objects.push(Object {
-                geometry: Geometry::Mesh(mesh),
-                material: m,
-                transform: Transform {
-                    translate: Vec3::new(i as f32 - 6.5, j as f32 - 6.5, 0.0),
-                    ..Transform::default()
-                },
-                ..Object::default()
-            });
-        }
-    }
-    s.lights = vec![
-        Light::Ambient {
-            color: Vec3::ONE,
-            intensity: 0.2,
-        },
-        Light::Point {
-            position: Vec3::new(5.0, -5.0, 10.0),
-            color: Vec3::ONE,
-            intensity: 60.0,
-            attenuation: Attenuation::default(),
-        },
-    ];
-    s.camera = Camera {
-        eye: Vec3::new(0.0, -4.5, 8.0),
-        look_at: Vec3::ZERO,
-        up: Vec3::Z,
-        fov_y_degrees: 60.0,
-        near: 0.1,
-        far: 100.0,
-    };
+    chiaro_testkit::scenes::add_grid_of(&mut s, mesh, m);
     s.render.width = 640;
     s.render.height = 480;
     s

@@ -1,8 +1,11 @@
 //! What the benchmark examples share: process CPU time, medians, a
 //! checksum of results, and the
 //! ray workload of the BVH benchmarks (a pinhole camera over the icosphere
-//! grid, as the Embree comparison traces it, and uniformly random rays).
+//! grid, as the Embree comparison traces it, and uniformly random rays),
+//! and a film's pixels as 8-bit sRGB.
 
+use chiaro_core::film::Film;
+use chiaro_core::film::tonemap::linear_to_srgb8;
 use chiaro_core::geometry::{Aabb, Ray};
 use chiaro_core::sampling::{pixel_rng, sample_uniform_sphere, uniform, uniform2};
 use glam::Vec3;
@@ -87,4 +90,13 @@ impl WordHash {
     pub fn eat_f32(&mut self, v: f32) {
         self.eat(v.to_bits());
     }
+}
+
+/// The film's colours as 8-bit sRGB, row by row, three bytes a pixel
+/// (clamped to `[0, 1]`, no tone map): what the examples write as PNG.
+pub fn srgb8_pixels(film: &Film) -> Vec<u8> {
+    film.color
+        .iter()
+        .flat_map(|c| [c.x, c.y, c.z].map(linear_to_srgb8))
+        .collect()
 }

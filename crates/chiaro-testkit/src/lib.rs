@@ -1,11 +1,15 @@
 //! Test support for chiaro: an approximate-equality macro, film comparison
-//! with a report of where two films differ, and small analytic scenes that
-//! several crates' tests share.
+//! with a report of where two films differ, the pixels two films agree are
+//! the same surface, sample statistics, and small scenes (built in code, or
+//! with the `io` feature loaded from the shipped files) that several
+//! crates' tests share.
 
 pub mod bench;
 pub mod scenes;
+pub mod stats;
 
 use chiaro_core::film::Film;
+use chiaro_core::scene::{RenderSettings, ShadowMethod, Technique};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
@@ -55,6 +59,19 @@ pub fn diff_films_relative(a: &Film, b: &Film, tol: f32, mask: impl Fn(usize) ->
     })
 }
 
+/// [`diff_films`] with `tol` relative to `a`'s brightest channel, or to
+/// `floor` where that is darker: for two estimates of the same picture
+/// (a reference `a` and a Monte Carlo `b`) compared in relative terms.
+pub fn diff_films_relative_to_first(
+    a: &Film,
+    b: &Film,
+    tol: f32,
+    floor: f32,
+    mask: impl Fn(usize) -> bool,
+) -> FilmDiff {
+    diff_films_scaled(a, b, tol, mask, |x, _| x.max_element().max(floor))
+}
+
 fn diff_films_scaled(
     a: &Film,
     b: &Film,
@@ -89,6 +106,102 @@ fn diff_films_scaled(
     d
 }
 
+/// Pixels where films `a` and `b` see a surface at the same depth (within
+/// 1e-3 relative, absolute below depth 1) with the same normal (cosine
+/// above 0.999), and so do the four neighbours: no silhouettes, so a
+/// pixel-by-pixel comparison of two techniques compares shading alone.
+pub fn same_surface(a: &Film, b: &Film) -> impl Fn(usize) -> bool + use<> {
+    let w = a.width as usize;
+    let h = a.height as usize;
+    let ok: Vec<bool> = (0..a.color.len())
+        .map(|i| {
+            let (da, db) = (a.depth[i], b.depth[i]);
+            da.is_finite()
+                && db.is_finite()
+                && (da - db).abs() <= 1e-3 * da.max(1.0)
+                && a.normal[i].dot(b.normal[i]) > 0.999
+        })
+        .collect();
+    move |i| {
+        let (x, y) = (i % w, i / w);
+        ok[i]
+            && x > 0
+            && y > 0
+            && x + 1 < w
+            && y + 1 < h
+            && ok[i - 1]
+            && ok[i + 1]
+            && ok[i - w]
+            && ok[i + w]
+    }
+}
+
+/// Pixels of `film` inside its border whose four neighbours' colours
+/// differ from theirs by at most `rel` of its brightest channel (at least
+/// `floor`) in every channel: away from edges in the picture, where two
+/// techniques that place their samples in a pixel differently see
+/// different coverage.
+pub fn smooth_colour(film: &Film, rel: f32, floor: f32) -> impl Fn(usize) -> bool + '_ {
+    let w = film.width as usize;
+    let h = film.height as usize;
+    move |i| {
+        let (x, y) = (i % w, i / w);
+        if x == 0 || y == 0 || x + 1 >= w || y + 1 >= h {
+            return false;
+        }
+        let c = film.color[i].max_element().max(floor);
+        [i - 1, i + 1, i - w, i + w]
+            .iter()
+            .all(|&j| (film.color[j] - film.color[i]).abs().max_element() <= rel * c)
+    }
+}
+
+/// The mean colour of the `2 half` x `2 half` pixels at the centre of
+/// `film`.
+///
+/// # Panics
+/// If the film is smaller than that square.
+pub fn central_mean(film: &Film, half: usize) -> Vec3 {
+    let (w, h) = (film.width as usize, film.height as usize);
+    let mut sum = Vec3::ZERO;
+    for y in h / 2 - half..h / 2 + half {
+        for x in w / 2 - half..w / 2 + half {
+            sum += film.color[y * w + x];
+        }
+    }
+    sum / (4 * half * half) as f32
+}
+
+/// The pair that must agree on surfaces seen directly: the scan converter
+/// (Phong) and Whitted at depth 0, each rendered by `render` from `s`,
+/// which is left set for the second.
+pub fn phong_and_whitted_at_depth_0(
+    s: &mut RenderSettings,
+    render: impl Fn(&RenderSettings) -> Film,
+) -> (Film, Film) {
+    s.technique = Technique::Phong;
+    let raster = render(s);
+    s.technique = Technique::Whitted;
+    s.whitted.max_depth = 0;
+    (raster, render(s))
+}
+
+/// The pair that must agree on direct light: Whitted at depth 0 and the
+/// path tracer at depth 1, both with shadow rays, each rendered by
+/// `render` from `s`, which is left set for the second.
+pub fn whitted_and_path_direct(
+    s: &mut RenderSettings,
+    render: impl Fn(&RenderSettings) -> Film,
+) -> (Film, Film) {
+    s.shadows = ShadowMethod::Ray;
+    s.technique = Technique::Whitted;
+    s.whitted.max_depth = 0;
+    let whitted = render(s);
+    s.technique = Technique::Path;
+    s.path.max_depth = 1;
+    (whitted, render(s))
+}
+
 /// Where failing tests write images: `target/test-output/<name>.ppm`.
 pub fn output_path(name: &str) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/test-output");
@@ -101,17 +214,7 @@ pub fn output_path(name: &str) -> PathBuf {
 pub fn dump_ppm(film: &Film, name: &str) -> PathBuf {
     let path = output_path(name);
     let mut bytes = format!("P6\n{} {}\n255\n", film.width, film.height).into_bytes();
-    for c in &film.color {
-        for ch in c.to_array() {
-            let x = ch.clamp(0.0, 1.0);
-            let s = if x <= 0.003_130_8 {
-                12.92 * x
-            } else {
-                1.055 * x.powf(1.0 / 2.4) - 0.055
-            };
-            bytes.push((s * 255.0 + 0.5) as u8);
-        }
-    }
+    bytes.extend(bench::srgb8_pixels(film));
     let _ = std::fs::write(&path, bytes);
     path
 }

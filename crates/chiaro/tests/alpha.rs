@@ -4,10 +4,10 @@
 //! passes through them too); the covered half shows the white front quad.
 
 use chiaro::scene::{
-    AlphaMode, Filter, Geometry, ImageTexture, Light, Material, Mesh, Object, ShadowMethod,
-    Technique, Texture,
+    AlphaMode, Filter, Geometry, ImageTexture, Light, Material, Object, ShadowMethod, Technique,
+    Texture,
 };
-use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec2, Vec3};
+use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
 
 fn scene(mode: AlphaMode) -> Scene {
     let mut s = Scene::default();
@@ -28,22 +28,7 @@ fn scene(mode: AlphaMode) -> Scene {
     });
     let back = s.add_material(Material::diffuse("back", Vec3::new(1.0, 0.0, 0.0)));
     for (z, m, r) in [(0.0, front, 1.0), (-1.0, back, 3.0)] {
-        let mesh = s.add_mesh(Mesh {
-            positions: vec![
-                Vec3::new(-r, -r, z),
-                Vec3::new(r, -r, z),
-                Vec3::new(r, r, z),
-                Vec3::new(-r, r, z),
-            ],
-            uvs: vec![
-                Vec2::new(0.0, 0.0),
-                Vec2::new(1.0, 0.0),
-                Vec2::new(1.0, 1.0),
-                Vec2::new(0.0, 1.0),
-            ],
-            indices: vec![[0, 1, 2], [0, 2, 3]],
-            ..Mesh::default()
-        });
+        let mesh = s.add_mesh(chiaro_testkit::scenes::square_mesh(r, z));
         s.objects.push(Object {
             geometry: Geometry::Mesh(mesh),
             material: m,

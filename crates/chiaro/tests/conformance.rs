@@ -161,6 +161,11 @@ impl Matrix {
         });
     }
 
+    /// A row saying `rule` does not apply to `case` for `tech`, and why.
+    fn not_applicable(&mut self, rule: &'static str, case: &str, tech: &str, why: &str) {
+        self.skip(rule, case, tech, Verdict::NotApplicable, why);
+    }
+
     /// The markdown table: rules down, cases across.
     fn table(&self, rules: &[&str], cases: &[String]) -> String {
         let mut out = String::new();
@@ -515,13 +520,8 @@ fn rule_bounded_work(m: &mut Matrix, case: &Case, tech: Tech, s: &RenderSettings
         }
         Tech::Facade(Technique::Preview) => 1,
         _ => {
-            m.skip(
-                "bounded work",
-                &case.name,
-                tech.name(),
-                Verdict::NotApplicable,
-                "no ray count (scan conversion, radiosity)",
-            );
+            let why = "no ray count (scan conversion, radiosity)";
+            m.not_applicable("bounded work", &case.name, tech.name(), why);
             return;
         }
     };
@@ -555,13 +555,7 @@ fn rule_same_background(
         })
         .collect();
     if pixels.is_empty() {
-        m.skip(
-            "same background",
-            case,
-            tech.name(),
-            Verdict::NotApplicable,
-            "no background pixel",
-        );
+        m.not_applicable("same background", case, tech.name(), "no background pixel");
         return;
     }
     let worst = pixels
@@ -590,10 +584,8 @@ fn rule_phong_equals_whitted(m: &mut Matrix, case: &Case) {
     s.height = 2 * H;
     s.samples = 1;
     s.shadows = ShadowMethod::None;
-    let raster = film(&case.scene, &s);
-    s.technique = Technique::Whitted;
-    s.whitted.max_depth = 0;
-    let traced = film(&case.scene, &s);
+    let (raster, traced) =
+        chiaro_testkit::phong_and_whitted_at_depth_0(&mut s, |s| film(&case.scene, s));
     let opaque = |i: usize| {
         ids.material[i]
             .and_then(|k| case.scene.materials.get(k))
@@ -620,12 +612,12 @@ fn rule_phong_equals_whitted(m: &mut Matrix, case: &Case) {
         chiaro_testkit::dump_ppm(&traced, &format!("conformance-{}-whitted0", case.name));
     }
     if d.compared == 0 {
-        m.skip(
+        let why = "no mesh surface (spheres are tessellated by the scan converter)";
+        m.not_applicable(
             "phong = whitted at depth 0",
             &case.name,
             "phong, whitted",
-            Verdict::NotApplicable,
-            "no mesh surface (spheres are tessellated by the scan converter)",
+            why,
         );
         return;
     }
@@ -659,13 +651,7 @@ fn rule_shadow_methods_agree(m: &mut Matrix, case: &Case, ids: &Ids) {
             .iter()
             .any(|l| !matches!(l, Light::Ambient { .. }))
     {
-        m.skip(
-            rule,
-            &case.name,
-            "all",
-            Verdict::NotApplicable,
-            "no light that casts shadows",
-        );
+        m.not_applicable(rule, &case.name, "all", "no light that casts shadows");
         return;
     }
     let mut s = settings(&case.scene, Tech::Facade(Technique::Phong));
@@ -714,13 +700,7 @@ fn rule_shadow_methods_agree(m: &mut Matrix, case: &Case, ids: &Ids) {
         let f = match chiaro::render(&case.scene, &s, &NoProgress) {
             Ok(f) => f,
             Err(e) => {
-                m.skip(
-                    rule,
-                    &case.name,
-                    &name,
-                    Verdict::NotApplicable,
-                    &format!("refused: {e}"),
-                );
+                m.not_applicable(rule, &case.name, &name, &format!("refused: {e}"));
                 continue;
             }
         };
@@ -753,53 +733,26 @@ fn rule_shadow_methods_agree(m: &mut Matrix, case: &Case, ids: &Ids) {
 fn rule_path_depth_one_is_direct(m: &mut Matrix, case: &Case, ids: &Ids) {
     let rule = "path depth 1 = direct";
     if case.scene.environment.is_some() {
-        m.skip(
-            rule,
-            &case.name,
-            "path, whitted",
-            Verdict::NotApplicable,
-            "environment lighting: Whitted does not integrate it (its method)",
-        );
+        let why = "environment lighting: Whitted does not integrate it (its method)";
+        m.not_applicable(rule, &case.name, "path, whitted", why);
         return;
     }
     let mut scene = case.scene.clone();
-    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     let mut s = settings(&scene, Tech::Facade(Technique::Whitted));
     s.samples = 256;
-    s.shadows = ShadowMethod::Ray;
-    s.whitted.max_depth = 0;
-    let whitted = film(&scene, &s);
-    s.technique = Technique::Path;
-    s.path.max_depth = 1;
-    let path = film(&scene, &s);
-    let w = W as usize;
-    let flat = |i: usize| {
-        let c = whitted.color[i].max_element().max(0.02);
-        [i - 1, i + 1, i - w, i + w]
-            .iter()
-            .all(|&j| (whitted.color[j] - whitted.color[i]).abs().max_element() <= 0.1 * c)
-    };
-    let (mut compared, mut bad) = (0usize, 0usize);
-    for i in 0..whitted.color.len() {
-        if ids.silhouette(i) || ids.id[i] == 0 || !flat(i) {
-            continue;
-        }
-        compared += 1;
-        let (a, b) = (whitted.color[i], path.color[i]);
-        if (a - b).abs().max_element() > 0.02 * a.max_element().max(0.05) {
-            bad += 1;
-        }
-    }
+    let (whitted, path) = chiaro_testkit::whitted_and_path_direct(&mut s, |s| film(&scene, s));
+    // Pixels inside a surface whose neighbours are within 10 %, compared
+    // within 2 % of their brightness (as cross_technique.rs).
+    let flat = chiaro_testkit::smooth_colour(&whitted, 0.1, 0.02);
+    let keep = |i: usize| !ids.silhouette(i) && ids.id[i] != 0 && flat(i);
+    let d = chiaro_testkit::diff_films_relative_to_first(&whitted, &path, 0.02, 0.05, keep);
+    let (compared, bad) = (d.compared, d.over);
     if compared < 50 {
-        m.skip(
-            rule,
-            &case.name,
-            "path, whitted",
-            Verdict::NotApplicable,
-            &format!(
-                "{compared} smooth interior pixels at this size (surface_layer.rs checks close up)"
-            ),
+        let why = format!(
+            "{compared} smooth interior pixels at this size (surface_layer.rs checks close up)"
         );
+        m.not_applicable(rule, &case.name, "path, whitted", &why);
         return;
     }
     m.check(
@@ -831,47 +784,19 @@ fn rule_fast_path_is_reference(m: &mut Matrix, case: &Case) {
                     .color
             })
             .collect();
-        let n = SEEDS as f32;
-        let mean: Vec<Vec3> = (0..films[0].len())
-            .map(|i| films.iter().map(|f| f[i]).sum::<Vec3>() / n)
-            .collect();
-        let var = (0..films[0].len())
-            .map(|i| {
-                films
-                    .iter()
-                    .map(|f| (f[i] - mean[i]) * (f[i] - mean[i]))
-                    .sum::<Vec3>()
-                    / (n - 1.0)
-            })
-            .collect();
-        (mean, var)
+        chiaro_testkit::stats::pixel_mean_and_variance(&films)
     };
     let (fast, fast_var) = means(Kernel::Lanes);
     let (reference, ref_var) = means(Kernel::Reference);
-    let mut worst = 0.0f32;
-    for by in 0..h / 8 {
-        for bx in 0..w / 8 {
-            let (mut d, mut var) = (Vec3::ZERO, Vec3::ZERO);
-            for y in by * 8..by * 8 + 8 {
-                for x in bx * 8..bx * 8 + 8 {
-                    let i = (y * w + x) as usize;
-                    d += fast[i] - reference[i];
-                    var += fast_var[i] + ref_var[i];
-                }
-            }
-            let d = d / 64.0;
-            let se = (var / (64.0 * 64.0 * SEEDS as f32)).powf(0.5);
-            for c in 0..3 {
-                // A block that is black in both (no light reaches it) agrees.
-                let z = if d[c] == 0.0 {
-                    0.0
-                } else {
-                    d[c].abs() / se[c].max(1e-6)
-                };
-                worst = worst.max(z);
-            }
-        }
-    }
+    let worst = chiaro_testkit::stats::worst_block(
+        (&fast, &fast_var),
+        (&reference, &ref_var),
+        w,
+        h,
+        8,
+        SEEDS,
+    )
+    .z;
     m.check(
         "fast path = reference",
         &case.name,
@@ -894,13 +819,7 @@ fn rule_radiosity_matches_path(m: &mut Matrix, case: &Case, ids: &Ids) {
             && mat.normal_map.is_none()
     }) && case.scene.environment.is_none();
     if !diffuse {
-        m.skip(
-            rule,
-            &case.name,
-            "radiosity, path",
-            Verdict::NotApplicable,
-            "not a diffuse scene",
-        );
+        m.not_applicable(rule, &case.name, "radiosity, path", "not a diffuse scene");
         return;
     }
     let mut s = settings(&case.scene, Tech::Facade(Technique::Radiosity));
@@ -961,13 +880,8 @@ fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
         .filter(|&i| textured(ids.material[i]) && !ids.silhouette(i))
         .collect();
     if px.len() < 20 {
-        m.skip(
-            rule,
-            &case.name,
-            "radiosity",
-            Verdict::NotApplicable,
-            "fewer than 20 textured interior pixels",
-        );
+        let why = "fewer than 20 textured interior pixels";
+        m.not_applicable(rule, &case.name, "radiosity", why);
         return;
     }
     // Both copies diffuse only, and textured surfaces not emissive: radiosity
@@ -977,9 +891,7 @@ fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
     // lit as radiosity draws: without ambient lights and the environment
     // (radiosity's listed limitations; phong's ambient term also carries F0).
     let mut diffuse = case.scene.clone();
-    diffuse
-        .lights
-        .retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut diffuse);
     diffuse.environment = None;
     for mat in &mut diffuse.materials {
         mat.reflect = Vec3::ZERO;

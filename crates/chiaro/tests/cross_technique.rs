@@ -1,39 +1,22 @@
 //! Invariants across techniques (ARCHITECTURE.md, "How correctness is
 //! shown"): techniques that should agree do, pixel by pixel, on small images.
 
-use chiaro::scene::{Light, ShadowMethod, Technique};
+use chiaro::scene::{ShadowMethod, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
-use chiaro_testkit::{diff_films, dump_ppm, scenes};
+use chiaro_testkit::{
+    diff_films, diff_films_relative_to_first, dump_ppm, phong_and_whitted_at_depth_0, same_surface,
+    scenes, smooth_colour, whitted_and_path_direct,
+};
 
 fn render(scene: &Scene, settings: &RenderSettings) -> Film {
     chiaro::render(scene, settings, &NoProgress).expect("renders")
 }
 
-/// Pixels where both films see a surface at the same depth with the same
-/// normal, away from silhouettes (all four neighbours agree too).
-fn same_surface(a: &Film, b: &Film) -> impl Fn(usize) -> bool {
-    let w = a.width as usize;
-    let h = a.height as usize;
-    let ok: Vec<bool> = (0..a.color.len())
-        .map(|i| {
-            let (da, db) = (a.depth[i], b.depth[i]);
-            da.is_finite()
-                && db.is_finite()
-                && (da - db).abs() <= 1e-3 * da.max(1.0)
-                && a.normal[i].dot(b.normal[i]) > 0.999
-        })
-        .collect();
-    move |i| {
-        let (x, y) = (i % w, i / w);
-        ok[i]
-            && x > 0
-            && y > 0
-            && x + 1 < w
-            && y + 1 < h
-            && ok[i - 1]
-            && ok[i + 1]
-            && ok[i - w]
-            && ok[i + w]
+/// `scene`'s own settings with `technique`.
+fn with_technique(scene: &Scene, technique: Technique) -> RenderSettings {
+    RenderSettings {
+        technique,
+        ..scene.render.clone()
     }
 }
 
@@ -58,13 +41,9 @@ fn smooth_region(f: &Film) -> impl Fn(usize) -> bool + '_ {
 #[test]
 fn phong_scan_conversion_equals_whitted_at_depth_zero() {
     let scene = scenes::shadow_test(64);
-    let mut s = scene.render.clone();
+    let mut s = with_technique(&scene, Technique::Phong);
     s.shadows = ShadowMethod::None;
-    s.technique = Technique::Phong;
-    let raster = render(&scene, &s);
-    s.technique = Technique::Whitted;
-    s.whitted.max_depth = 0;
-    let traced = render(&scene, &s);
+    let (raster, traced) = phong_and_whitted_at_depth_0(&mut s, |s| render(&scene, s));
     let mask = same_surface(&raster, &traced);
     let d = diff_films(&raster, &traced, 1e-3, &mask);
     if d.over > 0 {
@@ -82,7 +61,7 @@ fn phong_and_whitted_shadow_rays_agree_through_transparent_occluders() {
     // horizontal. On the horizontal surfaces both techniques call the one
     // shadow-ray query, so the shadows tinted by kt (pane) and kt^2 (cube,
     // crossed twice) are the same.
-    use chiaro::scene::{Geometry, Material, Object, Transform};
+    use chiaro::scene::{Geometry, Material, Transform};
     let mut scene = scenes::shadow_test(64);
     let pane = scene.add_material(Material {
         transmit: Vec3::new(0.9, 0.5, 0.2),
@@ -95,37 +74,24 @@ fn phong_and_whitted_shadow_rays_agree_through_transparent_occluders() {
     });
     let quad = scene.add_mesh(chiaro_core::geometry::primitives::plane(0.6, 1));
     let cube = scene.add_mesh(chiaro_core::geometry::primitives::cube());
-    scene.objects.push(Object {
-        name: "pane".into(),
-        geometry: Geometry::Mesh(quad),
-        material: pane,
-        transform: Transform {
-            translate: Vec3::new(0.2, 2.2, 0.8),
-            rotate_degrees: Vec3::new(20.0, 0.0, 10.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
-    scene.objects.push(Object {
-        name: "glass".into(),
-        geometry: Geometry::Mesh(cube),
-        material: glass,
-        smooth: false,
-        transform: Transform {
-            translate: Vec3::new(-1.2, 2.6, -1.0),
-            rotate_degrees: Vec3::new(30.0, 20.0, 0.0),
-            scale: Vec3::splat(0.35),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
-    let mut s = scene.render.clone();
+    let pane_at = Transform {
+        translate: Vec3::new(0.2, 2.2, 0.8),
+        rotate_degrees: Vec3::new(20.0, 0.0, 10.0),
+        ..Transform::default()
+    };
+    let part = (Geometry::Mesh(quad), pane);
+    scenes::add_named(&mut scene, "pane", part, pane_at, true);
+    let glass_at = Transform {
+        translate: Vec3::new(-1.2, 2.6, -1.0),
+        rotate_degrees: Vec3::new(30.0, 20.0, 0.0),
+        scale: Vec3::splat(0.35),
+        ..Transform::default()
+    };
+    let part = (Geometry::Mesh(cube), glass);
+    scenes::add_named(&mut scene, "glass", part, glass_at, false);
+    let mut s = with_technique(&scene, Technique::Phong);
     s.shadows = ShadowMethod::Ray;
-    s.technique = Technique::Phong;
-    let raster = render(&scene, &s);
-    s.technique = Technique::Whitted;
-    s.whitted.max_depth = 0;
-    let traced = render(&scene, &s);
+    let (raster, traced) = phong_and_whitted_at_depth_0(&mut s, |s| render(&scene, s));
     s.shadows = ShadowMethod::None;
     let unshadowed = render(&scene, &s);
     // Horizontal surfaces (not the pane or the cube, which the scan
@@ -163,8 +129,7 @@ fn gouraud_and_phong_agree_on_flat_lit_faces_only_where_they_should() {
     // specular sphere they must differ, on the diffuse faceted box (one
     // normal per face, distant light) they nearly agree.
     let scene = scenes::shadow_test(64);
-    let mut s = scene.render.clone();
-    s.technique = Technique::Phong;
+    let mut s = with_technique(&scene, Technique::Phong);
     let phong = render(&scene, &s);
     s.technique = Technique::Gouraud;
     let gouraud = render(&scene, &s);
@@ -180,40 +145,18 @@ fn path_tracer_at_depth_one_equals_direct_local_shading() {
     // Direct light only, inverse-square point light, no ambient: the path
     // tracer's mean per pixel equals Whitted's depth-0 shading with shadow rays.
     let mut scene = scenes::shadow_test(48);
-    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     let mut s = scene.render.clone();
     s.samples = 64;
-    s.shadows = ShadowMethod::Ray;
-    s.technique = Technique::Whitted;
-    s.whitted.max_depth = 0;
-    let whitted = render(&scene, &s);
-    s.technique = Technique::Path;
-    s.path.max_depth = 1;
-    let path = render(&scene, &s);
+    let (whitted, path) = whitted_and_path_direct(&mut s, |s| render(&scene, s));
     let mask = smooth_region(&whitted);
     // Silhouettes and shadow edges inside a pixel are sampled differently
     // (stratified vs random), so their pixel means differ by the coverage
     // noise: compare only pixels away from image edges (every neighbour
     // within 10% of the pixel), relative to brightness.
-    let w = whitted.width as usize;
-    let flat = |i: usize| {
-        let c = whitted.color[i].max_element().max(0.02);
-        [i - 1, i + 1, i - w, i + w]
-            .iter()
-            .all(|&j| (whitted.color[j] - whitted.color[i]).abs().max_element() <= 0.1 * c)
-    };
-    let mut compared = 0;
-    let mut bad = 0;
-    for i in 0..whitted.color.len() {
-        if !mask(i) || !flat(i) {
-            continue;
-        }
-        compared += 1;
-        let (a, b) = (whitted.color[i], path.color[i]);
-        if (a - b).abs().max_element() > 0.02 * a.max_element().max(0.05) {
-            bad += 1;
-        }
-    }
+    let flat = smooth_colour(&whitted, 0.1, 0.02);
+    let d = diff_films_relative_to_first(&whitted, &path, 0.02, 0.05, |i| mask(i) && flat(i));
+    let (compared, bad) = (d.compared, d.over);
     if bad > compared / 100 {
         dump_ppm(&whitted, "depth1_whitted");
         dump_ppm(&path, "depth1_path");
@@ -241,14 +184,6 @@ fn every_technique_renders_the_test_scene_without_nan() {
         );
         let _ = Vec3::ZERO;
     }
-}
-
-/// The shipped Cornell box (walls in millimetres).
-fn cornell() -> Scene {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/cornell-box.toml");
-    chiaro::io::load_scene(std::path::Path::new(path))
-        .expect("the shipped scene loads")
-        .scene
 }
 
 /// Mean colour per Cornell wall (floor, ceiling, back, left, right) over the
@@ -306,11 +241,8 @@ fn wall_means(scene: &Scene, f: &Film) -> [Vec3; 5] {
 fn radiosity_matches_the_path_tracer_on_the_diffuse_cornell_box() {
     // A converged radiosity solution and a converged path tracer must agree
     // on a purely Lambertian scene: within 4% relative error per wall.
-    let scene = cornell();
-    let mut s = scene.render.clone();
-    s.width = 40;
-    s.height = 40;
-    s.technique = Technique::Radiosity;
+    let scene = scenes::cornell_box(40);
+    let mut s = with_technique(&scene, Technique::Radiosity);
     s.samples = 1;
     s.radiosity.solver = chiaro::scene::RadiositySolver::Hierarchical;
     s.radiosity.formfactor = chiaro::scene::FormFactorMethod::Raycast;
@@ -357,8 +289,7 @@ fn post_filter_antialiasing_changes_only_edges() {
     // aa=post renders one sample per pixel and filters it (FXAA): inside
     // smooth regions the picture is the one-sample picture.
     let scene = scenes::shadow_test(48);
-    let mut s = scene.render.clone();
-    s.technique = Technique::Phong;
+    let mut s = with_technique(&scene, Technique::Phong);
     s.samples = 1;
     let plain = render(&scene, &s);
     s.aa = chiaro::scene::AaMode::Post;

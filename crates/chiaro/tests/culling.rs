@@ -9,6 +9,8 @@ mod common;
 use chiaro::scene::Technique;
 use chiaro::{Film, Scene, Vec3};
 use chiaro_ray::path::Kernel;
+use chiaro_testkit::central_mean;
+use chiaro_testkit::scenes::load_text;
 
 /// A 2 x 2 red quad in the plane z = 0, seen by a camera on +z; its front
 /// faces the camera (`back` false) or away from it (`back` true). Behind
@@ -55,31 +57,6 @@ fn quad_gltf(back: bool, double_sided: bool) -> String {
     )
 }
 
-fn load(back: bool, double_sided: bool) -> Scene {
-    let dir = std::env::temp_dir().join(format!(
-        "chiaro-culling-{}-{back}-{double_sided}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let path = dir.join("quad.gltf");
-    std::fs::write(&path, quad_gltf(back, double_sided)).expect("writes");
-    let loaded = chiaro::io::load_scene(&path).expect("the quads load");
-    let _ = std::fs::remove_dir_all(&dir);
-    loaded.scene
-}
-
-/// The mean colour of the central 8 x 8 pixels (all on the red quad).
-fn centre(f: &Film) -> Vec3 {
-    let (w, h) = (f.width as usize, f.height as usize);
-    let mut sum = Vec3::ZERO;
-    for y in h / 2 - 4..h / 2 + 4 {
-        for x in w / 2 - 4..w / 2 + 4 {
-            sum += f.color[y * w + x];
-        }
-    }
-    sum / 64.0
-}
-
 /// Every technique, the path tracer with each of its kernels.
 const CELLS: [(&str, Technique, Option<Kernel>); 10] = [
     ("preview", Technique::Preview, None),
@@ -122,11 +99,11 @@ fn render_spp(
 #[test]
 fn a_single_sided_quad_is_invisible_from_behind_in_every_technique() {
     for (back, double_sided) in [(false, false), (true, false), (true, true)] {
-        let scene = load(back, double_sided);
+        let scene = load_text("quad.gltf", &quad_gltf(back, double_sided));
         // The importer's flag, read by every technique from the material.
         assert_eq!(scene.materials[0].cull_backface, !double_sided);
         for (name, technique, kernel) in CELLS {
-            let c = centre(&render(&scene, technique, kernel, 32));
+            let c = central_mean(&render(&scene, technique, kernel, 32), 4);
             let case = format!(
                 "{name}, quad seen from its {}, doubleSided {double_sided}: centre {c}",
                 if back { "back" } else { "front" }
@@ -148,10 +125,10 @@ fn a_single_sided_quad_is_invisible_from_behind_in_every_technique() {
         }
     }
     // The control: with the flag cleared the ray techniques draw the back.
-    let mut scene = load(true, false);
+    let mut scene = load_text("quad.gltf", &quad_gltf(true, false));
     scene.materials[0].cull_backface = false;
     for (name, technique, kernel) in [CELLS[0], CELLS[4], CELLS[7]] {
-        let c = centre(&render(&scene, technique, kernel, 32));
+        let c = central_mean(&render(&scene, technique, kernel, 32), 4);
         assert!(c.y < 0.5 * 0.8, "{name} without the flag: centre {c}");
     }
 }
@@ -162,22 +139,13 @@ fn a_single_sided_quad_is_invisible_from_behind_in_every_technique() {
 /// light both see the quad's back.
 const SHADOW_SCENE: &str = r#"
 background = [0, 0, 0]
+camera = { eye = [0, 6, 0], look_at = [0, 0, 0], up = [0, 0, 1], fov = 40 }
+light = [{ type = "point", position = [0, 4, 0], intensity = 16 }]
 
 [render]
 technique = "whitted"
 width = 64
 height = 64
-
-[camera]
-eye = [0, 6, 0]
-look_at = [0, 0, 0]
-up = [0, 0, 1]
-fov = 40
-
-[[light]]
-type = "point"
-position = [0, 4, 0]
-intensity = 16
 
 [material.floor]
 diffuse = 0.8

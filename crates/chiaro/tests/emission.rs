@@ -8,6 +8,8 @@ mod common;
 use chiaro::scene::Technique;
 use chiaro::{Film, NoProgress, Scene, Vec3};
 use chiaro_ray::path::Kernel;
+use chiaro_testkit::central_mean;
+use chiaro_testkit::scenes::{load_text, repo_scene};
 
 /// A 2 x 2 quad in the plane z = 0 facing +z, with a black base colour and
 /// the emissive factor (0.1, 0.5, 0.9) times `strength`, seen by a camera
@@ -43,29 +45,6 @@ fn emissive_quad_gltf(strength: f32) -> String {
     )
 }
 
-fn load(strength: f32) -> Scene {
-    let dir =
-        std::env::temp_dir().join(format!("chiaro-emission-{}-{strength}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let path = dir.join("quad.gltf");
-    std::fs::write(&path, emissive_quad_gltf(strength)).expect("writes");
-    let loaded = chiaro::io::load_scene(&path).expect("the quad loads");
-    let _ = std::fs::remove_dir_all(&dir);
-    loaded.scene
-}
-
-/// The mean colour of the central 8 x 8 pixels (all on the quad).
-fn centre(f: &Film) -> Vec3 {
-    let (w, h) = (f.width as usize, f.height as usize);
-    let mut sum = Vec3::ZERO;
-    for y in h / 2 - 4..h / 2 + 4 {
-        for x in w / 2 - 4..w / 2 + 4 {
-            sum += f.color[y * w + x];
-        }
-    }
-    sum / 64.0
-}
-
 fn render(scene: &Scene, technique: Technique, kernel: Option<Kernel>) -> Film {
     let mut s = scene.render.clone();
     s.technique = technique;
@@ -78,7 +57,7 @@ fn render(scene: &Scene, technique: Technique, kernel: Option<Kernel>) -> Film {
 #[test]
 fn emissive_strength_is_seen_directly_by_every_technique() {
     for strength in [1.0f32, 4.0, 16.0] {
-        let mut scene = load(strength);
+        let mut scene = load_text("quad.gltf", &emissive_quad_gltf(strength));
         // The quad's own light only: the automatic lights and the studio
         // environment would add their (small, specular) reflection off the
         // black base colour.
@@ -104,7 +83,7 @@ fn emissive_strength_is_seen_directly_by_every_technique() {
             ),
         ];
         for (name, film) in &cells {
-            let got = centre(film);
+            let got = central_mean(film, 4);
             // Every camera sample sees the emitter: no noise, float error only.
             assert!(
                 (got - want).abs().max_element() <= 1e-4 * strength,
@@ -119,9 +98,7 @@ fn emissive_strength_is_seen_directly_by_every_technique() {
 /// technique (the gallery's copy in `scenes/gltf/`, with its licence).
 #[test]
 fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenes/gltf/EmissiveStrengthTest.glb");
-    let scene = chiaro::io::load_scene(&path).expect("loads").scene;
+    let scene = repo_scene("scenes/gltf/EmissiveStrengthTest.glb", 96);
     let strengths: Vec<f32> = scene
         .materials
         .iter()
@@ -146,9 +123,7 @@ fn emissive_strength_test_model_cubes_glow_in_path_as_in_phong() {
 /// its own triangles (its glow on the panels is noisy at 16 samples).
 #[test]
 fn phong_equals_whitted_at_depth_0_under_an_emitter_group() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../scenes/gltf/EmissiveStrengthTest.glb");
-    let scene = chiaro::io::load_scene(&path).expect("loads").scene;
+    let scene = repo_scene("scenes/gltf/EmissiveStrengthTest.glb", 96);
     let mut s = scene.render.clone();
     s.technique = Technique::Phong;
     s.width = 96;

@@ -246,7 +246,7 @@ fn the_automatic_light_lights_path_and_phong_alike() {
         scene.environment.is_some(),
         "the studio environment is added"
     );
-    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     scene.environment = None;
     let mut s = scene.render.clone();
     s.width = 96;
@@ -348,7 +348,7 @@ fn the_studio_environment_lights_a_metal_in_every_technique() {
     // The key light alone, in phong: no ambient, no environment.
     let mut key = s.clone();
     key.environment = None;
-    key.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut key);
     settings.technique = Technique::Phong;
     let key_only = surface_mean(&render(&key, &settings));
     eprintln!("metal mean luminance: {means:?}, key light alone {key_only}");

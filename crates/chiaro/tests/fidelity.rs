@@ -125,28 +125,26 @@ fn rel(root: &Path, p: &Path) -> String {
         .replace('\\', "/")
 }
 
-fn sorted_dirs(p: &Path) -> Vec<PathBuf> {
+/// The entries of folder `p` that `keep` accepts, sorted by path (none
+/// where it cannot be read).
+fn sorted_entries(p: &Path, keep: fn(&Path) -> bool) -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = std::fs::read_dir(p)
         .into_iter()
         .flatten()
         .flatten()
         .map(|e| e.path())
-        .filter(|p| p.is_dir())
+        .filter(|p| keep(p))
         .collect();
     v.sort();
     v
 }
 
+fn sorted_dirs(p: &Path) -> Vec<PathBuf> {
+    sorted_entries(p, Path::is_dir)
+}
+
 fn sorted_files(p: &Path) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(p)
-        .into_iter()
-        .flatten()
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.is_file())
-        .collect();
-    v.sort();
-    v
+    sorted_entries(p, Path::is_file)
 }
 
 // ------------------------------------------------------------ the measure

@@ -19,21 +19,13 @@ fn floor(diffuse_or_texture: &str) -> Scene {
     let text = format!(
         r#"
 background = [0, 0, 0]
+camera = {{ eye = [0, 5, 0], look_at = [0, 0, 0], up = [0, 0, 1], fov = 30 }}
+light = [{{ type = "point", position = [0, 3, 0], intensity = 9, attenuation = "inverse_square" }}]
 [render]
 technique = "radiosity"
 width = 48
 height = 48
 samples = 1
-[camera]
-eye = [0, 5, 0]
-look_at = [0, 0, 0]
-up = [0, 0, 1]
-fov = 30
-[[light]]
-type = "point"
-position = [0, 3, 0]
-intensity = 9
-attenuation = "inverse_square"
 [material.floor]
 {diffuse_or_texture}
 [[object]]

@@ -3,9 +3,12 @@
 //! of the same shapes): the scan converter, Whitted and the path tracer shade
 //! the same normal-mapped, textured surface.
 
-use chiaro::scene::{Light, ShadowMethod, Technique};
+use chiaro::scene::{ShadowMethod, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
-use chiaro_testkit::{diff_films, diff_films_relative, dump_ppm};
+use chiaro_testkit::{
+    diff_films, diff_films_relative, diff_films_relative_to_first, dump_ppm, same_surface,
+    smooth_colour, whitted_and_path_direct,
+};
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -40,34 +43,6 @@ fn settings(scene: &Scene, size: u32, technique: Technique) -> RenderSettings {
     s.technique = technique;
     s.whitted.max_depth = 0;
     s
-}
-
-/// Pixels where both films see a surface at the same depth, with the same
-/// normal, and so do their four neighbours (no silhouettes).
-fn same_surface(a: &Film, b: &Film) -> impl Fn(usize) -> bool {
-    let w = a.width as usize;
-    let h = a.height as usize;
-    let ok: Vec<bool> = (0..a.color.len())
-        .map(|i| {
-            let (da, db) = (a.depth[i], b.depth[i]);
-            da.is_finite()
-                && db.is_finite()
-                && (da - db).abs() <= 1e-3 * da.max(1.0)
-                && a.normal[i].dot(b.normal[i]) > 0.999
-        })
-        .collect();
-    move |i| {
-        let (x, y) = (i % w, i / w);
-        ok[i]
-            && x > 0
-            && y > 0
-            && x + 1 < w
-            && y + 1 < h
-            && ok[i - 1]
-            && ok[i + 1]
-            && ok[i - w]
-            && ok[i + w]
-    }
 }
 
 #[test]
@@ -123,7 +98,7 @@ fn whitted_and_path_show_the_normal_map() {
 #[test]
 fn path_at_depth_one_equals_direct_local_shading_on_a_normal_mapped_model() {
     let mut scene = model().clone();
-    scene.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     // The studio environment is a light the path tracer samples at depth 1
     // and Whitted does not integrate (as conformance.rs's depth-one rule
     // skips environment-lit cases): the key light alone.
@@ -147,39 +122,16 @@ fn path_at_depth_one_equals_direct_local_shading_on_a_normal_mapped_model() {
     cam.fov_y_degrees = 1.2;
     let mut s = settings(&scene, 64, Technique::Whitted);
     s.samples = 64;
-    s.shadows = ShadowMethod::Ray;
-    let whitted = render(&scene, &s);
-    s.technique = Technique::Path;
-    s.path.max_depth = 1;
-    let path = render(&scene, &s);
+    let (whitted, path) = whitted_and_path_direct(&mut s, |s| render(&scene, s));
     let mask = same_surface(&whitted, &whitted);
     // As in cross_technique.rs: the two techniques place their samples in
     // a pixel differently, so pixels across an edge of the image (here the
     // normal map's rim and the terminator) differ by their coverage;
     // compare only pixels whose neighbours are within 10 %.
-    let w = whitted.width as usize;
-    let smooth = |i: usize| {
-        let c = whitted.color[i].max_element().max(0.02);
-        [i - 1, i + 1, i - w, i + w]
-            .iter()
-            .all(|&j| (whitted.color[j] - whitted.color[i]).abs().max_element() <= 0.1 * c)
-    };
-    let mut compared = 0;
-    let mut bad = 0;
-    let mut worst = 0.0f32;
-    for i in 0..whitted.color.len() {
-        if !mask(i) || !smooth(i) {
-            continue;
-        }
-        compared += 1;
-        let (a, b) = (whitted.color[i], path.color[i]);
-        let e = (a - b).abs().max_element() / a.max_element().max(0.05);
-        worst = worst.max(e);
-        if e > 0.02 {
-            bad += 1;
-        }
-    }
-    eprintln!("path vs whitted: {bad} of {compared} over 2 %, worst {worst}");
+    let smooth = smooth_colour(&whitted, 0.1, 0.02);
+    let d = diff_films_relative_to_first(&whitted, &path, 0.02, 0.05, |i| mask(i) && smooth(i));
+    let (compared, bad) = (d.compared, d.over);
+    eprintln!("path vs whitted: {bad} of {compared} over 2 %: {d:?}");
     if bad > compared / 50 {
         dump_ppm(&whitted, "surface_depth1_whitted");
         dump_ppm(&path, "surface_depth1_path");

@@ -238,6 +238,72 @@ pub(crate) fn sphere_roots(ray: &Ray, center: glam::Vec3, radius: f32) -> [Optio
     [Some(t0), intersect_sphere(&rest, center, radius)]
 }
 
+/// A random point of `ps`'s bounds grown by a fifth of their extent on
+/// every side (a ray origin in the tests' random ray sets).
+#[cfg(test)]
+pub(crate) fn random_origin(
+    ps: &crate::prepared::PreparedScene<'_>,
+    rng: &mut crate::sampling::Rng,
+) -> glam::Vec3 {
+    use crate::sampling::uniform;
+    let b = ps.bounds;
+    let grow = b.extent() * 0.2;
+    b.min - grow
+        + (b.extent() + 2.0 * grow) * glam::Vec3::new(uniform(rng), uniform(rng), uniform(rng))
+}
+
+/// Asserts that rays leaving a surface of `ps` do not hit it again through
+/// `accel` (rustracer's shape-test invariant): 20,000 rays from random
+/// points of its triangles and, every `sphere_every`-th, of its analytic
+/// sphere `(centre, radius)` (the primitive after the triangles), in
+/// directions on both sides down to grazing angles (1e-3 rad), their
+/// origins offset by `offset_ray_origin`. Only a sphere may be re-entered,
+/// and then far away.
+#[cfg(test)]
+pub(crate) fn assert_rays_leave_surfaces(
+    ps: &crate::prepared::PreparedScene<'_>,
+    accel: &dyn Accelerator,
+    (centre, radius): (glam::Vec3, f32),
+    sphere_every: u32,
+) {
+    use crate::sampling::{pixel_rng, sample_uniform_sphere, sample_uniform_triangle};
+    use crate::sampling::{uniform, uniform2};
+    use glam::Vec3;
+    let nt = ps.triangles.len() as u32;
+    let mut rng = pixel_rng(5, 0, 0, 0);
+    for i in 0..20_000u32 {
+        let (prim, p, ng) = if i % sphere_every == 0 {
+            let d = sample_uniform_sphere(uniform2(&mut rng));
+            (nt, centre + radius * d, d)
+        } else {
+            let t = (uniform(&mut rng) * nt as f32) as u32 % nt;
+            let uv = sample_uniform_triangle(uniform2(&mut rng));
+            let sh = ps.triangle_surface(t, uv.x, uv.y);
+            (t, sh.p, sh.ng)
+        };
+        // Directions on both sides, down to grazing angles (1e-3 rad).
+        let f = crate::geometry::Frame::from_normal(ng);
+        let side = if i % 2 == 0 { 1.0 } else { -1.0 };
+        let graze = if i % 3 == 0 { 1e-3 } else { uniform(&mut rng) };
+        let phi = std::f32::consts::TAU * uniform(&mut rng);
+        let cos_t = graze.max(1e-3);
+        let sin_t = (1.0 - cos_t * cos_t).sqrt();
+        let dir = f.to_world(Vec3::new(
+            sin_t * phi.cos(),
+            sin_t * phi.sin(),
+            side * cos_t,
+        ));
+        let ray = Ray::new(crate::geometry::offset_ray_origin(p, ng, dir), dir);
+        if let Some(h) = accel.intersect(&ray).filter(|h| h.prim == prim) {
+            // Only a sphere can be re-entered, and then far away.
+            assert!(
+                prim >= nt && side < 0.0 && h.t > 1e-2,
+                "self-hit {h:?} at {i}"
+            );
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -125,14 +125,8 @@ impl Ctx<'_, '_> {
         sp: &ShadingPoint,
         counts: Option<&[i32]>,
     ) -> Vec3 {
-        let owned;
-        let m = match self.without_specular_ambient(m) {
-            Some(o) => {
-                owned = o;
-                &owned
-            }
-            None => m,
-        };
+        let mut owned = None;
+        let m = self.frame_material(m, &mut owned);
         if let Some(pl) = &self.point_lighting {
             return pl.shade(m, sp);
         }
@@ -173,6 +167,20 @@ impl Ctx<'_, '_> {
             .then(|| m.under_environment(true))
     }
 
+    /// `m` as this frame lights it: [`Self::without_specular_ambient`]'s
+    /// copy, kept in `owned`, or `m` itself.
+    #[inline]
+    fn frame_material<'m>(
+        &self,
+        m: &'m SurfaceMaterial,
+        owned: &'m mut Option<SurfaceMaterial>,
+    ) -> &'m SurfaceMaterial {
+        match self.without_specular_ambient(m) {
+            Some(o) => owned.insert(o),
+            None => m,
+        }
+    }
+
     /// The jitter of sample `i` of light `li` at the shading point `key`:
     /// area lights at their strata centres, an emitter group's picks from
     /// the jitter sequence Whitted shares ([`group_jitter`]).
@@ -193,14 +201,8 @@ impl Ctx<'_, '_> {
         m: &SurfaceMaterial,
         sp: &ShadingPoint,
     ) -> Split {
-        let owned;
-        let m = match self.without_specular_ambient(m) {
-            Some(o) => {
-                owned = o;
-                &owned
-            }
-            None => m,
-        };
+        let mut owned = None;
+        let m = self.frame_material(m, &mut owned);
         if let Some(pl) = &self.point_lighting {
             let [total, rest] = pl.shade_split(m, sp);
             return Split {
@@ -449,34 +451,16 @@ pub(crate) struct SampleAt {
     pub(crate) hit: SurfaceHit,
     /// Perspective-correct barycentrics `(u, v)` of the sample.
     pub(crate) b: Vec2,
-    /// The uv footprint of one pixel (zero for untextured triangles).
-    pub(crate) duv_dx: Vec2,
-    pub(crate) duv_dy: Vec2,
+    /// The uv footprint of one pixel, along x and y (zero for untextured
+    /// triangles).
+    pub(crate) duv: [Vec2; 2],
     /// Unit direction to the eye (zero where the method does not read it).
     pub(crate) wo: Vec3,
-    /// True where the back of a two-sided surface is seen; `sign` is then
-    /// -1 (the normals' factor), else 1.
-    pub(crate) flip: bool,
+    /// -1 where the back of a two-sided surface is seen (the normals'
+    /// factor), else 1.
     pub(crate) sign: f32,
     /// Film position of the sample.
-    pub(crate) sx: f32,
-    pub(crate) sy: f32,
-}
-
-/// What a shading method gives a sample, before the terms every method
-/// shares (environment light, reflection map, depth cueing).
-pub(crate) struct Lit {
-    pub(crate) color: Vec3,
-    /// The normal the sample is shaded with (flipped to the viewer's side).
-    pub(crate) n: Vec3,
-    /// The reflection map's weight.
-    pub(crate) kr: Vec3,
-    /// The lobe that reflects the prefiltered environment, when there is one.
-    pub(crate) lobe: Option<SurfaceMaterial>,
-    /// The part of `color` from specular reflection and emission.
-    pub(crate) specular: Vec3,
-    /// A BLEND point's straight-through transmission (see [`SampleResult`]).
-    pub(crate) coverage_kt: Option<Vec3>,
+    pub(crate) film: Vec2,
 }
 
 impl Ctx<'_, '_> {
@@ -490,7 +474,7 @@ impl Ctx<'_, '_> {
         let (hit, b) = (&at.hit, at.b);
         // diffuse_texture_factor: one without a texture.
         let tex = if td.material.texture.is_some() {
-            let tc = PreparedScene::tex_coord(hit, at.duv_dx, at.duv_dy);
+            let tc = PreparedScene::tex_coord(hit, at.duv[0], at.duv[1]);
             ps.diffuse_texture_factor(hit.material, &tc)
         } else {
             Vec3::ONE
@@ -506,15 +490,30 @@ impl Ctx<'_, '_> {
             sm.kd *= tex;
             sm
         };
+        let lobe = ps.prefiltered_environment().map(|_| vertex_lobe());
         Lit {
             color: split.diffuse * tex + split.rest,
             n,
-            kr: td.material.reflect,
-            lobe: ps.prefiltered_environment().map(|_| vertex_lobe()),
             specular: split.rest,
             coverage_kt: None,
+            reflects: (td.material.reflect, lobe),
         }
     }
+}
+
+/// What a shading method gives a sample, before the terms every method
+/// shares (environment light, reflection map, depth cueing).
+pub(crate) struct Lit {
+    pub(crate) color: Vec3,
+    /// The normal the sample is shaded with (flipped to the viewer's side).
+    pub(crate) n: Vec3,
+    /// The part of `color` from specular reflection and emission.
+    pub(crate) specular: Vec3,
+    /// A BLEND point's straight-through transmission (see [`SampleResult`]).
+    pub(crate) coverage_kt: Option<Vec3>,
+    /// What reflects the environment: the reflection map's weight `kr`, and
+    /// the lobe that reflects the prefiltered environment when there is one.
+    pub(crate) reflects: (Vec3, Option<SurfaceMaterial>),
 }
 
 /// Shades the sample at film position `(sx, sy)` (direction `dir`) where
@@ -571,22 +570,18 @@ pub(crate) fn shade_sample(
     let at = SampleAt {
         hit,
         b,
-        duv_dx,
-        duv_dy,
+        duv: [duv_dx, duv_dy],
         wo,
-        flip,
         sign: if flip { -1.0 } else { 1.0 },
-        sx,
-        sy,
+        film: Vec2::new(sx, sy),
     };
     // The method's own step.
     let Lit {
         mut color,
         n,
-        kr,
-        lobe,
         mut specular,
         coverage_kt,
+        reflects: (kr, lobe),
     } = match td.mode {
         ShadeMode::Phong => phong::shade(ctx, td, &at, counts, want_specular),
         ShadeMode::Gouraud => gouraud::shade(ctx, poly, td, &at),

@@ -25,6 +25,7 @@ use chiaro_core::scene::{Material, RenderSettings, Scene, ShadeMode, Technique};
 use chiaro_core::shading::PointLighting;
 use chiaro_core::shading::texture::environment_radiance;
 use chiaro_core::shading::{LocalLighting, ShadingPoint, SurfaceMaterial, shade_local};
+use chiaro_testkit::scenes::{add_named, add_object, camera, point_light, translate};
 use glam::{Vec2, Vec3};
 
 fn settings(technique: Technique, w: u32, h: u32) -> RenderSettings {
@@ -58,20 +59,10 @@ fn test_scene() -> Scene {
         ..Material::default()
     });
     let plane = s.add_mesh(primitives::plane(3.0, 4));
-    s.objects.push(Object {
-        geometry: Geometry::Sphere { radius: 1.0 },
-        material: shiny,
-        ..Object::default()
-    });
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: floor,
-        transform: Transform {
-            translate: Vec3::new(0.0, -1.0, 0.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    let ball = (Geometry::Sphere { radius: 1.0 }, shiny);
+    add_named(&mut s, "", ball, Transform::default(), true);
+    let below = translate(Vec3::new(0.0, -1.0, 0.0));
+    add_named(&mut s, "", (Geometry::Mesh(plane), floor), below, true);
     s.lights = vec![
         Light::Ambient {
             color: Vec3::ONE,
@@ -110,12 +101,15 @@ fn test_scene() -> Scene {
             intensity: 0.3,
         },
     ];
-    s.camera = Camera {
-        eye: Vec3::new(0.5, 1.5, 5.0),
-        look_at: Vec3::new(0.0, -0.3, 0.0),
-        fov_y_degrees: 40.0,
-        ..Camera::default()
-    };
+    s.camera = camera(Vec3::new(0.5, 1.5, 5.0), Vec3::new(0.0, -0.3, 0.0), 40.0);
+    s
+}
+
+/// [`test_scene`] with its first three lights (ambient and the two point
+/// lights): the lights of the point-light model.
+fn point_lit_scene() -> Scene {
+    let mut s = test_scene();
+    s.lights.truncate(3);
     s
 }
 
@@ -210,23 +204,9 @@ fn flat_is_constant_per_polygon_and_gouraud_interpolates_vertex_colours() {
         Vec3::new(2.0, 0.0, 0.0),
         Vec3::new(0.0, 2.0, 0.0),
     ));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(q),
-        material: m,
-        smooth: false,
-        ..Object::default()
-    });
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.5, 0.3, 1.0),
-        color: Vec3::ONE,
-        intensity: 1.0,
-        attenuation: Attenuation::InverseSquare,
-    });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 0.0, 2.0),
-        fov_y_degrees: 60.0,
-        ..Camera::default()
-    };
+    add_object(&mut s, Geometry::Mesh(q), m, Transform::default());
+    s.lights.push(point_light(Vec3::new(0.5, 0.3, 1.0), 1.0));
+    s.camera = camera(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 60.0);
     let (w, h) = (32, 32);
     let flat = render(&s, &settings(Technique::Flat, w, h), &NoProgress).expect("flat");
     let ps = PreparedScene::new(&s, PrepareOptions::default());
@@ -288,23 +268,11 @@ fn flat_is_constant_per_polygon_and_gouraud_interpolates_vertex_colours() {
     assert!(max_diff > 0.01);
 }
 
-/// A plane seen at a grazing angle whose emission texture is a ramp in u:
-/// the rendered value must be the u of the ray-plane hit (no affine distortion).
-#[test]
-fn textures_are_interpolated_perspective_correctly() {
-    let mut s = Scene::default();
-    let n = 64u32;
-    let ramp = ImageTexture {
-        source: "ramp".into(),
-        width: 1,
-        height: n,
-        texels: (0..n)
-            .map(|i| [(i as f32 + 0.5) / n as f32, 0.0, 0.0, 1.0])
-            .collect(),
-        wrap: WrapMode::Clamp,
-        ..Default::default()
-    };
-    let tex = s.add_texture(Texture::Image(ramp));
+/// Adds the quad `corner + s u + t v` emitting `image` (white emission
+/// times the texture, no diffuse or ambient reflection), so that a pixel
+/// shows the texture as filtered at it.
+fn emitting_quad(s: &mut Scene, image: ImageTexture, corner: Vec3, u: Vec3, v: Vec3) {
+    let tex = s.add_texture(Texture::Image(image));
     let m = s.add_material(Material {
         diffuse: Vec3::ZERO,
         ambient: Vec3::ZERO,
@@ -312,22 +280,27 @@ fn textures_are_interpolated_perspective_correctly() {
         emission_texture: Some(tex),
         ..Material::default()
     });
-    // Two big triangles, uv u along the depth axis.
-    let q = s.add_mesh(primitives::quad(
-        Vec3::new(-2.0, 0.0, 2.0),
-        Vec3::new(4.0, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, -40.0),
-    ));
+    let q = s.add_mesh(primitives::quad(corner, u, v));
     s.objects.push(Object {
         geometry: Geometry::Mesh(q),
         material: m,
         ..Object::default()
     });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 0.5, 2.5),
-        look_at: Vec3::new(0.0, 0.0, -5.0),
-        ..Camera::default()
-    };
+}
+
+/// A plane seen at a grazing angle whose emission texture is a ramp in u:
+/// the rendered value must be the u of the ray-plane hit (no affine distortion).
+#[test]
+fn textures_are_interpolated_perspective_correctly() {
+    let mut s = Scene::default();
+    let n = 64u32;
+    let texels = (0..n).map(|i| [(i as f32 + 0.5) / n as f32, 0.0, 0.0, 1.0]);
+    let mut ramp = ImageTexture::new("ramp".into(), 1, n, texels.collect());
+    ramp.wrap = WrapMode::Clamp;
+    // Two big triangles, uv u along the depth axis.
+    let (u, v) = (Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -40.0));
+    emitting_quad(&mut s, ramp, Vec3::new(-2.0, 0.0, 2.0), u, v);
+    s.camera = camera(Vec3::new(0.0, 0.5, 2.5), Vec3::new(0.0, 0.0, -5.0), 45.0);
     let (w, h) = (32, 32);
     let film = render(&s, &settings(Technique::Phong, w, h), &NoProgress).expect("render");
     let mut checked = 0;
@@ -372,29 +345,9 @@ fn distant_checker_is_filtered_to_its_mean_by_mip_mapping() {
         wrap: WrapMode::Repeat,
         ..Default::default()
     };
-    let tex = s.add_texture(Texture::Image(checker));
-    let m = s.add_material(Material {
-        diffuse: Vec3::ZERO,
-        ambient: Vec3::ZERO,
-        emission: Vec3::ONE,
-        emission_texture: Some(tex),
-        ..Material::default()
-    });
-    let q = s.add_mesh(primitives::quad(
-        Vec3::new(-1.0, -1.0, 0.0),
-        Vec3::new(2.0, 0.0, 0.0),
-        Vec3::new(0.0, 2.0, 0.0),
-    ));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(q),
-        material: m,
-        ..Object::default()
-    });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 0.0, 2.5),
-        fov_y_degrees: 50.0,
-        ..Camera::default()
-    };
+    let (u, v) = (Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0));
+    emitting_quad(&mut s, checker, Vec3::new(-1.0, -1.0, 0.0), u, v);
+    s.camera = camera(Vec3::new(0.0, 0.0, 2.5), Vec3::ZERO, 50.0);
     // 16x16 pixels over 256x256 texels: lod about 4, every pixel averages out.
     let film = render(&s, &settings(Technique::Phong, 16, 16), &NoProgress).expect("render");
     for (c, d) in film.color.iter().zip(&film.depth) {
@@ -489,16 +442,7 @@ fn supersampling_averages_edges_and_keeps_interiors() {
 #[test]
 fn environment_is_background_and_reflection() {
     let mut s = test_scene();
-    let env_img = ImageTexture {
-        source: "env".into(),
-        width: 8,
-        height: 4,
-        texels: (0..32)
-            .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
-            .collect(),
-        wrap: WrapMode::Repeat,
-        ..Default::default()
-    };
+    let env_img = chiaro_testkit::scenes::sky_image();
     let t = s.add_texture(Texture::Image(env_img));
     s.environment = Some(Environment {
         texture: t,
@@ -543,12 +487,7 @@ fn two_sided_back_faces_are_lit_and_one_sided_are_culled() {
         material: m,
         ..Object::default()
     });
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 0.0, 2.0),
-        color: Vec3::ONE,
-        intensity: 4.0,
-        attenuation: Attenuation::InverseSquare,
-    });
+    s.lights.push(point_light(Vec3::new(0.0, 0.0, 2.0), 4.0));
     let st = settings(Technique::Phong, 16, 16);
     let culled = render(&s, &st, &NoProgress).expect("render");
     assert!(culled.depth.iter().all(|d| d.is_infinite()));
@@ -776,8 +715,7 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
 
 #[test]
 fn vertex_split_equals_corner_split_of_every_face() {
-    let mut s = test_scene();
-    s.lights.truncate(3);
+    let s = point_lit_scene();
     // Vertex colours, so that kd varies per vertex.
     let ps0 = tessellated(&s);
     let mut ps = ps0;
@@ -809,8 +747,7 @@ fn vertex_split_equals_corner_split_of_every_face() {
 
 #[test]
 fn uniform_vertex_shading_lights_the_vertices_of_the_samples_triangles() {
-    let mut s = test_scene();
-    s.lights.truncate(3);
+    let mut s = point_lit_scene();
     for two_sided in [false, true] {
         s.materials[0].two_sided = two_sided;
         let ps = tessellated(&s);
@@ -975,8 +912,7 @@ fn tent_filter_widens_edges_keeps_interiors_and_crops_exactly() {
 /// the vertex cache has evicted and refilled its slots.
 #[test]
 fn on_demand_corners_are_the_vertex_illumination() {
-    let mut s = test_scene();
-    s.lights.truncate(3);
+    let mut s = point_lit_scene();
     let one = s.objects[0].material;
     for o in &mut s.objects {
         o.material = one;

@@ -13,8 +13,9 @@ use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::progress::Progress;
 use chiaro_core::scene::ShadowMethod;
-use chiaro_core::scene::{Camera, Geometry, Light, Mesh, Object, Transform};
+use chiaro_core::scene::{Camera, Geometry, Light, Object, Transform};
 use chiaro_core::scene::{Material, RenderSettings, Scene, ShadeMode, Technique, TransparencyMode};
+use chiaro_testkit::scenes::{add_named, camera, point_light, translate};
 use glam::{Vec2, Vec3};
 
 fn settings(shadows: ShadowMethod, w: u32, h: u32) -> RenderSettings {
@@ -60,7 +61,7 @@ fn render_with(scene: &Scene, s: &RenderSettings, counting: VolumeCounting) -> F
 /// The shared shadow test scene lit by its point light only.
 fn light_only(size: u32) -> Scene {
     let mut s = chiaro_testkit::scenes::shadow_test(size);
-    s.lights.retain(|l| !matches!(l, Light::Ambient { .. }));
+    chiaro_testkit::scenes::drop_ambient(&mut s);
     s
 }
 
@@ -185,11 +186,7 @@ fn plane_at_grazing_light_has_no_acne() {
         color: Vec3::ONE,
         intensity: 1.0,
     });
-    scene.camera = Camera {
-        eye: Vec3::new(0.0, 3.0, -3.0),
-        look_at: Vec3::ZERO,
-        ..Camera::default()
-    };
+    scene.camera = camera(Vec3::new(0.0, 3.0, -3.0), Vec3::ZERO, 45.0);
     let (w, h) = (48, 48);
     for res in [256, 1024] {
         let mut s = settings(ShadowMethod::Map, w, h);
@@ -219,12 +216,7 @@ fn camera_inside_a_shadow_volume_is_right_with_z_fail() {
     // The eye sits in the ball's shadow, just above the floor.
     let (w, h) = (48, 48);
     let mut scene = light_only(48);
-    scene.camera = Camera {
-        eye: Vec3::new(-0.8, 0.25, 0.65),
-        look_at: Vec3::new(0.6, 0.0, 2.5),
-        fov_y_degrees: 70.0,
-        ..Camera::default()
-    };
+    scene.camera = camera(Vec3::new(-0.8, 0.25, 0.65), Vec3::new(0.6, 0.0, 2.5), 70.0);
     let ray = dark(&render_with(
         &scene,
         &settings(ShadowMethod::Ray, w, h),
@@ -264,20 +256,13 @@ fn crossing_quads(mode: TransparencyMode, kt: f32) -> Scene {
     let red = scene.add_material(mat("red", Vec3::X));
     let blue = scene.add_material(mat("blue", Vec3::Z));
     let plane = scene.add_mesh(primitives::plane(1.0, 2));
-    scene.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: red,
-        ..Object::default()
-    });
-    scene.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: blue,
-        transform: Transform {
-            rotate_degrees: Vec3::new(0.0, 0.0, 20.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    let tilted = Transform {
+        rotate_degrees: Vec3::new(0.0, 0.0, 20.0),
+        ..Transform::default()
+    };
+    let part = (Geometry::Mesh(plane), red);
+    add_named(&mut scene, "", part, Transform::default(), true);
+    add_named(&mut scene, "", (Geometry::Mesh(plane), blue), tilted, true);
     scene.lights.push(Light::Ambient {
         color: Vec3::ONE,
         intensity: 1.0,
@@ -369,18 +354,10 @@ fn transparent_casters_tint_alike_in_every_shadow_method() {
         },
         ..Object::default()
     });
-    scene.lights.push(Light::Point {
-        position: Vec3::new(0.0, 3.0, 0.0),
-        color: Vec3::ONE,
-        intensity: 5.0,
-        attenuation: chiaro_core::scene::Attenuation::InverseSquare,
-    });
-    scene.camera = Camera {
-        eye: Vec3::new(0.0, 6.0, -0.01),
-        look_at: Vec3::ZERO,
-        fov_y_degrees: 20.0,
-        ..Camera::default()
-    };
+    scene
+        .lights
+        .push(point_light(Vec3::new(0.0, 3.0, 0.0), 5.0));
+    scene.camera = camera(Vec3::new(0.0, 6.0, -0.01), Vec3::ZERO, 20.0);
     let (w, h) = (32, 32);
     let mut s_none = settings(ShadowMethod::None, w, h);
     s_none.transparency = Some(TransparencyMode::ScreenDoor);
@@ -449,76 +426,10 @@ impl Progress for Warnings {
     }
 }
 
-/// The shipped Cornell box (its OBJ meshes: `v` and `f` lines only),
-/// without the ambient light.
+/// The shipped Cornell box without the ambient light.
 fn cornell_box() -> Scene {
-    let mut scene = Scene::default();
-    let mat = |name: &str, kd: Vec3, e: Vec3| Material {
-        emission: e,
-        ..Material::diffuse(name, kd)
-    };
-    let white = scene.add_material(mat("white", Vec3::new(0.725, 0.71, 0.68), Vec3::ZERO));
-    let red = scene.add_material(mat("red", Vec3::new(0.63, 0.065, 0.05), Vec3::ZERO));
-    let green = scene.add_material(mat("green", Vec3::new(0.14, 0.45, 0.091), Vec3::ZERO));
-    let light = scene.add_material(mat("light", Vec3::splat(0.78), Vec3::new(17.0, 12.0, 4.0)));
-    for (name, m) in [
-        ("floor", white),
-        ("ceiling", white),
-        ("back-wall", white),
-        ("left-wall", red),
-        ("right-wall", green),
-        ("light", light),
-        ("short-block", white),
-        ("tall-block", white),
-    ] {
-        let path = format!(
-            "{}/../../scenes/meshes/cornell-{name}.obj",
-            env!("CARGO_MANIFEST_DIR")
-        );
-        let text = std::fs::read_to_string(&path).expect("shipped Cornell mesh");
-        let mut mesh = Mesh::default();
-        for line in text.lines() {
-            let w: Vec<&str> = line.split_whitespace().collect();
-            match w.first() {
-                Some(&"v") => mesh.positions.push(Vec3::new(
-                    w[1].parse().expect("x"),
-                    w[2].parse().expect("y"),
-                    w[3].parse().expect("z"),
-                )),
-                Some(&"f") => {
-                    let ids: Vec<u32> = w[1..]
-                        .iter()
-                        .map(|s| {
-                            s.split('/')
-                                .next()
-                                .and_then(|i| i.parse::<u32>().ok())
-                                .expect("index")
-                                - 1
-                        })
-                        .collect();
-                    for k in 1..ids.len() - 1 {
-                        mesh.indices.push([ids[0], ids[k], ids[k + 1]]);
-                    }
-                }
-                _ => {}
-            }
-        }
-        let mesh = scene.add_mesh(mesh);
-        scene.objects.push(Object {
-            name: name.into(),
-            geometry: Geometry::Mesh(mesh),
-            material: m,
-            smooth: false,
-            ..Object::default()
-        });
-    }
-    scene.camera = Camera {
-        eye: Vec3::new(278.0, 273.0, -800.0),
-        look_at: Vec3::new(278.0, 273.0, 0.0),
-        up: Vec3::Y,
-        fov_y_degrees: 39.3077,
-        ..Camera::default()
-    };
+    let mut scene = chiaro_testkit::scenes::cornell_box(64);
+    chiaro_testkit::scenes::drop_ambient(&mut scene);
     scene
 }
 
@@ -527,12 +438,7 @@ fn cornell_box() -> Scene {
 fn area_lights_at_centres(ps: &mut PreparedScene<'_>) {
     for l in &mut ps.lights {
         if let Light::Area { shape, .. } = l {
-            *l = Light::Point {
-                position: shape.center(),
-                color: Vec3::ONE,
-                intensity: 1e5,
-                attenuation: chiaro_core::scene::Attenuation::InverseSquare,
-            };
+            *l = point_light(shape.center(), 1e5);
         }
     }
 }
@@ -620,34 +526,19 @@ fn light_in_a_polygon_plane() -> Scene {
     let floor = scene.add_mesh(primitives::plane(4.0, 4));
     let shelf = scene.add_mesh(primitives::plane(1.0, 1));
     let cube = scene.add_mesh(primitives::cube());
-    scene.objects.push(Object {
-        name: "floor".into(),
-        geometry: Geometry::Mesh(floor),
-        material: grey,
-        ..Object::default()
-    });
-    scene.objects.push(Object {
-        name: "shelf".into(),
-        geometry: Geometry::Mesh(shelf),
-        material: grey,
-        transform: Transform {
-            translate: Vec3::new(-2.0, 1.0, 1.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
-    scene.objects.push(Object {
-        name: "box".into(),
-        geometry: Geometry::Mesh(cube),
-        material: grey,
-        smooth: false,
-        transform: Transform {
-            translate: Vec3::new(0.5, 0.5, 0.0),
-            scale: Vec3::splat(0.5),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    let no_move = Transform::default();
+    let part = (Geometry::Mesh(floor), grey);
+    add_named(&mut scene, "floor", part, no_move, true);
+    let shelf_at = translate(Vec3::new(-2.0, 1.0, 1.0));
+    let part = (Geometry::Mesh(shelf), grey);
+    add_named(&mut scene, "shelf", part, shelf_at, true);
+    let box_at = Transform {
+        translate: Vec3::new(0.5, 0.5, 0.0),
+        scale: Vec3::splat(0.5),
+        ..Transform::default()
+    };
+    let part = (Geometry::Mesh(cube), grey);
+    add_named(&mut scene, "box", part, box_at, false);
     // A 0.4 x 0.4 quad light in the plane y = 1, centre (2, 1, 0).
     scene.lights.push(Light::Area {
         shape: chiaro_core::scene::AreaShape::Quad {
@@ -659,12 +550,7 @@ fn light_in_a_polygon_plane() -> Scene {
         intensity: 20.0,
         two_sided: true,
     });
-    scene.camera = Camera {
-        eye: Vec3::new(0.0, 5.0, -6.0),
-        look_at: Vec3::new(0.0, 0.0, 0.5),
-        fov_y_degrees: 45.0,
-        ..Camera::default()
-    };
+    scene.camera = camera(Vec3::new(0.0, 5.0, -6.0), Vec3::new(0.0, 0.0, 0.5), 45.0);
     scene
 }
 
@@ -706,12 +592,7 @@ fn open_occluders_are_named_in_a_warning_and_still_shadow() {
     // The shelf (an open quad) over the floor under a point light: it gets
     // per-triangle volumes, a warning names it, and the shadow is right.
     let mut scene = light_in_a_polygon_plane();
-    scene.lights = vec![Light::Point {
-        position: Vec3::new(-2.0, 3.0, 1.0),
-        color: Vec3::ONE,
-        intensity: 10.0,
-        attenuation: chiaro_core::scene::Attenuation::InverseSquare,
-    }];
+    scene.lights = vec![point_light(Vec3::new(-2.0, 3.0, 1.0), 10.0)];
     let mut ps = PreparedScene::new(&scene, PrepareOptions::default());
     let (n, shadowed) = assert_volumes_match_rays(&mut ps, 64, 48);
     assert!(n > 64 * 48 * 8 / 10 && shadowed > 100, "{n} {shadowed}");
@@ -735,11 +616,11 @@ fn open_occluders_are_named_in_a_warning_and_still_shadow() {
 fn many_point_lights(count: usize) -> Scene {
     let mut scene = light_only(32);
     scene.lights = (0..count)
-        .map(|i| Light::Point {
-            position: Vec3::new(-2.0 + 4.0 * i as f32 / count as f32, 4.0, -1.0),
-            color: Vec3::ONE,
-            intensity: 10.0 / count as f32,
-            attenuation: chiaro_core::scene::Attenuation::InverseSquare,
+        .map(|i| {
+            point_light(
+                Vec3::new(-2.0 + 4.0 * i as f32 / count as f32, 4.0, -1.0),
+                10.0 / count as f32,
+            )
         })
         .collect();
     scene

@@ -7,9 +7,8 @@ use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::SceneBvh;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::NoProgress;
-use chiaro_core::scene::{
-    AlphaMode, Attenuation, Camera, Geometry, Light, Material, Mesh, Object, Scene,
-};
+use chiaro_core::scene::{AlphaMode, Geometry, Material, Mesh, Scene, Transform};
+use chiaro_testkit::scenes::{self, add_object, camera};
 
 fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
     Box::new(SceneBvh::new(p))
@@ -34,12 +33,7 @@ fn square(s: &mut Scene, half: f32, y: f32, up: bool, material: &str, m: Materia
         indices,
         ..Mesh::default()
     });
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(mesh),
-        material: mat,
-        smooth: false,
-        ..Object::default()
-    });
+    add_object(s, Geometry::Mesh(mesh), mat, Transform::default());
 }
 
 /// A white Lambertian floor (`kd` 0.5) at `y = 0`, lit from above by an
@@ -67,12 +61,8 @@ fn decal_scene(decal: bool, point_light: bool) -> Scene {
         square(&mut s, 2.0, 1.0, true, "decal", m);
     }
     if point_light {
-        s.lights.push(Light::Point {
-            position: Vec3::new(0.0, 2.0, 0.0),
-            color: Vec3::ONE,
-            intensity: 8.0,
-            attenuation: Attenuation::InverseSquare,
-        });
+        s.lights
+            .push(scenes::point_light(Vec3::new(0.0, 2.0, 0.0), 8.0));
     } else {
         let m = Material {
             emission: Vec3::splat(40.0),
@@ -80,12 +70,7 @@ fn decal_scene(decal: bool, point_light: bool) -> Scene {
         };
         square(&mut s, 0.25, 2.0, false, "light", m);
     }
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 0.5, 0.001),
-        look_at: Vec3::ZERO,
-        fov_y_degrees: 20.0,
-        ..Camera::default()
-    };
+    s.camera = camera(Vec3::new(0.0, 0.5, 0.001), Vec3::ZERO, 20.0);
     s.render.width = 16;
     s.render.height = 16;
     s.render.samples = 64;

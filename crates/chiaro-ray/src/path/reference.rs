@@ -187,13 +187,10 @@ mod tests {
         Box::new(SceneBvh::new(p))
     }
 
+    /// The shipped scene `scenes/NAME.toml` at `size` x `size` pixels and
+    /// `spp` samples per pixel.
     fn shipped(name: &str, size: u32, spp: u32) -> Scene {
-        let path = format!("{}/../../scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
-        let mut s = chiaro_io::load_scene(std::path::Path::new(&path))
-            .expect("the shipped scene loads")
-            .scene;
-        s.render.width = size;
-        s.render.height = size;
+        let mut s = chiaro_testkit::scenes::shipped(name, size);
         s.render.samples = spp;
         s
     }
@@ -211,20 +208,7 @@ mod tests {
                 film.color
             })
             .collect();
-        let m = seeds as f32;
-        let mean: Vec<Vec3> = (0..films[0].len())
-            .map(|i| films.iter().map(|f| f[i]).sum::<Vec3>() / m)
-            .collect();
-        let var = (0..films[0].len())
-            .map(|i| {
-                films
-                    .iter()
-                    .map(|f| (f[i] - mean[i]) * (f[i] - mean[i]))
-                    .sum::<Vec3>()
-                    / (m - 1.0)
-            })
-            .collect();
-        (mean, var)
+        chiaro_testkit::stats::pixel_mean_and_variance(&films)
     }
 
     /// The fast tracer and the reference agree per 8x8 block within four
@@ -235,39 +219,31 @@ mod tests {
         let size = scene.render.width;
         let (fast, fast_var) = renders(scene, Kernel::Lanes, SEEDS);
         let (reference, ref_var) = renders(scene, Kernel::Reference, SEEDS);
-        let mut worst = 0.0f32;
-        for by in 0..size / 8 {
-            for bx in 0..size / 8 {
-                let (mut d, mut var) = (Vec3::ZERO, Vec3::ZERO);
-                for y in by * 8..by * 8 + 8 {
-                    for x in bx * 8..bx * 8 + 8 {
-                        let i = (y * size + x) as usize;
-                        d += fast[i] - reference[i];
-                        var += fast_var[i] + ref_var[i];
-                    }
-                }
-                // Block means of SEEDS renders each: the mean difference and its
-                // standard error.
-                let n = 64.0;
-                let d = d / n;
-                let se = (var / (n * n * SEEDS as f32)).powf(0.5);
-                for c in 0..3 {
-                    let z = d[c].abs() / se[c].max(1e-6);
-                    worst = worst.max(z);
-                    assert!(
-                        z <= 4.0,
-                        "{what}: block ({bx}, {by}) channel {c}: difference {} is {z:.1} standard errors {}",
-                        d[c],
-                        se[c]
-                    );
-                }
-            }
-        }
+        let worst = chiaro_testkit::stats::worst_block(
+            (&fast, &fast_var),
+            (&reference, &ref_var),
+            size,
+            size,
+            8,
+            SEEDS,
+        );
+        assert!(
+            worst.z <= 4.0,
+            "{what}: block {:?} channel {}: difference {} is {:.1} standard errors {}",
+            worst.block,
+            worst.channel,
+            worst.difference,
+            worst.z,
+            worst.stderr
+        );
         assert!(
             fast.iter().any(|c| c.max_element() > 0.0),
             "{what}: black image"
         );
-        eprintln!("{what}: largest block difference {worst:.2} standard errors");
+        eprintln!(
+            "{what}: largest block difference {:.2} standard errors",
+            worst.z
+        );
     }
 
     #[test]
@@ -284,31 +260,24 @@ mod tests {
             }
         }
         let (w, h) = (16u32, 8u32);
-        let env = s.add_texture(chiaro_core::scene::Texture::Image(
-            chiaro_core::scene::ImageTexture {
-                source: "patch".into(),
-                width: w,
-                height: h,
-                texels: (0..w * h)
-                    .map(|i| {
-                        let (x, y) = (i % w, i / w);
-                        let v = if (7..=9).contains(&x) && (2..=3).contains(&y) {
-                            20.0
-                        } else {
-                            0.2
-                        };
-                        [v, v * 0.8, v * 0.6, 1.0]
-                    })
-                    .collect(),
-                ..Default::default()
-            },
-        ));
-        s.environment = Some(chiaro_core::scene::Environment {
-            texture: env,
-            intensity: 1.0,
-            rotate_y_degrees: 0.0,
-            as_background: true,
-        });
+        let env = chiaro_core::scene::ImageTexture {
+            source: "patch".into(),
+            width: w,
+            height: h,
+            texels: (0..w * h)
+                .map(|i| {
+                    let (x, y) = (i % w, i / w);
+                    let v = if (7..=9).contains(&x) && (2..=3).contains(&y) {
+                        20.0
+                    } else {
+                        0.2
+                    };
+                    [v, v * 0.8, v * 0.6, 1.0]
+                })
+                .collect(),
+            ..Default::default()
+        };
+        chiaro_testkit::scenes::set_environment(&mut s, env, 1.0, 0.0, true);
         assert_tracers_agree(&s, "environment");
     }
 

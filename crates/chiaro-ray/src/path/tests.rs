@@ -8,8 +8,12 @@ use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Camera, Geometry, Light, Material, Object, Scene, Technique,
+    AreaShape, Geometry, Light, Material, Object, Scene, Technique, Transform,
 };
+use chiaro_testkit::scenes::{
+    add_object, camera, point_light, repo_scene, set_environment, shipped,
+};
+use chiaro_testkit::stats;
 use std::f32::consts::PI;
 
 fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
@@ -31,11 +35,7 @@ fn furnace(geometry: Option<u32>) -> Scene {
         geometry,
         ..Default::default()
     });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 1.0, 0.0),
-        look_at: Vec3::new(0.0, 0.0, 5.0),
-        ..Camera::default()
-    };
+    s.camera = camera(Vec3::new(0.0, 1.0, 0.0), Vec3::new(0.0, 0.0, 5.0), 45.0);
     s.render.technique = Technique::Path;
     s.render.width = 16;
     s.render.height = 16;
@@ -70,10 +70,7 @@ fn triangle_furnace_with_mis_is_unbiased() {
     s.render.samples = 16;
     let (film, _) =
         render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
-    let n = film.color.len() as f32;
-    let mean = film.mean().x;
-    let var = film.color.iter().map(|c| (c.x - mean).powi(2)).sum::<f32>() / (n - 1.0);
-    let stderr = (var / n).sqrt();
+    let (mean, stderr) = mean_and_stderr(&film, 0);
     assert!(
         (mean - 2.0).abs() < 4.0 * stderr + 0.01,
         "mean {mean} stderr {stderr}"
@@ -82,11 +79,7 @@ fn triangle_furnace_with_mis_is_unbiased() {
 
 /// Mean and standard error of the mean of one channel over all pixels.
 fn mean_and_stderr(film: &Film, channel: usize) -> (f32, f32) {
-    let values: Vec<f32> = film.color.iter().map(|c| c[channel]).collect();
-    let n = values.len() as f32;
-    let mean = values.iter().sum::<f32>() / n;
-    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / (n - 1.0);
-    (mean, (var / n).sqrt())
+    stats::mean_and_stderr(&stats::channel(film, channel))
 }
 
 #[test]
@@ -113,12 +106,7 @@ fn diffuse_sphere_inside_emitting_sphere_reflects_rho_times_le() {
     });
     let inner = s.add_material(Material::diffuse("inner", rho));
     let shell = s.add_mesh(primitives::uv_sphere(10.0, 32, 16));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(shell),
-        material: emitter,
-        smooth: false,
-        ..Default::default()
-    });
+    add_object(&mut s, Geometry::Mesh(shell), emitter, Transform::default());
     let center = Vec3::new(1.0, 0.5, 0.0);
     s.objects.push(Object {
         geometry: Geometry::Sphere { radius: 1.0 },
@@ -130,12 +118,7 @@ fn diffuse_sphere_inside_emitting_sphere_reflects_rho_times_le() {
         ..Default::default()
     });
     // A narrow view whose every pixel lands on the inner sphere.
-    s.camera = Camera {
-        eye: center + Vec3::new(0.5, 1.0, -4.0),
-        look_at: center,
-        fov_y_degrees: 10.0,
-        ..Camera::default()
-    };
+    s.camera = camera(center + Vec3::new(0.5, 1.0, -4.0), center, 10.0);
     s.render.width = 16;
     s.render.height = 16;
     s.render.samples = 64;
@@ -183,61 +166,44 @@ fn images_do_not_depend_on_the_thread_count() {
     assert_eq!(one.color, three.color);
 }
 
+/// A faceted `size` x `size` plane of grey albedo `rho` (material 0) at
+/// y = 0, facing up: no lights, the default camera.
+fn grey_plane(rho: f32, size: f32) -> Scene {
+    let mut s = Scene::default();
+    let grey = s.add_material(Material::diffuse("grey", Vec3::splat(rho)));
+    let plane = s.add_mesh(primitives::plane(size, 1));
+    add_object(&mut s, Geometry::Mesh(plane), grey, Transform::default());
+    s
+}
+
+/// `s` rendered by the lock-step kernel at `size` x `size` pixels, `spp`
+/// samples per pixel and paths of at most `depth` bounces.
+fn render_lanes(s: &mut Scene, size: u32, spp: u32, depth: u32) -> Film {
+    s.render.width = size;
+    s.render.height = size;
+    s.render.samples = spp;
+    s.render.path.max_depth = depth;
+    render_with_kernel(s, &s.render, &NoProgress, &bvh, Kernel::Lanes)
+        .expect("renders")
+        .0
+}
+
 #[test]
 fn depth_one_point_light_is_the_lambert_term() {
     // A plane under a point light: L = kd Ip cos / d^2 exactly at depth 1.
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
-    let plane = s.add_mesh(primitives::plane(2.0, 1));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        smooth: false,
-        ..Default::default()
-    });
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 2.0, 0.0),
-        color: Vec3::ONE,
-        intensity: 8.0,
-        attenuation: Attenuation::InverseSquare,
-    });
+    let mut s = grey_plane(0.5, 2.0);
+    s.lights.push(point_light(Vec3::new(0.0, 2.0, 0.0), 8.0));
     s.lights.push(Light::Ambient {
         color: Vec3::ONE,
         intensity: 1.0,
     });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 3.0, -0.001),
-        look_at: Vec3::ZERO,
-        fov_y_degrees: 1.0,
-        ..Camera::default()
-    };
-    s.render.width = 4;
-    s.render.height = 4;
-    s.render.samples = 4;
-    s.render.path.max_depth = 1;
-    let (film, _) =
-        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
+    s.camera = camera(Vec3::new(0.0, 3.0, -0.001), Vec3::ZERO, 1.0);
+    let film = render_lanes(&mut s, 4, 4, 1);
     // Straight below the light: cos = 1, d = 2, ambient ignored.
     let expect = 0.5 * 8.0 / 4.0;
     for c in &film.color {
         assert!((c.x - expect).abs() < 0.01 * expect, "{c} vs {expect}");
     }
-}
-
-/// The scene file `relative` to the repository root at `size` x `size`
-/// pixels.
-fn repo_scene(relative: &str, size: u32) -> Scene {
-    let path = format!("{}/../../{relative}", env!("CARGO_MANIFEST_DIR"));
-    let mut s = chiaro_io::load_scene(std::path::Path::new(&path))
-        .expect("the repository's scene loads")
-        .scene;
-    s.render.width = size;
-    s.render.height = size;
-    s
-}
-
-/// The shipped scene `scenes/NAME.toml` at `size` x `size` pixels.
-fn shipped(name: &str, size: u32) -> Scene {
-    repo_scene(&format!("scenes/{name}.toml"), size)
 }
 
 /// Mitsuba's Cornell box as shipped (`scenes/mitsuba-cbox.toml`).
@@ -449,24 +415,8 @@ fn lock_step_kernel_with_only_an_environment() {
     s.render.samples = 8;
     let light = s.material_by_name("light").expect("the light").index();
     s.materials[light].emission = Vec3::ZERO;
-    let env = s.add_texture(chiaro_core::scene::Texture::Image(
-        chiaro_core::scene::ImageTexture {
-            source: "env".into(),
-            width: 8,
-            height: 4,
-            texels: (0..32)
-                .map(|i| [0.2, 0.4 + (i / 8) as f32 * 0.1, 0.9, 1.0])
-                .collect(),
-            wrap: chiaro_core::scene::WrapMode::Repeat,
-            ..Default::default()
-        },
-    ));
-    s.environment = Some(chiaro_core::scene::Environment {
-        texture: env,
-        intensity: 2.0,
-        rotate_y_degrees: 0.0,
-        as_background: true,
-    });
+    let env = chiaro_testkit::scenes::sky_image();
+    set_environment(&mut s, env, 2.0, 0.0, true);
     assert_kernels_agree(&s, "environment only");
 }
 
@@ -478,18 +428,8 @@ fn lock_step_kernel_with_an_environment_and_lights() {
     s.render.samples = 11;
     s.render.path.max_depth = 5;
     s.render.path.rr_depth = 2;
-    let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
-        16,
-        8,
-        (5, 3),
-        50.0,
-    )));
-    s.environment = Some(chiaro_core::scene::Environment {
-        texture: env,
-        intensity: 1.0,
-        rotate_y_degrees: 200.0,
-        as_background: false,
-    });
+    let env = spot_map(16, 8, (5, 3), 50.0);
+    set_environment(&mut s, env, 1.0, 200.0, false);
     let prepared = PreparedScene::new(&s, PrepareOptions::default());
     let accel = bvh(&prepared);
     let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render, true);
@@ -517,10 +457,7 @@ fn spot_map(w: u32, h: u32, spot: (u32, u32), value: f32) -> chiaro_core::scene:
 
 /// Mean and unbiased variance of channel 0 over the film's pixels.
 fn mean_and_variance(film: &Film) -> (f32, f32) {
-    let n = film.color.len() as f32;
-    let mean = film.color.iter().map(|c| c.x).sum::<f32>() / n;
-    let var = film.color.iter().map(|c| (c.x - mean).powi(2)).sum::<f32>() / (n - 1.0);
-    (mean, var)
+    stats::mean_and_variance(&stats::channel(film, 0))
 }
 
 #[test]
@@ -545,24 +482,9 @@ fn diffuse_sphere_under_a_white_environment_reflects_its_albedo() {
             smooth: false,
             ..Default::default()
         });
-        let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
-            8,
-            4,
-            (0, 0),
-            0.05,
-        )));
-        s.environment = Some(chiaro_core::scene::Environment {
-            texture: env,
-            intensity: le / 0.05,
-            rotate_y_degrees: 10.0,
-            as_background: false,
-        });
-        s.camera = Camera {
-            eye: Vec3::new(0.3, 0.4, -4.0),
-            look_at: Vec3::new(0.0, 0.2, 0.0),
-            fov_y_degrees: 8.0,
-            ..Camera::default()
-        };
+        let env = spot_map(8, 4, (0, 0), 0.05);
+        set_environment(&mut s, env, le / 0.05, 10.0, false);
+        s.camera = camera(Vec3::new(0.3, 0.4, -4.0), Vec3::new(0.0, 0.2, 0.0), 8.0);
         s.render.width = 16;
         s.render.height = 16;
         s.render.samples = 64;
@@ -598,32 +520,10 @@ fn environment_sampling_cuts_the_variance_of_a_small_bright_spot() {
     // environment sampled and without (BSDF sampling alone) the mean
     // must be that; at equal samples the variance must be far lower.
     let rho = 0.5;
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("grey", Vec3::splat(rho)));
-    let plane = s.add_mesh(primitives::plane(400.0, 1));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        smooth: false,
-        ..Default::default()
-    });
-    let env = s.add_texture(chiaro_core::scene::Texture::Image(spot_map(
-        64,
-        32,
-        (40, 8),
-        2000.0,
-    )));
-    s.environment = Some(chiaro_core::scene::Environment {
-        texture: env,
-        intensity: 1.0,
-        rotate_y_degrees: 25.0,
-        as_background: false,
-    });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 1.0, -0.001),
-        look_at: Vec3::ZERO,
-        fov_y_degrees: 30.0,
-        ..Camera::default()
-    };
+    let mut s = grey_plane(rho, 400.0);
+    let env = spot_map(64, 32, (40, 8), 2000.0);
+    set_environment(&mut s, env, 1.0, 25.0, false);
+    s.camera = camera(Vec3::new(0.0, 1.0, -0.001), Vec3::ZERO, 30.0);
     s.render.width = 16;
     s.render.height = 16;
     s.render.samples = 64;
@@ -677,12 +577,8 @@ fn lanes_pick_the_lights_the_scalar_pick_does() {
     for k in [1usize, 2, 3, 16, 17, 40] {
         let mut s = mitsuba_cbox(4);
         for j in 0..k {
-            s.lights.push(Light::Point {
-                position: Vec3::new(0.0, 0.5, 0.0),
-                color: Vec3::ONE,
-                intensity: 1.0 + (j % 5) as f32,
-                attenuation: Attenuation::InverseSquare,
-            });
+            s.lights
+                .push(point_light(Vec3::new(0.0, 0.5, 0.0), 1.0 + (j % 5) as f32));
         }
         let prepared = PreparedScene::new(&s, PrepareOptions::default());
         let accel = SceneBvh::new(&prepared);
@@ -707,8 +603,7 @@ fn lanes_pick_the_lights_the_scalar_pick_does() {
 fn glass_sphere_of_ior_one_is_invisible() {
     // A non-absorbing dielectric with ior 1 refracts straight through:
     // the image equals the image without it (up to ray offsets).
-    let mut s = Scene::default();
-    s.add_material(Material::diffuse("grey", Vec3::splat(0.5)));
+    let mut s = grey_plane(0.5, 5.0);
     let glass = s.add_material(Material {
         diffuse: Vec3::ZERO,
         transmit: Vec3::ONE,
@@ -716,29 +611,9 @@ fn glass_sphere_of_ior_one_is_invisible() {
         fresnel: true,
         ..Material::default()
     });
-    let plane = s.add_mesh(primitives::plane(5.0, 1));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        smooth: false,
-        ..Default::default()
-    });
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 4.0, 0.0),
-        color: Vec3::ONE,
-        intensity: 10.0,
-        attenuation: Attenuation::InverseSquare,
-    });
-    s.camera = Camera {
-        eye: Vec3::new(0.0, 3.0, -3.0),
-        look_at: Vec3::ZERO,
-        ..Camera::default()
-    };
-    s.render.width = 12;
-    s.render.height = 12;
-    s.render.samples = 2;
-    s.render.path.max_depth = 4;
-    let (without, _) =
-        render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
+    s.lights.push(point_light(Vec3::new(0.0, 4.0, 0.0), 10.0));
+    s.camera = camera(Vec3::new(0.0, 3.0, -3.0), Vec3::ZERO, 45.0);
+    let without = render_lanes(&mut s, 12, 2, 4);
     s.objects.push(Object {
         geometry: Geometry::Sphere { radius: 0.7 },
         material: glass,
@@ -928,12 +803,7 @@ fn lock_step_kernel_equals_the_scalar_loop_with_mirror_and_glass() {
     one_emitter_triangle(&mut s);
     assert!(assert_samples_agree(&s, "one light") > 1000);
     let mut s = delta_box(10);
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 0.75, 0.3),
-        color: Vec3::ONE,
-        intensity: 0.5,
-        attenuation: Attenuation::InverseSquare,
-    });
+    s.lights.push(point_light(Vec3::new(0.0, 0.75, 0.3), 0.5));
     assert!(assert_samples_agree(&s, "emitter and point light") > 1000);
     assert_kernels_agree(&s, "emitter and point light, films");
     s.render.path.rr_depth = 12;

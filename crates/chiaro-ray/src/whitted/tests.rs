@@ -6,9 +6,10 @@ use chiaro_core::error::CoreError;
 use chiaro_core::geometry::primitives;
 use chiaro_core::progress::{CountingProgress, NoProgress, Progress};
 use chiaro_core::scene::{
-    AreaShape, Attenuation, Geometry, Light, Material, MaterialId, Mesh, Object, Scene, Transform,
+    AreaShape, Geometry, Light, Material, MaterialId, Mesh, Object, Scene, Transform,
 };
 use chiaro_core::shading::{fresnel_dielectric, refract};
+use chiaro_testkit::scenes::point_light;
 
 fn lambert(kd: f32) -> Material {
     Material {
@@ -41,6 +42,16 @@ fn add(s: &mut Scene, mesh: Mesh, m: MaterialId, translate: Vec3) {
         },
         ..Default::default()
     });
+}
+
+/// A 20 x 20 slab of material `m`, `2 half` thick, centred at the origin.
+fn add_slab(s: &mut Scene, half: f32, m: MaterialId) {
+    add(
+        s,
+        primitives::box_mesh(Vec3::new(10.0, half, 10.0)),
+        m,
+        Vec3::ZERO,
+    );
 }
 
 fn add_sphere(s: &mut Scene, c: Vec3, r: f32, m: MaterialId) {
@@ -128,12 +139,7 @@ fn floor_scene() -> Scene {
         color: Vec3::ONE,
         intensity: 1.0,
     });
-    s.lights.push(Light::Point {
-        position: Vec3::new(0.0, 4.0, 0.0),
-        color: Vec3::ONE,
-        intensity: 16.0,
-        attenuation: Attenuation::InverseSquare,
-    });
+    s.lights.push(point_light(Vec3::new(0.0, 4.0, 0.0), 16.0));
     s.background = Vec3::new(0.1, 0.2, 0.3);
     s.camera.eye = Vec3::new(0.0, 3.0, 6.0);
     s.camera.look_at = Vec3::ZERO;
@@ -141,6 +147,32 @@ fn floor_scene() -> Scene {
 }
 
 /// The radiance seen along a ray from `from` towards `to`.
+/// A white one-sided quad area light `corner + s edge_u + t edge_v` of
+/// `intensity`.
+fn quad_light(corner: Vec3, edge_u: Vec3, edge_v: Vec3, intensity: f32) -> Light {
+    Light::Area {
+        shape: AreaShape::Quad {
+            corner,
+            edge_u,
+            edge_v,
+        },
+        color: Vec3::ONE,
+        intensity,
+        two_sided: false,
+    }
+}
+
+/// A unit delta light sample straight above the origin, at height 4.
+fn overhead_sample() -> LightSample {
+    LightSample {
+        wi: Vec3::Y,
+        distance: 4.0,
+        point: Vec3::new(0.0, 4.0, 0.0),
+        intensity: Vec3::ONE,
+        is_delta: true,
+    }
+}
+
 fn look(t: &Tracer<'_>, from: Vec3, to: Vec3) -> Vec3 {
     let mut st = TraceState::new(pixel_rng(0, 0, 0, 0));
     t.trace(&Ray::new(from, to - from), 0, Vec3::ONE, &mut st)
@@ -224,12 +256,7 @@ fn total_internal_reflection_reflects_everything() {
 fn slab_exit_is_parallel_with_closed_form_shift() {
     let mut s = Scene::default();
     let g = s.add_material(glass(1.5, true));
-    add(
-        &mut s,
-        primitives::box_mesh(Vec3::new(10.0, 0.5, 10.0)),
-        g,
-        Vec3::ZERO,
-    );
+    add_slab(&mut s, 0.5, g);
     let ctx_t = context(&s, &settings(8, 8));
     let t = Tracer::new(&ctx_t);
     for deg in [0.0f32, 20.0, 45.0, 70.0, 85.0] {
@@ -271,20 +298,13 @@ fn slab_exit_is_parallel_with_closed_form_shift() {
 
 #[test]
 fn beer_absorption_through_slab() {
-    let mut s = Scene {
-        background: Vec3::new(1.0, 0.5, 0.25),
-        ..Scene::default()
-    };
+    let mut s = Scene::default();
     let g = s.add_material(Material {
         absorption: Vec3::new(0.5, 1.0, 0.0),
         ..glass(1.5, false)
     });
-    add(
-        &mut s,
-        primitives::box_mesh(Vec3::new(10.0, 0.75, 10.0)),
-        g,
-        Vec3::ZERO,
-    );
+    add_slab(&mut s, 0.75, g);
+    s.background = Vec3::new(1.0, 0.5, 0.25);
     let ctx_t = context(&s, &settings(8, 8));
     let t = Tracer::new(&ctx_t);
     let c = look(&t, Vec3::new(0.0, 3.0, 0.0), Vec3::ZERO);
@@ -314,13 +334,7 @@ fn local_shading_with_and_without_shadow_rays() {
     let c = look(&t, from, Vec3::ZERO);
     assert!((c.x - ambient - lit).abs() < 1e-4, "unshadowed: {c}");
     // The same through the public visibility query.
-    let sample = LightSample {
-        wi: Vec3::Y,
-        distance: 4.0,
-        point: Vec3::new(0.0, 4.0, 0.0),
-        intensity: Vec3::ONE,
-        is_delta: true,
-    };
+    let sample = overhead_sample();
     assert_eq!(t.light_visibility(Vec3::ZERO, Vec3::Y, &sample), Vec3::ONE);
     let ctx_t = context(&s, &settings(8, 8));
     let t = Tracer::new(&ctx_t);
@@ -347,13 +361,7 @@ fn shadow_rays_are_tinted_by_transparent_surfaces() {
     );
     let ctx_t = context(&s, &settings(8, 8));
     let t = Tracer::new(&ctx_t);
-    let sample = LightSample {
-        wi: Vec3::Y,
-        distance: 4.0,
-        point: Vec3::new(0.0, 4.0, 0.0),
-        intensity: Vec3::ONE,
-        is_delta: true,
-    };
+    let sample = overhead_sample();
     let v = t.light_visibility(Vec3::ZERO, Vec3::Y, &sample);
     assert!(
         (v - Vec3::new(0.5, 0.25, 1.0)).abs().max_element() < 1e-6,
@@ -430,16 +438,12 @@ fn two_level_bvh_renders_like_the_flat_bvh() {
 fn soft_shadow_has_umbra_and_penumbra() {
     let mut s = floor_scene();
     s.lights.truncate(1);
-    s.lights.push(Light::Area {
-        shape: AreaShape::Quad {
-            corner: Vec3::new(-0.5, 4.0, -0.5),
-            edge_u: Vec3::new(1.0, 0.0, 0.0),
-            edge_v: Vec3::new(0.0, 0.0, 1.0),
-        },
-        color: Vec3::ONE,
-        intensity: 10.0,
-        two_sided: false,
-    });
+    s.lights.push(quad_light(
+        Vec3::new(-0.5, 4.0, -0.5),
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 1.0),
+        10.0,
+    ));
     let black = s.add_material(lambert(0.0));
     add_sphere(&mut s, Vec3::new(0.0, 2.0, 0.0), 0.5, black);
     let mut st = settings(8, 8);
@@ -469,16 +473,14 @@ fn soft_shadow_has_umbra_and_penumbra() {
 
 #[test]
 fn mirror_reflects_kr_of_what_it_sees_up_to_the_depth_limit() {
-    let mut s = Scene {
-        background: Vec3::new(0.2, 0.4, 0.8),
-        ..Scene::default()
-    };
+    let mut s = Scene::default();
     let mirror = s.add_material(Material {
         diffuse: Vec3::ZERO,
         reflect: Vec3::splat(0.75),
         ..Material::default()
     });
     add(&mut s, primitives::plane(5.0, 1), mirror, Vec3::ZERO);
+    s.background = Vec3::new(0.2, 0.4, 0.8);
     {
         let ctx_t = context(&s, &settings(8, 8));
         let t = Tracer::new(&ctx_t);
@@ -537,16 +539,12 @@ fn glass_sphere_of_ior_one_is_invisible() {
 #[test]
 fn render_is_clean_and_independent_of_thread_count() {
     let mut s = floor_scene();
-    s.lights.push(Light::Area {
-        shape: AreaShape::Quad {
-            corner: Vec3::new(-1.0, 3.0, -1.0),
-            edge_u: Vec3::new(2.0, 0.0, 0.0),
-            edge_v: Vec3::new(0.0, 0.0, 2.0),
-        },
-        color: Vec3::ONE,
-        intensity: 2.0,
-        two_sided: false,
-    });
+    s.lights.push(quad_light(
+        Vec3::new(-1.0, 3.0, -1.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 2.0),
+        2.0,
+    ));
     let g = s.add_material(Material {
         specular: Vec3::splat(0.5),
         absorption: Vec3::splat(0.3),

@@ -79,14 +79,10 @@ fn scene_of(mesh: Mesh, spheres: &[(Vec3, f32)]) -> Scene {
 /// Random rays: half from random points in the (grown) bounds in
 /// random directions, half aimed at random points of random triangles.
 fn random_rays(ps: &PreparedScene<'_>, count: u32, seed: u64) -> Vec<Ray> {
-    let b = ps.bounds;
-    let grow = b.extent() * 0.2;
     (0..count)
         .map(|i| {
             let mut rng = pixel_rng(seed, i, 0, 0);
-            let o = b.min - grow
-                + (b.extent() + 2.0 * grow)
-                    * Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+            let o = crate::accel::random_origin(ps, &mut rng);
             if i % 2 == 0 || ps.triangles.is_empty() {
                 Ray::new(o, sample_uniform_sphere(uniform2(&mut rng)))
             } else {
@@ -99,6 +95,17 @@ fn random_rays(ps: &PreparedScene<'_>, count: u32, seed: u64) -> Vec<Ray> {
             }
         })
         .collect()
+}
+
+/// `s` prepared with its spheres kept analytic (not tessellated).
+fn with_analytic_spheres(s: &Scene) -> PreparedScene<'_> {
+    PreparedScene::new(
+        s,
+        PrepareOptions {
+            analytic_spheres: true,
+            ..Default::default()
+        },
+    )
 }
 
 fn check_against_oracle(ps: &PreparedScene<'_>, rays: &[Ray]) {
@@ -151,13 +158,7 @@ fn bunny_closest_and_any_hit_match_brute_force() {
     let ps = PreparedScene::new(&s, PrepareOptions::default());
     check_against_oracle(&ps, &random_rays(&ps, 100_000, 1));
     let s = scene_of(mesh, &[(Vec3::new(0.0, 0.1, 0.0), 0.03)]);
-    let ps = PreparedScene::new(
-        &s,
-        PrepareOptions {
-            analytic_spheres: true,
-            ..Default::default()
-        },
-    );
+    let ps = with_analytic_spheres(&s);
     check_against_oracle(&ps, &random_rays(&ps, 2_000, 2));
 }
 
@@ -183,13 +184,7 @@ fn random_soup_with_spheres_matches_brute_force() {
         })
         .collect();
     let s = scene_of(mesh, &spheres);
-    let ps = PreparedScene::new(
-        &s,
-        PrepareOptions {
-            analytic_spheres: true,
-            ..Default::default()
-        },
-    );
+    let ps = with_analytic_spheres(&s);
     check_against_oracle(&ps, &random_rays(&ps, 20_000, 3));
 }
 
@@ -495,48 +490,9 @@ fn parallel_and_serial_builds_drop_the_same_unusable_boxes() {
 fn rays_leaving_a_surface_do_not_hit_it_again() {
     let mesh = bunny().unwrap_or_else(|| crate::geometry::primitives::uv_sphere(1.0, 64, 32));
     let s = scene_of(mesh, &[(Vec3::new(5.0, 0.0, 0.0), 0.5)]);
-    let ps = PreparedScene::new(
-        &s,
-        PrepareOptions {
-            analytic_spheres: true,
-            ..Default::default()
-        },
-    );
+    let ps = with_analytic_spheres(&s);
     let bvh = SceneBvh::new(&ps);
-    let nt = ps.triangles.len() as u32;
-    let mut rng = pixel_rng(5, 0, 0, 0);
-    for i in 0..20_000u32 {
-        let (prim, p, ng) = if i % 4 == 0 {
-            let d = sample_uniform_sphere(uniform2(&mut rng));
-            (nt, Vec3::new(5.0, 0.0, 0.0) + 0.5 * d, d)
-        } else {
-            let t = (uniform(&mut rng) * nt as f32) as u32 % nt;
-            let uv = crate::sampling::sample_uniform_triangle(uniform2(&mut rng));
-            let sh = ps.triangle_surface(t, uv.x, uv.y);
-            (t, sh.p, sh.ng)
-        };
-        // Directions on both sides, down to grazing angles (1e-3 rad).
-        let f = crate::geometry::Frame::from_normal(ng);
-        let side = if i % 2 == 0 { 1.0 } else { -1.0 };
-        let graze = if i % 3 == 0 { 1e-3 } else { uniform(&mut rng) };
-        let phi = std::f32::consts::TAU * uniform(&mut rng);
-        let cos_t = graze.max(1e-3);
-        let sin_t = (1.0 - cos_t * cos_t).sqrt();
-        let dir = f.to_world(Vec3::new(
-            sin_t * phi.cos(),
-            sin_t * phi.sin(),
-            side * cos_t,
-        ));
-        let o = crate::geometry::offset_ray_origin(p, ng, dir);
-        let ray = Ray::new(o, dir);
-        if let Some(h) = bvh.intersect(&ray).filter(|h| h.prim == prim) {
-            // Only a sphere can be re-entered, and then far away.
-            assert!(
-                prim >= nt && side < 0.0 && h.t > 1e-2,
-                "self-hit {h:?} at {i}"
-            );
-        }
-    }
+    crate::accel::assert_rays_leave_surfaces(&ps, &bvh, (Vec3::new(5.0, 0.0, 0.0), 0.5), 4);
 }
 
 /// The node test used in traversal (eight AVX lanes on x86-64-v3)
@@ -782,13 +738,7 @@ fn tie_scene() -> Scene {
 #[test]
 fn packets_match_single_rays_bit_for_bit() {
     let s = tie_scene();
-    let ps = PreparedScene::new(
-        &s,
-        PrepareOptions {
-            analytic_spheres: true,
-            ..Default::default()
-        },
-    );
+    let ps = with_analytic_spheres(&s);
     let bvh = SceneBvh::new(&ps);
     // Straight down the z axis (zero x and y components in the middle),
     // obliquely, from inside the grown bounds, and along the grid's plane.
@@ -824,13 +774,7 @@ fn packets_match_single_rays_bit_for_bit() {
     // The whole bunny, where the shared assets are present.
     if let Some(mesh) = bunny() {
         let s = scene_of(mesh, &[(Vec3::new(0.0, 0.1, 0.0), 0.03)]);
-        let ps = PreparedScene::new(
-            &s,
-            PrepareOptions {
-                analytic_spheres: true,
-                ..Default::default()
-            },
-        );
+        let ps = with_analytic_spheres(&s);
         let bvh = SceneBvh::new(&ps);
         let c = ps.bounds.center();
         let eye = c + Vec3::new(0.05, 0.02, 0.3);
@@ -867,13 +811,7 @@ fn culled_camera_packets_match_single_rays() {
     for m in &mut s.materials {
         m.cull_backface = true;
     }
-    let ps = PreparedScene::new(
-        &s,
-        PrepareOptions {
-            analytic_spheres: true,
-            ..Default::default()
-        },
-    );
+    let ps = with_analytic_spheres(&s);
     let accel = crate::accel::cull::Culled::wrap(&ps, Box::new(SceneBvh::new(&ps)));
     let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.prim, h.u.to_bits(), h.v.to_bits()));
     let mut culled = 0;

@@ -2,8 +2,8 @@
 
 use super::*;
 use crate::accel::list::ListAccel;
+use crate::geometry::offset_ray_origin;
 use crate::geometry::primitives::{cube, cylinder, icosphere};
-use crate::geometry::{Frame, offset_ray_origin};
 use crate::sampling::{
     pixel_rng, sample_uniform_sphere, sample_uniform_triangle, uniform, uniform2,
 };
@@ -90,22 +90,12 @@ fn instanced_scene() -> Scene {
         },
         ..Object::default()
     });
-    s.objects.push(Object {
-        geometry: Geometry::Sphere { radius: 1.2 },
-        transform: Transform {
-            translate: Vec3::new(0.5, 0.0, 4.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(floor),
-        transform: Transform {
-            translate: Vec3::new(0.0, -4.0, 0.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    place(
+        &mut s,
+        Geometry::Sphere { radius: 1.2 },
+        Vec3::new(0.5, 0.0, 4.0),
+    );
+    place(&mut s, Geometry::Mesh(floor), Vec3::new(0.0, -4.0, 0.0));
     s.camera = Camera {
         eye: Vec3::new(0.0, 3.0, 18.0),
         look_at: Vec3::new(0.0, 0.0, 0.0),
@@ -129,14 +119,10 @@ fn prepare(s: &Scene, analytic_spheres: bool) -> PreparedScene<'_> {
 /// directions, half aimed at random triangles with unnormalised
 /// directions.
 fn random_rays(ps: &PreparedScene<'_>, count: u32, seed: u64) -> Vec<Ray> {
-    let b = ps.bounds;
-    let grow = b.extent() * 0.2;
     (0..count)
         .map(|i| {
             let mut rng = pixel_rng(seed, i, 0, 0);
-            let o = b.min - grow
-                + (b.extent() + 2.0 * grow)
-                    * Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+            let o = crate::accel::random_origin(ps, &mut rng);
             if i % 2 == 0 {
                 Ray::new(o, sample_uniform_sphere(uniform2(&mut rng)))
             } else {
@@ -367,18 +353,12 @@ fn scenes_without_sharing_or_geometry() {
     assert!(!bvh.occluded(&Ray::new(Vec3::ZERO, Vec3::X)));
     // A mesh used once and a sphere: one flat level, same hits.
     let m = s.add_mesh(icosphere(1.0, 1));
-    s.objects.push(Object {
-        geometry: Geometry::Mesh(m),
-        ..Object::default()
-    });
-    s.objects.push(Object {
-        geometry: Geometry::Sphere { radius: 0.5 },
-        transform: Transform {
-            translate: Vec3::new(3.0, 0.0, 0.0),
-            ..Transform::default()
-        },
-        ..Object::default()
-    });
+    place(&mut s, Geometry::Mesh(m), Vec3::ZERO);
+    place(
+        &mut s,
+        Geometry::Sphere { radius: 0.5 },
+        Vec3::new(3.0, 0.0, 0.0),
+    );
     let ps = prepare(&s, true);
     let bvh = InstancedBvh::new(&ps);
     assert_eq!((bvh.level_count(), bvh.instance_count()), (1, 1));
@@ -435,40 +415,8 @@ fn rays_leaving_a_surface_do_not_hit_it_again() {
     let s = instanced_scene();
     let ps = prepare(&s, true);
     let bvh = InstancedBvh::new(&ps);
-    let nt = ps.triangles.len() as u32;
     let sphere = ps.spheres[0];
-    let mut rng = pixel_rng(5, 0, 0, 0);
-    for i in 0..20_000u32 {
-        let (prim, p, ng) = if i % 8 == 0 {
-            let d = sample_uniform_sphere(uniform2(&mut rng));
-            (nt, sphere.center + sphere.radius * d, d)
-        } else {
-            let t = (uniform(&mut rng) * nt as f32) as u32 % nt;
-            let uv = sample_uniform_triangle(uniform2(&mut rng));
-            let sh = ps.triangle_surface(t, uv.x, uv.y);
-            (t, sh.p, sh.ng)
-        };
-        // Directions on both sides, down to grazing angles (1e-3 rad).
-        let f = Frame::from_normal(ng);
-        let side = if i % 2 == 0 { 1.0 } else { -1.0 };
-        let graze = if i % 3 == 0 { 1e-3 } else { uniform(&mut rng) };
-        let phi = std::f32::consts::TAU * uniform(&mut rng);
-        let cos_t = graze.max(1e-3);
-        let sin_t = (1.0 - cos_t * cos_t).sqrt();
-        let dir = f.to_world(Vec3::new(
-            sin_t * phi.cos(),
-            sin_t * phi.sin(),
-            side * cos_t,
-        ));
-        let ray = Ray::new(offset_ray_origin(p, ng, dir), dir);
-        if let Some(h) = bvh.intersect(&ray).filter(|h| h.prim == prim) {
-            // Only a sphere can be re-entered, and then far away.
-            assert!(
-                prim >= nt && side < 0.0 && h.t > 1e-2,
-                "self-hit {h:?} at {i}"
-            );
-        }
-    }
+    crate::accel::assert_rays_leave_surfaces(&ps, &bvh, (sphere.center, sphere.radius), 8);
 }
 
 /// A small shaded image: Lambert under a point light with shadow rays,
@@ -523,4 +471,16 @@ fn render_matches_the_flat_bvh() {
         .map(|(i, (a, b))| (i, *a, *b))
         .collect();
     assert!(differing.len() <= 3, "{differing:?}");
+}
+
+/// Adds an object of `geometry` (material 0, smooth) moved by `offset`.
+fn place(s: &mut Scene, geometry: Geometry, offset: Vec3) {
+    s.objects.push(Object {
+        geometry,
+        transform: Transform {
+            translate: offset,
+            ..Transform::default()
+        },
+        ..Object::default()
+    });
 }

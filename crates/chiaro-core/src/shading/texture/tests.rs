@@ -167,12 +167,7 @@ fn latlong_convention() {
     assert!(latlong_uv(Vec3::Y).y.abs() < 1e-6);
     let mut scene = Scene::default();
     let t = scene.add_texture(Texture::Image(image(4, 2, |x, _| x as f32)));
-    scene.environment = Some(crate::scene::Environment {
-        texture: t,
-        intensity: 2.0,
-        rotate_y_degrees: 0.0,
-        as_background: true,
-    });
+    set_environment(&mut scene, t, 2.0, 0.0, true);
     // -z is u = 0.5: between texels 1 and 2 (values 1 and 2) -> 1.5, times 2.
     assert!((environment_radiance(&scene, Vec3::NEG_Z).x - 3.0).abs() < 1e-5);
     assert_eq!(
@@ -205,12 +200,7 @@ fn rotate_y_turns_the_map_right_handed() {
         glam::Quat::from_rotation_y(rot_deg.to_radians()) * d
     };
     for rot in [0.0_f32, 90.0, -90.0, 180.0, 30.0, 450.0] {
-        scene.environment = Some(crate::scene::Environment {
-            texture: t,
-            intensity: 1.0,
-            rotate_y_degrees: rot,
-            as_background: true,
-        });
+        set_environment(&mut scene, t, 1.0, rot, true);
         let d = texel_dir(rot);
         let seen = environment_radiance(&scene, d).x;
         assert!((seen - 100.0).abs() < 1e-2, "rotate_y {rot}: {seen} at {d}");
@@ -225,12 +215,7 @@ fn rotate_y_turns_the_map_right_handed() {
     // at the map's centre column is seen looking down -x.
     let centre = image(8, 4, |x, _| if x == 3 || x == 4 { 1.0 } else { 0.0 });
     let c = scene.add_texture(Texture::Image(centre));
-    scene.environment = Some(crate::scene::Environment {
-        texture: c,
-        intensity: 1.0,
-        rotate_y_degrees: 90.0,
-        as_background: true,
-    });
+    set_environment(&mut scene, c, 1.0, 90.0, true);
     assert!((environment_radiance(&scene, Vec3::NEG_X).x - 1.0).abs() < 1e-6);
     assert!(environment_radiance(&scene, Vec3::NEG_Z).x.abs() < 1e-6);
     assert!(environment_radiance(&scene, Vec3::X).x.abs() < 1e-6);
@@ -244,22 +229,12 @@ fn environment_mean_radiance_closed_forms() {
     let mut scene = Scene::default();
     assert_eq!(environment_mean_radiance(&scene), Vec3::ZERO);
     let t = scene.add_texture(Texture::Image(image(64, 32, |_, _| 2.0)));
-    scene.environment = Some(crate::scene::Environment {
-        texture: t,
-        intensity: 1.5,
-        rotate_y_degrees: 30.0,
-        as_background: false,
-    });
+    set_environment(&mut scene, t, 1.5, 30.0, false);
     let m = environment_mean_radiance(&scene);
     assert!((m.x - 3.0).abs() < 1e-3, "{m}");
     let sky = image(64, 32, |_, y| if y < 16 { 1.0 } else { 0.0 });
     let t = scene.add_texture(Texture::Image(sky));
-    scene.environment = Some(crate::scene::Environment {
-        texture: t,
-        intensity: 1.0,
-        rotate_y_degrees: 0.0,
-        as_background: false,
-    });
+    set_environment(&mut scene, t, 1.0, 0.0, false);
     let m = environment_mean_radiance(&scene);
     assert!((m.x - 0.5).abs() < 0.02, "{m}");
 }
@@ -278,12 +253,7 @@ fn spot_scene(rot: f32) -> Scene {
     });
     let mut scene = Scene::default();
     let t = scene.add_texture(Texture::Image(img));
-    scene.environment = Some(crate::scene::Environment {
-        texture: t,
-        intensity: 2.0,
-        rotate_y_degrees: rot,
-        as_background: true,
-    });
+    set_environment(&mut scene, t, 2.0, rot, true);
     scene
 }
 
@@ -322,12 +292,7 @@ fn environment_light_pdf_integrates_to_one() {
     let t = scene.add_texture(Texture::Image(image(16, 8, |x, y| {
         if (x, y) == (5, 2) { 1.0 } else { 0.0 }
     })));
-    scene.environment = Some(crate::scene::Environment {
-        texture: t,
-        intensity: 1.0,
-        rotate_y_degrees: 45.0,
-        as_background: true,
-    });
+    set_environment(&mut scene, t, 1.0, 45.0, true);
     let light = EnvironmentLight::new(&scene).expect("a light");
     let mut lit = 0;
     for i in 0..200 {
@@ -553,12 +518,7 @@ fn an_eight_bit_environment_map_lights_as_its_f32_twin() {
     let lights = [packed, plain].map(|img| {
         let mut scene = Scene::default();
         let t = scene.add_texture(Texture::Image(img));
-        scene.environment = Some(crate::scene::Environment {
-            texture: t,
-            intensity: 1.0,
-            rotate_y_degrees: 0.0,
-            as_background: true,
-        });
+        set_environment(&mut scene, t, 1.0, 0.0, true);
         let d = glam::Vec3::new(0.3, 0.5, -0.8).normalize();
         (
             environment_mean_radiance(&scene)
@@ -570,4 +530,22 @@ fn an_eight_bit_environment_map_lights_as_its_f32_twin() {
     });
     assert_eq!(lights[0], lights[1]);
     assert!(lights[0].2.is_some());
+}
+
+/// Makes `texture` `scene`'s environment: radiance times `intensity`,
+/// turned by `rotate_y_degrees` about +y, and the background where
+/// `as_background`.
+fn set_environment(
+    scene: &mut Scene,
+    texture: crate::scene::TextureId,
+    intensity: f32,
+    rotate_y_degrees: f32,
+    as_background: bool,
+) {
+    scene.environment = Some(crate::scene::Environment {
+        texture,
+        intensity,
+        rotate_y_degrees,
+        as_background,
+    });
 }
