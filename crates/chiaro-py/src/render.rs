@@ -291,10 +291,10 @@ pub fn compare<'py>(
             })
         })
         .collect::<PyResult<Vec<_>>>()?;
-    let spec = chiaro::compare::ReferenceSpec::parse(reference).map_err(core_err)?;
+    let spec = chiaro_tools::compare::ReferenceSpec::parse(reference).map_err(core_err)?;
     let inner = &scene.inner;
     let comparison = run_polling(py, progress.map(Bound::unbind), None, |p| {
-        chiaro::compare::compare(inner, &base, &techs, &spec, cache_dir.as_deref(), p)
+        chiaro_tools::compare::compare(inner, &base, &techs, &spec, cache_dir.as_deref(), p)
     })?
     .map_err(to_pyerr)?;
     let report = serde_json::to_value(comparison.report(name))

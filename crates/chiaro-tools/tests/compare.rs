@@ -1,13 +1,15 @@
-//! `chiaro::compare` and the contact sheet on a tiny scene: every technique
+//! `chiaro_tools::compare` and the contact sheet on a tiny scene: every technique
 //! is measured with finite numbers, the path tracer against itself differs
 //! only by noise, the sheet has the documented size, and the reference
 //! cache is hit on the second run.
 
-use chiaro::compare::{CacheStatus, ReferenceSamples, ReferenceSpec, compare, reference_seed};
 use chiaro::scene::Technique;
-use chiaro::sheet::{contact_sheet, sheet_size, write_sheet};
 use chiaro::{NoProgress, RenderSettings, Scene};
 use chiaro_testkit::scenes;
+use chiaro_tools::compare::{
+    CacheStatus, ReferenceSamples, ReferenceSpec, compare, reference_seed,
+};
+use chiaro_tools::sheet::{contact_sheet, sheet_size, write_sheet};
 use std::path::PathBuf;
 
 const SIZE: u32 = 24;
@@ -287,7 +289,7 @@ fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominatin
         f64::from(display_channel(a) - display_channel(b)).powi(2)
     };
     for e in [phong, radiosity] {
-        let flip: Vec<f64> = chiaro::compare::flip_errors(&e.film, r)
+        let flip: Vec<f64> = chiaro_tools::compare::flip_errors(&e.film, r)
             .expect("flip")
             .into_iter()
             .map(f64::from)

@@ -39,7 +39,7 @@
 //! emitter's edge in a Cornell box).
 //!
 //! ```no_run
-//! use chiaro::compare::{compare, ReferenceSpec};
+//! use chiaro_tools::compare::{compare, ReferenceSpec};
 //! use chiaro::{NoProgress, Technique};
 //! let scene = chiaro::io::load_scene("scenes/cornell-box.toml".as_ref()).unwrap().scene;
 //! let mut base = scene.render.clone();
@@ -50,7 +50,7 @@
 //! println!("{}", c.to_markdown());
 //! ```
 
-use crate::{Error, Result, render_with_stats};
+use chiaro::{Error, Result, render_with_stats};
 use chiaro_core::Vec3;
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, metrics, tonemap};
@@ -161,7 +161,7 @@ impl ReferenceSpec {
         let technique = Technique::from_name(name).ok_or_else(|| {
                 bad(format!(
                     "unknown technique `{name}` in `{text}` (expected TECHNIQUE:SPP or TECHNIQUE:auto, e.g. path:256; available: {})",
-                    crate::technique_list()
+                    chiaro::technique_list()
                 ))
             })?;
         let count = |s: &str| match s.trim().parse::<u32>() {
@@ -866,7 +866,7 @@ fn measure(
 ///
 /// # Errors
 /// [`CoreError::BadSetting`] if `techniques` is empty; any error of
-/// [`crate::render_with_stats`] (unknown technique, invalid scene or
+/// [`chiaro::render_with_stats`] (unknown technique, invalid scene or
 /// settings, cancellation).
 pub fn compare(
     scene: &Scene,
@@ -884,13 +884,13 @@ pub fn compare(
     }
     // Check every technique before spending time on any render.
     for &t in techniques {
-        crate::check_settings(&RenderSettings {
+        chiaro::check_settings(&RenderSettings {
             technique: t,
             ..base.clone()
         })?;
     }
     let ref_settings = reference.settings(base);
-    crate::check_settings(&ref_settings)?;
+    chiaro::check_settings(&ref_settings)?;
 
     // The techniques under test: an adaptive reference needs their errors.
     let mut rendered = Vec::with_capacity(techniques.len());

@@ -10,8 +10,8 @@
 //! font (plus a descender row) defined below as data (one `u8` per glyph row, bit 4 the leftmost
 //! pixel), drawn for this project.
 
-use crate::Result;
 use crate::compare::{CacheStatus, Comparison, Entry, format_psnr};
+use chiaro::Result;
 use chiaro_core::Vec3;
 use chiaro_core::film::Film;
 use chiaro_core::film::metrics::{ErrorKind, difference_image, viridis};
