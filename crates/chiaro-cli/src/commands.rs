@@ -391,7 +391,7 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         .filter(|t| !t.is_empty())
         .map(|t| parse_technique("--techniques", t))
         .collect::<Result<Vec<_>>>()?;
-    let reference = chiaro::compare::ReferenceSpec::parse(&args.reference)?;
+    let reference = chiaro_tools::compare::ReferenceSpec::parse(&args.reference)?;
     check_output(&args.output)?;
     if let Some(report) = &args.report {
         check_output_dir(report)?;
@@ -416,7 +416,7 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         }))
     };
     let bar = crate::progress::Bar::new();
-    let result = chiaro::compare::compare(
+    let result = chiaro_tools::compare::compare(
         &scene,
         &settings,
         &techniques,
@@ -426,7 +426,7 @@ pub fn compare(args: CompareArgs) -> Result<()> {
     );
     bar.finish();
     let comparison = result?;
-    use chiaro::compare::CacheStatus;
+    use chiaro_tools::compare::CacheStatus;
     match &comparison.cache {
         CacheStatus::Hit(p) => eprintln!("reference: reusing cached {}", p.display()),
         CacheStatus::Stored(p) => eprintln!("reference: cached as {}", p.display()),
@@ -434,7 +434,7 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         CacheStatus::Disabled => {}
     }
     let title = args.scene.display().to_string();
-    let sheet = chiaro::sheet::write_sheet(&comparison, &title, &args.output)?;
+    let sheet = chiaro_tools::sheet::write_sheet(&comparison, &title, &args.output)?;
     eprintln!(
         "{}: contact sheet {}x{}, error scale {:.4}",
         args.output.display(),

@@ -188,7 +188,7 @@ fn compare_writes_sheet_and_report_and_reuses_the_reference() {
 
     // The sheet: three rows of 16x16 images, so taller than 3 * 16.
     let film = chiaro::io::output::read_image_as_film(&sheet).expect("sheet written");
-    let (w, h) = chiaro::sheet::sheet_size(16, 16, 3);
+    let (w, h) = chiaro_tools::sheet::sheet_size(16, 16, 3);
     assert_eq!((film.width, film.height), (w, h));
 
     // The reference was cached next to the sheet, and is reused.

@@ -99,6 +99,7 @@ fn _chiaro(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(has_crop, m)?)?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
     m.add_function(wrap_pyfunction!(render::compare, m)?)?;
+    m.add_function(wrap_pyfunction!(render::metrics, m)?)?;
     m.add_function(wrap_pyfunction!(solution::solve_radiosity, m)?)?;
     m.add_function(wrap_pyfunction!(render::write, m)?)?;
     m.add_function(wrap_pyfunction!(render::resolve, m)?)?;

@@ -274,15 +274,34 @@ pub fn compare<'py>(
             })
         })
         .collect::<PyResult<Vec<_>>>()?;
-    let spec = chiaro::compare::ReferenceSpec::parse(reference).map_err(core_err)?;
+    let spec = chiaro_tools::compare::ReferenceSpec::parse(reference).map_err(core_err)?;
     let inner = &scene.inner;
     let comparison = run_polling(py, progress.map(Bound::unbind), None, |p| {
-        chiaro::compare::compare(inner, &base, &techs, &spec, cache_dir.as_deref(), p)
+        chiaro_tools::compare::compare(inner, &base, &techs, &spec, cache_dir.as_deref(), p)
     })?
     .map_err(to_pyerr)?;
     let report = serde_json::to_value(comparison.report(name))
         .map_err(|e| RenderError::new_err(format!("report: {e}")))?;
     json_to_py(py, &report)
+}
+
+/// `chiaro._chiaro.metrics`: the numbers `chiaro compare` reports for the
+/// linear-RGB `(H, W, 3)` image `test` against `reference` (same shape),
+/// from the same code (`chiaro_tools::metrics`), as a dict; an infinite
+/// PSNR (identical images) is `None`.
+#[pyfunction]
+pub fn metrics<'py>(
+    py: Python<'py>,
+    test: PyArrayLike3<'_, f32, AllowTypeChange>,
+    reference: PyArrayLike3<'_, f32, AllowTypeChange>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let test = film_from_arrays(test, None, None)?;
+    let reference = film_from_arrays(reference, None, None)?;
+    let m = py
+        .detach(|| chiaro_tools::metrics::measure(&test, &reference))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let value = serde_json::to_value(m).map_err(|e| RenderError::new_err(e.to_string()))?;
+    json_to_py(py, &value)
 }
 
 /// `chiaro._chiaro.resolve_settings`: the settings `render` would use for

@@ -216,6 +216,22 @@ def test_write_read_and_repr_png(tmp_path, root):
         chiaro.write(tmp_path / "y.png", np.zeros((4, 4)))
 
 
+def test_metrics_are_those_of_compare(root):
+    s = chiaro.load(root / BOX)
+    flat = chiaro.render(s, "flat", width=16, height=16)
+    phong = chiaro.render(s, "phong", width=16, height=16)
+    m = chiaro.metrics(flat, phong)
+    assert set(m) == {"relative_mse", "flip", "display_psnr", "rmse", "psnr",
+                      "mean_relative_error"}
+    assert m["relative_mse"] > 0 and 0 < m["flip"] < 1 and m["rmse"] > 0
+    assert 5 < m["display_psnr"] < 60
+    same = chiaro.metrics(phong, np.array(phong))
+    assert same["relative_mse"] == 0 and same["rmse"] == 0 and same["flip"] < 1e-6
+    assert same["psnr"] is None and same["display_psnr"] is None
+    with pytest.raises(ValueError, match="shape"):
+        chiaro.metrics(flat, phong[:8])
+
+
 def test_compare_report(root, tmp_path):
     s = chiaro.load(root / BOX)
     report = chiaro.compare(s, ["flat", "phong"], reference="path:4", width=16, height=16,

@@ -154,8 +154,11 @@ try {
   // Split view: whitted against path, with metrics and a difference image.
   await page.check("#split");
   id = await waitDone(id);
-  const psnr = await page.textContent("#m-psnr");
-  check("split view shows metrics", /dB|inf/.test(psnr), `(PSNR ${psnr})`);
+  // The numbers of `chiaro compare`: relMSE and FLIP to rank by.
+  const [relmse, flipText, psnr] = await Promise.all(["#m-relmse", "#m-flip", "#m-psnr"].map((s) => page.textContent(s)));
+  const flipValue = Number(flipText);
+  check("split view shows compare's metrics", Number(relmse) > 0 && flipValue > 0 && flipValue < 1 && /dB|inf/.test(psnr),
+    `(relMSE ${relmse}, FLIP ${flipText}, display PSNR ${psnr})`);
   await page.screenshot({ path: join(out, "page-split.png") });
 
   // Orbit: drag across the left image, then wait for the refined frame.
@@ -191,9 +194,21 @@ try {
   const shot = await still.screenshot({ path: join(out, "still-split-1280x800.png") });
   const boxes = {};
   for (const c of ["canvas-0", "canvas-1", "canvas-diff"]) boxes[c] = await still.locator(`#${c}`).boundingBox();
-  const d = boxes["canvas-diff"];
-  check("split view fits 1280x800 with the difference image", d && d.x + d.width <= 1280 && d.y + d.height <= 800,
-    `(difference image at ${d && [d.x, d.y, d.width, d.height].map(Math.round).join(",")})`);
+  const inView = (b) => b && b.x >= 0 && b.y >= 0 && b.x + b.width <= 1280 && b.y + b.height <= 800;
+  const fmt = (b) => b && [b.x, b.y, b.width, b.height].map(Math.round).join(",");
+  const d = boxes["canvas-diff"], m = await still.locator("#metrics").boundingBox();
+  check("split view fits 1280x800 with the difference image and the metrics", inView(d) && inView(m),
+    `(difference image at ${fmt(d)}, metrics at ${fmt(m)})`);
+  // The pictures take the window: the compared views are larger than a
+  // third of the width beside the controls (324 px), and what is shown
+  // reaches the bottom of the window rather than leaving it empty.
+  const a0 = boxes["canvas-0"], a1 = boxes["canvas-1"];
+  const bottom = Math.max(...[a0, a1, d, m].map((b) => b.y + b.height));
+  check("split view gives the pictures the window", inView(a0) && inView(a1) && a0.width >= 400 && a1.width >= 400 && bottom >= 700,
+    `(views ${fmt(a0)} and ${fmt(a1)}, lowest picture or table ends at ${Math.round(bottom)} of 800)`);
+  const scrolls = await still.evaluate(() => [document.scrollingElement, document.getElementById("views")]
+    .some((e) => e.scrollHeight > e.clientHeight + 1 || e.scrollWidth > e.clientWidth + 1));
+  check("the split view needs no scrolling", !scrolls);
   // The screenshot itself shows pictures, not the black placeholder canvas.
   const stats = await still.evaluate(async ([b64, boxes]) => {
     const img = await createImageBitmap(await (await fetch(`data:image/png;base64,${b64}`)).blob());
@@ -214,6 +229,16 @@ try {
   }
   const stillStatus = await still.textContent("#status");
   check("the still is not 'rendering'", !/rendering|refining/.test(stillStatus), `(${stillStatus})`);
+  // Slider mode: the slider picture (larger than the two side by side),
+  // the difference image and the metrics all above the fold.
+  await still.check("#slider-mode");
+  await still.screenshot({ path: join(out, "still-slider-1280x800.png") });
+  const sb = await still.locator("#slider-box").boundingBox();
+  const sd = await still.locator("#canvas-diff").boundingBox();
+  const sm = await still.locator("#metrics").boundingBox();
+  const range = await still.locator("#slider").boundingBox();
+  check("slider mode shows the comparison without scrolling", inView(sb) && inView(sd) && inView(sm) && inView(range) && sb.width >= 500,
+    `(slider ${fmt(sb)}, difference ${fmt(sd)}, metrics ${fmt(sm)})`);
   await still.close();
 } catch (e) {
   check("browser session", false, String(e));

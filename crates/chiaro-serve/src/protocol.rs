@@ -13,8 +13,8 @@
 //! ```
 //!
 //! A render request names one view, or two for the split view (then the
-//! server also sends the difference image and the error numbers of the
-//! first view against the second). Every field but `type` has a default;
+//! server also sends the ꟻLIP map and the metrics of the first view
+//! against the second, those of `chiaro compare`). Every field but `type` has a default;
 //! sizes and samples beyond [`Limits`] are refused with an error message,
 //! not clamped, so the page knows. The server answers with binary frames
 //! (see [`encode_frame`]) and JSON text messages (`pass`, `first`, `done`,

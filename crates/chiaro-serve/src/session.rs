@@ -9,7 +9,7 @@ use crate::{ConnGuard, Phase, State};
 use chiaro::RadiositySolution;
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film};
 use chiaro::{Film, Progress, RenderSettings, Scene, Technique};
-use chiaro_core::film::metrics;
+use chiaro_tools::metrics;
 use serde_json::json;
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream};
@@ -574,37 +574,29 @@ fn render_job(
     true
 }
 
-/// Sends the difference image of `a` against the reference `b` and the
-/// numbers `chiaro compare` reports (RMSE, PSNR with peak 1, mean relative
-/// error), all on linear radiance.
+/// Sends the ꟻLIP map of `a` against the reference `b` (the difference
+/// image) and the numbers `chiaro compare` reports ([`metrics::Metrics`],
+/// from the same code): relative MSE and ꟻLIP to rank by, the display
+/// PSNR, and the linear RMSE, PSNR and mean relative error. An infinite
+/// PSNR (identical pictures) is sent as `null`.
 fn send_comparison(job: &Job, a: &Film, b: &Film, out: &SyncSender<Event>) -> bool {
-    let (Ok(rmse), Ok(psnr), Ok(mre), Ok(diff)) = (
-        metrics::rmse(a, b),
-        metrics::psnr(a, b, 1.0),
-        metrics::mean_relative_error(a, b),
-        metrics::difference_image(a, b, metrics::ErrorKind::Absolute, None),
-    ) else {
+    let Ok((m, flip_map)) = metrics::measure_with_flip_map(a, b) else {
         return text(
             out,
             json!({"type": "error", "id": job.id, "message": "the two views differ in size"}),
         );
     };
-    let psnr_json = if psnr.is_finite() {
-        json!(psnr)
-    } else {
-        json!("inf")
-    };
-    if let Ok(png) = encode_film(&diff.film, ImageFormat::Png, &OutputOptions::default()) {
+    if let Ok(png) = encode_film(&flip_map, ImageFormat::Png, &OutputOptions::default()) {
         let header = FrameHeader {
             kind: "diff",
             id: job.id,
             view: 2,
             x: 0,
             y: 0,
-            w: diff.film.width,
-            h: diff.film.height,
-            width: diff.film.width,
-            height: diff.film.height,
+            w: flip_map.width,
+            h: flip_map.height,
+            width: flip_map.width,
+            height: flip_map.height,
             name: String::new(),
         };
         if !send(out, Message::binary(encode_frame(&header, &png))) {
@@ -612,12 +604,10 @@ fn send_comparison(job: &Job, a: &Film, b: &Film, out: &SyncSender<Event>) -> bo
         }
     }
     // Last, so that the page's "done" means every picture has arrived.
-    let m = json!({
-        "type": "metrics", "id": job.id,
-        "rmse": rmse, "psnr": psnr_json, "mean_relative_error": mre,
-        "diff_scale": diff.scale, "max_error": diff.max_error,
-    });
-    text(out, m)
+    let mut message = serde_json::to_value(m).unwrap_or_else(|_| json!({}));
+    message["type"] = json!("metrics");
+    message["id"] = json!(job.id);
+    text(out, message)
 }
 
 /// Sends the last finished render of `view` as a PNG or EXR file frame.

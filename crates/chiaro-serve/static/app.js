@@ -107,11 +107,13 @@ async function onFrame(buf) {
   const bmp = await createImageBitmap(new Blob([payload], { type: "image/png" }));
   if (header.id !== state.sentId) return;
   const c = canvasFor(header.kind, header.view);
-  if (c.width !== header.width || c.height !== header.height) {
+  const resized = c.width !== header.width || c.height !== header.height;
+  if (resized) {
     c.width = header.width; c.height = header.height;
   }
   c.getContext("2d").drawImage(bmp, header.x, header.y);
   if ($("slider-mode").checked) updateSlider();
+  if (resized) fit();
 }
 
 function onText(m) {
@@ -141,11 +143,14 @@ function onText(m) {
   }
 }
 
+// The numbers `chiaro compare` reports (chiaro_tools::metrics), with its
+// digits; a PSNR of identical pictures is infinite, sent as null.
 function showMetrics(m) {
   $("metrics").hidden = false;
-  $("m-rmse").textContent = m.rmse.toExponential(3);
-  $("m-psnr").textContent = typeof m.psnr === "number" ? `${m.psnr.toFixed(2)} dB` : m.psnr;
-  $("m-mre").textContent = m.mean_relative_error.toExponential(3);
+  $("m-relmse").textContent = m.relative_mse.toFixed(5);
+  $("m-flip").textContent = m.flip.toFixed(4);
+  $("m-psnr").textContent = m.display_psnr === null ? "inf" : `${m.display_psnr.toFixed(2)} dB`;
+  $("m-rmse").textContent = m.rmse.toFixed(5);
 }
 
 function finish() {
@@ -195,17 +200,60 @@ function updateSlider() {
   sa.style.clipPath = `inset(0 ${100 - $("slider").value}% 0 0)`;
 }
 
+// Heights below a picture (its caption; the slider's range input too) and
+// between pictures, in CSS pixels, as style.css draws them.
+// The metrics table's size (style.css fixes its width).
+const CAPTION = 20, SLIDER = 20, GAP = 12, METRICS = 200, METRICS_HEIGHT = 110;
+
+// Gives the pictures the window: the compared views (one, two side by
+// side, or the slider's one) as large as they fit beside the controls, the
+// difference image (at least half as wide as a view) and the metrics after
+// them, either in a column beside the views or on the row below,
+// whichever shows the views larger.
+function fit() {
+  const v = $("views"), cs = getComputedStyle(v);
+  // A pixel of slack against rounding, so that nothing scrolls.
+  const W = v.clientWidth - parseFloat(cs.paddingLeft) - parseFloat(cs.paddingRight) - 2;
+  const H = v.clientHeight - parseFloat(cs.paddingTop) - parseFloat(cs.paddingBottom) - 2;
+  const c = $("canvas-0"), aspect = c.width / c.height;
+  const slider = $("slider-mode").checked && state.split;
+  const n = state.split && !slider ? 2 : 1;
+  const below = CAPTION + (slider ? SLIDER : 0);
+  // The widest picture within w x h (h: the picture alone, no caption).
+  const widest = (w, h) => Math.max(32, Math.floor(Math.min(w, h * aspect)));
+  let main, diff, twoRows = false;
+  if (!state.split) {
+    main = diff = widest(W, H - below);
+  } else {
+    // A column beside the views, as wide as half a view (or the table).
+    let w = (W - n * GAP) / (n + 0.5);
+    if (w / 2 < METRICS) w = (W - n * GAP - METRICS) / n;
+    const beside = widest(w, H - below);
+    const column = widest(W - n * (beside + GAP), H - CAPTION - GAP - METRICS_HEIGHT);
+    // Two rows: the row break adds a second gap.
+    const rows = H - below - CAPTION - 2 * GAP;
+    const top = widest((W - (n - 1) * GAP) / n, rows / 1.5);
+    const bottom = widest(W - METRICS - GAP, rows - top / aspect);
+    if (beside >= top) { main = beside; diff = column; } else { main = top; diff = bottom; twoRows = true; }
+  }
+  v.style.setProperty("--main", `${main}px`);
+  v.style.setProperty("--diff", `${diff}px`);
+  $("row-break").hidden = !twoRows;
+  $("side").classList.toggle("column", !twoRows);
+}
+
 function layout() {
   const slider = $("slider-mode").checked && state.split;
   $("fig-0").hidden = slider;
   $("fig-1").hidden = !state.split || slider;
   $("fig-diff").hidden = !state.split;
+  $("side").hidden = !state.split;
   $("fig-slider").hidden = !slider;
   $("metrics").hidden = !state.split;
-  $("views").classList.toggle("split", state.split && !slider);
   $("view-b").disabled = !state.split;
   for (const f of ["png", "exr"]) $(`save-${f}-1`).disabled = !state.split;
   if (slider) updateSlider();
+  fit();
 }
 
 function orbitStart(e) {
@@ -262,6 +310,7 @@ async function main() {
   $("resolution").onchange = () => request(false);
   $("split").onchange = () => { state.split = $("split").checked; layout(); request(false); };
   $("slider-mode").onchange = layout;
+  window.addEventListener("resize", fit);
   $("slider").oninput = updateSlider;
   $("reset-camera").onclick = () => { state.orbit = { yaw: 0, pitch: 0, zoom: 1 }; request(false); };
   for (const v of [0, 1]) for (const f of ["png", "exr"]) {

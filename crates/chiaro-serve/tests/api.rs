@@ -302,11 +302,18 @@ fn split_view_sends_difference_and_metrics_and_saves() {
     );
     let (m, frames) = until(&mut c, "metrics");
     assert_eq!(m["id"], 3);
-    let psnr = m["psnr"]
+    // The numbers `chiaro compare` reports, ranked by relMSE and FLIP.
+    let rel = m["relative_mse"].as_f64().expect("relative_mse");
+    let flip = m["flip"].as_f64().expect("flip");
+    assert!(rel > 0.0 && rel.is_finite(), "{rel}");
+    assert!(flip > 0.0 && flip < 1.0, "{flip}");
+    let psnr = m["display_psnr"]
         .as_f64()
-        .expect("finite PSNR between different techniques");
+        .expect("finite display PSNR between different techniques");
     assert!(psnr > 5.0 && psnr < 60.0, "{psnr}");
-    assert!(m["rmse"].as_f64().expect("rmse") > 0.0);
+    for key in ["rmse", "psnr", "mean_relative_error"] {
+        assert!(m[key].as_f64().expect(key) > 0.0, "{key}: {}", m[key]);
+    }
     assert!(
         frames
             .iter()
@@ -339,6 +346,21 @@ fn split_view_sends_difference_and_metrics_and_saves() {
         json!({"type": "save", "view": 0, "format": "../../x"}),
     );
     assert!(matches!(next(&mut c), Got::Text(v) if v["type"] == "error"));
+}
+
+#[test]
+fn identical_views_measure_no_error_and_an_infinite_psnr_as_null() {
+    let addr = start();
+    let mut c = ws(addr);
+    send(
+        &mut c,
+        json!({"type": "render", "id": 4, "width": 16, "height": 16,
+        "views": [{"technique": "phong"}, {"technique": "phong"}]}),
+    );
+    let (m, _) = until(&mut c, "metrics");
+    assert_eq!(m["relative_mse"].as_f64(), Some(0.0), "{m}");
+    assert!(m["flip"].as_f64().expect("flip") < 1e-6, "{m}");
+    assert!(m["display_psnr"].is_null() && m["psnr"].is_null(), "{m}");
 }
 
 #[test]

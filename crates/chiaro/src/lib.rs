@@ -26,12 +26,9 @@
 //! ```
 
 pub mod camera;
-pub mod compare;
-pub mod gallery;
 pub mod hybrid;
 pub mod limitations;
 pub mod settings;
-pub mod sheet;
 
 pub use chiaro_core::budget;
 pub use chiaro_core::film::{self, Film};

@@ -1,10 +1,9 @@
 //! The film every technique writes: linear RGB `f32` radiance plus depth and
 //! normal buffers, and the tiling used to render it in parallel.
 //!
-//! Tone mapping, palettes and image metrics live in the submodules; file
-//! encoding lives in chiaro-io.
+//! Tone mapping, palettes and the post filter live in the submodules; file
+//! encoding lives in chiaro-io, image metrics in chiaro-tools.
 
-pub mod metrics;
 pub mod palette;
 pub mod postfilter;
 pub mod tonemap;

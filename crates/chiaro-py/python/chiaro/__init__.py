@@ -55,6 +55,7 @@ __all__ = [
     "has_crop",
     "load",
     "loads",
+    "metrics",
     "read_image",
     "render",
     "render_region",
@@ -382,6 +383,22 @@ def read_image(path: PathLike) -> Image:
     """Reads an image file (``.exr``, ``.hdr``, ``.png``, ...) as a linear-RGB
     float32 :class:`Image` (8-bit files are decoded from sRGB)."""
     return Image(_chiaro.read_image(os.fspath(path)))
+
+
+def metrics(image: Any, reference: Any) -> dict:
+    """The numbers ``chiaro compare`` (and the web viewer) report for
+    ``image`` against ``reference``, two linear-RGB arrays of one shape
+    ``(H, W, 3)`` (as :func:`render` returns them), computed by the same
+    code: ``relative_mse`` and ``flip`` (the measures to rank by),
+    ``display_psnr`` (dB of the clamped sRGB images), ``rmse``, ``psnr``
+    (dB of linear radiance, peak 1) and ``mean_relative_error``. A PSNR is
+    ``None`` when the images are identical. Raises ``ValueError`` for arrays
+    of other shapes or of different sizes."""
+    a = np.asarray(image, dtype=np.float32)
+    b = np.asarray(reference, dtype=np.float32)
+    if a.shape != b.shape:
+        raise ValueError(f"metrics: image {a.shape} and reference {b.shape} differ in shape")
+    return _chiaro.metrics(a, b)
 
 
 def compare(

@@ -2,14 +2,14 @@
 //! (`scenes/*.toml`) and on the glTF models in `scenes/gltf/`, as small
 //! PNGs, with a manifest and the README's table.
 //!
-//! [`generate`] renders and writes it all (`cargo run --release -p chiaro
-//! --example gallery`, see [`REGENERATE`]); the test
-//! `crates/chiaro/tests/gallery.rs` checks that it is current: every scene
+//! [`generate`] renders and writes it all (`cargo run --release -p
+//! chiaro-tools --example gallery`, see [`REGENERATE`]); the test
+//! `crates/chiaro-tools/tests/gallery.rs` checks that it is current: every scene
 //! and technique present, each scene file's SHA-256 and each cell's
 //! settings as recorded, each PNG as recorded, the README's table as
 //! generated, and the cells re-rendered within [`CellTolerance`].
 
-use crate::{Error, NoProgress, Result};
+use chiaro::{Error, NoProgress, Result};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, tonemap};
 use chiaro_core::scene::{RenderSettings, Technique};
@@ -21,7 +21,7 @@ use std::time::Instant;
 
 /// The one command that regenerates the gallery, the manifest and the
 /// README's table.
-pub const REGENERATE: &str = "cargo run --release -p chiaro --example gallery";
+pub const REGENERATE: &str = "cargo run --release -p chiaro-tools --example gallery";
 
 /// Image width of every cell.
 pub const WIDTH: u32 = 192;
@@ -203,7 +203,7 @@ pub fn read_png_rgb8(path: &Path) -> Result<(u32, u32, Vec<u8>)> {
 ///
 /// # Errors
 /// [`Error::Io`] if it cannot be read or parsed.
-pub fn load(root: &Path, scene: &str) -> Result<(crate::Scene, String)> {
+pub fn load(root: &Path, scene: &str) -> Result<(chiaro::Scene, String)> {
     let path = root.join(scene);
     let bytes = std::fs::read(&path).map_err(|e| chiaro_io::IoError::io(&path, e))?;
     let loaded = chiaro_io::load_scene(&path)?;
@@ -213,14 +213,14 @@ pub fn load(root: &Path, scene: &str) -> Result<(crate::Scene, String)> {
 /// Renders one cell: the film, its settings and the seconds it took.
 ///
 /// # Errors
-/// Any error of [`crate::render_with_stats`].
+/// Any error of [`chiaro::render_with_stats`].
 pub fn render_cell(
-    scene: &crate::Scene,
+    scene: &chiaro::Scene,
     technique: Technique,
 ) -> Result<(Film, RenderSettings, f64)> {
     let settings = cell_settings(&scene.render, technique);
     let start = Instant::now();
-    let film = crate::render(scene, &settings, &NoProgress)?;
+    let film = chiaro::render(scene, &settings, &NoProgress)?;
     Ok((film, settings, start.elapsed().as_secs_f64()))
 }
 

@@ -10,11 +10,11 @@
 //! font (plus a descender row) defined below as data (one `u8` per glyph row, bit 4 the leftmost
 //! pixel), drawn for this project.
 
-use crate::Result;
 use crate::compare::{CacheStatus, Comparison, Entry, format_psnr};
+use crate::metrics::{ErrorKind, difference_image, viridis};
+use chiaro::Result;
 use chiaro_core::Vec3;
 use chiaro_core::film::Film;
-use chiaro_core::film::metrics::{ErrorKind, difference_image, viridis};
 use chiaro_core::film::tonemap::{self, tonemap_color};
 use chiaro_core::scene::ToneMap;
 use chiaro_io::output::{OutputOptions, write_film};
@@ -577,12 +577,18 @@ pub fn contact_sheet(comparison: &Comparison, title: &str) -> Result<Sheet> {
                 (name, TEXT),
                 (format!("{} spp", e.settings.samples), DIM_TEXT),
                 (format!("{:.3} s", e.seconds), TEXT),
-                (format!("relMSE {:.5}", e.relative_mse), TEXT),
-                (format!("FLIP {:.4}", e.flip), TEXT),
-                (format!("PSNRd {} dB", format_psnr(e.display_psnr)), TEXT),
-                (format!("RMSE {:.5}", e.rmse), DIM_TEXT),
-                (format!("PSNR {} dB", format_psnr(e.psnr)), DIM_TEXT),
-                (format!("MRE  {:.4}", e.mean_relative_error), DIM_TEXT),
+                (format!("relMSE {:.5}", e.metrics.relative_mse), TEXT),
+                (format!("FLIP {:.4}", e.metrics.flip), TEXT),
+                (
+                    format!("PSNRd {} dB", format_psnr(e.metrics.display_psnr)),
+                    TEXT,
+                ),
+                (format!("RMSE {:.5}", e.metrics.rmse), DIM_TEXT),
+                (format!("PSNR {} dB", format_psnr(e.metrics.psnr)), DIM_TEXT),
+                (
+                    format!("MRE  {:.4}", e.metrics.mean_relative_error),
+                    DIM_TEXT,
+                ),
             ]
         };
         for (k, (text, color)) in lines.iter().enumerate() {

@@ -16,7 +16,8 @@
 //! scene and the reference settings ([`cache_key`]), and reused when its
 //! recorded noise meets the target.
 //!
-//! Metrics (see `chiaro_core::film::metrics`) are computed on **linear**
+//! Metrics ([`crate::metrics`], the same for the web viewer and Python)
+//! are computed on **linear**
 //! radiance, before exposure and tone mapping, over all channels:
 //! - `rmse`: `sqrt(mean((a - r)^2))`, radiance units;
 //! - `psnr`: `10 log10(1 / MSE)` dB, i.e. linear values with a peak of 1.0
@@ -39,7 +40,7 @@
 //! emitter's edge in a Cornell box).
 //!
 //! ```no_run
-//! use chiaro::compare::{compare, ReferenceSpec};
+//! use chiaro_tools::compare::{compare, ReferenceSpec};
 //! use chiaro::{NoProgress, Technique};
 //! let scene = chiaro::io::load_scene("scenes/cornell-box.toml".as_ref()).unwrap().scene;
 //! let mut base = scene.render.clone();
@@ -50,12 +51,13 @@
 //! println!("{}", c.to_markdown());
 //! ```
 
-use crate::{Error, Result, render_with_stats};
+use crate::metrics::{self, Metrics};
+use chiaro::{Error, Result, render_with_stats};
 use chiaro_core::Vec3;
 use chiaro_core::error::CoreError;
-use chiaro_core::film::{Film, metrics, tonemap};
+use chiaro_core::film::Film;
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::{RenderSettings, Scene, Technique, ToneMap};
+use chiaro_core::scene::{RenderSettings, Scene, Technique};
 use chiaro_io::output::{OutputOptions, read_image_as_film, write_atomically, write_film};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -161,7 +163,7 @@ impl ReferenceSpec {
         let technique = Technique::from_name(name).ok_or_else(|| {
                 bad(format!(
                     "unknown technique `{name}` in `{text}` (expected TECHNIQUE:SPP or TECHNIQUE:auto, e.g. path:256; available: {})",
-                    crate::technique_list()
+                    chiaro::technique_list()
                 ))
             })?;
         let count = |s: &str| match s.trim().parse::<u32>() {
@@ -223,19 +225,8 @@ pub struct Entry {
     /// Render wall-clock time in seconds (for a cached reference: the time
     /// of the render that filled the cache, 0 if unknown).
     pub seconds: f64,
-    /// RMSE against the reference, linear radiance units.
-    pub rmse: f64,
-    /// PSNR against the reference in dB ([`PSNR_CONVENTION`]); infinite for
-    /// an identical image.
-    pub psnr: f64,
-    /// Mean relative error against the reference (dimensionless).
-    pub mean_relative_error: f64,
-    /// Relative MSE against the reference (dimensionless).
-    pub relative_mse: f64,
-    /// PSNR of the displayed images in dB; infinite when they are identical.
-    pub display_psnr: f64,
-    /// Mean ꟻLIP error of the displayed images, in `[0, 1]`.
-    pub flip: f64,
+    /// Its errors against the reference (PSNR: [`PSNR_CONVENTION`]).
+    pub metrics: Metrics,
     /// The ꟻLIP error per pixel in the magma colour map (linear RGB).
     pub flip_map: Film,
 }
@@ -382,16 +373,19 @@ impl Comparison {
             techniques: self
                 .entries
                 .iter()
-                .map(|e| TechniqueReport {
-                    technique: e.technique.name().into(),
-                    rmse: e.rmse,
-                    psnr: e.psnr.is_finite().then_some(e.psnr),
-                    mean_relative_error: e.mean_relative_error,
-                    relative_mse: e.relative_mse,
-                    display_psnr: e.display_psnr.is_finite().then_some(e.display_psnr),
-                    flip: e.flip,
-                    seconds: e.seconds,
-                    samples: e.settings.samples,
+                .map(|e| {
+                    let m = &e.metrics;
+                    TechniqueReport {
+                        technique: e.technique.name().into(),
+                        rmse: m.rmse,
+                        psnr: m.psnr.is_finite().then_some(m.psnr),
+                        mean_relative_error: m.mean_relative_error,
+                        relative_mse: m.relative_mse,
+                        display_psnr: m.display_psnr.is_finite().then_some(m.display_psnr),
+                        flip: m.flip,
+                        seconds: e.seconds,
+                        samples: e.settings.samples,
+                    }
                 })
                 .collect(),
         }
@@ -411,17 +405,18 @@ impl Comparison {
              |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for e in &self.entries {
+            let m = &e.metrics;
             s += &format!(
                 "| {} | {} | {:.3} | {:.5} | {:.4} | {} | {:.5} | {} | {:.4} |\n",
                 e.technique.name(),
                 e.settings.samples,
                 e.seconds,
-                e.relative_mse,
-                e.flip,
-                format_psnr(e.display_psnr),
-                e.rmse,
-                format_psnr(e.psnr),
-                e.mean_relative_error
+                m.relative_mse,
+                m.flip,
+                format_psnr(m.display_psnr),
+                m.rmse,
+                format_psnr(m.psnr),
+                m.mean_relative_error
             );
         }
         let r = &self.reference;
@@ -583,60 +578,6 @@ impl Progress for Labelled<'_> {
     fn cancelled(&self) -> bool {
         self.inner.cancelled()
     }
-}
-
-/// ꟻLIP between the displayed images of `test` and `reference` (clamped,
-/// sRGB 8-bit, as [`metrics::display_channel`] shows them): the mean error
-/// in `[0, 1]` and the per-pixel error in the magma colour map, as linear
-/// RGB.
-///
-/// # Errors
-/// [`CoreError::Unsupported`] if the films differ in size.
-pub fn flip(test: &Film, reference: &Film) -> Result<(f64, Film)> {
-    let map = flip_image(test, reference)?;
-    let (w, h) = (reference.width, reference.height);
-    let mean = f64::from(nv_flip::FlipPool::from_image(&map).mean());
-    let colours = map.apply_color_lut(&nv_flip::magma_lut()).to_vec();
-    let to_linear = tonemap::srgb8_to_linear_table();
-    let mut film = Film::new(w, h);
-    for (px, c) in film.color.iter_mut().zip(colours.chunks_exact(3)) {
-        *px = Vec3::new(
-            to_linear[c[0] as usize],
-            to_linear[c[1] as usize],
-            to_linear[c[2] as usize],
-        );
-    }
-    Ok((if mean.is_finite() { mean } else { 1.0 }, film))
-}
-
-/// The ꟻLIP error of every pixel (row by row, in `[0, 1]`) between the
-/// displayed images of `test` and `reference`, as [`flip`] computes it.
-///
-/// # Errors
-/// [`CoreError::Unsupported`] if the films differ in size.
-pub fn flip_errors(test: &Film, reference: &Film) -> Result<Vec<f32>> {
-    Ok(flip_image(test, reference)?.to_vec())
-}
-
-fn flip_image(test: &Film, reference: &Film) -> Result<nv_flip::FlipImageFloat> {
-    if test.width != reference.width || test.height != reference.height {
-        return Err(Error::Core(CoreError::Unsupported(format!(
-            "cannot compare images of different sizes: {}x{} and {}x{}",
-            test.width, test.height, reference.width, reference.height
-        ))));
-    }
-    let (w, h) = (reference.width, reference.height);
-    let rgb8 = |f: &Film| -> Vec<u8> {
-        tonemap::to_srgb8(f, ToneMap::Clamp, 0.0)
-            .into_iter()
-            .flatten()
-            .collect()
-    };
-    Ok(nv_flip::flip(
-        nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(reference)),
-        nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(test)),
-        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
-    ))
 }
 
 /// The reference as [`BATCHES`] independent images of equal sample
@@ -838,15 +779,10 @@ fn measure(
     seconds: f64,
     reference: &Film,
 ) -> Result<Entry> {
-    let (flip_mean, flip_map) = flip(&film, reference)?;
+    let (metrics, flip_map) = metrics::measure_with_flip_map(&film, reference)?;
     Ok(Entry {
         technique,
-        rmse: metrics::rmse(&film, reference)?,
-        psnr: metrics::psnr(&film, reference, 1.0)?,
-        mean_relative_error: metrics::mean_relative_error(&film, reference)?,
-        relative_mse: metrics::relative_mse(&film, reference)?,
-        display_psnr: metrics::display_psnr(&film, reference)?,
-        flip: flip_mean,
+        metrics,
         flip_map,
         settings,
         film,
@@ -866,7 +802,7 @@ fn measure(
 ///
 /// # Errors
 /// [`CoreError::BadSetting`] if `techniques` is empty; any error of
-/// [`crate::render_with_stats`] (unknown technique, invalid scene or
+/// [`chiaro::render_with_stats`] (unknown technique, invalid scene or
 /// settings, cancellation).
 pub fn compare(
     scene: &Scene,
@@ -884,13 +820,13 @@ pub fn compare(
     }
     // Check every technique before spending time on any render.
     for &t in techniques {
-        crate::check_settings(&RenderSettings {
+        chiaro::check_settings(&RenderSettings {
             technique: t,
             ..base.clone()
         })?;
     }
     let ref_settings = reference.settings(base);
-    crate::check_settings(&ref_settings)?;
+    chiaro::check_settings(&ref_settings)?;
 
     // The techniques under test: an adaptive reference needs their errors.
     let mut rendered = Vec::with_capacity(techniques.len());

@@ -5,8 +5,8 @@
 //! `gallery::RECHECK_SECONDS` re-render within their tolerance. Any
 //! failure says to run `gallery::REGENERATE`.
 
-use chiaro::gallery::{self, CellTolerance, Manifest};
 use chiaro::scene::Technique;
+use chiaro_tools::gallery::{self, CellTolerance, Manifest};
 use std::collections::HashMap;
 use std::time::Instant;
 

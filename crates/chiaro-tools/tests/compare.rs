@@ -1,13 +1,15 @@
-//! `chiaro::compare` and the contact sheet on a tiny scene: every technique
+//! `chiaro_tools::compare` and the contact sheet on a tiny scene: every technique
 //! is measured with finite numbers, the path tracer against itself differs
 //! only by noise, the sheet has the documented size, and the reference
 //! cache is hit on the second run.
 
-use chiaro::compare::{CacheStatus, ReferenceSamples, ReferenceSpec, compare, reference_seed};
 use chiaro::scene::Technique;
-use chiaro::sheet::{contact_sheet, sheet_size, write_sheet};
 use chiaro::{NoProgress, RenderSettings, Scene};
 use chiaro_testkit::scenes;
+use chiaro_tools::compare::{
+    CacheStatus, ReferenceSamples, ReferenceSpec, compare, reference_seed,
+};
+use chiaro_tools::sheet::{contact_sheet, sheet_size, write_sheet};
 use std::path::PathBuf;
 
 const SIZE: u32 = 24;
@@ -50,18 +52,23 @@ fn phong_and_whitted_against_path_report_finite_metrics() {
     assert_eq!(c.reference.technique, Technique::Path);
     assert_eq!(c.reference.settings.samples, 16);
     assert_eq!(c.reference.settings.seed, reference_seed(base.seed));
-    assert_eq!(c.reference.rmse, 0.0);
-    assert!(c.reference.psnr.is_infinite());
+    assert_eq!(c.reference.metrics.rmse, 0.0);
+    assert!(c.reference.metrics.psnr.is_infinite());
     let names: Vec<_> = c.entries.iter().map(|e| e.technique).collect();
     assert_eq!(names, [Technique::Phong, Technique::Whitted]);
     for e in &c.entries {
         assert_eq!(e.settings.samples, base.samples);
         assert_eq!((e.film.width, e.film.height), (SIZE, SIZE));
-        for v in [e.rmse, e.psnr, e.mean_relative_error, e.seconds] {
+        for v in [
+            e.metrics.rmse,
+            e.metrics.psnr,
+            e.metrics.mean_relative_error,
+            e.seconds,
+        ] {
             assert!(v.is_finite() && v >= 0.0, "{:?}: {v}", e.technique);
         }
         assert!(
-            e.rmse > 0.0,
+            e.metrics.rmse > 0.0,
             "{:?} cannot equal the path tracer",
             e.technique
         );
@@ -112,22 +119,22 @@ fn path_against_itself_at_another_seed_differs_only_by_noise() {
     let (path, phong) = (&c.entries[0], &c.entries[1]);
     // A different seed: not the same image ...
     assert_ne!(path.settings.seed, c.reference.settings.seed);
-    assert!(path.rmse > 0.0);
+    assert!(path.metrics.rmse > 0.0);
     // ... but the same estimate: a small error, and smaller than that of a
     // different technique (Phong's ambient term instead of indirect light).
     assert!(
-        path.rmse < phong.rmse,
+        path.metrics.rmse < phong.metrics.rmse,
         "path {} phong {}",
-        path.rmse,
-        phong.rmse
+        path.metrics.rmse,
+        phong.metrics.rmse
     );
     let mean = f64::from(c.reference.film.mean().element_sum() / 3.0);
     assert!(
-        path.rmse < 0.5 * mean.max(1e-3),
+        path.metrics.rmse < 0.5 * mean.max(1e-3),
         "path rmse {} vs mean {mean}",
-        path.rmse
+        path.metrics.rmse
     );
-    assert!(path.psnr > 20.0, "path psnr {}", path.psnr);
+    assert!(path.metrics.psnr > 20.0, "path psnr {}", path.metrics.psnr);
 }
 
 #[test]
@@ -156,7 +163,10 @@ fn reference_is_cached_and_reused() {
     // The cached reference is bit-identical (EXR f32), so are the metrics,
     // and the report keeps the original render time.
     assert_eq!(second.reference.film.color, first.reference.film.color);
-    assert_eq!(second.entries[0].rmse, first.entries[0].rmse);
+    assert_eq!(
+        second.entries[0].metrics.rmse,
+        first.entries[0].metrics.rmse
+    );
     assert_eq!(second.reference.seconds, first.reference.seconds);
     assert!(second.report("s").reference.cached);
 
@@ -256,18 +266,18 @@ fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominatin
     let (phong, radiosity) = (&c.entries[0], &c.entries[1]);
     // Radiosity is visibly the closest; the measures meant for ranking say so.
     assert!(
-        radiosity.relative_mse < 0.5 * phong.relative_mse,
+        radiosity.metrics.relative_mse < 0.5 * phong.metrics.relative_mse,
         "{} {}",
-        radiosity.relative_mse,
-        phong.relative_mse
+        radiosity.metrics.relative_mse,
+        phong.metrics.relative_mse
     );
     assert!(
-        radiosity.flip < 0.5 * phong.flip,
+        radiosity.metrics.flip < 0.5 * phong.metrics.flip,
         "{} {}",
-        radiosity.flip,
-        phong.flip
+        radiosity.metrics.flip,
+        phong.metrics.flip
     );
-    assert!(radiosity.display_psnr > phong.display_psnr + 3.0);
+    assert!(radiosity.metrics.display_psnr > phong.metrics.display_psnr + 3.0);
     // The emitter: pixels where the reference is brighter than white.
     let r = &c.reference.film;
     let mask: Vec<bool> = r.color.iter().map(|c| c.max_element() > 1.0).collect();
@@ -283,11 +293,11 @@ fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominatin
     let sq = |a: f32, b: f32| f64::from(a - b).powi(2);
     let rel = |a: f32, b: f32| f64::from(a - b).powi(2) / (f64::from(b).powi(2) + 0.01);
     let disp = |a: f32, b: f32| {
-        use chiaro::film::metrics::display_channel;
+        use chiaro_tools::metrics::display_channel;
         f64::from(display_channel(a) - display_channel(b)).powi(2)
     };
     for e in [phong, radiosity] {
-        let flip: Vec<f64> = chiaro::compare::flip_errors(&e.film, r)
+        let flip: Vec<f64> = chiaro_tools::metrics::flip_errors(&e.film, r)
             .expect("flip")
             .into_iter()
             .map(f64::from)
@@ -336,7 +346,7 @@ fn the_reference_takes_samples_until_its_own_noise_is_below_the_target() {
         let c = run(ReferenceSamples::Auto { fraction, cap });
         let n = &c.reference_noise;
         let estimate = n.relative_mse.expect("estimated");
-        let judged = c.entries[0].relative_mse;
+        let judged = c.entries[0].metrics.relative_mse;
         assert!(
             estimate <= fraction * judged,
             "reference relMSE {estimate} above {fraction} x {judged}"
@@ -361,7 +371,7 @@ fn the_reference_takes_samples_until_its_own_noise_is_below_the_target() {
     let (finest, finest_estimate) = finest.expect("rendered");
     let coarse = run(ReferenceSamples::Fixed(64));
     let measured =
-        chiaro::film::metrics::relative_mse(&coarse.reference.film, &finest.film).expect("sizes");
+        chiaro_tools::metrics::relative_mse(&coarse.reference.film, &finest.film).expect("sizes");
     let predicted = coarse.reference_noise.relative_mse.expect("estimated") + finest_estimate;
     assert!(
         measured > 0.5 * predicted && measured < 2.0 * predicted,

@@ -1,19 +1,27 @@
-//! Image metrics for comparing techniques: RMSE, PSNR, mean relative error,
-//! relative MSE, the MSE and PSNR of the displayed images, and a
-//! false-colour difference image.
+//! Image metrics for comparing techniques, the one set that `compare`, the
+//! web viewer's split view and Python's `chiaro.metrics` report
+//! ([`Metrics`], [`measure`]): relative MSE and ꟻLIP (the measures to rank
+//! by), the PSNR of the displayed images, and RMSE, PSNR and mean relative
+//! error of linear radiance; besides them, a false-colour difference image
+//! and the ꟻLIP map.
 //!
 //! The metrics work over every channel of every pixel; `a` is the image
 //! under test and `b` the reference, of the same size. RMSE, PSNR, the mean
 //! relative error and relative MSE read the films' **linear** colours
-//! (before exposure and tone mapping); `display_mse` and `display_psnr`
-//! read them as an 8-bit PNG shows them (clamped, sRGB-encoded), where an
-//! emitter far brighter than white cannot dominate.
+//! (before exposure and tone mapping); `display_mse`, `display_psnr` and
+//! ꟻLIP read them as an 8-bit PNG shows them (clamped, sRGB-encoded), where
+//! an emitter far brighter than white cannot dominate. Linear RMSE and PSNR
+//! are dominated by the few brightest pixels (an emitter's edge: phong
+//! against path on a scene with visible lights can read PSNR -9 dB for two
+//! pictures that look alike), hence ranking by relMSE and ꟻLIP.
 
-use super::Film;
-use super::tonemap::srgb_eotf;
-use crate::error::{CoreError, Result};
-use crate::shading::sanitize;
-use glam::Vec3;
+use chiaro_core::Vec3;
+use chiaro_core::error::{CoreError, Result};
+use chiaro_core::film::Film;
+use chiaro_core::film::tonemap::{self, srgb_eotf, srgb_oetf};
+use chiaro_core::scene::ToneMap;
+use chiaro_core::shading::sanitize;
+use serde::Serialize;
 
 /// The `epsilon` in the mean relative error `|a - b| / (b + epsilon)`: keeps
 /// black reference pixels from dominating (the convention of e.g. the
@@ -114,7 +122,7 @@ pub fn relative_mse(a: &Film, b: &Film) -> Result<f64> {
 /// sRGB-encoded, what an 8-bit PNG of the film shows (before quantising).
 #[inline]
 pub fn display_channel(x: f32) -> f32 {
-    super::tonemap::srgb_oetf(sanitize(Vec3::splat(x)).x.min(1.0))
+    srgb_oetf(sanitize(Vec3::splat(x)).x.min(1.0))
 }
 
 /// Mean squared error of the **displayed** images ([`display_channel`]):
@@ -143,6 +151,102 @@ pub fn display_psnr(a: &Film, b: &Film) -> Result<f64> {
     } else {
         -10.0 * m.log10()
     })
+}
+
+/// ꟻLIP between the displayed images of `test` and `reference` (clamped,
+/// sRGB 8-bit, as [`display_channel`] shows them; Andersson et al. 2020,
+/// NVIDIA's perceptual difference, LDR version, 67 pixels per degree): the
+/// mean error in `[0, 1]` and the per-pixel error in the magma colour map,
+/// as linear RGB.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn flip(test: &Film, reference: &Film) -> Result<(f64, Film)> {
+    let map = flip_image(test, reference)?;
+    let (w, h) = (reference.width, reference.height);
+    let mean = f64::from(nv_flip::FlipPool::from_image(&map).mean());
+    let colours = map.apply_color_lut(&nv_flip::magma_lut()).to_vec();
+    let to_linear = tonemap::srgb8_to_linear_table();
+    let mut film = Film::new(w, h);
+    for (px, c) in film.color.iter_mut().zip(colours.chunks_exact(3)) {
+        *px = Vec3::new(
+            to_linear[c[0] as usize],
+            to_linear[c[1] as usize],
+            to_linear[c[2] as usize],
+        );
+    }
+    Ok((if mean.is_finite() { mean } else { 1.0 }, film))
+}
+
+/// The ꟻLIP error of every pixel (row by row, in `[0, 1]`) between the
+/// displayed images of `test` and `reference`, as [`flip`] computes it.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn flip_errors(test: &Film, reference: &Film) -> Result<Vec<f32>> {
+    Ok(flip_image(test, reference)?.to_vec())
+}
+
+fn flip_image(test: &Film, reference: &Film) -> Result<nv_flip::FlipImageFloat> {
+    check_sizes(test, reference)?;
+    let (w, h) = (reference.width, reference.height);
+    let rgb8 = |f: &Film| -> Vec<u8> {
+        tonemap::to_srgb8(f, ToneMap::Clamp, 0.0)
+            .into_iter()
+            .flatten()
+            .collect()
+    };
+    Ok(nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(reference)),
+        nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(test)),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    ))
+}
+
+/// The numbers reported for an image against a reference, wherever one is
+/// compared (`compare`'s report and contact sheet, the web viewer, Python).
+/// Serialised with these names; an infinite PSNR (identical images) becomes
+/// JSON `null`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Metrics {
+    /// [`relative_mse`] (dimensionless): rank by this or [`Self::flip`].
+    pub relative_mse: f64,
+    /// The mean of [`flip`]'s per-pixel error, 0 (identical) to 1.
+    pub flip: f64,
+    /// [`display_psnr`] in dB; infinite when the displays are identical.
+    pub display_psnr: f64,
+    /// [`rmse`], linear radiance units.
+    pub rmse: f64,
+    /// [`psnr`] in dB with peak 1.0 (linear radiance); infinite when the
+    /// images are identical.
+    pub psnr: f64,
+    /// [`mean_relative_error`] (dimensionless).
+    pub mean_relative_error: f64,
+}
+
+/// Every [`Metrics`] number of `test` against `reference`.
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn measure(test: &Film, reference: &Film) -> Result<Metrics> {
+    measure_with_flip_map(test, reference).map(|(m, _)| m)
+}
+
+/// [`measure`], and the ꟻLIP map that comes with it ([`flip`]).
+///
+/// # Errors
+/// [`CoreError::Unsupported`] if the films differ in size.
+pub fn measure_with_flip_map(test: &Film, reference: &Film) -> Result<(Metrics, Film)> {
+    let (flip, flip_map) = flip(test, reference)?;
+    let metrics = Metrics {
+        relative_mse: relative_mse(test, reference)?,
+        flip,
+        display_psnr: display_psnr(test, reference)?,
+        rmse: rmse(test, reference)?,
+        psnr: psnr(test, reference, 1.0)?,
+        mean_relative_error: mean_relative_error(test, reference)?,
+    };
+    Ok((metrics, flip_map))
 }
 
 /// Which per-pixel error the difference image shows.
@@ -351,7 +455,31 @@ mod tests {
         let b = Film::new(3, 2);
         assert!(rmse(&a, &b).is_err());
         assert!(mean_relative_error(&a, &b).is_err());
+        assert!(measure(&a, &b).is_err());
         assert!(difference_image(&a, &b, ErrorKind::Absolute, None).is_err());
+    }
+
+    #[test]
+    fn measure_gathers_the_single_metrics() {
+        let b = flat(8, 8, Vec3::splat(0.4));
+        let mut a = b.clone();
+        a.color[9] = Vec3::new(0.9, 0.1, 0.4);
+        let (m, map) = measure_with_flip_map(&a, &b).expect("same size");
+        assert_eq!(m.relative_mse, relative_mse(&a, &b).expect("same size"));
+        assert_eq!(m.display_psnr, display_psnr(&a, &b).expect("same size"));
+        assert_eq!(m.rmse, rmse(&a, &b).expect("same size"));
+        assert_eq!(m.psnr, psnr(&a, &b, 1.0).expect("same size"));
+        assert_eq!(m.flip, flip(&a, &b).expect("same size").0);
+        assert!(m.flip > 0.0 && m.flip < 1.0, "{}", m.flip);
+        assert_eq!((map.width, map.height), (8, 8));
+        // Identical images: no error, infinite PSNRs written as null.
+        let same = measure(&b, &b).expect("same size");
+        assert_eq!((same.relative_mse, same.rmse, same.flip), (0.0, 0.0, 0.0));
+        let json = serde_json::to_value(same).expect("serialises");
+        assert!(
+            json["psnr"].is_null() && json["display_psnr"].is_null(),
+            "{json}"
+        );
     }
 
     #[test]
