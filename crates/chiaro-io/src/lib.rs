@@ -21,6 +21,7 @@
 //!   merged into a [`Scene`] by [`Imported::merge_into`].
 
 pub mod error;
+pub mod files;
 pub mod gltf_import;
 pub mod images;
 pub mod obj;
@@ -79,7 +80,7 @@ pub fn load_scene(path: &Path) -> Result<Loaded> {
     let ext = lowercase_extension(path);
     match ext.as_str() {
         "toml" => {
-            let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+            let text = files::read_text_file(path)?;
             let base = path.parent().unwrap_or_else(|| Path::new("."));
             scene_toml::parse_scene(&text, base, path)
         }
