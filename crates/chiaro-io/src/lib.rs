@@ -313,7 +313,11 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
             camera: c.camera,
             inside: None,
         },
-        None => framing::frame_scene(&scene, UpAxis::Y, scene.render.aspect(), None),
+        None => {
+            // A vertex at 1e30 would overflow the framing into a NaN camera.
+            framing::check_framable(&scene).map_err(|m| IoError::format(path, m))?;
+            framing::frame_scene(&scene, UpAxis::Y, scene.render.aspect(), None)
+        }
     };
     scene.camera = framed.camera;
     scene.lights = imported.lights.clone();
