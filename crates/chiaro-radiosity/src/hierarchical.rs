@@ -12,8 +12,10 @@
 //! (BF refinement) until nothing changes. The number of links grows about
 //! linearly with the number of leaves, instead of quadratically.
 
-use crate::formfactor::{PairRule, Visibility, facing, pair, point_light_direct};
+use crate::direct::point_light_direct;
+use crate::formfactor::facing;
 use crate::mesh::{Element, ElementMesh, barycentric, material_at};
+use crate::ray_cast::{PairRule, Visibility, pair};
 use chiaro_core::error::CoreError;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::Progress;

@@ -2,9 +2,9 @@
 //!
 //! [`solve`] meshes every surface and area light into triangular elements
 //! ([`mesh`]), groups fine elements into shooting patches (`patch.rs`),
-//! computes form factors ([`formfactor`], [`hemicube`]), solves
-//! the radiosity system with the chosen solver ([`solver`],
-//! [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
+//! computes form factors ([`formfactor`]: [`ray_cast`], [`analytic`],
+//! [`hemicube`]), solves the radiosity system with the chosen solver
+//! ([`solver`]: [`gathering`], [`progressive`], [`hierarchical`]) and returns a [`RadiositySolution`]; [`render_solution`]
 //! draws it from the scene's camera through chiaro-raster's z-buffer (item
 //! buffer): the textured colour from the surface layer times the Gouraud
 //! interpolation of the vertex irradiance; [`Radiosity`] does both, as the
@@ -43,16 +43,22 @@
 //! - **link** (hierarchical): an interaction between two quadtree nodes at
 //!   the level where its form factor is accurate enough.
 
+pub mod analytic;
+mod direct;
 pub mod formfactor;
+pub mod gathering;
 pub mod hemicube;
 pub mod hierarchical;
 pub mod mesh;
 mod nearest;
 mod patch;
+pub mod progressive;
+pub mod ray_cast;
 pub mod solution;
 pub mod solver;
 
-pub use formfactor::{FormFactor, disc_to_disc, perpendicular_rectangles, point_to_polygon};
+pub use analytic::point_to_polygon;
+pub use formfactor::{FormFactor, disc_to_disc, perpendicular_rectangles};
 use solution::{RHO_MIN, clamped_weights, irradiance_from};
 pub use solution::{RadiositySolution, SolveStats, fingerprint};
 
@@ -63,9 +69,10 @@ use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::Progress;
 use chiaro_core::scene::Scene;
 use chiaro_core::shading::texture::background_radiance;
-use formfactor::{PairFormFactor, PairRule, Visibility, pair, point_light_direct};
+use direct::point_light_direct;
 use glam::{Vec2, Vec3};
 use mesh::{Element, ElementMesh, SourceKind, material_at};
+use ray_cast::{PairFormFactor, PairRule, Visibility, pair};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -326,9 +333,9 @@ pub(crate) fn solve_with(
     };
     let l = match cfg.solver {
         Solver::Jacobi | Solver::GaussSeidel => {
-            let m = solver::build_matrix(&mesh.elements, ff, progress)?;
+            let m = gathering::build_matrix(&mesh.elements, ff, progress)?;
             let out = if cfg.solver == Solver::Jacobi {
-                solver::jacobi(
+                gathering::jacobi(
                     &mesh.elements,
                     &e,
                     &m,
@@ -337,7 +344,7 @@ pub(crate) fn solve_with(
                     progress,
                 )?
             } else {
-                solver::gauss_seidel(
+                gathering::gauss_seidel(
                     &mesh.elements,
                     &e,
                     &m,
@@ -371,12 +378,12 @@ pub(crate) fn solve_with(
                     s.shoot(p, du, f, g);
                 }
             };
-            let shoot: &solver::Shoot<'_> = if shooter.is_some() {
+            let shoot: &progressive::Shoot<'_> = if shooter.is_some() {
                 &by_patch
             } else {
                 &columns
             };
-            let out = solver::progressive(
+            let out = progressive::progressive(
                 &mesh.elements,
                 &patches,
                 &e,

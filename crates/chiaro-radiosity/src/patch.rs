@@ -25,8 +25,9 @@
 //! same criterion), times one visibility fraction per receiving element
 //! (four rays to points of the shooter).
 
-use crate::formfactor::{PairRule, Visibility, pair, sub_centroids};
+use crate::formfactor::sub_centroids;
 use crate::mesh::{ElementMesh, SourceKind};
+use crate::ray_cast::{PairRule, Visibility, pair};
 use chiaro_core::error::CoreError;
 use chiaro_core::progress::Progress;
 use glam::Vec3;

@@ -1,14 +1,18 @@
-//! Gouraud (1971) shading's vertex lighting for the scan converter: which
-//! vertices are lit, once each, and the vertex cache the shading pass fills.
+//! Gouraud shading for the scan converter (Henri Gouraud, "Continuous
+//! Shading of Curved Surfaces", IEEE Trans. Computers C-20(6), 1971; Foley
+//! et al. 16.2.4): the illumination model evaluated at the vertices and
+//! interpolated across the triangle. Here: which vertices are lit, once
+//! each, the vertex cache the shading pass fills, and the interpolation at
+//! a sample. The per-sample steps every method shares are in
+//! [`crate::pipeline::shading`].
 
 use crate::pipeline::NONE;
-use crate::pipeline::shading::Ctx;
-use crate::pipeline::shading::Split;
+use crate::pipeline::shading::{Ctx, Lit, SampleAt, Split};
 use crate::pipeline::triangles::TriData;
 use crate::pipeline::triangles::needs_footprint;
 use crate::pipeline::visibility::Class;
 use crate::pipeline::visibility::TileVis;
-use glam::Vec3A;
+use glam::{Vec3, Vec3A};
 
 use chiaro_core::scene::ShadeMode;
 use chiaro_core::shading::{ShadingPoint, SurfaceMaterial};
@@ -359,4 +363,47 @@ impl<'a> Ctx<'a, '_> {
             d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
         }
     }
+}
+
+/// Gouraud shading of the sample `at` of triangle `td`: the illumination of
+/// its corners (`poly`'s vertex tables, or the triangle's own corners where
+/// a vertex is shared by different materials) interpolated at the sample,
+/// textured per pixel, with the interpolated normal.
+#[inline]
+pub(crate) fn shade(ctx: &Ctx<'_, '_>, poly: &PolyShading, td: &TriData, at: &SampleAt) -> Lit {
+    let (t, b) = (td.t, at.b);
+    let [i0, i1, i2] = td.idx;
+    let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
+    // (No hashing when no triangle needed per-corner values.)
+    let corners = if poly.corners.is_empty() {
+        None
+    } else {
+        poly.corners.get(&t)
+    };
+    let split = match corners {
+        Some(c) => Split::lerp3(*c, w),
+        None => {
+            let table = if at.flip {
+                &poly.vertex_back
+            } else {
+                &poly.vertex_front
+            };
+            let get = |i: usize| table.get(i).copied().unwrap_or_default();
+            Split::lerp3([get(i0), get(i1), get(i2)], w)
+        }
+    };
+    ctx.split_sample(td, at, split, at.hit.ns * at.sign)
+}
+
+/// The colour of a [`TriData::lean`] Gouraud sample at barycentric weights
+/// `w` of the three corners: the corners' illumination interpolated,
+/// untextured. The same operations as [`shade`] for that case.
+#[inline(always)]
+pub(crate) fn lean_color(td: &TriData, [w, u, v]: [f32; 3]) -> Vec3 {
+    // Split::lerp3 and `diffuse * 1 + rest` on the corners' SSE
+    // vectors: the same operations lane by lane.
+    let [a, b, c] = td.corners;
+    let diffuse = a[0] * w + b[0] * u + c[0] * v;
+    let rest = a[1] * w + b[1] * u + c[1] * v;
+    (diffuse * Vec3A::ONE + rest).into()
 }

@@ -8,11 +8,14 @@
 //! - [`pipeline`]: the driver of the five steps, each in its file:
 //!   [`pipeline::vertex`] (clip space, snapping, eye rays),
 //!   [`pipeline::binning`] (setup and tiles), [`pipeline::visibility`]
-//!   (Catmull's z-buffer into an item buffer, screen-door transparency),
-//!   [`pipeline::shading`] (flat, Gouraud and Phong shading per sample) and
+//!   (Catmull's z-buffer into an item buffer),
+//!   [`pipeline::shading`] (what every shading method shares per sample) and
 //!   [`pipeline::resolve`] (the tent filter into the film).
-//! - [`gouraud`]: Gouraud's vertex lighting and its cache.
-//! - [`abuffer`]: Carpenter's A-buffer, the sorted transparent fragments.
+//! - The shading methods, one file each: [`flat`] (one illumination per
+//!   polygon), [`gouraud`] (vertex lighting, its cache, interpolation) and
+//!   [`phong`] (the normal interpolated, lit per sample).
+//! - Transparency: [`screen_door`] (the ordered-dither mask in the z-buffer)
+//!   and [`abuffer`] (Carpenter's A-buffer, the sorted transparent fragments).
 //! - [`shadows`]: the shadow methods: [`shadows::rays`] (shadow rays),
 //!   [`shadows::maps`] (Williams' shadow z-buffers), [`shadows::volumes`]
 //!   (Crow's shadow volumes), [`shadows::object_precision`]
@@ -37,9 +40,12 @@
 pub mod abuffer;
 pub mod clip;
 pub mod filter;
+pub mod flat;
 pub mod gouraud;
+pub mod phong;
 pub mod pipeline;
 pub mod raster;
+pub mod screen_door;
 pub mod shadows;
 pub mod technique;
 pub mod zbuffer;

@@ -79,6 +79,7 @@ use crate::pipeline::vertex::Rays;
 use crate::pipeline::visibility::Class;
 use crate::pipeline::visibility::Visibility;
 use crate::raster::sample_offsets;
+pub use crate::screen_door::dither_threshold;
 use crate::shadows::Shadows;
 use crate::shadows::volumes::VolumeCounting;
 use crate::shadows::volumes::bin_volumes;
@@ -92,7 +93,6 @@ use chiaro_core::progress::Progress;
 use chiaro_core::scene::{RenderSettings, ShadeMode};
 use chiaro_core::shading::EmitterGroup;
 use std::sync::atomic::AtomicU64;
-pub use visibility::dither_threshold;
 
 /// Side of the square screen tiles, in pixels.
 pub const TILE_SIZE: u32 = 64;

@@ -1,5 +1,8 @@
-//! Step 4: deferred shading of the visible samples per tile: flat shading,
-//! Gouraud (1971) interpolation and Phong (1975) normals, box-filtered.
+//! Step 4: deferred shading of the visible samples per tile, box-filtered:
+//! what every shading method shares (the frame's lighting, the sample's
+//! surface and side, the environment and reflection maps, depth cueing),
+//! with each method's own step in its file: [`crate::flat`],
+//! [`crate::gouraud`] and [`crate::phong`].
 
 use crate::gouraud::PolyShading;
 use crate::pipeline::NONE;
@@ -8,6 +11,7 @@ use crate::pipeline::vertex::Rays;
 use crate::pipeline::visibility::{Class, TileVis};
 use crate::shadows::Shadows;
 use crate::shadows::rays::RayShadows;
+use crate::{flat, gouraud, phong};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TileRect};
 use chiaro_core::progress::Progress;
@@ -21,7 +25,7 @@ use crate::abuffer::composite;
 use crate::pipeline::exact;
 use chiaro_core::film::TilePixels;
 use chiaro_core::prepared::{PreparedScene, SurfaceHit};
-use chiaro_core::scene::{AlphaMode, MaterialId};
+use chiaro_core::scene::MaterialId;
 use chiaro_core::scene::{Material, RenderSettings, ShadeMode};
 use chiaro_core::shading::texture::{
     background_radiance, environment_diffuse, environment_radiance, environment_specular,
@@ -241,35 +245,6 @@ impl Ctx<'_, '_> {
             None => SurfaceMaterial::from_material(td.material),
         }
     }
-
-    /// Flat shading of triangle `td`: once, at the centroid, with the face
-    /// normal. The same values as `surface` at the centroid, `flipped` and
-    /// `untextured_material` give, from the cached triangle.
-    pub(crate) fn flat_split(&self, td: &TriData<'_>) -> Split {
-        let t = td.t;
-        let third = 1.0 / 3.0;
-        let (p, sm) = if td.textured {
-            let hit = self.surface(td, third, third, true, true);
-            (hit.p, self.untextured_material(&hit))
-        } else {
-            // surface(): w = 1 - u - v, then the same interpolations.
-            let w = 1.0 - third - third;
-            let mut sm = self.base(td);
-            sm.kd *= Vec3::from(td.c[0] * w + td.c[1] * third + td.c[2] * third);
-            (
-                Vec3::from(td.p[0] * w + td.p[1] * third + td.p[2] * third),
-                sm,
-            )
-        };
-        let mut n = Vec3::from(td.ng);
-        // flipped(t), with the cached face normal (PreparedScene::face_normal).
-        if td.material.two_sided && td.ng.dot(Vec3A::from(self.rays.eye) - td.p[0]) < 0.0 {
-            n = -n;
-        }
-        let wo = (self.rays.eye - p).normalize_or_zero();
-        let sp = ShadingPoint { p, n, ng: n, wo };
-        self.illuminate_split(t, &sm, &sp)
-    }
 }
 
 /// What shading one sample produced.
@@ -454,37 +429,10 @@ pub(crate) fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> Sample
     let (color, normal) = match td.mode {
         ShadeMode::Phong => {
             let ns = ns();
-            let color = td.c[0] * w + td.c[1] * u + td.c[2] * v;
-            // exact::normalize_or_zero(eye - p): |eye - p| is `depth`, bit
-            // for bit (the same squares summed in the same order).
-            let rcp = 1.0 / depth;
-            let wo = if rcp.is_finite() && rcp > 0.0 {
-                (eye - p) * rcp
-            } else {
-                Vec3A::ZERO
-            };
-            let sp = ShadingPoint {
-                p: p.into(),
-                n: ns.into(),
-                ng: ng.into(),
-                wo: wo.into(),
-            };
-            let c = match (&ctx.point_lighting, ctx.bases.get(td.material_id.index())) {
-                (Some(pl), Some(base)) => pl.shade_kd(base, base.kd * Vec3::from(color), &sp),
-                // Not reached: TriData::lean checked both.
-                _ => Vec3::ZERO,
-            };
-            (c, ns)
+            (phong::lean_color(ctx, td, [w, u, v], p, depth, ns), ns)
         }
-        ShadeMode::Gouraud => {
-            // Split::lerp3 and `diffuse * 1 + rest` on the corners' SSE
-            // vectors: the same operations lane by lane.
-            let [a, b, c] = td.corners;
-            let diffuse = a[0] * w + b[0] * u + c[0] * v;
-            let rest = a[1] * w + b[1] * u + c[1] * v;
-            ((diffuse * Vec3A::ONE + rest).into(), ns())
-        }
-        ShadeMode::Flat => (td.flat.diffuse * Vec3::ONE + td.flat.rest, ng),
+        ShadeMode::Gouraud => (gouraud::lean_color(td, [w, u, v]), ns()),
+        ShadeMode::Flat => (flat::lean_color(td), ng),
     };
     SampleResult {
         color,
@@ -492,6 +440,80 @@ pub(crate) fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> Sample
         normal: normal.into(),
         specular: Vec3::ZERO,
         coverage_kt: None,
+    }
+}
+
+/// A visible sample as every shading method reads it.
+pub(crate) struct SampleAt {
+    /// The surface at the sample (shading normal only for Gouraud and Phong).
+    pub(crate) hit: SurfaceHit,
+    /// Perspective-correct barycentrics `(u, v)` of the sample.
+    pub(crate) b: Vec2,
+    /// The uv footprint of one pixel (zero for untextured triangles).
+    pub(crate) duv_dx: Vec2,
+    pub(crate) duv_dy: Vec2,
+    /// Unit direction to the eye (zero where the method does not read it).
+    pub(crate) wo: Vec3,
+    /// True where the back of a two-sided surface is seen; `sign` is then
+    /// -1 (the normals' factor), else 1.
+    pub(crate) flip: bool,
+    pub(crate) sign: f32,
+    /// Film position of the sample.
+    pub(crate) sx: f32,
+    pub(crate) sy: f32,
+}
+
+/// What a shading method gives a sample, before the terms every method
+/// shares (environment light, reflection map, depth cueing).
+pub(crate) struct Lit {
+    pub(crate) color: Vec3,
+    /// The normal the sample is shaded with (flipped to the viewer's side).
+    pub(crate) n: Vec3,
+    /// The reflection map's weight.
+    pub(crate) kr: Vec3,
+    /// The lobe that reflects the prefiltered environment, when there is one.
+    pub(crate) lobe: Option<SurfaceMaterial>,
+    /// The part of `color` from specular reflection and emission.
+    pub(crate) specular: Vec3,
+    /// A BLEND point's straight-through transmission (see [`SampleResult`]).
+    pub(crate) coverage_kt: Option<Vec3>,
+}
+
+impl Ctx<'_, '_> {
+    /// The sample `at` of a flat or Gouraud triangle, whose illumination
+    /// `split` is constant or interpolated: the diffuse part times the
+    /// diffuse texture (applied per pixel) plus the rest, shaded with the
+    /// normal `n`.
+    #[inline]
+    pub(crate) fn split_sample(&self, td: &TriData, at: &SampleAt, split: Split, n: Vec3) -> Lit {
+        let ps = self.ps;
+        let (hit, b) = (&at.hit, at.b);
+        // diffuse_texture_factor: one without a texture.
+        let tex = if td.material.texture.is_some() {
+            let tc = PreparedScene::tex_coord(hit, at.duv_dx, at.duv_dy);
+            ps.diffuse_texture_factor(hit.material, &tc)
+        } else {
+            Vec3::ONE
+        };
+        // The material with the vertex colour at the sample (flat and
+        // Gouraud triangles do not carry it) and the diffuse texture
+        // factor, for the environment terms.
+        let vertex_lobe = || {
+            let [i0, i1, i2] = td.idx;
+            let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
+            let color = ps.colors[i0] * w.x + ps.colors[i1] * w.y + ps.colors[i2] * w.z;
+            let mut sm = SurfaceMaterial::with_vertex_color(td.material, color);
+            sm.kd *= tex;
+            sm
+        };
+        Lit {
+            color: split.diffuse * tex + split.rest,
+            n,
+            kr: td.material.reflect,
+            lobe: ps.prefiltered_environment().map(|_| vertex_lobe()),
+            specular: split.rest,
+            coverage_kt: None,
+        }
     }
 }
 
@@ -512,7 +534,6 @@ pub(crate) fn shade_sample(
 ) -> SampleResult {
     let ps = ctx.ps;
     let eye = ctx.rays.eye;
-    let t = td.t;
     let [i0, i1, i2] = td.idx;
     // Perspective-correct barycentrics of the sample and of its neighbours.
     let third = Vec2::splat(1.0 / 3.0);
@@ -547,156 +568,33 @@ pub(crate) fn shade_sample(
         Vec3::ZERO
     };
     let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
-    let sign = if flip { -1.0 } else { 1.0 };
-    let mut specular = Vec3::ZERO;
-    let mut coverage_kt = None;
-    let prefiltered = ps.prefiltered_environment();
-    // The material with the vertex colour at the sample (flat and Gouraud
-    // triangles do not carry it) and the diffuse texture factor `tex`, for
-    // the environment terms.
-    let vertex_lobe = |tex: Vec3| {
-        let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
-        let color = ps.colors[i0] * w.x + ps.colors[i1] * w.y + ps.colors[i2] * w.z;
-        let mut sm = SurfaceMaterial::with_vertex_color(material, color);
-        sm.kd *= tex;
-        sm
+    let at = SampleAt {
+        hit,
+        b,
+        duv_dx,
+        duv_dy,
+        wo,
+        flip,
+        sign: if flip { -1.0 } else { 1.0 },
+        sx,
+        sy,
     };
-    let (color, n, kr, lobe) = match td.mode {
-        ShadeMode::Phong if !needs_footprint && !want_specular && ctx.point_lighting.is_some() => {
-            // The common case without copying the material: untextured (so
-            // no bump or normal map), the point-light model, no pixel index.
-            let base = ctx.bases.get(td.material_id.index());
-            let owned;
-            let base = match base {
-                Some(b) => b,
-                None => {
-                    owned = ctx.base(td);
-                    &owned
-                }
-            };
-            let n = hit.ns * sign;
-            let sp = ShadingPoint {
-                p: hit.p,
-                n,
-                ng: hit.ng * sign,
-                wo,
-            };
-            let c = match &ctx.point_lighting {
-                Some(pl) => pl.shade_kd(base, base.kd * hit.color, &sp),
-                // Not reached: the arm's guard checked `point_lighting`.
-                None => ctx.illuminate(
-                    t,
-                    None,
-                    &SurfaceMaterial {
-                        kd: base.kd * hit.color,
-                        ..*base
-                    },
-                    &sp,
-                    counts,
-                ),
-            };
-            (
-                c,
-                n,
-                base.kr,
-                prefiltered.map(|_| SurfaceMaterial {
-                    kd: base.kd * hit.color,
-                    ..*base
-                }),
-            )
-        }
-        ShadeMode::Phong => {
-            let (sm, n) = if needs_footprint {
-                // The surface layer: textures, normal and bump maps.
-                let (dpdu, dpdv) = ps.triangle_dpduv(t);
-                let ss = ps.shading_surface_at(hit, dpdu, dpdv, duv_dx, duv_dy);
-                if material.alpha_mode == AlphaMode::Blend {
-                    coverage_kt = Some(ss.material.kt);
-                }
-                (ss.material, ss.ns)
-            } else {
-                // The layer without textures or maps: the vertex colour only.
-                let mut sm = ctx.base(td);
-                sm.kd *= hit.color;
-                (sm, hit.ns)
-            };
-            let n = n * sign;
-            let sp = ShadingPoint {
-                p: hit.p,
-                n,
-                ng: hit.ng * sign,
-                wo,
-            };
-            // A sample at a pixel centre (one sample per pixel) names its pixel.
-            let pixel = (sx.fract() == 0.5 && sy.fract() == 0.5 && sx >= 0.0 && sy >= 0.0)
-                .then_some((sx as u32, sy as u32));
-            let c = ctx.illuminate(t, pixel, &sm, &sp, counts);
-            if want_specular {
-                let diffuse_only = SurfaceMaterial {
-                    ks: Vec3::ZERO,
-                    emission: Vec3::ZERO,
-                    ..sm
-                };
-                specular = c - ctx.illuminate(t, pixel, &diffuse_only, &sp, counts);
-            }
-            (c, n, sm.kr, prefiltered.map(|_| sm))
-        }
-        ShadeMode::Gouraud => {
-            let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
-            // (No hashing when no triangle needed per-corner values.)
-            let corners = if poly.corners.is_empty() {
-                None
-            } else {
-                poly.corners.get(&t)
-            };
-            let split = match corners {
-                Some(c) => Split::lerp3(*c, w),
-                None => {
-                    let table = if flip {
-                        &poly.vertex_back
-                    } else {
-                        &poly.vertex_front
-                    };
-                    let get = |i: usize| table.get(i).copied().unwrap_or_default();
-                    Split::lerp3([get(i0), get(i1), get(i2)], w)
-                }
-            };
-            // diffuse_texture_factor: one without a texture.
-            let tex = if material.texture.is_some() {
-                let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
-                ps.diffuse_texture_factor(hit.material, &tc)
-            } else {
-                Vec3::ONE
-            };
-            specular = split.rest;
-            (
-                split.diffuse * tex + split.rest,
-                hit.ns * sign,
-                material.reflect,
-                prefiltered.map(|_| vertex_lobe(tex)),
-            )
-        }
-        ShadeMode::Flat => {
-            let split = td.flat;
-            let tex = if material.texture.is_some() {
-                let tc = PreparedScene::tex_coord(&hit, duv_dx, duv_dy);
-                ps.diffuse_texture_factor(hit.material, &tc)
-            } else {
-                Vec3::ONE
-            };
-            specular = split.rest;
-            (
-                split.diffuse * tex + split.rest,
-                hit.ng * sign,
-                material.reflect,
-                prefiltered.map(|_| vertex_lobe(tex)),
-            )
-        }
+    // The method's own step.
+    let Lit {
+        mut color,
+        n,
+        kr,
+        lobe,
+        mut specular,
+        coverage_kt,
+    } = match td.mode {
+        ShadeMode::Phong => phong::shade(ctx, td, &at, counts, want_specular),
+        ShadeMode::Gouraud => gouraud::shade(ctx, poly, td, &at),
+        ShadeMode::Flat => flat::shade(ctx, td, &at),
     };
-    let mut color = color;
     // The environment's diffuse light and its reflection by the glossy
     // lobe (the split sum).
-    if let (Some(table), Some(lobe)) = (prefiltered, lobe) {
+    if let (Some(table), Some(lobe)) = (ps.prefiltered_environment(), lobe) {
         let glossy = environment_specular(table, ps.scene, &lobe, n, wo);
         color += environment_diffuse(table, lobe.kd, n) + glossy;
         specular += glossy;

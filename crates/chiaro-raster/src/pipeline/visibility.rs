@@ -1,5 +1,6 @@
 //! Step 3: per-tile z-buffer visibility (Catmull 1974) into an item buffer,
-//! with screen-door transparency by an ordered-dither mask (Bayer 1973).
+//! with screen-door transparency ([`crate::screen_door`]) and the A-buffer's
+//! fragment lists ([`crate::abuffer`]).
 
 use crate::abuffer::fragment_lists;
 use crate::pipeline::binning::Bins;
@@ -7,6 +8,7 @@ use crate::pipeline::vertex::Rays;
 use crate::pipeline::{NONE, RasterWork};
 use crate::raster::RasterTri;
 use crate::raster::{rasterize_window, rasterize_window_masked};
+use crate::screen_door;
 use crate::shadows::volumes::{VolumeCounting, count_volumes};
 use chiaro_core::accel::alpha::Coverage;
 use chiaro_core::error::CoreError;
@@ -18,7 +20,6 @@ use std::sync::atomic::Ordering;
 use crate::raster::Rect;
 use chiaro_core::film::TileRect;
 use chiaro_core::scene::{Material, RenderSettings, TransparencyMode};
-use glam::Vec3;
 
 /// How the visibility pass treats a material.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -37,31 +38,10 @@ impl Class {
             return Class::Opaque;
         }
         match settings.transparency.unwrap_or(m.transparency) {
-            TransparencyMode::ScreenDoor => {
-                let kt = m.transmit.clamp(Vec3::ZERO, Vec3::ONE);
-                Class::ScreenDoor((kt.x + kt.y + kt.z) / 3.0)
-            }
+            TransparencyMode::ScreenDoor => Class::ScreenDoor(screen_door::mask_level(m.transmit)),
             mode => Class::Blend(mode),
         }
     }
-}
-
-/// The 8x8 ordered-dither (Bayer) threshold in `(0, 1)` of sample `s` of
-/// pixel `(x, y)`: over any 8x8 block each of the 64 values occurs once, so
-/// a surface drawn where `threshold >= kt` covers a fraction `1 - kt`.
-#[inline]
-pub fn dither_threshold(x: u32, y: u32, s: u32) -> f32 {
-    const BAYER: [u8; 64] = [
-        0, 32, 8, 40, 2, 34, 10, 42, 48, 16, 56, 24, 50, 18, 58, 26, 12, 44, 4, 36, 14, 46, 6, 38,
-        60, 28, 52, 20, 62, 30, 54, 22, 3, 35, 11, 43, 1, 33, 9, 41, 51, 19, 59, 27, 49, 17, 57,
-        25, 15, 47, 7, 39, 13, 45, 5, 37, 63, 31, 55, 23, 61, 29, 53, 21,
-    ];
-    // Samples of one pixel use shifted masks so they cover different levels.
-    let (xs, ys) = (
-        x.wrapping_add(s.wrapping_mul(5)),
-        y.wrapping_add(s.wrapping_mul(3)),
-    );
-    (f32::from(BAYER[((ys % 8) * 8 + xs % 8) as usize]) + 0.5) / 64.0
 }
 
 /// One tile's visibility: the nearest opaque triangle of each sample, the
@@ -210,13 +190,7 @@ impl Visibility<'_, '_> {
                         })
                     }
                     Class::ScreenDoor(kt) => {
-                        rasterize_window(rt, r, win, self.offsets, |x, y, s, k| {
-                            let i = index(x, y, s);
-                            if k > key[i] && dither_threshold(x, y, s as u32) >= kt {
-                                key[i] = k;
-                                ids[i] = rt.id;
-                            }
-                        })
+                        screen_door::draw(rt, r, win, self.offsets, kt, key, &mut ids, index)
                     }
                     Class::Blend(_) => blend.push(rt),
                 }
