@@ -135,6 +135,10 @@ impl EmitterGroup {
     }
 }
 
+/// Receiver elements times emissive triangles above which [`direct_light`]
+/// gathers each pair with one point and one ray.
+const DIRECT_PAIR_BUDGET: usize = 20_000_000;
+
 /// Reflected radiance at each element due to *direct* light: point-like
 /// lights (`point_direct`) plus every emissive source triangle, gathered
 /// with ray-cast form factors (16 visibility rays per receiver point), or,
@@ -189,11 +193,25 @@ fn direct_light(
             .map(|q| q.distance(g.centre))
             .fold(0.0f32, f32::max);
     }
-    let rule = PairRule {
-        far_m: 2,
-        mid_m: 2,
-        near_m: 4,
-        vis_m: 4,
+    // Every element gathers from every emitter: past a budget of pairs
+    // (a whole model made emissive), one quadrature point and one
+    // visibility ray a pair instead of up to 16 and 16, so the work stays
+    // bounded (counted in pairs, so the result does not depend on timing).
+    let emitters: usize = groups.iter().map(|g| g.sources.len()).sum();
+    let rule = if mesh.elements.len().saturating_mul(emitters) > DIRECT_PAIR_BUDGET {
+        PairRule {
+            far_m: 1,
+            mid_m: 1,
+            near_m: 1,
+            vis_m: 1,
+        }
+    } else {
+        PairRule {
+            far_m: 2,
+            mid_m: 2,
+            near_m: 4,
+            vis_m: 4,
+        }
     };
     par_map(mesh.elements.len(), progress, |i| {
         let (e, pd) = (&mesh.elements[i], &point_direct[i]);
@@ -355,6 +373,7 @@ pub(crate) fn solve_with(
             };
             stats.iterations = out.iterations;
             stats.unshot = out.unshot;
+            warn_unconverged(ctx, &mesh, out.stop, &stats, Some(out.worst));
             out.l
         }
         Solver::Progressive => {
@@ -394,6 +413,7 @@ pub(crate) fn solve_with(
             )?;
             stats.iterations = out.iterations;
             stats.unshot = out.unshot;
+            warn_unconverged(ctx, &mesh, out.stop, &stats, Some(out.worst));
             out.l
         }
         Solver::Hierarchical => {
@@ -428,6 +448,7 @@ pub(crate) fn solve_with(
             stats.nodes = hs.nodes;
             stats.leaves = hs.leaves;
             stats.links = hs.links;
+            warn_unconverged(ctx, &mesh, hs.stop, &stats, None);
             l
         }
     };
@@ -456,6 +477,33 @@ pub(crate) fn solve_with(
     Ok(build_solution(
         scene, ps, &mesh, l, irradiance, indirect, stats,
     ))
+}
+
+/// Warns through the context's progress when a solve stopped before
+/// converging ([`solver::stop_warning`]), naming the object of element
+/// `worst` (the one holding the most unshot power) when known.
+fn warn_unconverged(
+    ctx: &RenderContext<'_>,
+    mesh: &ElementMesh,
+    stop: solver::Stop,
+    stats: &SolveStats,
+    worst: Option<usize>,
+) {
+    let culprit = worst
+        .and_then(|e| mesh.elements.get(e))
+        .and_then(|e| mesh.sources.get(e.source as usize))
+        .and_then(|s| ctx.scene().objects.get(s.object as usize))
+        .map(|o| format!("object \"{}\"", o.name));
+    if let Some(w) = solver::stop_warning(
+        stop,
+        &stats.solver,
+        stats.iterations,
+        stats.unshot,
+        ctx.settings().radiosity.tolerance,
+        culprit.as_deref(),
+    ) {
+        ctx.progress().warning(&w);
+    }
 }
 
 fn build_solution(
@@ -723,3 +771,5 @@ pub(crate) fn surface(ps: &PreparedScene<'_>, t: u32, u: f32, v: f32) -> (Vec3, 
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_hostile;
