@@ -120,7 +120,7 @@ fn coincident_and_coplanar_elements_do_not_face() {
         let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
         let a = mesh::Element::new(p, n, Vec3::ONE, Vec3::ZERO, [0; 3], 0);
         // The same triangle, and one overlapping it in the same plane.
-        let b = a.clone();
+        let b = a;
         let q = [p[0], (p[1] + p[2]) * 0.5, p[2] + (p[2] - p[1]) * 0.3];
         let c = mesh::Element::new(q, n, Vec3::ONE, Vec3::ZERO, [0; 3], 1);
         let tol = 3.0 * 1e-6;
