@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# CI fuzz stage: builds the cargo-fuzz targets in fuzz/ and runs each from
-# its checked-in corpus for a bounded time (FUZZING.md). A crash fails the
-# stage and leaves its input under fuzz/artifacts/<target>/.
+# CI fuzz stage: mutates scenes through the CLI (fuzz/mutate.py, no nightly
+# needed), then builds the cargo-fuzz targets in fuzz/ and runs each from
+# its checked-in corpus for a bounded time (FUZZING.md). A crash (or a hang,
+# for the CLI mutation and the `techniques` target) fails the stage and
+# leaves its input under fuzz/artifacts/.
 # FUZZ_SECONDS (default 10) bounds each target's run; FUZZ_SEED (default 1)
 # fixes libFuzzer's random choices, so a commit's CI run explores the same
 # inputs each time (a crash is the code's, not the dice's).
@@ -15,6 +17,19 @@ skip() {
   echo "SKIP fuzz: $*"
   exit 0
 }
+
+# CLI-level mutation fuzzing (fuzz/mutate.py): needs no nightly, so it runs
+# everywhere; mutants of the shipped scenes and corpora through `chiaro info`
+# and `chiaro render` under a 4 GB address-space cap, a hang, crash, panic
+# or Debug-form message fails the stage (input under fuzz/artifacts/cli/).
+if command -v python3 >/dev/null 2>&1; then
+  cargo build --release -p chiaro-cli
+  echo "== mutate (CLI, ${seconds} s)"
+  python3 fuzz/mutate.py --chiaro target/release/chiaro --seconds "$seconds" --seed "$seed" ||
+    { echo "CLI mutation found a problem: see fuzz/artifacts/cli/"; exit 1; }
+else
+  echo "SKIP mutate: no python3"
+fi
 
 # cargo-fuzz needs a nightly compiler (libFuzzer's coverage flags).
 if ! cargo +nightly --version >/dev/null 2>&1; then

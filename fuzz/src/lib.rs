@@ -1,5 +1,7 @@
-//! What every fuzz target shares: a small memory budget for the loaders and
-//! the `chiaro info`-level preparation of a loaded scene.
+//! What every fuzz target shares: a small memory budget for the loaders,
+//! the `chiaro info`-level preparation of a loaded scene, and (for the
+//! `techniques` target) a tiny render with every technique under a work
+//! budget.
 
 use chiaro_core::budget::{ByteSize, MemoryBudget};
 use chiaro_io::Loaded;
@@ -25,5 +27,42 @@ pub fn prepare(loaded: &Loaded) {
     if estimate.check(MemoryBudget::new(FUZZ_BUDGET)).is_ok() {
         let b = chiaro::scene_bounds(scene);
         assert!(!b.min.is_nan() && !b.max.is_nan(), "NaN scene bounds");
+    }
+}
+
+/// Width and height of the renders of [`render_every_technique`].
+pub const TINY: (u32, u32) = (8, 6);
+
+/// The radiosity iteration budget of [`render_every_technique`]: a count,
+/// so a solve ends at the same point every run, and small, so that a
+/// render that does not end shows as a libFuzzer timeout, not a slow run.
+pub const RADIOSITY_BUDGET: u32 = 200;
+
+/// Renders `loaded` with every technique at [`TINY`] size, one sample, a
+/// radiosity budget of [`RADIOSITY_BUDGET`] iterations and the fuzzing
+/// memory budget, when the scene's estimate fits that budget. Errors (a
+/// refusal) are fine; a panic, a hang or a NaN-free film turning NaN are
+/// what fuzzing looks for.
+pub fn render_every_technique(loaded: &Loaded) {
+    let scene = &loaded.scene;
+    for technique in chiaro::scene::Technique::ALL {
+        let mut s = scene.render.clone();
+        s.technique = technique;
+        (s.width, s.height) = TINY;
+        s.samples = 1;
+        s.memory_limit = Some(ByteSize(FUZZ_BUDGET));
+        s.radiosity.max_iterations = RADIOSITY_BUDGET;
+        if chiaro::memory_estimate(scene, &s)
+            .check(MemoryBudget::new(FUZZ_BUDGET))
+            .is_err()
+        {
+            continue;
+        }
+        if let Ok(film) = chiaro::render(scene, &s, &chiaro::NoProgress) {
+            assert!(
+                film.color.iter().all(|c| !c.is_nan()),
+                "{technique:?}: NaN in the film"
+            );
+        }
     }
 }

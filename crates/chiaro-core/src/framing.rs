@@ -116,6 +116,92 @@ pub fn for_each_world_point(scene: &Scene, mut f: impl FnMut(Vec3)) {
     }
 }
 
+/// The largest world coordinate (in absolute value) [`frame_scene`] works
+/// with: it squares distances in `f32`, which overflows past about 1.8e19.
+pub const MAX_FRAMED_COORDINATE: f32 = 1e18;
+
+/// `x` as a person reads it: exponent form outside `[1e-4, 1e6)`.
+fn plain_number(x: f32) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-4..1e6).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+/// `Ok` when every world point of the scene is finite and within
+/// [`MAX_FRAMED_COORDINATE`], so that [`frame_scene`] can place a camera;
+/// otherwise a message naming the first point that is not: its mesh (or
+/// sphere), object, vertex index and position (`mesh "m" (object "o"):
+/// vertex 12 at (1e30, 0, 0)`), with how many points are out of range.
+pub fn check_framable(scene: &Scene) -> Result<(), String> {
+    let bad = |q: Vec3| !q.is_finite() || q.abs().max_element() > MAX_FRAMED_COORDINATE;
+    let at = |q: Vec3| {
+        format!(
+            "({}, {}, {})",
+            plain_number(q.x),
+            plain_number(q.y),
+            plain_number(q.z)
+        )
+    };
+    let mut first: Option<String> = None;
+    let mut count = 0usize;
+    for o in &scene.objects {
+        let m = o.transform.world_from_object();
+        match o.geometry {
+            Geometry::Mesh(id) => {
+                let Some(mesh) = scene.meshes.get(id.index()) else {
+                    continue;
+                };
+                for (i, p) in mesh.positions.iter().enumerate() {
+                    let q = m.transform_point3(*p);
+                    if bad(q) {
+                        count += 1;
+                        first.get_or_insert_with(|| {
+                            format!(
+                                "mesh \"{}\" (object \"{}\"): vertex {i} at {}",
+                                mesh.name,
+                                o.name,
+                                at(q)
+                            )
+                        });
+                    }
+                }
+            }
+            Geometry::Sphere { radius } => {
+                let centre = m.transform_point3(Vec3::ZERO);
+                let reach = m.transform_vector3(Vec3::splat(radius)).abs().max_element();
+                if bad(centre) || !(reach.is_finite() && reach <= MAX_FRAMED_COORDINATE) {
+                    count += 1;
+                    first.get_or_insert_with(|| {
+                        format!(
+                            "sphere \"{}\": centre {} radius {}",
+                            o.name,
+                            at(centre),
+                            plain_number(reach)
+                        )
+                    });
+                }
+            }
+        }
+    }
+    match first {
+        None => Ok(()),
+        Some(what) => {
+            let more = if count > 1 {
+                format!(" (and {} more points out of range)", count - 1)
+            } else {
+                String::new()
+            };
+            Err(format!(
+                "{what}{more}: the camera cannot be placed automatically for coordinates \
+                 beyond {} (or not finite)",
+                plain_number(MAX_FRAMED_COORDINATE)
+            ))
+        }
+    }
+}
+
 /// The world-space bounds of every object (mesh vertices, sphere boxes).
 pub fn world_bounds(scene: &Scene) -> Aabb {
     let mut b = Aabb::EMPTY;
@@ -419,6 +505,29 @@ mod tests {
             (box_mesh(Vec3::ONE), Transform::default()),
             (lining, Transform::default()),
         ])
+    }
+
+    /// Issue 47: one vertex at 1e30 overflowed the framing into a NaN
+    /// camera, reported as a bad `camera.eye`; the check names the vertex.
+    #[test]
+    fn absurd_coordinates_are_named_before_framing() {
+        let mut mesh = box_mesh(Vec3::ONE);
+        mesh.name = "crate".into();
+        assert_eq!(
+            check_framable(&scene_of(vec![(mesh.clone(), Transform::default())])),
+            Ok(())
+        );
+        mesh.positions[5].x = 1e30;
+        mesh.positions[7].z = -3e19;
+        let mut scene = scene_of(vec![(mesh, Transform::default())]);
+        scene.objects[0].name = "lid".into();
+        let msg = check_framable(&scene).expect_err("1e30");
+        assert!(
+            msg.starts_with("mesh \"crate\" (object \"lid\"): vertex 5 at (1e30, ")
+                && msg.contains("and 1 more")
+                && msg.contains("beyond 1e18"),
+            "{msg}"
+        );
     }
 
     #[test]

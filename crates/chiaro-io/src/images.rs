@@ -50,7 +50,7 @@ pub fn load_texture(path: &Path, srgb: bool) -> Result<ImageTexture> {
 /// # Errors
 /// As [`load_texture`].
 pub fn load_texture_within(path: &Path, srgb: bool, budget: MemoryBudget) -> Result<ImageTexture> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let bytes = crate::files::read_file_within(path, budget, u64::MAX)?;
     decode_texture_within(&bytes, path, srgb, budget, path.display().to_string())
 }
 
@@ -259,8 +259,15 @@ fn decode_with_image_crate(
     name: &Path,
     budget: MemoryBudget,
 ) -> Result<image::DynamicImage> {
-    let bad =
-        |e: &dyn std::fmt::Display| IoError::format(name, format!("cannot decode the image: {e}"));
+    let bad = |e: &dyn std::fmt::Display| {
+        IoError::format(
+            name,
+            format!(
+                "cannot decode the image: {}",
+                crate::plain::third_party(&e.to_string())
+            ),
+        )
+    };
     let reader = || {
         image::ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()
@@ -291,7 +298,13 @@ fn decode_with_image_crate(
 fn decode_exr(bytes: &[u8], name: &Path, budget: MemoryBudget) -> Result<DecodedImage> {
     use exr::prelude::*;
     let bad = |e: &dyn std::fmt::Display| {
-        IoError::format(name, format!("cannot decode the OpenEXR image: {e}"))
+        IoError::format(
+            name,
+            format!(
+                "cannot decode the OpenEXR image: {}",
+                crate::plain::third_party(&e.to_string())
+            ),
+        )
     };
     // Check the header's size before reading pixels.
     let meta =

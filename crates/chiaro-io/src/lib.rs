@@ -21,6 +21,7 @@
 //!   merged into a [`Scene`] by [`Imported::merge_into`].
 
 pub mod error;
+pub mod files;
 pub mod gltf_import;
 pub mod images;
 pub mod obj;
@@ -79,7 +80,7 @@ pub fn load_scene(path: &Path) -> Result<Loaded> {
     let ext = lowercase_extension(path);
     match ext.as_str() {
         "toml" => {
-            let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+            let text = files::read_text_file(path)?;
             let base = path.parent().unwrap_or_else(|| Path::new("."));
             scene_toml::parse_scene(&text, base, path)
         }
@@ -96,14 +97,63 @@ pub fn load_scene(path: &Path) -> Result<Loaded> {
 }
 
 /// Reads a mesh file by its extension (`.obj`, `.gltf`, `.glb`, `.ply`);
-/// `None` for another extension.
+/// `None` for another extension. Faces given twice are dropped with a
+/// warning ([`dedupe_faces`]).
 pub fn load_mesh_file(path: &Path) -> Option<Result<Imported>> {
-    Some(match lowercase_extension(path).as_str() {
+    let imported = match lowercase_extension(path).as_str() {
         "obj" => obj::load_obj_meshes(path),
         "gltf" | "glb" => gltf_import::load_gltf(path),
         "ply" => ply::load_ply(path),
         _ => return None,
-    })
+    };
+    Some(imported.map(|mut i| {
+        dedupe_faces(&mut i, path);
+        i
+    }))
+}
+
+/// Drops every triangle of a mesh that repeats an earlier one of the same
+/// mesh: the same three positions in the same winding (a face given
+/// twice), adding a warning per mesh that had any. Two coincident copies
+/// light each other's neighbours twice over, which radiosity cannot
+/// converge on (issue 47); a copy with the opposite winding (a two-sided
+/// sheet made of two faces) is kept.
+pub fn dedupe_faces(imported: &mut Imported, path: &Path) {
+    for mesh in &mut imported.meshes {
+        let mut seen = std::collections::HashSet::with_capacity(mesh.indices.len());
+        let positions = &mesh.positions;
+        let key = |t: &[u32; 3]| {
+            let p = t.map(|i| {
+                positions
+                    .get(i as usize)
+                    .map(|v| v.to_array().map(f32::to_bits))
+            });
+            // The rotation that starts at the smallest corner: the same
+            // face whatever corner it was written from.
+            let start = (0..3).min_by_key(|&k| p[k]).unwrap_or(0);
+            [p[start], p[(start + 1) % 3], p[(start + 2) % 3]]
+        };
+        let has_materials = mesh.face_materials.len() == mesh.indices.len();
+        let mut keep = Vec::with_capacity(mesh.indices.len());
+        for t in &mesh.indices {
+            keep.push(seen.insert(key(t)));
+        }
+        let dropped = keep.iter().filter(|k| !**k).count();
+        if dropped == 0 {
+            continue;
+        }
+        let mut it = keep.iter();
+        mesh.indices.retain(|_| *it.next().unwrap_or(&true));
+        if has_materials {
+            let mut it = keep.iter();
+            mesh.face_materials.retain(|_| *it.next().unwrap_or(&true));
+        }
+        imported.warnings.push(format!(
+            "{}: mesh \"{}\": {dropped} faces given twice were dropped (a face and its exact copy)",
+            path.display(),
+            mesh.name
+        ));
+    }
 }
 
 /// Parses a `.toml` scene held in memory (tests, Python). Relative mesh and
@@ -312,7 +362,11 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
             camera: c.camera,
             inside: None,
         },
-        None => framing::frame_scene(&scene, UpAxis::Y, scene.render.aspect(), None),
+        None => {
+            // A vertex at 1e30 would overflow the framing into a NaN camera.
+            framing::check_framable(&scene).map_err(|m| IoError::format(path, m))?;
+            framing::frame_scene(&scene, UpAxis::Y, scene.render.aspect(), None)
+        }
     };
     scene.camera = framed.camera;
     scene.lights = imported.lights.clone();

@@ -55,7 +55,7 @@ use std::path::{Path, PathBuf};
 /// cannot be read or parsed. A missing `.mtl`, a bad MTL statement or a
 /// missing texture is a warning in [`Imported::warnings`].
 pub fn load_obj_meshes(path: &Path) -> Result<Imported> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let bytes = crate::files::read_file(path)?;
     let dir = path.parent().unwrap_or_else(|| Path::new("."));
     let text = String::from_utf8_lossy(&bytes);
     let mut out = Imported::default();
@@ -68,16 +68,15 @@ pub fn load_obj_meshes(path: &Path) -> Result<Imported> {
                 continue;
             }
             seen.push(file.clone());
-            match std::fs::read(&file) {
+            match crate::files::read_file(&file) {
                 Ok(b) => {
                     let t = String::from_utf8_lossy(&b);
                     libs.extend(parse_mtl(&t, &file, &mut out.warnings));
                 }
                 Err(e) => out.warnings.push(format!(
-                    "{}: material library {} could not be read ({e}): its materials are \
+                    "{}: material library could not be read ({e}): its materials are \
                      replaced by the default material",
                     path.display(),
-                    file.display()
                 )),
             }
         }

@@ -71,6 +71,76 @@ pub fn plain_serde_message(message: &str, key: Option<&str>) -> String {
     message.to_string()
 }
 
+/// A third-party parser's message (png, jpeg, hdr, exr, ply, gltf, toml)
+/// in plain words: on one line, its decoder prefix named by format
+/// (`Format error decoding Png:` becomes `corrupt PNG data:`), and any
+/// `Debug` form the library printed rewritten: `Name { type: IDAT, .. }`
+/// becomes `IDAT` (a struct's `type` field, else its name), and
+/// `Some(x)`, `Ok(x)`, `Err(x)`, `Valid(x)` become `x`.
+pub fn third_party(message: &str) -> String {
+    let mut m = message.split_whitespace().collect::<Vec<_>>().join(" ");
+    for (from, to) in [
+        ("Format error decoding Png:", "corrupt PNG data:"),
+        ("Format error decoding Jpeg:", "corrupt JPEG data:"),
+        ("Format error decoding Hdr:", "corrupt Radiance HDR data:"),
+        ("Format error decoding OpenExr:", "corrupt OpenEXR data:"),
+        ("I/O errors ", ""),
+    ] {
+        m = m.replace(from, to);
+    }
+    for wrapper in ["Some(", "Ok(", "Err(", "Valid("] {
+        while let Some(start) = find_word(&m, wrapper) {
+            let open = start + wrapper.len() - 1;
+            let Some(close) = matching(&m, open, '(', ')') else {
+                break;
+            };
+            m = format!("{}{}{}", &m[..start], &m[open + 1..close], &m[close + 1..]);
+        }
+    }
+    // `Name { field: value, .. }`, innermost last.
+    while let Some(open) = m.find(" { ") {
+        let name_start = m[..open].rfind([' ', '(', '\'', '"']).map_or(0, |i| i + 1);
+        let name = &m[name_start..open];
+        let Some(close) = matching(&m, open + 1, '{', '}') else {
+            break;
+        };
+        let body = &m[open + 3..close];
+        let keep = body
+            .split(", ")
+            .find_map(|f| f.strip_prefix("type: "))
+            .map_or_else(|| name.to_string(), |t| t.trim().to_string());
+        m = format!("{}{keep}{}", &m[..name_start], &m[close + 1..]);
+    }
+    m.trim().trim_end_matches('.').to_string()
+}
+
+/// The first `word` in `s` not preceded by a letter or digit (so `Some(`
+/// inside `HasSome(` is left alone).
+fn find_word(s: &str, word: &str) -> Option<usize> {
+    s.match_indices(word).map(|(i, _)| i).find(|&i| {
+        !s[..i]
+            .chars()
+            .next_back()
+            .is_some_and(|c| c.is_alphanumeric() || c == '_')
+    })
+}
+
+/// The byte index of the `close` bracket matching the `open` at `at`.
+fn matching(s: &str, at: usize, open: char, close: char) -> Option<usize> {
+    let mut depth = 0usize;
+    for (i, c) in s[at..].char_indices() {
+        if c == open {
+            depth += 1;
+        } else if c == close {
+            depth = depth.checked_sub(1)?;
+            if depth == 0 {
+                return Some(at + i);
+            }
+        }
+    }
+    None
+}
+
 /// The names of serde's `, expected one of `a`, `b`` (or `` expected `a` ``) tail.
 fn expected_names(tail: &str) -> Vec<String> {
     let Some(i) = tail.find("expected") else {
@@ -111,7 +181,8 @@ fn plain_got(got: &str) -> String {
         ("boolean ", ""),
     ] {
         if let Some(v) = g.strip_prefix(prefix) {
-            let v = v.trim_matches('`');
+            // `` `18446744073709551616` as i128 ``: the number alone.
+            let v = v.split(" as ").next().unwrap_or(v).trim_matches('`');
             return if name.is_empty() {
                 v.to_string()
             } else {
@@ -165,6 +236,29 @@ mod tests {
                 Some("color")
             ),
             "`color` must be a list [..], got the number 1.5"
+        );
+    }
+
+    #[test]
+    fn third_party_debug_forms_are_rewritten() {
+        assert_eq!(
+            third_party(
+                "Format error decoding Png: CRC error: expected 0x1 have 0x2 while decoding \
+                 ChunkType { type: IHDR, critical: true, private: false } chunk."
+            ),
+            "corrupt PNG data: CRC error: expected 0x1 have 0x2 while decoding IHDR chunk"
+        );
+        assert_eq!(
+            third_party("Encoding: Ascii, Version: Some(Version { major: 1, minor: 0 })"),
+            "Encoding: Ascii, Version: Version"
+        );
+        assert_eq!(third_party("x: Valid(Normals)\n\tmore"), "x: Normals more");
+        assert_eq!(
+            plain_serde_message(
+                "invalid type: integer `18446744073709551616` as i128, expected u32",
+                Some("width")
+            ),
+            "`width` must be a whole number (0 or more), got the whole number 18446744073709551616"
         );
     }
 

@@ -9,6 +9,7 @@
 //! property (a range scan's `confidence`, `intensity`, ...) is skipped.
 
 use crate::{Imported, ImportedObject, IoError, Result};
+use chiaro_core::budget::MemoryBudget;
 use chiaro_core::film::tonemap::srgb_eotf as srgb_to_linear;
 use chiaro_core::scene::Mesh;
 use chiaro_core::{Mat4, Vec2, Vec3};
@@ -31,7 +32,17 @@ fn check_counts(bytes: &[u8]) -> std::result::Result<(), String> {
         .position(|&b| b == b'\n')
         .map_or(0, |nl| bytes.len() - (end + nl + 1));
     let header = String::from_utf8_lossy(&bytes[..end]);
-    let ascii = header.lines().any(|l| l.trim() == "format ascii 1.0");
+    let format = |l: &str| {
+        let words: Vec<&str> = l.split_whitespace().collect();
+        match words.as_slice() {
+            ["format", enc, "1.0"] => Some(*enc == "ascii"),
+            _ => None,
+        }
+    };
+    // Without a readable format line, the parser's refusal says what is wrong.
+    let Some(ascii) = header.lines().find_map(format) else {
+        return Ok(());
+    };
     let mut elements: Vec<(String, u128, u128)> = Vec::new();
     for line in header.lines() {
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -67,6 +78,92 @@ fn check_counts(bytes: &[u8]) -> std::result::Result<(), String> {
     Ok(())
 }
 
+/// The PLY parser's error in the project's words: the line (and the
+/// column of the bad value where the parser says it), what was expected,
+/// and what the line holds. ply-rs-bw's own text nests its grammar's
+/// `Debug` output under `\tString:` and `\tError:` lines; only the facts
+/// are kept.
+fn parse_error(e: &ply_rs_bw::parser::ParseError, path: &Path) -> IoError {
+    let text = e.to_string();
+    let body = match e.line() {
+        Some(n) => text.strip_prefix(&format!("Line {n}: ")).unwrap_or(&text),
+        None => &text,
+    };
+    let headline = body.lines().next().unwrap_or_default().trim();
+    // The line as the parser quotes it (`String: '...'`).
+    let quoted = body
+        .split_once("String: '")
+        .map(|(_, rest)| rest.split('\'').next().unwrap_or_default().trim());
+    // The grammar's column of the first bad character (`error at 1:5:`).
+    let column = body
+        .split_once("error at 1:")
+        .and_then(|(_, rest)| rest.split(':').next()?.parse::<usize>().ok())
+        .or_else(|| {
+            let (_, rest) = body.split_once("column: ")?;
+            rest.split(',').next()?.parse::<usize>().ok()
+        });
+    let bad_word = |line: &str, col: usize| {
+        let start = line
+            .char_indices()
+            .take_while(|(i, _)| *i < col.saturating_sub(1))
+            .filter(|(_, c)| c.is_whitespace())
+            .last()
+            .map_or(0, |(i, _)| i + 1);
+        line[start..]
+            .split_whitespace()
+            .next()
+            .unwrap_or_default()
+            .to_string()
+    };
+    let has = |s: &str| body.contains(s);
+    let what = if headline.starts_with("Expected magic number") {
+        "expected `ply` alone on the first line".to_string()
+    } else if headline.starts_with("Property") && has("without preceding element") {
+        "a `property` line before any `element` line".to_string()
+    } else if headline.starts_with("Found contradicting format") {
+        "a second `format` line that disagrees with the first".to_string()
+    } else if headline.starts_with("Invalid version") || headline.starts_with("No format line") {
+        "expected a `format ascii 1.0`, `format binary_little_endian 1.0` or \
+         `format binary_big_endian 1.0` line"
+            .to_string()
+    } else if headline.starts_with("Invalid element") {
+        "expected `element NAME COUNT`".to_string()
+    } else if headline.starts_with("Couldn't parse line") {
+        "a header line chiaro cannot read: expected `format ...`, `element NAME COUNT`, \
+         `property TYPE NAME`, `property list COUNT_TYPE TYPE NAME`, `comment ...` or \
+         `end_header` (types: char, uchar, short, ushort, int, uint, float, double and \
+         their int8 ... float64 names)"
+            .to_string()
+    } else if has("but found nothing") {
+        "the line holds fewer values than the header declares".to_string()
+    } else if has("Couldn't parse element line") || has("Parse error.") {
+        "expected numbers separated by spaces".to_string()
+    } else if has("Couldn't parse element at index") {
+        "a list entry is not a number of the declared type".to_string()
+    } else if has("Expected") && has("list elements") {
+        "a list holds fewer entries than its count says".to_string()
+    } else {
+        crate::plain::third_party(headline)
+    };
+    let found = match (quoted, column) {
+        (Some(line), Some(col)) if !line.is_empty() => {
+            format!(", found `{}` in `{line}`", bad_word(line, col))
+        }
+        (Some(line), None) if !line.is_empty() => format!(" (the line reads `{line}`)"),
+        _ => String::new(),
+    };
+    let message = format!("malformed PLY: {what}{found}");
+    match e.line() {
+        Some(line) => IoError::At {
+            path: path.to_path_buf(),
+            line,
+            column: column.unwrap_or(1),
+            message,
+        },
+        None => IoError::format(path, message),
+    }
+}
+
 /// Bytes of one binary PLY scalar of type `ty` (1 for an unknown name: the
 /// parser refuses those itself).
 fn type_bytes(ty: &str) -> u128 {
@@ -84,11 +181,7 @@ const MAX_FILE_BYTES: u64 = 2 << 30;
 /// Reads a `.ply` file as one mesh placed at the origin with the default
 /// material, or an [`IoError`] naming the file and what is wrong.
 pub fn load_ply(path: &Path) -> Result<Imported> {
-    let meta = std::fs::metadata(path).map_err(|e| IoError::io(path, e))?;
-    if meta.len() > MAX_FILE_BYTES {
-        return Err(IoError::format(path, "file too large"));
-    }
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let bytes = crate::files::read_file_within(path, MemoryBudget::process(), MAX_FILE_BYTES)?;
     load_ply_slice(&bytes, path)
 }
 
@@ -101,7 +194,7 @@ pub fn load_ply_slice(bytes: &[u8], path: &Path) -> Result<Imported> {
     });
     let ply = match parsed {
         Ok(Ok(p)) => p,
-        Ok(Err(e)) => return Err(IoError::format(path, format!("malformed PLY: {e}"))),
+        Ok(Err(e)) => return Err(parse_error(&e, path)),
         Err(_) => {
             return Err(IoError::format(
                 path,

@@ -66,9 +66,16 @@ pub(crate) fn sub_centroids(p: &[Vec3; 3], m: u32, out: &mut [Vec3; 64]) -> usiz
 
 /// True if some of `r` lies in front of `s` and some of `s` in front of `r`
 /// (a necessary condition for a nonzero form factor between one-sided
-/// elements).
+/// elements). "In front" means by more than `tol`, or than the rounding
+/// error of the plane distance at the elements' coordinates, whichever is
+/// larger: two coplanar elements (coincident duplicates, overlapping faces)
+/// exchange no light, and far from the origin rounding alone could put a
+/// coplanar vertex "in front" by more than a tolerance scaled to the
+/// scene's size (issue 47: such pairs kept light bouncing between copies).
 #[inline]
 pub(crate) fn facing(r: &Element, s: &Element, tol: f32) -> bool {
+    let magnitude = r.c.abs().max_element().max(s.c.abs().max_element());
+    let tol = tol.max(8.0 * f32::EPSILON * magnitude);
     s.p.iter().any(|&v| r.n.dot(v - r.c) > tol) && r.p.iter().any(|&v| s.n.dot(v - s.c) > tol)
 }
 

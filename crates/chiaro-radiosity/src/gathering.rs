@@ -9,7 +9,7 @@
 
 use crate::formfactor::FormFactor;
 use crate::mesh::Element;
-use crate::solver::{SolveOutput, power};
+use crate::solver::{STALL_WINDOW, SolveOutput, Stop, Stopper, power};
 use chiaro_core::error::CoreError;
 use chiaro_core::progress::{Convergence, Progress};
 use glam::Vec3;
@@ -108,6 +108,8 @@ pub(crate) fn iterate(
         l: Vec::new(),
         iterations: 0,
         unshot: 0.0,
+        stop: Stop::Converged,
+        worst: 0,
     };
     if p0 <= 0.0 {
         out.l = l;
@@ -124,10 +126,12 @@ pub(crate) fn iterate(
         let g: Vec3 = row.iter().zip(l).map(|(f, x)| *f * *x).sum();
         e[j] + elements[j].rho * g
     };
-    for it in 1..=max_iter {
+    let mut stopper = Stopper::new(tol, max_iter, STALL_WINDOW);
+    for it in 1.. {
         if progress.cancelled() {
             return Err(CoreError::Cancelled);
         }
+        let before = l.clone();
         let change = match sweep {
             Sweep::Jacobi => {
                 let next: Vec<Vec3> = (0..n).into_par_iter().map(|j| gather(j, &l)).collect();
@@ -152,7 +156,15 @@ pub(crate) fn iterate(
             "{name}: iteration {it}, residual {:.3e}",
             out.unshot
         ));
-        if out.unshot < tol {
+        if let Some(stop) = stopper.check(out.unshot, it) {
+            out.stop = stop;
+            // The element whose radiance changed the most in the last sweep.
+            out.worst = (0..n)
+                .max_by(|&a, &b| {
+                    let d = |j: usize| elements[j].area * (l[j] - before[j]).abs().element_sum();
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap_or(0);
             break;
         }
     }

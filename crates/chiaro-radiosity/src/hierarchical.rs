@@ -16,6 +16,7 @@ use crate::direct::point_light_direct;
 use crate::formfactor::facing;
 use crate::mesh::{Element, ElementMesh, barycentric, material_at};
 use crate::ray_cast::{PairRule, Visibility, pair};
+use crate::solver::{STALL_WINDOW, Stop, Stopper};
 use chiaro_core::error::CoreError;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::Progress;
@@ -32,6 +33,8 @@ pub(crate) struct HrStats {
     pub links: usize,
     pub iterations: u32,
     pub unshot: f32,
+    /// Why the last round of gathers stopped.
+    pub stop: Stop,
 }
 
 struct Tree<'a, 's> {
@@ -213,7 +216,8 @@ impl Tree<'_, '_> {
         stats: &mut HrStats,
         progress: &dyn Progress,
     ) -> Result<(), CoreError> {
-        for _ in 0..max_iter {
+        let mut stopper = Stopper::new(tol, max_iter, STALL_WINDOW);
+        for done in 1.. {
             if progress.cancelled() {
                 return Err(CoreError::Cancelled);
             }
@@ -236,7 +240,8 @@ impl Tree<'_, '_> {
                 stats.unshot,
                 self.links.iter().map(Vec::len).sum::<usize>()
             ));
-            if stats.unshot < tol {
+            if let Some(stop) = stopper.check(stats.unshot, done) {
+                stats.stop = stop;
                 break;
             }
         }

@@ -209,6 +209,10 @@ impl EmitterGroup {
     }
 }
 
+/// Receiver elements times emissive triangles above which [`direct_light`]
+/// gathers each pair with one point and one ray.
+const DIRECT_PAIR_BUDGET: usize = 20_000_000;
+
 /// Reflected radiance at each element due to *direct* light: point-like
 /// lights (`point_direct`) plus every emissive source triangle, gathered
 /// with ray-cast form factors (16 visibility rays per receiver point), or,
@@ -263,11 +267,25 @@ fn direct_light(
             .map(|q| q.distance(g.centre))
             .fold(0.0f32, f32::max);
     }
-    let rule = PairRule {
-        far_m: 2,
-        mid_m: 2,
-        near_m: 4,
-        vis_m: 4,
+    // Every element gathers from every emitter: past a budget of pairs
+    // (a whole model made emissive), one quadrature point and one
+    // visibility ray a pair instead of up to 16 and 16, so the work stays
+    // bounded (counted in pairs, so the result does not depend on timing).
+    let emitters: usize = groups.iter().map(|g| g.sources.len()).sum();
+    let rule = if mesh.elements.len().saturating_mul(emitters) > DIRECT_PAIR_BUDGET {
+        PairRule {
+            far_m: 1,
+            mid_m: 1,
+            near_m: 1,
+            vis_m: 1,
+        }
+    } else {
+        PairRule {
+            far_m: 2,
+            mid_m: 2,
+            near_m: 4,
+            vis_m: 4,
+        }
     };
     par_map(mesh.elements.len(), progress, |i| {
         let (e, pd) = (&mesh.elements[i], &point_direct[i]);
@@ -405,9 +423,10 @@ pub(crate) fn solve_with(
             &pairs
         }
     };
-    // Each solver's radiance per element, iterations and final unshot fraction.
+    // Each solver's radiance per element, iterations, final unshot fraction,
+    // why it stopped and where most unshot light was left.
     let (stop, max_iter) = (cfg.tolerance, cfg.max_iterations);
-    let (l, iterations, unshot) = match cfg.solver {
+    let (l, iterations, unshot, ended, worst) = match cfg.solver {
         Solver::Jacobi | Solver::GaussSeidel => {
             let m = gathering::build_matrix(&mesh.elements, ff, progress)?;
             let sweep = if cfg.solver == Solver::Jacobi {
@@ -416,7 +435,7 @@ pub(crate) fn solve_with(
                 gathering::Sweep::GaussSeidel
             };
             let out = gathering::iterate(&mesh.elements, &e, &m, stop, max_iter, progress, sweep)?;
-            (out.l, out.iterations, out.unshot)
+            (out.l, out.iterations, out.unshot, out.stop, Some(out.worst))
         }
         Solver::Progressive => {
             let columns = |i: usize, du: &[Vec3], f: &mut [f32], g: &mut [Vec3]| {
@@ -453,7 +472,7 @@ pub(crate) fn solve_with(
                 max_iter,
                 progress,
             )?;
-            (out.l, out.iterations, out.unshot)
+            (out.l, out.iterations, out.unshot, out.stop, Some(out.worst))
         }
         Solver::Hierarchical => {
             let (rule, v) = match cfg.formfactor {
@@ -474,10 +493,11 @@ pub(crate) fn solve_with(
             let (l, hs) =
                 hierarchical::solve(ps, &mesh, &e, v, rule, tol, stop, max_iter, progress)?;
             (stats.nodes, stats.leaves, stats.links) = (hs.nodes, hs.leaves, hs.links);
-            (l, hs.iterations, hs.unshot)
+            (l, hs.iterations, hs.unshot, hs.stop, None)
         }
     };
     (stats.iterations, stats.unshot) = (iterations, unshot);
+    warn_unconverged(ctx, &mesh, ended, &stats, worst);
     let l: Vec<Vec3> = l.into_iter().map(chiaro_core::shading::sanitize).collect();
     // Irradiance for the display, pi (L - Le) / rho, and its indirect part
     // for the hybrid, pi (L - Le - direct) / rho.
@@ -503,6 +523,33 @@ pub(crate) fn solve_with(
     Ok(build_solution(
         scene, ps, &mesh, l, irradiance, indirect, stats,
     ))
+}
+
+/// Warns through the context's progress when a solve stopped before
+/// converging ([`solver::stop_warning`]), naming the object of element
+/// `worst` (the one holding the most unshot power) when known.
+fn warn_unconverged(
+    ctx: &RenderContext<'_>,
+    mesh: &ElementMesh,
+    stop: solver::Stop,
+    stats: &SolveStats,
+    worst: Option<usize>,
+) {
+    let culprit = worst
+        .and_then(|e| mesh.elements.get(e))
+        .and_then(|e| mesh.sources.get(e.source as usize))
+        .and_then(|s| ctx.scene().objects.get(s.object as usize))
+        .map(|o| format!("object \"{}\"", o.name));
+    if let Some(w) = solver::stop_warning(
+        stop,
+        &stats.solver,
+        stats.iterations,
+        stats.unshot,
+        ctx.settings().radiosity.tolerance,
+        culprit.as_deref(),
+    ) {
+        ctx.progress().warning(&w);
+    }
 }
 
 fn build_solution(
@@ -770,3 +817,5 @@ pub(crate) fn surface(ps: &PreparedScene<'_>, t: u32, u: f32, v: f32) -> (Vec3, 
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_hostile;

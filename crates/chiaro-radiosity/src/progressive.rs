@@ -7,7 +7,7 @@
 
 use crate::mesh::Element;
 use crate::patch::Patches;
-use crate::solver::{SolveOutput, power};
+use crate::solver::{STALL_WINDOW, SolveOutput, Stop, Stopper, power};
 use chiaro_core::error::CoreError;
 use chiaro_core::progress::{Convergence, Progress};
 use glam::Vec3;
@@ -44,6 +44,8 @@ pub(crate) fn progressive(
         l: Vec::new(),
         iterations: 0,
         unshot: 0.0,
+        stop: Stop::Converged,
+        worst: 0,
     };
     if p0 <= 0.0 {
         out.l = l;
@@ -65,7 +67,12 @@ pub(crate) fn progressive(
     let (mut shot_power, mut landed_power) = (0.0f32, 0.0f32);
     let mut bar = Convergence::begin(progress, "radiosity progressive", tol);
     out.unshot = 1.0;
-    for it in 1..=max_iter {
+    // A shot per patch and then some must lower the unshot power.
+    let window = u32::try_from(patches.len())
+        .unwrap_or(u32::MAX)
+        .saturating_add(STALL_WINDOW);
+    let mut stopper = Stopper::new(tol, max_iter, window);
+    for it in 1.. {
         if progress.cancelled() {
             return Err(CoreError::Cancelled);
         }
@@ -82,7 +89,9 @@ pub(crate) fn progressive(
             }
         }
         out.unshot = total / p0;
-        if out.unshot < tol {
+        if let Some(stop) = stopper.check(out.unshot, it - 1) {
+            out.stop = stop;
+            out.worst = patches.elements(best).first().map_or(0, |&i| i as usize);
             break;
         }
         shoot(best, &unshot, &mut col, &mut gathered);

@@ -32,7 +32,8 @@
 //! - **`Host` and `Origin` checks**: every request's `Host` and a
 //!   WebSocket handshake's `Origin` (when sent: browsers always send it)
 //!   must name the address served (`localhost` or an IP address, with its
-//!   port); others get `403`. This stops other web sites from driving
+//!   port); others get `403`, and a request with two `Host` or two
+//!   `Origin` headers gets `400`. This stops other web sites from driving
 //!   renders through the user's browser (cross-site WebSocket hijacking)
 //!   and DNS-rebinding pages from reading the viewer.
 //!
@@ -193,6 +194,18 @@ pub fn host_allowed(host: &str, served: SocketAddr) -> bool {
         }
         Err(_) => false,
     }
+}
+
+/// `Host` or `Origin` when a request carries that header more than once
+/// (names compared without case), `None` otherwise.
+pub fn repeated_guard_header(headers: &[httparse::Header<'_>]) -> Option<&'static str> {
+    ["Host", "Origin"].into_iter().find(|name| {
+        headers
+            .iter()
+            .filter(|h| h.name.eq_ignore_ascii_case(name))
+            .count()
+            > 1
+    })
 }
 
 /// Whether a WebSocket handshake's `Origin` header (absent for clients that
@@ -553,6 +566,14 @@ fn handle_connection(
             .find(|h| h.name.eq_ignore_ascii_case(name))
             .and_then(|h| std::str::from_utf8(h.value).ok())
     };
+    // Two `Host` (RFC 9112 section 3.2: answered with 400) or two `Origin`
+    // headers: the checks below read one, another part of the stack might
+    // read the other.
+    if let Some(name) = repeated_guard_header(req.headers) {
+        let body = format!("more than one {name} header\n");
+        let _ = respond(&mut stream, 400, "text/plain", body.as_bytes());
+        return;
+    }
     if !header("host").is_some_and(|h| host_allowed(h, state.served)) {
         let _ = respond(
             &mut stream,
@@ -642,5 +663,74 @@ fn handle_connection(
         _ => {
             let _ = respond(&mut stream, 404, "text/plain", b"not found\n");
         }
+    }
+}
+
+#[cfg(test)]
+mod header_tests {
+    use super::*;
+    use std::io::{Read, Write};
+
+    /// Issue 47: with two `Origin` or two `Host` headers, only the first was
+    /// checked. Each is refused now, whichever of the two is foreign, on the
+    /// page and on the WebSocket handshake.
+    #[test]
+    fn two_host_or_origin_headers_get_400() {
+        let scene = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenes/cornell-box.toml");
+        let opts = ServeOptions {
+            port: 0,
+            ..ServeOptions::default()
+        };
+        let server = Server::bind(&scene, &opts).expect("binds");
+        let addr = server.local_addr().expect("addr");
+        std::thread::spawn(move || server.run());
+        let send = |request: String| {
+            let mut s = std::net::TcpStream::connect(addr).expect("connect");
+            s.set_read_timeout(Some(Duration::from_secs(10)))
+                .expect("timeout");
+            s.write_all(request.as_bytes()).expect("write");
+            let mut out = Vec::new();
+            let mut buf = [0u8; 512];
+            while !out.windows(4).any(|w| w == b"\r\n\r\n") {
+                match s.read(&mut buf) {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => out.extend_from_slice(&buf[..n]),
+                }
+            }
+            String::from_utf8_lossy(&out).into_owned()
+        };
+        let own = format!("127.0.0.1:{}", addr.port());
+        let ws = "Upgrade: websocket\r\nConnection: Upgrade\r\n\
+                  Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n";
+        for (first, second) in [
+            (own.as_str(), "evil.example.com"),
+            ("evil.example.com", own.as_str()),
+        ] {
+            let r = send(format!(
+                "GET / HTTP/1.1\r\nHost: {first}\r\nhost: {second}\r\n\r\n"
+            ));
+            assert!(r.starts_with("HTTP/1.1 400"), "{r}");
+        }
+        for (first, second) in [
+            (
+                format!("http://{own}"),
+                "http://evil.example.com".to_string(),
+            ),
+            (
+                "http://evil.example.com".to_string(),
+                format!("http://{own}"),
+            ),
+        ] {
+            let r = send(format!(
+                "GET /ws HTTP/1.1\r\nHost: {own}\r\nOrigin: {first}\r\nORIGIN: {second}\r\n{ws}\r\n"
+            ));
+            assert!(r.starts_with("HTTP/1.1 400"), "{r}");
+        }
+        // One of each still opens.
+        let r = send(format!(
+            "GET /ws HTTP/1.1\r\nHost: {own}\r\nOrigin: http://{own}\r\n{ws}\r\n"
+        ));
+        assert!(r.starts_with("HTTP/1.1 101"), "{r}");
     }
 }

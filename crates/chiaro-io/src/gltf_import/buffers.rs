@@ -3,7 +3,33 @@
 
 use super::in_err;
 use crate::Result;
+use chiaro_core::budget::MemoryBudget;
 use std::path::Path;
+
+/// Reads the external buffer `uri` (a `file:` URI or a path relative to
+/// `base`, percent-decoded) through [`crate::files::read_file_within`],
+/// padded to a multiple of four bytes as the gltf crate pads it.
+fn external_buffer(
+    uri: &str,
+    base: &Path,
+    budget: MemoryBudget,
+) -> std::result::Result<gltf::buffer::Data, String> {
+    let file = if let Some(rest) = uri.strip_prefix("file://").or(uri.strip_prefix("file:")) {
+        std::path::PathBuf::from(percent_decode(rest))
+    } else if uri.contains(':') {
+        return Err(format!(
+            "unsupported URI scheme in {uri:?}: expected a relative path, file: or data:"
+        ));
+    } else {
+        base.join(percent_decode(uri))
+    };
+    let mut bytes =
+        crate::files::read_file_within(&file, budget, u64::MAX).map_err(|e| e.to_string())?;
+    while bytes.len() % 4 != 0 {
+        bytes.push(0);
+    }
+    Ok(gltf::buffer::Data(bytes))
+}
 
 /// Loads every buffer, checking URIs before handing them to the gltf crate.
 pub(super) fn load_buffers(
@@ -11,6 +37,7 @@ pub(super) fn load_buffers(
     base: Option<&Path>,
     mut blob: Option<Vec<u8>>,
     path: &Path,
+    budget: MemoryBudget,
 ) -> Result<Vec<gltf::buffer::Data>> {
     let mut out = Vec::new();
     for buffer in doc.buffers() {
@@ -25,8 +52,16 @@ pub(super) fn load_buffers(
                 ));
             }
         }
-        let data = gltf::buffer::Data::from_source_and_blob(buffer.source(), base, &mut blob)
-            .map_err(|e| in_err(path, loc.clone(), format!("cannot load buffer: {e}")))?;
+        let data = match (buffer.source(), base) {
+            // External files go through the one safe reader (regular files
+            // only, size checked against the budget before reading).
+            (gltf::buffer::Source::Uri(uri), Some(base)) if !uri.starts_with("data:") => {
+                external_buffer(uri, base, budget)
+                    .map_err(|m| in_err(path, format!("{loc}.uri"), m))?
+            }
+            (source, _) => gltf::buffer::Data::from_source_and_blob(source, base, &mut blob)
+                .map_err(|e| in_err(path, loc.clone(), format!("cannot load buffer: {e}")))?,
+        };
         if data.len() < buffer.length() {
             return Err(in_err(
                 path,

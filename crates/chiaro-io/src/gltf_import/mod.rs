@@ -91,11 +91,7 @@ pub fn load_gltf(path: &Path) -> Result<Imported> {
 /// [`load_gltf`] within `budget`: an accessor whose count no bytes back (it
 /// has no buffer view) is refused when its decoded size exceeds it.
 pub fn load_gltf_within(path: &Path, budget: MemoryBudget) -> Result<Imported> {
-    let meta = std::fs::metadata(path).map_err(|e| IoError::io(path, e))?;
-    if meta.len() > MAX_FILE_BYTES {
-        return Err(IoError::format(path, "file too large"));
-    }
-    let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
+    let bytes = crate::files::read_file_within(path, budget, MAX_FILE_BYTES)?;
     let base = path.parent().unwrap_or_else(|| Path::new("."));
     load_gltf_slice_within(&bytes, Some(base), path, budget)
 }
@@ -232,7 +228,8 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
                         path,
                         format!("meshes[{i}].primitives[{j}].attributes"),
                         format!(
-                            "{semantic:?} refers to accessor {} but there are {}",
+                            "{} refers to accessor {} but there are {}",
+                            semantic.to_string(),
                             index.value(),
                             root.accessors.len()
                         ),
@@ -274,7 +271,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         .map(|json| unsupported_features(&json, path))
         .unwrap_or_default();
 
-    let buffers = load_buffers(doc, base, gltf.blob.clone(), path)?;
+    let buffers = load_buffers(doc, base, gltf.blob.clone(), path, budget)?;
     let mut b = Builder {
         doc,
         buffers: &buffers,

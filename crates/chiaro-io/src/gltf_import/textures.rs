@@ -137,7 +137,8 @@ impl Builder<'_> {
                     let base = self.base.ok_or("external image without a directory")?;
                     let rel = percent_decode(uri);
                     let p = base.join(&rel);
-                    let bytes = std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?;
+                    let bytes = crate::files::read_file_within(&p, self.budget, u64::MAX)
+                        .map_err(|e| e.to_string())?;
                     (bytes, p.display().to_string())
                 }
             }

@@ -161,6 +161,9 @@ impl Ctx<'_> {
         if let Some(id) = self.images.get(&key) {
             return Ok(*id);
         }
+        if let Some(e) = crate::files::refuse_special(&path) {
+            return Err(self.at(rel.span(), format!("cannot load texture: {e}")));
+        }
         if !path.is_file() {
             return Err(self.at(
                 rel.span(),

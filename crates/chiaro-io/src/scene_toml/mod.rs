@@ -167,6 +167,42 @@ pub fn parse_scene(text: &str, base: &Path, path: &Path) -> Result<Loaded> {
     ctx.finish(scene)
 }
 
+/// The key (table header or the key of `key = value`) with the most dotted
+/// parts in `text`, as its span and its number of parts; `None` when no
+/// line has one. Quoted parts are skipped over, so a dot inside quotes is
+/// not counted.
+fn deepest_key(text: &str) -> Option<(Range<usize>, usize)> {
+    let mut best: Option<(Range<usize>, usize)> = None;
+    let mut offset = 0;
+    for line in text.split_inclusive('\n') {
+        let trimmed = line.trim_start();
+        let start = offset + (line.len() - trimmed.len());
+        offset += line.len();
+        let key = trimmed.trim_start_matches('[');
+        let mut parts = 1;
+        let mut quote = None;
+        let mut end = key.len();
+        for (i, c) in key.char_indices() {
+            match (quote, c) {
+                (Some(q), c) if c == q => quote = None,
+                (Some(_), _) => {}
+                (None, '"' | '\'') => quote = Some(c),
+                (None, '.') => parts += 1,
+                (None, ']' | '=' | '#') => {
+                    end = i;
+                    break;
+                }
+                _ => {}
+            }
+        }
+        if parts > 1 && best.as_ref().is_none_or(|b| parts > b.1) {
+            let key_start = start + (trimmed.len() - key.len());
+            best = Some((key_start..key_start + end, parts));
+        }
+    }
+    best
+}
+
 /// Converts a byte offset into a 1-based line and column (in characters).
 pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let mut offset = offset.min(text.len());
@@ -324,9 +360,31 @@ impl Ctx<'_> {
     }
 
     fn toml_err(&self, e: &toml::de::Error) -> IoError {
+        // The reader's nesting limits: a dotted key of 80 parts or more
+        // comes without a position (found at the key here), and arrays or
+        // inline tables nested too deeply.
+        if e.message().contains("recursion limit")
+            && let Some((span, parts)) = deepest_key(self.text)
+        {
+            return self.at(
+                span,
+                format!(
+                    "a key nested {parts} levels deep: chiaro's TOML reader allows fewer \
+                     than 80 dotted parts in a key or table header"
+                ),
+            );
+        }
+        if e.message().contains("max recursion depth") {
+            let span = e.span().unwrap_or(0..0);
+            return self.at(
+                span,
+                "lists or inline tables nested too deeply for chiaro's TOML reader",
+            );
+        }
         let span = e.span().unwrap_or(0..0);
         let key = key_before(self.text, span.start);
-        let message = crate::plain::plain_serde_message(e.message(), key);
+        let message =
+            crate::plain::plain_serde_message(&crate::plain::third_party(e.message()), key);
         // A render setting's value is named by its setting path.
         let setting = self
             .spans

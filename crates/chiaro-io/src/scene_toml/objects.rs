@@ -325,6 +325,9 @@ impl Ctx<'_> {
         span: Range<usize>,
     ) -> Result<()> {
         let path = crate::resolve(self.base, file.get_ref());
+        if let Some(e) = crate::files::refuse_special(&path) {
+            return Err(self.at(file.span(), format!("cannot read mesh file: {e}")));
+        }
         if !path.is_file() {
             return Err(self.at(
                 file.span(),
