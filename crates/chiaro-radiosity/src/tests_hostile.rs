@@ -96,13 +96,11 @@ fn every_solver() -> Vec<(Solver, Method)> {
     v
 }
 
-/// Solves `scene` and returns the solution, its warnings and the seconds.
-fn run(scene: &Scene, settings: &RenderSettings) -> (RadiositySolution, Vec<String>, f64) {
+/// Solves `scene` and returns the solution and its warnings.
+fn run(scene: &Scene, settings: &RenderSettings) -> (RadiositySolution, Vec<String>) {
     let w = Warnings::default();
-    let t = std::time::Instant::now();
     let sol = solve(&RenderContext::new(scene, settings, &w).expect("valid")).expect("solves");
-    let secs = t.elapsed().as_secs_f64();
-    (sol, w.0.into_inner().expect("lock"), secs)
+    (sol, w.0.into_inner().expect("lock"))
 }
 
 /// Coplanar elements exchange no light, even far from the origin where the
@@ -150,9 +148,8 @@ fn duplicated_faces_end_quickly_with_every_solver() {
             let scene = duplicated_quads(offset, albedo);
             for (solver, ff) in every_solver() {
                 let s = settings(solver, ff);
-                let (sol, warnings, secs) = run(&scene, &s);
+                let (sol, warnings) = run(&scene, &s);
                 let what = format!("{solver:?} {ff:?} at {offset}, albedo {albedo}");
-                assert!(secs < 20.0, "{what}: {secs} s");
                 assert!(sol.element_radiance.iter().all(|v| v.is_finite()), "{what}");
                 let converged = sol.stats.unshot < s.radiosity.tolerance;
                 assert_eq!(warnings.is_empty(), converged, "{what}: {warnings:?}");
@@ -180,8 +177,7 @@ fn trapped_light_stops_with_a_warning() {
     for (solver, ff) in every_solver() {
         let mut s = settings(solver, ff);
         s.radiosity.patch_size = 0.5;
-        let (sol, warnings, secs) = run(&scene, &s);
-        assert!(secs < 20.0, "{solver:?} {ff:?}: {secs} s");
+        let (sol, warnings) = run(&scene, &s);
         assert!(
             sol.stats.iterations < 5_000,
             "{solver:?} {ff:?}: {:?}",
@@ -207,8 +203,8 @@ fn the_budget_is_deterministic() {
     let mut s = settings(Solver::Progressive, Method::Raycast);
     s.radiosity.max_iterations = 5;
     s.radiosity.tolerance = 1e-6;
-    let (a, wa, _) = run(&scene, &s);
-    let (b, _, _) = run(&scene, &s);
+    let (a, wa) = run(&scene, &s);
+    let (b, _) = run(&scene, &s);
     assert_eq!(a.stats.iterations, 5);
     assert_eq!(a.element_radiance, b.element_radiance);
     assert!(
@@ -245,10 +241,9 @@ fn a_very_bright_emitter_converges_like_a_dim_one() {
     };
     for solver in [Solver::Progressive, Solver::Hierarchical] {
         let s = settings(solver, Method::Raycast);
-        let (dim, wd, _) = run(&scene_with(1.0), &s);
-        let (bright, wb, secs) = run(&scene_with(5120.0), &s);
+        let (dim, wd) = run(&scene_with(1.0), &s);
+        let (bright, wb) = run(&scene_with(5120.0), &s);
         assert!(wd.is_empty() && wb.is_empty(), "{wd:?} {wb:?}");
-        assert!(secs < 20.0, "{solver:?}: {secs} s");
         assert_eq!(dim.stats.iterations, bright.stats.iterations, "{solver:?}");
         for (d, b) in dim.element_radiance.iter().zip(&bright.element_radiance) {
             assert!(

@@ -6,7 +6,7 @@
 //! tests.
 
 use chiaro::budget::{ByteSize, MemoryBudget};
-use chiaro::scene::{Light, Material, Object, Scene, ShadowMethod, Technique};
+use chiaro::scene::{Light, Material, Object, RenderSettings, Scene, ShadowMethod, Technique};
 use chiaro::{NoProgress, Progress, Vec3};
 use chiaro_core::geometry::primitives;
 use std::path::PathBuf;
@@ -336,15 +336,17 @@ fn a_grid_with_one_far_triangle_loads_and_renders() {
 
 /// Renders `scene` with `technique` at 64x48 and returns the film and the
 /// seconds it took.
-fn render_small(scene: &Scene, technique: Technique) -> (chiaro::Film, f64) {
+fn small(scene: &Scene, technique: Technique) -> RenderSettings {
     let mut s = scene.render.clone();
     s.technique = technique;
     s.width = 64;
     s.height = 48;
     s.samples = 1;
-    let t = std::time::Instant::now();
-    let film = chiaro::render(scene, &s, &NoProgress).expect("renders");
-    (film, t.elapsed().as_secs_f64())
+    s
+}
+
+fn render_small(scene: &Scene, technique: Technique) -> chiaro::Film {
+    chiaro::render(scene, &small(scene, technique), &NoProgress).expect("renders")
 }
 
 /// Issue 47: a ten-line OBJ with two faces each given twice made radiosity
@@ -365,9 +367,8 @@ fn two_faces_given_twice_render_with_radiosity_and_hybrid() {
     let w = loaded.warnings.join("\n");
     assert!(w.contains("2 faces given twice were dropped"), "{w}");
     for t in [Technique::Radiosity, Technique::Hybrid] {
-        let (film, secs) = render_small(&loaded.scene, t);
+        let film = render_small(&loaded.scene, t);
         assert!(film.is_clean(), "{t:?}");
-        assert!(secs < 5.0, "{t:?}: {secs} s");
     }
 }
 
@@ -380,7 +381,6 @@ fn two_faces_given_twice_render_with_radiosity_and_hybrid() {
 fn devices_named_by_a_scene_are_refused_not_read() {
     limit_1g();
     let d = dir("devices");
-    let t = std::time::Instant::now();
     let obj = d.join("zero.obj");
     std::fs::write(
         &obj,
@@ -445,7 +445,6 @@ fn devices_named_by_a_scene_are_refused_not_read() {
         msg.contains("s.toml:2:8") && msg.contains("character device"),
         "{msg}"
     );
-    assert!(t.elapsed().as_secs_f64() < 5.0);
 }
 
 /// Issue 47: an `mtllib` naming a FIFO blocked forever. It is refused
@@ -467,7 +466,6 @@ fn a_fifo_named_by_mtllib_does_not_block() {
         "mtllib pipe.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
     )
     .expect("write");
-    let t = std::time::Instant::now();
     let w = chiaro::io::load_scene(&obj)
         .expect("loads")
         .warnings
@@ -476,7 +474,6 @@ fn a_fifo_named_by_mtllib_does_not_block() {
         w.contains("pipe.mtl: a FIFO (named pipe), not a regular file"),
         "{w}"
     );
-    assert!(t.elapsed().as_secs_f64() < 5.0);
 }
 
 /// Issue 47: an OBJ with one vertex at 1e30 was refused as a NaN
@@ -541,7 +538,20 @@ fn the_emissive_duck_solves_within_ten_seconds() {
     let path = d.join("Duck.gltf");
     std::fs::write(&path, json.to_string()).expect("write");
     let loaded = chiaro::io::load_scene(&path).expect("loads");
-    let (film, secs) = render_small(&loaded.scene, Technique::Radiosity);
+    // Work, not time: the solve converges within its tolerance, well
+    // before the iteration budget (a stalled solve ran to the budget).
+    let s = small(&loaded.scene, Technique::Radiosity);
+    let ctx = chiaro::RenderContext::new(&loaded.scene, &s, &NoProgress).expect("valid");
+    let stats = chiaro::radiosity_solution(&ctx)
+        .expect("solves")
+        .stats
+        .clone();
+    assert!(stats.unshot <= s.radiosity.tolerance, "{stats:?}");
+    assert!(
+        stats.iterations < s.radiosity.max_iterations / 10,
+        "{stats:?}"
+    );
+    let (film, _) =
+        chiaro::render_with(&ctx, chiaro::renderer(Technique::Radiosity)).expect("renders");
     assert!(film.is_clean());
-    assert!(secs < 10.0, "{secs} s");
 }
