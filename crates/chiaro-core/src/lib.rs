@@ -38,4 +38,20 @@ pub mod shadow;
 pub mod technique;
 
 pub use glam;
+
+/// The square `z` = const with x, y in [-1, 1], as two triangles (a test
+/// fixture: the panes and masked quads of the shadow and alpha tests).
+#[cfg(test)]
+pub(crate) fn test_square(z: f32) -> scene::Mesh {
+    scene::Mesh {
+        positions: vec![
+            glam::Vec3::new(-1.0, -1.0, z),
+            glam::Vec3::new(1.0, -1.0, z),
+            glam::Vec3::new(1.0, 1.0, z),
+            glam::Vec3::new(-1.0, 1.0, z),
+        ],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        ..scene::Mesh::default()
+    }
+}
 pub use glam::{Mat3, Mat4, Vec2, Vec3, Vec3A, Vec4};

@@ -236,7 +236,7 @@ mod tests {
     use super::*;
     use crate::accel::list::ListAccel;
     use crate::prepared::PrepareOptions;
-    use crate::scene::{Geometry, Material, Mesh, Object, Scene, Transform};
+    use crate::scene::{Geometry, Material, Object, Scene, Transform};
 
     /// A scene of the unit quads `z = zs[i]` (x, y in [-1, 1]) with
     /// transmit colours `kts[i]`, each its own object, and optionally a
@@ -248,16 +248,7 @@ mod tests {
                 transmit: kt,
                 ..Material::diffuse(&format!("pane{i}"), Vec3::splat(0.5))
             });
-            let mesh = s.add_mesh(Mesh {
-                positions: vec![
-                    Vec3::new(-1.0, -1.0, z),
-                    Vec3::new(1.0, -1.0, z),
-                    Vec3::new(1.0, 1.0, z),
-                    Vec3::new(-1.0, 1.0, z),
-                ],
-                indices: vec![[0, 1, 2], [0, 2, 3]],
-                ..Mesh::default()
-            });
+            let mesh = s.add_mesh(crate::test_square(z));
             s.objects.push(Object {
                 geometry: Geometry::Mesh(mesh),
                 material: m,

@@ -2,7 +2,7 @@
 //! 5120-triangle icospheres, 1,003,520 triangles, 1920x1080, two point
 //! lights, as `benches/llvmpipe_raster.py` draws it) rendered with flat, Gouraud
 //! and Phong shading, each into one film reused across frames
-//! (`render_prepared_into`, as the peer reuses its framebuffer). Prints
+//! (`ScanConversion::render_into`, as the peer reuses its framebuffer). Prints
 //! ms/frame (median of `frames` after one warm-up) and the peak resident
 //! memory; writes PNGs of the frames to `$OUT_DIR` or /tmp when given
 //! `--png`.
@@ -136,6 +136,18 @@ struct Case {
     post: bool,
 }
 
+impl Case {
+    /// A case without the post filter.
+    fn new(name: impl Into<String>, scene: usize, settings: RenderSettings) -> Self {
+        Self {
+            name: name.into(),
+            scene,
+            settings,
+            post: false,
+        }
+    }
+}
+
 /// The issue-8 large scene: a 9x9 grid of level-3 icospheres (1280
 /// triangles each) floating over a 16x16-cell ground plane, lit by one
 /// point light above and to the side so every sphere casts a shadow on the
@@ -218,15 +230,14 @@ fn issue8_cases(cull: bool) -> Vec<Case> {
             ("object", ShadowMethod::Object),
             ("scanline", ShadowMethod::Scanline),
         ] {
-            cases.push(Case {
-                name: format!("{tag}, shadows {name}"),
+            cases.push(Case::new(
+                format!("{tag}, shadows {name}"),
                 scene,
-                settings: RenderSettings {
+                RenderSettings {
                     shadows: sh,
                     ..base.clone()
                 },
-                post: false,
-            });
+            ));
         }
     }
     for (name, samples, post) in [("aa post (1 + FXAA)", 1, true), ("aa 4 samples", 4, false)] {
@@ -327,36 +338,33 @@ fn main() {
             ("phong, shadow maps", ShadowMethod::Map),
             ("phong, shadow volumes", ShadowMethod::Volume),
         ] {
-            cases.push(Case {
-                name: name.into(),
-                scene: 0,
-                settings: RenderSettings {
+            cases.push(Case::new(
+                name,
+                0,
+                RenderSettings {
                     shadows: sh,
                     ..settings(Technique::Phong, cull)
                 },
-                post: false,
-            });
+            ));
         }
-        cases.push(Case {
-            name: "phong, 1/3 of spheres kt=0.6 drawn opaque".into(),
-            scene: 0,
-            settings: settings(Technique::Phong, cull),
-            post: false,
-        });
+        cases.push(Case::new(
+            "phong, 1/3 of spheres kt=0.6 drawn opaque",
+            0,
+            settings(Technique::Phong, cull),
+        ));
         for (name, t) in [
             ("screen-door", TransparencyMode::ScreenDoor),
             ("interpolated", TransparencyMode::Interpolated),
             ("filtered", TransparencyMode::Filtered),
         ] {
-            cases.push(Case {
-                name: format!("phong, 1/3 of spheres kt=0.6, {name}"),
-                scene: 1,
-                settings: RenderSettings {
+            cases.push(Case::new(
+                format!("phong, 1/3 of spheres kt=0.6, {name}"),
+                1,
+                RenderSettings {
                     transparency: Some(t),
                     ..settings(Technique::Phong, cull)
                 },
-                post: false,
-            });
+            ));
         }
     } else {
         for (name, technique) in [
@@ -364,15 +372,14 @@ fn main() {
             ("gouraud", Technique::Gouraud),
             ("flat", Technique::Flat),
         ] {
-            cases.push(Case {
-                name: name.into(),
-                scene: 0,
-                settings: RenderSettings {
+            cases.push(Case::new(
+                name,
+                0,
+                RenderSettings {
                     crop: crop.then_some([640, 270, 1280, 810]),
                     ..settings(technique, cull)
                 },
-                post: false,
-            });
+            ));
         }
     }
     let only: Option<&String> = args

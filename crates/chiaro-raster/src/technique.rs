@@ -205,28 +205,9 @@ pub(crate) mod test_support {
         progress: &dyn Progress,
     ) -> Result<Film> {
         let mut film = Film::new(settings.width, settings.height);
-        render_prepared_into(ps, settings, mode, options, progress, &mut film)?;
+        let work = RasterWork::default();
+        render_work(ps, settings, mode, options, progress, &mut film, &work)?;
         Ok(film)
-    }
-
-    /// [`render_prepared_with`] into an existing `film`.
-    pub(crate) fn render_prepared_into(
-        ps: &PreparedScene<'_>,
-        settings: &RenderSettings,
-        mode: ShadeMode,
-        options: &RasterOptions,
-        progress: &dyn Progress,
-        film: &mut Film,
-    ) -> Result<()> {
-        render_work(
-            ps,
-            settings,
-            mode,
-            options,
-            progress,
-            film,
-            &RasterWork::default(),
-        )
     }
 
     /// [`render_prepared_with`] with the default options.

@@ -22,7 +22,9 @@ use chiaro_core::accel::bvh::{BvhOptions, PACKET, SceneBvh};
 use chiaro_core::geometry::Ray;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
-use chiaro_testkit::bench::{WordHash, bvh_rays, cpu_seconds, flag_value, median};
+use chiaro_testkit::bench::{
+    WordHash, bvh_rays, cpu_normalised_note, cpu_seconds, flag_value, median,
+};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::io::Write;
@@ -211,15 +213,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let med = median(&mut times);
         // CPU-normalised: rays per second if every thread had had a core.
-        let cpu_note = if cpu.is_empty() {
-            String::new()
-        } else {
-            let c = median(&mut cpu);
-            format!(
-                ", cpu {c:.4}s -> {:.2} Mrays/s cpu-normalised",
-                rays.len() as f64 / (c / threads as f64) / 1e6
-            )
-        };
+        let cpu = (!cpu.is_empty()).then(|| median(&mut cpu));
+        let cpu_note = cpu_normalised_note(rays.len(), cpu, threads, 4);
         println!(
             "{name:<20} {how:<10} threads={threads}: median {med:.4}s -> {:.2} Mrays/s (min {:.4} max {:.4}, hit rate {:.3}{cpu_note})",
             rays.len() as f64 / med / 1e6,

@@ -30,7 +30,7 @@ use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{Camera, Geometry, Material, Object, RenderSettings, Scene, Transform};
 use chiaro_ray::preview::Preview;
-use chiaro_testkit::bench::{bvh_rays, cpu_seconds, flag_value, median};
+use chiaro_testkit::bench::{bvh_rays, cpu_normalised_note, cpu_seconds, flag_value, median};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -138,12 +138,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         .collect::<Vec<_>>()
                 })
             });
-            let cpu_rate = cpu.map_or(String::new(), |c| {
-                format!(
-                    ", cpu {c:.3}s -> {:.2} Mrays/s cpu-normalised",
-                    rays.len() as f64 / (c / threads as f64) / 1e6
-                )
-            });
+            let cpu_rate = cpu_normalised_note(rays.len(), cpu, threads, 3);
             println!(
                 "{rays_name:<6} {name:<9} intersect: median {wall:.3}s -> {:.2} Mrays/s{cpu_rate}, hit rate {:.3}",
                 rays.len() as f64 / wall / 1e6,

@@ -33,17 +33,19 @@ use chiaro_core::scene::Technique;
 use chiaro_ray::path;
 use chiaro_testkit::bench::{cpu_seconds, flag_value};
 use std::io::Write;
-use std::path::Path;
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    let (Some(scene_path), Some(prefix)) = (args.get(1), args.get(2)) else {
-        return Err("usage: path_bench SCENE OUT_PREFIX [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]".into());
-    };
+    let chiaro_testkit::scenes::SceneCommandLine {
+        args,
+        out: prefix,
+        scene,
+        mut settings,
+    } = chiaro_testkit::scenes::scene_command_line(
+        "usage: path_bench SCENE OUT_PREFIX [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]",
+        Technique::Path,
+    )?;
     let arg = |name: &str| flag_value(&args, name);
-    let (scene, mut settings) =
-        chiaro_testkit::scenes::load_for(Path::new(scene_path), Technique::Path)?;
     if let Some(n) = arg("--spp") {
         settings.samples = n.parse()?;
     }

@@ -11,17 +11,19 @@ use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{AaMode, Technique};
 use chiaro_ray::whitted;
 use chiaro_testkit::bench::flag_value;
-use std::path::Path;
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().collect();
-    let (Some(scene_path), Some(out)) = (args.get(1), args.get(2)) else {
-        return Err("usage: whitted_render SCENE OUT.png [--size WxH] [--samples N] [--adaptive] [--light-samples N] [--threads N]".into());
-    };
+    let chiaro_testkit::scenes::SceneCommandLine {
+        args,
+        out,
+        scene,
+        mut settings,
+    } = chiaro_testkit::scenes::scene_command_line(
+        "usage: whitted_render SCENE OUT.png [--size WxH] [--samples N] [--adaptive] [--light-samples N] [--threads N]",
+        Technique::Whitted,
+    )?;
     let arg = |name: &str| flag_value(&args, name);
-    let (scene, mut settings) =
-        chiaro_testkit::scenes::load_for(Path::new(scene_path), Technique::Whitted)?;
     if let Some(size) = arg("--size") {
         let (w, h) = size.split_once('x').ok_or("--size WxH")?;
         settings.width = w.parse()?;

@@ -29,6 +29,18 @@ pub fn median(v: &mut [f64]) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(0.0)
 }
 
+/// `, cpu Cs -> R Mrays/s cpu-normalised` for `rays` rays that took `cpu`
+/// CPU seconds (shown to `digits` decimals) on `threads` threads: the rate
+/// had every thread had a core. Empty without a CPU time.
+pub fn cpu_normalised_note(rays: usize, cpu: Option<f64>, threads: usize, digits: usize) -> String {
+    cpu.map_or(String::new(), |c| {
+        format!(
+            ", cpu {c:.digits$}s -> {:.2} Mrays/s cpu-normalised",
+            rays as f64 / (c / threads as f64) / 1e6
+        )
+    })
+}
+
 /// The BVH benchmarks' rays, `w * h` of each kind: coherent pinhole rays
 /// from `(0, 0, 20)` looking down `-z` with `tan_half` the tangent of the
 /// half field of view, row by row; and incoherent rays from uniform points

@@ -368,6 +368,45 @@ pub fn load_for(
     Ok((loaded.scene, settings))
 }
 
+/// An example's command line `NAME SCENE OUT [flags]`, read by
+/// [`scene_command_line`].
+#[cfg(feature = "io")]
+#[derive(Debug)]
+pub struct SceneCommandLine {
+    /// All the arguments, for the flags.
+    pub args: Vec<String>,
+    /// `OUT`.
+    pub out: String,
+    /// `SCENE`, loaded with [`load_for`].
+    pub scene: Scene,
+    /// Its settings, with the example's technique.
+    pub settings: chiaro_core::scene::RenderSettings,
+}
+
+/// The process's command line as a [`SceneCommandLine`] whose scene has
+/// `technique` (`usage` is the error when `SCENE` or `OUT` is missing).
+///
+/// # Errors
+/// `usage`, or the importer's error when the scene does not load.
+#[cfg(feature = "io")]
+pub fn scene_command_line(
+    usage: &str,
+    technique: chiaro_core::scene::Technique,
+) -> Result<SceneCommandLine, Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let (Some(scene_path), Some(out)) = (args.get(1), args.get(2)) else {
+        return Err(usage.into());
+    };
+    let out = out.clone();
+    let (scene, settings) = load_for(std::path::Path::new(scene_path), technique)?;
+    Ok(SceneCommandLine {
+        args,
+        out,
+        scene,
+        settings,
+    })
+}
+
 /// Writes `film` as an 8-bit sRGB PNG (clamped, no tone map).
 ///
 /// # Errors

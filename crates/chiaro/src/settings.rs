@@ -111,6 +111,13 @@ mod tests {
     use super::*;
     use chiaro_core::scene::{ShadowMethod, Technique};
 
+    /// The message of an override that must be refused.
+    fn refusal(s: &mut RenderSettings, key: &str, value: &str) -> String {
+        apply_override(s, key, value)
+            .expect_err("refused")
+            .to_string()
+    }
+
     #[test]
     fn overrides_nested_and_enum_fields() {
         let mut s = RenderSettings::default();
@@ -132,8 +139,7 @@ mod tests {
     #[test]
     fn unknown_key_lists_known_ones() {
         let mut s = RenderSettings::default();
-        let e = apply_override(&mut s, "shadow", "map").expect_err("unknown");
-        let msg = e.to_string();
+        let msg = refusal(&mut s, "shadow", "map");
         assert!(
             msg.contains("unknown setting `shadow`")
                 && msg.contains("shadows")
@@ -155,16 +161,12 @@ mod tests {
             s.radiosity.formfactor,
             chiaro_core::scene::FormFactorMethod::Hemicube
         );
-        let msg = apply_override(&mut s, "radiosity.solver", "magic")
-            .expect_err("unknown solver")
-            .to_string();
+        let msg = refusal(&mut s, "radiosity.solver", "magic");
         assert!(
             msg.contains("radiosity.solver") && msg.contains("gauss-seidel"),
             "{msg}"
         );
-        let msg = apply_override(&mut s, "radiosity.formfactor", "voodoo")
-            .expect_err("unknown method")
-            .to_string();
+        let msg = refusal(&mut s, "radiosity.formfactor", "voodoo");
         assert!(
             msg.contains("hemicube") && msg.contains("analytic"),
             "{msg}"

@@ -223,12 +223,6 @@ mod tests {
         let back = s.add_material(Material::diffuse("back", Vec3::new(1.0, 0.0, 0.0)));
         for (z, m) in [(0.0, front), (-1.0, back)] {
             let mesh = s.add_mesh(Mesh {
-                positions: vec![
-                    Vec3::new(-1.0, -1.0, z),
-                    Vec3::new(1.0, -1.0, z),
-                    Vec3::new(1.0, 1.0, z),
-                    Vec3::new(-1.0, 1.0, z),
-                ],
                 uvs: vec![
                     Vec2::new(0.0, 0.0),
                     Vec2::new(1.0, 0.0),
@@ -236,8 +230,7 @@ mod tests {
                     Vec2::new(0.0, 1.0),
                 ],
                 color_alphas: if z == 0.0 { va.to_vec() } else { Vec::new() },
-                indices: vec![[0, 1, 2], [0, 2, 3]],
-                ..Mesh::default()
+                ..crate::test_square(z)
             });
             s.objects.push(Object {
                 geometry: crate::scene::Geometry::Mesh(mesh),

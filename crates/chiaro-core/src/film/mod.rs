@@ -192,20 +192,6 @@ where
             })
         })
         .collect();
-    render_rects(width, height, rects, stage, progress, render_tile)
-}
-
-fn render_rects<F>(
-    width: u32,
-    height: u32,
-    rects: Vec<TileRect>,
-    stage: &str,
-    progress: &dyn Progress,
-    render_tile: F,
-) -> crate::error::Result<Film>
-where
-    F: Fn(TileRect) -> TilePixels + Sync,
-{
     progress.begin(stage, rects.len() as u64);
     // One task per tile: rayon's default splitting leaves a thread running a
     // long unsplit run of tiles alone while the other idles when costs are

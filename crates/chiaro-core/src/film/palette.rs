@@ -170,9 +170,18 @@ fn nearest_band(c: Vec3, bands: &[(f32, f32)]) -> usize {
     let Some((r, g)) = chromaticity(c) else {
         return 0;
     };
+    index_of_least(
+        bands
+            .iter()
+            .map(|&(br, bg)| (r - br).powi(2) + (g - bg).powi(2)),
+    )
+}
+
+/// The index of the least of `distances` (the first of equals; 0 when
+/// there is none below `f32::MAX`).
+fn index_of_least(distances: impl Iterator<Item = f32>) -> usize {
     let mut best = (f32::MAX, 0);
-    for (i, &(br, bg)) in bands.iter().enumerate() {
-        let d = (r - br).powi(2) + (g - bg).powi(2);
+    for (i, d) in distances.enumerate() {
         if d < best.0 {
             best = (d, i);
         }
@@ -353,15 +362,11 @@ pub fn median_cut_palette(rgb8: &[[u8; 3]], colors: usize) -> Vec<[u8; 3]> {
 
 /// Index of the palette entry nearest `c` (squared distance in code values).
 fn nearest_entry(palette: &[[u8; 3]], c: Vec3) -> usize {
-    let mut best = (f32::MAX, 0);
-    for (i, p) in palette.iter().enumerate() {
-        let d = Vec3::new(p[0].into(), p[1].into(), p[2].into()) - c;
-        let d2 = d.length_squared();
-        if d2 < best.0 {
-            best = (d2, i);
-        }
-    }
-    best.1
+    index_of_least(
+        palette
+            .iter()
+            .map(|p| (Vec3::new(p[0].into(), p[1].into(), p[2].into()) - c).length_squared()),
+    )
 }
 
 /// Maps an 8-bit sRGB image onto a given palette (at most 256 entries, at

@@ -102,30 +102,27 @@ pub fn linear_to_srgb16(x: f32) -> u16 {
 /// The film as 8-bit sRGB, row-major from the top-left: each pixel exposed
 /// by `2^exposure` (stops), tone mapped, and sRGB encoded.
 pub fn to_srgb8(film: &Film, tonemap: ToneMap, exposure: f32) -> Vec<[u8; 3]> {
-    film.color
-        .iter()
-        .map(|&c| {
-            let d = tonemap_color(c, tonemap, exposure);
-            [
-                linear_to_srgb8(d.x),
-                linear_to_srgb8(d.y),
-                linear_to_srgb8(d.z),
-            ]
-        })
-        .collect()
+    encode_film(film, tonemap, exposure, linear_to_srgb8)
 }
 
 /// The film as 16-bit sRGB, like [`to_srgb8`] with codes in `0..=65535`.
 pub fn to_srgb16(film: &Film, tonemap: ToneMap, exposure: f32) -> Vec<[u16; 3]> {
+    encode_film(film, tonemap, exposure, linear_to_srgb16)
+}
+
+/// Each pixel of `film` exposed, tone mapped, and its channels encoded by
+/// `encode` (red, green, blue in turn).
+fn encode_film<T>(
+    film: &Film,
+    tonemap: ToneMap,
+    exposure: f32,
+    encode: impl Fn(f32) -> T,
+) -> Vec<[T; 3]> {
     film.color
         .iter()
         .map(|&c| {
             let d = tonemap_color(c, tonemap, exposure);
-            [
-                linear_to_srgb16(d.x),
-                linear_to_srgb16(d.y),
-                linear_to_srgb16(d.z),
-            ]
+            [encode(d.x), encode(d.y), encode(d.z)]
         })
         .collect()
 }

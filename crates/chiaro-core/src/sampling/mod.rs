@@ -149,9 +149,14 @@ pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
 
 /// Uniform direction on the unit sphere.
 pub fn sample_uniform_sphere(u: Vec2) -> Vec3 {
-    let z = 1.0 - 2.0 * u.x;
+    unit_vector_at_height(1.0 - 2.0 * u.x, u.y)
+}
+
+/// The unit vector at height `z` (in `[-1, 1]`) and azimuth `2 pi v`.
+#[inline]
+fn unit_vector_at_height(z: f32, v: f32) -> Vec3 {
     let r = (1.0 - z * z).max(0.0).sqrt();
-    let phi = 2.0 * PI * u.y;
+    let phi = 2.0 * PI * v;
     Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
@@ -163,10 +168,7 @@ pub fn uniform_sphere_pdf() -> f32 {
 
 /// Uniform direction on the hemisphere about +z.
 pub fn sample_uniform_hemisphere(u: Vec2) -> Vec3 {
-    let z = u.x;
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    let phi = 2.0 * PI * u.y;
-    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+    unit_vector_at_height(u.x, u.y)
 }
 
 /// Pdf (per solid angle) of [`sample_uniform_hemisphere`]: `1 / (2 pi)`.

@@ -173,13 +173,7 @@ fn sample_area(
     }
     let dist = dist2.sqrt();
     let wi = d / dist;
-    let mut cos_l = -nl.dot(wi);
-    if two_sided {
-        cos_l = cos_l.abs();
-    }
-    if cos_l <= 0.0 {
-        return None;
-    }
+    let cos_l = facing_cosine(nl, wi, two_sided)?;
     Some(LightSample {
         wi,
         distance: dist,
@@ -187,6 +181,15 @@ fn sample_area(
         intensity: le * (cos_l * area / (PI * dist2)),
         is_delta: false,
     })
+}
+
+/// The cosine between an emitter's normal `n` and `-wi` (its magnitude when
+/// `two_sided`): `None` when the emitter faces away from the point.
+#[inline]
+fn facing_cosine(n: Vec3, wi: Vec3, two_sided: bool) -> Option<f32> {
+    let cos_l = -n.dot(wi);
+    let cos_l = if two_sided { cos_l.abs() } else { cos_l };
+    if cos_l <= 0.0 { None } else { Some(cos_l) }
 }
 
 /// An emissive triangle as a light: sampled uniformly in area, its samples
@@ -247,13 +250,7 @@ impl TriangleEmitter {
             return None;
         }
         let wi = d * (1.0 / dist2.sqrt());
-        let mut cos_l = -self.n.dot(wi);
-        if self.two_sided {
-            cos_l = cos_l.abs();
-        }
-        if cos_l <= 0.0 {
-            return None;
-        }
+        let cos_l = facing_cosine(self.n, wi, self.two_sided)?;
         Some(TriangleSample {
             wi,
             point: q,

@@ -832,7 +832,8 @@ fn rendering_into_a_used_film_gives_the_fresh_picture() {
         let mode = technique.shade_mode().expect("raster technique");
         let opts = RasterOptions::default();
         let fresh = render_prepared_with(&ps, &st, mode, &opts, &NoProgress).expect("fresh");
-        render_prepared_into(&ps, &st, mode, &opts, &NoProgress, &mut film).expect("into");
+        let work = RasterWork::default();
+        render_work(&ps, &st, mode, &opts, &NoProgress, &mut film, &work).expect("into");
         assert!(film == fresh, "{technique:?} {crop:?}");
     }
 }

@@ -65,11 +65,36 @@ fn light_only(size: u32) -> Scene {
     s
 }
 
+/// A light-grey diffuse floor: the 2 x 2 plane `y = 0` in 4 x 4 cells,
+/// without lights.
+fn floor() -> Scene {
+    let mut scene = Scene::default();
+    let m = scene.add_material(Material::diffuse("floor", Vec3::splat(0.8)));
+    let plane = scene.add_mesh(primitives::plane(2.0, 4));
+    scene.objects.push(Object {
+        geometry: Geometry::Mesh(plane),
+        material: m,
+        ..Object::default()
+    });
+    scene
+}
+
 /// Per pixel: true where the light contributes nothing.
 fn dark(f: &Film) -> Vec<bool> {
     (0..(f.width * f.height) as usize)
         .map(|i| f.color[i].max_element() < 1e-5)
         .collect()
+}
+
+/// [`render_with`] a `w` x `h` frame with [`settings`] for `method` (z-fail
+/// counting for volumes).
+fn render_plain(scene: &Scene, method: ShadowMethod, w: u32, h: u32) -> Film {
+    render_with(scene, &settings(method, w, h), VolumeCounting::ZFail)
+}
+
+/// [`dark`] of [`render_plain`].
+fn dark_with(scene: &Scene, method: ShadowMethod, w: u32, h: u32) -> Vec<bool> {
+    dark(&render_plain(scene, method, w, h))
 }
 
 /// Pixels of `reference` farther than `r` pixels from any pixel of the other class.
@@ -112,26 +137,10 @@ fn disagreement(reference: &[bool], other: &[bool], w: u32, h: u32) -> f32 {
 fn shadow_map_volume_and_rays_classify_the_same_pixels() {
     let (w, h) = (96, 72);
     let scene = light_only(64);
-    let none = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::None, w, h),
-        VolumeCounting::ZFail,
-    ));
-    let ray = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Ray, w, h),
-        VolumeCounting::ZFail,
-    ));
-    let map = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Map, w, h),
-        VolumeCounting::ZFail,
-    ));
-    let vol = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Volume, w, h),
-        VolumeCounting::ZFail,
-    ));
+    let none = dark_with(&scene, ShadowMethod::None, w, h);
+    let ray = dark_with(&scene, ShadowMethod::Ray, w, h);
+    let map = dark_with(&scene, ShadowMethod::Map, w, h);
+    let vol = dark_with(&scene, ShadowMethod::Volume, w, h);
     // The scene has real cast shadows: pixels dark with rays, lit without.
     let cast = (0..none.len()).filter(|&i| ray[i] && !none[i]).count();
     assert!(cast > 150, "only {cast} shadowed pixels");
@@ -146,40 +155,33 @@ fn object_precision_shadows_match_shadow_rays_at_every_pixel_centre() {
     // Both methods are exact: unlike shadow maps and volumes they must agree
     // at every pixel centre, edges included (up to points within float
     // epsilon of a shadow boundary).
-    let (w, h) = (96, 72);
-    let scene = light_only(64);
-    let ray = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Ray, w, h),
-        VolumeCounting::ZFail,
-    ));
-    let obj = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Object, w, h),
-        VolumeCounting::ZFail,
-    ));
+    let ray = assert_classifies_like_rays(ShadowMethod::Object);
     let shadowed = ray.iter().filter(|&&d| d).count();
     assert!(shadowed > 150, "only {shadowed} dark pixels");
-    let differ = (0..ray.len()).filter(|&i| ray[i] != obj[i]).count();
+}
+
+/// Asserts that `method` leaves the same pixels of the light-only shadow
+/// test dark as shadow rays, but for at most one in 500; returns the
+/// rays' dark pixels.
+fn assert_classifies_like_rays(method: ShadowMethod) -> Vec<bool> {
+    let (w, h) = (96, 72);
+    let scene = light_only(64);
+    let ray = dark_with(&scene, ShadowMethod::Ray, w, h);
+    let other = dark_with(&scene, method, w, h);
+    let differ = (0..ray.len()).filter(|&i| ray[i] != other[i]).count();
     assert!(
         differ <= ray.len() / 500,
         "{differ} of {} pixels differ",
         ray.len()
     );
+    ray
 }
 
 #[test]
 fn plane_at_grazing_light_has_no_acne() {
     // A floor lit at 85 degrees from its normal by a directional light,
     // and by a spot: with shadow maps every floor pixel stays lit.
-    let mut scene = Scene::default();
-    let m = scene.add_material(Material::diffuse("floor", Vec3::splat(0.8)));
-    let plane = scene.add_mesh(primitives::plane(2.0, 4));
-    scene.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: m,
-        ..Object::default()
-    });
+    let mut scene = floor();
     let a = 85f32.to_radians();
     scene.lights.push(Light::Directional {
         direction: Vec3::new(a.sin(), -a.cos(), 0.2).normalize(),
@@ -192,11 +194,7 @@ fn plane_at_grazing_light_has_no_acne() {
         let mut s = settings(ShadowMethod::Map, w, h);
         s.shadow_map.resolution = res;
         let lit = render_with(&scene, &s, VolumeCounting::ZFail);
-        let free = render_with(
-            &scene,
-            &settings(ShadowMethod::None, w, h),
-            VolumeCounting::ZFail,
-        );
+        let free = render_plain(&scene, ShadowMethod::None, w, h);
         let covered = (0..lit.color.len()).filter(|&i| free.color[i].max_element() > 0.0);
         let mut n = 0;
         for i in covered {
@@ -217,16 +215,8 @@ fn camera_inside_a_shadow_volume_is_right_with_z_fail() {
     let (w, h) = (48, 48);
     let mut scene = light_only(48);
     scene.camera = camera(Vec3::new(-0.8, 0.25, 0.65), Vec3::new(0.6, 0.0, 2.5), 70.0);
-    let ray = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Ray, w, h),
-        VolumeCounting::ZFail,
-    ));
-    let zfail = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Volume, w, h),
-        VolumeCounting::ZFail,
-    ));
+    let ray = dark_with(&scene, ShadowMethod::Ray, w, h);
+    let zfail = dark_with(&scene, ShadowMethod::Volume, w, h);
     let zpass = dark(&render_with(
         &scene,
         &settings(ShadowMethod::Volume, w, h),
@@ -282,11 +272,7 @@ fn intersecting_transparent_quads_blend_in_order_on_both_sides() {
     let (w, h) = (32, 32);
     for mode in [TransparencyMode::Interpolated, TransparencyMode::Filtered] {
         let scene = crossing_quads(mode, 0.5);
-        let f = render_with(
-            &scene,
-            &settings(ShadowMethod::None, w, h),
-            VolumeCounting::ZFail,
-        );
+        let f = render_plain(&scene, ShadowMethod::None, w, h);
         // Screen x grows towards world -x (camera looking down -y with up +z).
         let left = f.color[(16 * w + 6) as usize]; // world x > 0: blue in front
         let right = f.color[(16 * w + 25) as usize]; // world x < 0: red in front
@@ -315,11 +301,7 @@ fn screen_door_coverage_equals_one_minus_kt() {
         let mut scene = crossing_quads(TransparencyMode::ScreenDoor, kt);
         scene.objects.truncate(1);
         scene.camera.fov_y_degrees = 10.0; // the quad fills the image
-        let f = render_with(
-            &scene,
-            &settings(ShadowMethod::None, w, h),
-            VolumeCounting::ZFail,
-        );
+        let f = render_plain(&scene, ShadowMethod::None, w, h);
         let shown = f.color.iter().filter(|c| c.x > 0.5).count();
         let frac = shown as f32 / (w * h) as f32;
         assert!((frac - (1.0 - kt)).abs() < 0.01, "kt {kt}: coverage {frac}");
@@ -390,24 +372,7 @@ fn transparent_casters_tint_alike_in_every_shadow_method() {
 fn scanline_shadows_render_like_shadow_rays() {
     // Scan-line shadows in the renderer: exact at pixel centres, so they
     // classify like shadow rays (and like object precision).
-    let (w, h) = (96, 72);
-    let scene = light_only(64);
-    let ray = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Ray, w, h),
-        VolumeCounting::ZFail,
-    ));
-    let line = dark(&render_with(
-        &scene,
-        &settings(ShadowMethod::Scanline, w, h),
-        VolumeCounting::ZFail,
-    ));
-    let differ = (0..ray.len()).filter(|&i| ray[i] != line[i]).count();
-    assert!(
-        differ <= ray.len() / 500,
-        "{differ} of {} pixels differ",
-        ray.len()
-    );
+    assert_classifies_like_rays(ShadowMethod::Scanline);
     let _ = CoreError::Cancelled;
 }
 
@@ -712,14 +677,7 @@ fn a_floor_under_everything_casts_no_volume_a_raised_one_does() {
 /// lit fragment and showed isolated shadowed pixels).
 #[test]
 fn object_precision_lookup_just_outside_a_triangle_is_lit() {
-    let mut scene = Scene::default();
-    let m = scene.add_material(Material::diffuse("floor", Vec3::splat(0.8)));
-    let plane = scene.add_mesh(primitives::plane(2.0, 4));
-    scene.objects.push(Object {
-        geometry: Geometry::Mesh(plane),
-        material: m,
-        ..Object::default()
-    });
+    let mut scene = floor();
     scene.lights.push(Light::Point {
         position: Vec3::new(0.3, 2.0, 0.2),
         color: Vec3::ONE,

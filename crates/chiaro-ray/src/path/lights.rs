@@ -4,7 +4,8 @@
 use super::integrator::{MaterialInfo, PathTracer, Vertex};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::sampling::{SobolSampler, power_heuristic};
-use chiaro_core::shading::{Bsdf, sample_light, sample_light_pdf};
+use chiaro_core::scene::Light;
+use chiaro_core::shading::{Bsdf, LightSample, sample_light, sample_light_pdf};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -165,6 +166,30 @@ impl PathTracer<'_, '_> {
         if f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
             return Vec3::ZERO;
         }
+        self.shadowed_light_sample(light, &s, f_cos, pick, p, &info.bsdf, n, ng, wo, mis, rays)
+    }
+
+    /// The contribution of sample `s` of `light` (picked with probability
+    /// `pick`) at `p`, whose BSDF term is `f_cos`: a shadow ray, then `f cos
+    /// Le / pdf`, MIS-weighted (`mis`) against BSDF sampling unless the
+    /// light is a delta. The kernel's and the reference's point, spot,
+    /// directional and area lights end here.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(super) fn shadowed_light_sample(
+        &self,
+        light: &Light,
+        s: &LightSample,
+        f_cos: Vec3,
+        pick: f32,
+        p: Vec3,
+        bsdf: &Bsdf,
+        n: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        mis: bool,
+        rays: &mut u64,
+    ) -> Vec3 {
         *rays += 1;
         let origin = offset_ray_origin(p, ng, s.wi);
         let shadow = if s.distance.is_finite() {
@@ -175,13 +200,13 @@ impl PathTracer<'_, '_> {
         let Some(tr) = self.shadow_pass(&shadow) else {
             return Vec3::ZERO;
         };
+        // `pi * intensity` is the light sample's `Le / pdf` (see `LightSample`).
         let mut w = 1.0;
         if mis
             && !s.is_delta
             && let Some(light_pdf) = sample_light_pdf(light, p, s.point)
         {
-            let bsdf_pdf = info.bsdf.pdf(n, wo, s.wi);
-            w = power_heuristic(light_pdf * pick, bsdf_pdf);
+            w = power_heuristic(light_pdf * pick, bsdf.pdf(n, wo, s.wi));
         }
         PI * f_cos * s.intensity * (w / pick) * tr
     }

@@ -14,7 +14,6 @@ use chiaro_core::sampling::{Rng, power_heuristic, uniform, uniform2};
 use chiaro_core::scene::AlphaMode;
 use chiaro_core::shading::{Bsdf, sample_light, sample_light_pdf};
 use glam::Vec3;
-use std::f32::consts::PI;
 
 impl PathTracer<'_, '_> {
     /// Radiance along camera ray `ray`, and the first hit's distance and
@@ -151,25 +150,7 @@ impl PathTracer<'_, '_> {
         if pick <= 0.0 || f_cos == Vec3::ZERO || ng.dot(s.wi) <= 0.0 {
             return Vec3::ZERO;
         }
-        *rays += 1;
-        let origin = offset_ray_origin(p, ng, s.wi);
-        let shadow = if s.distance.is_finite() {
-            Ray::segment(origin, s.point)
-        } else {
-            Ray::new(origin, s.wi)
-        };
-        let Some(tr) = self.shadow_pass(&shadow) else {
-            return Vec3::ZERO;
-        };
-        // `pi * intensity` is the light sample's `Le / pdf` (see `LightSample`).
-        let mut w = 1.0;
-        if mis
-            && !s.is_delta
-            && let Some(light_pdf) = sample_light_pdf(light, p, s.point)
-        {
-            w = power_heuristic(light_pdf * pick, bsdf.pdf(n, wo, s.wi));
-        }
-        PI * f_cos * s.intensity * (w / pick) * tr
+        self.shadowed_light_sample(light, &s, f_cos, pick, p, bsdf, n, ng, wo, mis, rays)
     }
 }
 

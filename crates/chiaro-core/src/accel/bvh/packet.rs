@@ -159,74 +159,70 @@ pub(super) type NodeRays = ([u32; WIDTH], [[f32; PACKET]; WIDTH], [f32; WIDTH]);
 /// per AVX lane): per ray the same operations in the same order as
 /// [`BvhNode::intersect`] (the entry plane chosen by the sign of `1 /
 /// dir`, `max`/`min` with the same operand order), so the same bits.
-#[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
-#[inline(always)]
-pub(super) fn node_packet(
-    n: &BvhNode,
-    _pre: &[RayPre; PACKET],
-    soa: &PacketPre,
-    _t_min: &[f32; PACKET],
-    cull: &[f32; PACKET],
-    rays: u32,
-    path: &[f32; PACKET],
-) -> NodeRays {
-    use super::{EMPTY_LANE, EXIT_SLACK};
-    use safe_arch::*;
-    let mut lane_rays = [0u32; WIDTH];
-    let mut lane_near = [[f32::INFINITY; PACKET]; WIDTH];
-    let mut lane_key = [f32::INFINITY; WIDTH];
-    let cull = m256::from_array(*cull);
-    let path = m256::from_array(*path);
-    let b = &n.bounds;
-    for i in 0..WIDTH {
-        if n.count[i] == EMPTY_LANE {
-            continue;
-        }
-        let slab = |a: usize, near: bool| {
-            let (lo, hi) = (set_splat_m256(b[a][i]), set_splat_m256(b[a + 3][i]));
-            let plane = if near {
-                blend_varying_m256(lo, hi, soa.inv[a])
-            } else {
-                blend_varying_m256(hi, lo, soa.inv[a])
-            };
-            mul_m256(sub_m256(plane, soa.org[a]), soa.inv[a])
-        };
-        let near = max_m256(
-            slab(2, true),
-            max_m256(slab(1, true), max_m256(slab(0, true), soa.t_min)),
-        );
-        let far = min_m256(
-            slab(2, false),
-            min_m256(
-                slab(1, false),
-                min_m256(slab(0, false), set_splat_m256(f32::INFINITY)),
-            ),
-        );
-        let far = min_m256(mul_m256(far, set_splat_m256(EXIT_SLACK)), cull);
-        let hit = cmp_op_mask_m256::<{ cmp_op!(LessEqualOrdered) }>(near, far);
-        let mask = move_mask_m256(hit) as u32 & rays;
-        if mask != 0 {
-            lane_rays[i] = mask;
-            let near = near.to_array();
-            lane_key[i] = near[mask.trailing_zeros() as usize];
-            lane_near[i] = max_m256(m256::from_array(near), path).to_array();
-        }
-    }
-    (lane_rays, lane_near, lane_key)
-}
-
-#[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+/// Without AVX, [`node_per_ray`].
 #[inline(always)]
 pub(super) fn node_packet(
     n: &BvhNode,
     pre: &[RayPre; PACKET],
-    _soa: &PacketPre,
+    soa: &PacketPre,
     t_min: &[f32; PACKET],
     cull: &[f32; PACKET],
     rays: u32,
     path: &[f32; PACKET],
 ) -> NodeRays {
-    node_per_ray(n, pre, t_min, cull, rays, path)
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    {
+        use super::{EMPTY_LANE, EXIT_SLACK};
+        use safe_arch::*;
+        // (The per-ray forms are for the portable test.)
+        let _ = (pre, t_min);
+        let mut lane_rays = [0u32; WIDTH];
+        let mut lane_near = [[f32::INFINITY; PACKET]; WIDTH];
+        let mut lane_key = [f32::INFINITY; WIDTH];
+        let cull = m256::from_array(*cull);
+        let path = m256::from_array(*path);
+        let b = &n.bounds;
+        for i in 0..WIDTH {
+            if n.count[i] == EMPTY_LANE {
+                continue;
+            }
+            let slab = |a: usize, near: bool| {
+                let (lo, hi) = (set_splat_m256(b[a][i]), set_splat_m256(b[a + 3][i]));
+                let plane = if near {
+                    blend_varying_m256(lo, hi, soa.inv[a])
+                } else {
+                    blend_varying_m256(hi, lo, soa.inv[a])
+                };
+                mul_m256(sub_m256(plane, soa.org[a]), soa.inv[a])
+            };
+            let near = max_m256(
+                slab(2, true),
+                max_m256(slab(1, true), max_m256(slab(0, true), soa.t_min)),
+            );
+            let far = min_m256(
+                slab(2, false),
+                min_m256(
+                    slab(1, false),
+                    min_m256(slab(0, false), set_splat_m256(f32::INFINITY)),
+                ),
+            );
+            let far = min_m256(mul_m256(far, set_splat_m256(EXIT_SLACK)), cull);
+            let hit = cmp_op_mask_m256::<{ cmp_op!(LessEqualOrdered) }>(near, far);
+            let mask = move_mask_m256(hit) as u32 & rays;
+            if mask != 0 {
+                lane_rays[i] = mask;
+                let near = near.to_array();
+                lane_key[i] = near[mask.trailing_zeros() as usize];
+                lane_near[i] = max_m256(m256::from_array(near), path).to_array();
+            }
+        }
+        (lane_rays, lane_near, lane_key)
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    {
+        let _ = soa; // (The AVX test's form of the rays.)
+        node_per_ray(n, pre, t_min, cull, rays, path)
+    }
 }
 
 /// [`node_packet`] a ray at a time with [`BvhNode::intersect`]: the

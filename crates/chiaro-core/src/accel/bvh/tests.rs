@@ -55,6 +55,17 @@ fn read_obj(path: &std::path::Path) -> Option<Mesh> {
     Some(mesh)
 }
 
+/// A point uniform in the unit cube, its coordinates drawn x, y, z in turn.
+fn unit_cube_point(rng: &mut crate::sampling::Rng) -> Vec3 {
+    Vec3::new(uniform(rng), uniform(rng), uniform(rng))
+}
+
+/// [`unit_cube_point`] rounded to the grid of eighths, so that box faces
+/// and ray origins can share slab planes exactly.
+fn grid_point(rng: &mut crate::sampling::Rng) -> Vec3 {
+    unit_cube_point(rng).map(|x| (x * 8.0).round() / 8.0)
+}
+
 fn scene_of(mesh: Mesh, spheres: &[(Vec3, f32)]) -> Scene {
     let mut s = Scene::default();
     s.add_material(Material::default());
@@ -167,21 +178,14 @@ fn random_soup_with_spheres_matches_brute_force() {
     let mut rng = pixel_rng(9, 0, 0, 0);
     let mut mesh = Mesh::default();
     for i in 0..3000u32 {
-        let c = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * 10.0;
+        let c = unit_cube_point(&mut rng) * 10.0;
         for _ in 0..3 {
-            mesh.positions.push(
-                c + (Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) - 0.5),
-            );
+            mesh.positions.push(c + (unit_cube_point(&mut rng) - 0.5));
         }
         mesh.indices.push([3 * i, 3 * i + 1, 3 * i + 2]);
     }
     let spheres: Vec<(Vec3, f32)> = (0..50)
-        .map(|_| {
-            (
-                Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * 10.0,
-                0.3,
-            )
-        })
+        .map(|_| (unit_cube_point(&mut rng) * 10.0, 0.3))
         .collect();
     let s = scene_of(mesh, &spheres);
     let ps = with_analytic_spheres(&s);
@@ -193,7 +197,7 @@ fn structure_invariants_and_thread_independence() {
     let mut rng = pixel_rng(4, 0, 0, 0);
     let boxes: Vec<Aabb> = (0..20_000)
         .map(|_| {
-            let c = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * 100.0;
+            let c = unit_cube_point(&mut rng) * 100.0;
             Aabb {
                 min: c,
                 max: c + Vec3::splat(uniform(&mut rng)),
@@ -286,7 +290,7 @@ fn partition_is_exact_at_every_size() {
     for (case, &n) in sizes.iter().cycle().take(3 * sizes.len()).enumerate() {
         let mut refs: Vec<PrimRef> = (0..n)
             .map(|i| {
-                let p = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+                let p = unit_cube_point(&mut rng);
                 let p = if case % 3 == 1 {
                     p * 0.1 + Vec3::X * (i as f32 / n as f32)
                 } else {
@@ -508,29 +512,19 @@ fn node_test_matches_the_four_lane_one() {
         let mut node = BvhNode::EMPTY;
         let used = k % WIDTH + 1;
         for lane in 0..used {
-            let g = |x: f32| (x * 8.0).round() / 8.0;
-            let a = Vec3::new(
-                g(uniform(&mut rng)),
-                g(uniform(&mut rng)),
-                g(uniform(&mut rng)),
-            );
-            let e = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * 0.5;
+            let a = grid_point(&mut rng);
+            let e = unit_cube_point(&mut rng) * 0.5;
             let b = Aabb { min: a, max: a + e };
             node.set_lane(lane, &b, lane as u32, 0);
         }
         let o = if k % 3 == 0 {
             // On the grid the boxes' corners lie on: slab planes.
-            let g = |x: f32| (x * 8.0).round() / 8.0;
-            Vec3::new(
-                g(uniform(&mut rng)),
-                g(uniform(&mut rng)),
-                g(uniform(&mut rng)),
-            )
+            grid_point(&mut rng)
         } else {
-            Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * 3.0 - 1.0
+            unit_cube_point(&mut rng) * 3.0 - 1.0
         };
         // Towards a random point among the boxes.
-        let aim = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)) * 1.5;
+        let aim = unit_cube_point(&mut rng) * 1.5;
         let mut dir =
             (aim - o).normalize_or(Vec3::X) + sample_uniform_sphere(uniform2(&mut rng)) * 0.1;
         if k % 3 == 0 {
@@ -564,7 +558,7 @@ fn four_wide_triangle_test_is_bit_identical_to_scalar() {
         let mut tris = [[Vec3::ZERO; 3]; BLOCK];
         for (lane, t) in tris.iter_mut().enumerate() {
             for p in t.iter_mut() {
-                *p = Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng));
+                *p = unit_cube_point(&mut rng);
             }
             if k % 2 == 0 {
                 // Axis-aligned grid triangles: rays through vertices and
@@ -609,9 +603,7 @@ fn four_wide_triangle_test_is_bit_identical_to_scalar() {
 fn watertight_ray_agrees_with_free_function() {
     let mut rng = pixel_rng(6, 0, 0, 0);
     for _ in 0..1000 {
-        let p: Vec<Vec3> = (0..3)
-            .map(|_| Vec3::new(uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)))
-            .collect();
+        let p: Vec<Vec3> = (0..3).map(|_| unit_cube_point(&mut rng)).collect();
         let r = Ray::new(
             Vec3::new(0.5, 0.5, 3.0),
             sample_uniform_sphere(uniform2(&mut rng)) - Vec3::Z * 2.0,
