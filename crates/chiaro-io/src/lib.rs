@@ -29,6 +29,7 @@ pub mod output;
 pub mod plain;
 pub mod ply;
 pub mod scene_toml;
+mod warnings;
 
 pub use error::{IoError, Result};
 
@@ -506,20 +507,18 @@ pub fn default_lights(camera: &Camera) -> Vec<Light> {
 }
 
 /// Runs `Scene::validate`: errors become one [`IoError::Format`] listing
-/// them, warnings are appended to `warnings`.
-fn finish(scene: Scene, mut warnings: Vec<String>, path: &Path) -> Result<Loaded> {
+/// them, warnings follow the loader's `warnings`, each kind said once
+/// (`warnings::summarize`).
+fn finish(scene: Scene, warnings: Vec<String>, path: &Path) -> Result<Loaded> {
     let mut errors = Vec::new();
+    let mut issues = Vec::new();
     for issue in scene.validate() {
         match issue.severity {
             Severity::Error => errors.push(format!("{}: {}", issue.path, issue.message)),
-            Severity::Warning => warnings.push(format!(
-                "{}: {}: {}",
-                path.display(),
-                issue.path,
-                issue.message
-            )),
+            Severity::Warning => issues.push((issue.path, issue.message)),
         }
     }
+    let warnings = warnings::summarize(warnings, path, issues);
     if !errors.is_empty() {
         return Err(IoError::format(
             path,
