@@ -200,7 +200,7 @@ pub fn add_unit_box(s: &mut Scene, mats: [MaterialId; 6], closed: bool) {
 /// and light radiance (17, 12, 4), with the light a one-sided quad area
 /// light just under the ceiling and two blocks of the same proportions.
 /// For tests whose settings are in scene units of a unit box (radiosity
-/// patch sizes) and for the radiosity benchmark; [`cornell_box`] (feature
+/// patch sizes) and for the radiosity benchmark; `cornell_box` (feature
 /// `io`) is the shipped one. Objects: 0 floor, 1 ceiling, 2 back, 3 left
 /// (red), 4 right (green), 5 short block, 6 tall block; materials 0 white,
 /// 1 red, 2 green.
