@@ -77,3 +77,15 @@ fn a_ply_element_count_larger_than_the_file_is_refused() {
         chiaro_io::ply::load_ply_slice(ok, std::path::Path::new("tri.ply")).expect("loads");
     assert_eq!(imported.objects.len(), 1);
 }
+
+/// The `ply` target ran out of memory on a binary file whose format line
+/// says version 0.0: the element-count check skipped files without a
+/// `1.0` format line, and the parser allocated for 5e15 vertices.
+#[test]
+fn a_huge_element_count_is_refused_whatever_the_format_version() {
+    let path = data("odd-version-huge-count.ply");
+    let msg = chiaro_io::load_scene(&path)
+        .expect_err("a count no file can back")
+        .to_string();
+    assert!(msg.contains("claims"), "{msg}");
+}
