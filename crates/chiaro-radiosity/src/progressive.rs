@@ -7,7 +7,7 @@
 
 use crate::mesh::Element;
 use crate::patch::Patches;
-use crate::solver::{STALL_WINDOW, SolveOutput, Stop, Stopper, power};
+use crate::solver::{STALL_WINDOW, SolveOutput, Stopper, power};
 use chiaro_core::error::CoreError;
 use chiaro_core::progress::{Convergence, Progress};
 use glam::Vec3;
@@ -40,16 +40,9 @@ pub(crate) fn progressive(
     let p0 = power(elements, e);
     let mut l = e.to_vec();
     let mut unshot = e.to_vec();
-    let mut out = SolveOutput {
-        l: Vec::new(),
-        iterations: 0,
-        unshot: 0.0,
-        stop: Stop::Converged,
-        worst: 0,
-    };
+    let mut out = SolveOutput::start(Vec::new());
     if p0 <= 0.0 {
-        out.l = l;
-        return Ok(out);
+        return Ok(SolveOutput::start(l));
     }
     let mut col = vec![0.0f32; n];
     let mut gathered = vec![Vec3::ZERO; n];

@@ -29,6 +29,20 @@ pub(crate) struct SolveOutput {
     pub worst: usize,
 }
 
+impl SolveOutput {
+    /// Radiance `l` before any iteration: converged, nothing unshot (the
+    /// start of every solver, and its result when nothing emits).
+    pub(crate) fn start(l: Vec<Vec3>) -> Self {
+        Self {
+            l,
+            iterations: 0,
+            unshot: 0.0,
+            stop: Stop::Converged,
+            worst: 0,
+        }
+    }
+}
+
 /// The power `sum_j A_j |v_j|_1` of a radiance vector over the elements
 /// (the numerator and denominator of the unshot fraction).
 pub(crate) fn power(elements: &[Element], v: &[Vec3]) -> f32 {
