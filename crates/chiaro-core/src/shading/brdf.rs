@@ -1,7 +1,7 @@
 //! The BRDF of the local illumination model: Lambert plus one specular lobe
 //! (Phong, Blinn-Phong or Torrance-Sparrow microfacets).
 
-use super::fresnel::{fresnel_schlick, reflect};
+use super::fresnel::{fresnel_schlick, reflect, schlick_weight};
 use super::microfacet;
 use crate::scene::{Distribution, Material, MetallicRoughness, ReflectanceModel};
 use glam::Vec3;
@@ -151,28 +151,86 @@ pub fn eval_brdf_cos(m: &SurfaceMaterial, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
 /// The specular part of [`eval_brdf_cos`] alone.
 #[inline]
 pub fn specular_cos(m: &SurfaceMaterial, n: Vec3, wo: Vec3, wi: Vec3, cos_i: f32) -> Vec3 {
+    match colourless_lobe(m, n, wo, wi, cos_i) {
+        None => Vec3::ZERO,
+        Some((value, None)) => m.ks * value,
+        Some((value, Some(cos_d))) => fresnel_schlick(m.ks, cos_d) * value,
+    }
+}
+
+/// [`specular_cos`] as an affine function of the specular colour `m.ks`:
+/// `specular_cos = ks * scale + offset` (up to rounding), the other
+/// parameters of `m` (lobe, exponent, roughness) as given and `m.ks`
+/// itself unread. The parts flat and Gouraud shading compute per face or
+/// vertex, to apply a textured `ks` (a metal's F0) per pixel.
+#[inline]
+pub fn specular_cos_factored(
+    m: &SurfaceMaterial,
+    n: Vec3,
+    wo: Vec3,
+    wi: Vec3,
+    cos_i: f32,
+) -> SpecularFactors {
+    match colourless_lobe(m, n, wo, wi, cos_i) {
+        None => SpecularFactors::default(),
+        Some((value, None)) => SpecularFactors {
+            scale: value,
+            offset: 0.0,
+        },
+        // Schlick: F = F0 (1 - w) + w.
+        Some((value, Some(cos_d))) => {
+            let w = schlick_weight(cos_d);
+            SpecularFactors {
+                scale: (1.0 - w) * value,
+                offset: w * value,
+            }
+        }
+    }
+}
+
+/// The specular term per unit of the specular colour, and the part that
+/// does not depend on it ([`specular_cos_factored`]), in 1/sr.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SpecularFactors {
+    /// Multiplies `ks` (the lobe times `1 - w` of Schlick's Fresnel).
+    pub scale: f32,
+    /// Added whatever `ks` is (Schlick's white grazing reflection `w`
+    /// times the lobe; zero for the Phong and Blinn lobes).
+    pub offset: f32,
+}
+
+/// The specular lobe of `m` without its colour, the one body of
+/// [`specular_cos`] and [`specular_cos_factored`]: `(value, cos_d)` where
+/// the term is `ks * value` (Phong, Blinn: `cos_d` is `None`) or
+/// `fresnel_schlick(ks, cos_d) * value` (Torrance-Sparrow, `cos_d = wi . h`);
+/// `None` where it is zero.
+#[inline(always)]
+fn colourless_lobe(
+    m: &SurfaceMaterial,
+    n: Vec3,
+    wo: Vec3,
+    wi: Vec3,
+    cos_i: f32,
+) -> Option<(f32, Option<f32>)> {
     match m.model {
-        ReflectanceModel::Phong => m.ks * (phong_lobe(n, wo, wi, m.shininess) * FRAC_1_PI),
+        ReflectanceModel::Phong => Some((phong_lobe(n, wo, wi, m.shininess) * FRAC_1_PI, None)),
         ReflectanceModel::Blinn => {
             if n.dot(wo) <= 0.0 {
-                return Vec3::ZERO;
+                return None;
             }
-            m.ks * (blinn_lobe(n, wo, wi, m.shininess) * FRAC_1_PI)
+            Some((blinn_lobe(n, wo, wi, m.shininess) * FRAC_1_PI, None))
         }
         ReflectanceModel::TorranceSparrow => {
             let cos_o = n.dot(wo);
             if cos_o <= 0.0 {
-                return Vec3::ZERO;
+                return None;
             }
-            let Some(h) = (wo + wi).try_normalize() else {
-                return Vec3::ZERO;
-            };
+            let h = (wo + wi).try_normalize()?;
             let alpha = m.roughness.max(1e-3);
             let d = microfacet::d(m.distribution, n.dot(h), alpha);
             let g = microfacet::g_smith(m.distribution, cos_o, cos_i, alpha);
-            let f = fresnel_schlick(m.ks, wi.dot(h).max(0.0));
             // D G F / (4 cos_i cos_o) * cos_i
-            f * (d * g / (4.0 * cos_o))
+            Some((d * g / (4.0 * cos_o), Some(wi.dot(h).max(0.0))))
         }
     }
 }
@@ -292,6 +350,56 @@ mod tests {
                 assert!(a <= 1.01, "alpha {alpha} {dist:?}: albedo {a}");
                 if alpha <= 0.1 {
                     assert!(a > 0.95, "alpha {alpha} {dist:?}: albedo {a}");
+                }
+            }
+        }
+    }
+
+    /// `ks * scale + offset` is the specular term, for every lobe, colour
+    /// and pair of directions (including below the horizon).
+    #[test]
+    fn factored_specular_is_the_specular_term() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let models = [
+            ReflectanceModel::Phong,
+            ReflectanceModel::Blinn,
+            ReflectanceModel::TorranceSparrow,
+        ];
+        for model in models {
+            for _ in 0..2000 {
+                let mut unit = || {
+                    Vec3::new(next(), next(), next())
+                        .try_normalize()
+                        .unwrap_or(Vec3::Y)
+                };
+                let (wo, wi) = (unit(), unit());
+                let m = SurfaceMaterial {
+                    ks: Vec3::new(0.9, 0.5, 0.04),
+                    model,
+                    shininess: 12.0,
+                    roughness: 0.2,
+                    ..SurfaceMaterial::default()
+                };
+                let cos_i = Vec3::Y.dot(wi);
+                if cos_i <= 0.0 {
+                    continue;
+                }
+                let want = specular_cos(&m, Vec3::Y, wo, wi, cos_i);
+                let f = specular_cos_factored(&m, Vec3::Y, wo, wi, cos_i);
+                let got = m.ks * f.scale + Vec3::splat(f.offset);
+                let tol = 1e-5 * want.max_element().max(1.0);
+                assert!(
+                    (got - want).abs().max_element() <= tol,
+                    "{model:?}: {got} vs {want}"
+                );
+                if model != ReflectanceModel::TorranceSparrow {
+                    assert_eq!(f.offset, 0.0);
                 }
             }
         }

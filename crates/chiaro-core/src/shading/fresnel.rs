@@ -30,9 +30,17 @@ pub fn refract(wo: Vec3, n: Vec3, eta: f32) -> Option<Vec3> {
 /// Schlick's approximation `F0 + (1 - F0)(1 - cos)^5` (Schlick 1994).
 #[inline]
 pub fn fresnel_schlick(f0: Vec3, cos_theta: f32) -> Vec3 {
+    f0 + (Vec3::ONE - f0) * schlick_weight(cos_theta)
+}
+
+/// The weight `w = (1 - cos)^5` of Schlick's approximation, which is
+/// `F0 (1 - w) + w`: linear in `F0`, so a lobe's colourless parts can be
+/// found where `F0` is not yet known (flat and Gouraud shading).
+#[inline]
+pub fn schlick_weight(cos_theta: f32) -> f32 {
     let m = (1.0 - cos_theta).clamp(0.0, 1.0);
     let m2 = m * m;
-    f0 + (Vec3::ONE - f0) * (m2 * m2 * m)
+    m2 * m2 * m
 }
 
 /// Unpolarised Fresnel reflectance of a dielectric interface for light

@@ -28,9 +28,9 @@ pub mod microfacet;
 pub mod point;
 pub mod texture;
 
-pub use brdf::{SurfaceMaterial, eval_brdf_cos};
+pub use brdf::{SpecularFactors, SurfaceMaterial, eval_brdf_cos, specular_cos_factored};
 pub use bsdf::{Bsdf, BsdfSample, DeltaSplit, delta_split, luminance};
-pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract};
+pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract, schlick_weight};
 pub use light_set::{
     AliasTable, EmitterGroup, LightPowerTable, SampleKey, environment_power, group_jitter,
     light_power,
@@ -152,7 +152,7 @@ pub fn shade_local(
     jitter: impl FnMut(usize, u32) -> Vec2,
     visibility: impl FnMut(usize, &LightSample) -> Vec3,
 ) -> Vec3 {
-    local_model::<false>(m, sp, env, jitter, visibility)[0]
+    local_model::<Coloured<false>>(m, sp, env, jitter, visibility).0[0]
 }
 
 /// [`shade_local`] split into two parts in one evaluation: returns
@@ -161,7 +161,7 @@ pub fn shade_local(
 /// (emission and specular reflection: the part that does not scale with the
 /// diffuse colour). `visibility` is called once per light sample, as in
 /// [`shade_local`]. Flat and Gouraud shading use `total - rest` as the
-/// illumination a diffuse texture modulates.
+/// light of an untextured surface's diffuse colour.
 #[inline]
 pub fn shade_local_split(
     m: &SurfaceMaterial,
@@ -170,25 +170,226 @@ pub fn shade_local_split(
     jitter: impl FnMut(usize, u32) -> Vec2,
     visibility: impl FnMut(usize, &LightSample) -> Vec3,
 ) -> [Vec3; 2] {
-    local_model::<true>(m, sp, env, jitter, visibility)
+    local_model::<Coloured<true>>(m, sp, env, jitter, visibility).0
 }
 
-/// The body of [`shade_local`] and [`shade_local_split`]: `[total, rest]`
-/// (`rest` only computed when `SPLIT`, zero otherwise). Every operation on
-/// `total` is the same whether or not `SPLIT`, and the operations on `rest`
-/// are those `total` performs with `kd = 0` (the diffuse terms then add
-/// exact zeros), so the split is exact.
+/// The local model at one point without the surface's colours: the same
+/// lights, samples and visibility as [`shade_local`], summed into the parts
+/// that multiply `kd`, the ambient reflectance and `ks`, so that
+/// [`FactoredLight::radiance`] of a material gives (up to rounding) what
+/// [`shade_local`] gives for it at this point. `m` gives the specular
+/// lobe's shape (model, exponent, roughness, distribution); its colours,
+/// emission and ambient reflectance are not read, and its lobe is
+/// evaluated even where its `ks` is zero. Flat and Gouraud shading light a
+/// textured surface this way per face or vertex and apply its colours
+/// (base colour, a metal's F0) per pixel.
+#[inline]
+pub fn shade_local_factored(
+    m: &SurfaceMaterial,
+    sp: &ShadingPoint,
+    env: &LocalLighting<'_>,
+    jitter: impl FnMut(usize, u32) -> Vec2,
+    visibility: impl FnMut(usize, &LightSample) -> Vec3,
+) -> FactoredLight {
+    local_model::<FactoredLight>(m, sp, env, jitter, visibility)
+}
+
+/// The light at a point as [`shade_local_factored`] sums it: radiance per
+/// unit of each colour of the local model (linear RGB).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FactoredLight {
+    /// What a white Lambertian surface (`kd = 1`) reflects: the sum of
+    /// `cos_theta_i * intensity * visibility` over the light samples.
+    pub diffuse: Vec3,
+    /// The ambient light `Ia` (summed), which the ambient term scales by
+    /// `ka (kd + ks_ambient)`.
+    pub ambient: Vec3,
+    /// The specular lobe per unit of `ks`: the sum of
+    /// `pi * scale * intensity * visibility` ([`brdf::SpecularFactors`]).
+    pub specular: Vec3,
+    /// The specular reflection that does not depend on `ks` (Schlick's
+    /// grazing term): the sum of `pi * offset * intensity * visibility`.
+    pub specular_offset: Vec3,
+}
+
+impl FactoredLight {
+    /// The radiance towards the viewer of a surface whose colours are those
+    /// of `m` under this light: emission, the ambient term, `kd` times the
+    /// diffuse light and, where `m` has a specular lobe, `ks` times the
+    /// specular light plus its colourless part. Linear RGB.
+    #[inline]
+    pub fn radiance(&self, m: &SurfaceMaterial) -> Vec3 {
+        let mut c = m.emission + ambient_term(m, self.ambient) + m.kd * self.diffuse;
+        if m.has_specular() {
+            c += m.ks * self.specular + self.specular_offset;
+        }
+        c
+    }
+}
+
+/// What [`local_model`] sums: the model's terms in one form. `sample` adds
+/// one light sample in front of the surface with visibility `v`;
+/// `add_mean` adds a light's `sum` over `count` samples divided by `count`.
+trait Terms: Copy {
+    fn start(m: &SurfaceMaterial) -> Self;
+    fn zero() -> Self;
+    /// True when the specular lobe is evaluated.
+    fn wants_specular(m: &SurfaceMaterial) -> bool;
+    fn ambient(&mut self, m: &SurfaceMaterial, ia: Vec3);
+    fn sample(
+        &mut self,
+        m: &SurfaceMaterial,
+        sp: &ShadingPoint,
+        has_specular: bool,
+        cos_i: f32,
+        s: &LightSample,
+        v: Vec3,
+    );
+    fn add_mean(&mut self, sum: Self, count: u32);
+}
+
+/// `[total, rest]` of [`shade_local`] and [`shade_local_split`]: `rest`
+/// only computed when `SPLIT`, zero otherwise. Every operation on `total`
+/// is the same whether or not `SPLIT`, and the operations on `rest` are
+/// those `total` performs with `kd = 0` (the diffuse terms then add exact
+/// zeros), so the split is exact.
+#[derive(Clone, Copy)]
+struct Coloured<const SPLIT: bool>([Vec3; 2]);
+
+impl<const SPLIT: bool> Terms for Coloured<SPLIT> {
+    #[inline(always)]
+    fn start(m: &SurfaceMaterial) -> Self {
+        Self([m.emission, if SPLIT { m.emission } else { Vec3::ZERO }])
+    }
+
+    #[inline(always)]
+    fn zero() -> Self {
+        Self([Vec3::ZERO; 2])
+    }
+
+    #[inline(always)]
+    fn wants_specular(m: &SurfaceMaterial) -> bool {
+        m.has_specular()
+    }
+
+    #[inline(always)]
+    fn ambient(&mut self, m: &SurfaceMaterial, ia: Vec3) {
+        self.0[0] += ambient_term(m, ia);
+        if SPLIT {
+            // The specular share does not scale with kd.
+            self.0[1] += ia * m.ka * m.ks_ambient;
+        }
+    }
+
+    /// [`direct_from_sample`] / `eval_brdf_cos` inlined with the specular
+    /// lobe evaluated once for both parts.
+    #[inline(always)]
+    fn sample(
+        &mut self,
+        m: &SurfaceMaterial,
+        sp: &ShadingPoint,
+        has_specular: bool,
+        cos_i: f32,
+        s: &LightSample,
+        v: Vec3,
+    ) {
+        let spec = if has_specular {
+            brdf::specular_cos(m, sp.n, sp.wo, s.wi, cos_i)
+        } else {
+            Vec3::ZERO
+        };
+        let mut f = m.kd * (std::f32::consts::FRAC_1_PI * cos_i);
+        if has_specular {
+            f += spec;
+        }
+        self.0[0] += PI * f * s.intensity * v;
+        if SPLIT {
+            // eval_brdf_cos with kd = 0 is `spec` (zero without specular).
+            self.0[1] += PI * spec * s.intensity * v;
+        }
+    }
+
+    #[inline(always)]
+    fn add_mean(&mut self, sum: Self, count: u32) {
+        if count == 1 {
+            // `x / 1.0 == x` exactly: skip the divisions.
+            self.0[0] += sum.0[0];
+            if SPLIT {
+                self.0[1] += sum.0[1];
+            }
+        } else {
+            self.0[0] += sum.0[0] / count as f32;
+            if SPLIT {
+                self.0[1] += sum.0[1] / count as f32;
+            }
+        }
+    }
+}
+
+impl Terms for FactoredLight {
+    #[inline(always)]
+    fn start(_: &SurfaceMaterial) -> Self {
+        Self::default()
+    }
+
+    #[inline(always)]
+    fn zero() -> Self {
+        Self::default()
+    }
+
+    #[inline(always)]
+    fn wants_specular(_: &SurfaceMaterial) -> bool {
+        // The colour applied later may have a lobe where this one has none.
+        true
+    }
+
+    #[inline(always)]
+    fn ambient(&mut self, _: &SurfaceMaterial, ia: Vec3) {
+        self.ambient += ia;
+    }
+
+    /// [`direct_from_sample`] with `kd = 1` for the diffuse part and the
+    /// specular lobe factored by its colour ([`brdf::specular_cos_factored`]).
+    #[inline(always)]
+    fn sample(
+        &mut self,
+        m: &SurfaceMaterial,
+        sp: &ShadingPoint,
+        _: bool,
+        cos_i: f32,
+        s: &LightSample,
+        v: Vec3,
+    ) {
+        let light = s.intensity * v;
+        self.diffuse += PI * (std::f32::consts::FRAC_1_PI * cos_i) * light;
+        let spec = brdf::specular_cos_factored(m, sp.n, sp.wo, s.wi, cos_i);
+        self.specular += PI * spec.scale * light;
+        self.specular_offset += PI * spec.offset * light;
+    }
+
+    #[inline(always)]
+    fn add_mean(&mut self, sum: Self, count: u32) {
+        let k = 1.0 / count as f32;
+        self.diffuse += sum.diffuse * k;
+        self.ambient += sum.ambient * k;
+        self.specular += sum.specular * k;
+        self.specular_offset += sum.specular_offset * k;
+    }
+}
+
+/// The body of [`shade_local`], [`shade_local_split`] and
+/// [`shade_local_factored`]: the emission, the ambient lights and every
+/// light sample summed into the terms `T`.
 #[inline(always)]
-fn local_model<const SPLIT: bool>(
+fn local_model<T: Terms>(
     m: &SurfaceMaterial,
     sp: &ShadingPoint,
     env: &LocalLighting<'_>,
     mut jitter: impl FnMut(usize, u32) -> Vec2,
     mut visibility: impl FnMut(usize, &LightSample) -> Vec3,
-) -> [Vec3; 2] {
-    let mut out = m.emission;
-    let mut rest = m.emission;
-    let has_specular = m.has_specular();
+) -> T {
+    let mut out = T::start(m);
+    let has_specular = T::wants_specular(m);
     // A group's lights are sampled together, after the others.
     let group = env
         .group
@@ -203,46 +404,42 @@ fn local_model<const SPLIT: bool>(
             .enumerate()
             .map(|(k, l)| (after + k, l)),
     );
+    // One light sample in front of the surface, visibility asked only there.
+    let mut add = |sum: &mut T, li: usize, s: &LightSample| {
+        let cos_i = s.wi.dot(sp.n);
+        if cos_i <= 0.0 {
+            return;
+        }
+        let v = visibility(li, s);
+        if v == Vec3::ZERO {
+            return;
+        }
+        sum.sample(m, sp, has_specular, cos_i, s, v);
+    };
     for (li, light) in singles {
         if let Light::Ambient { .. } = light {
             if env.ambient {
-                let ia = light.power_rgb();
-                out += ambient_term(m, ia);
-                if SPLIT {
-                    // The specular share does not scale with kd.
-                    rest += ia * m.ka * m.ks_ambient;
-                }
+                out.ambient(m, light.power_rgb());
             }
             continue;
         }
         let count = samples_for_light(light, env.area_samples);
-        let mut sum = [Vec3::ZERO; 2];
+        let mut sum = T::zero();
         for i in 0..count {
             let j = jitter(li, i);
             // A single sample is its stratum's jitter itself (stratum(0, 1, j) == j).
             let u = if count == 1 { j } else { stratum(i, count, j) };
             if let Some(s) = sample_light(light, sp.p, u) {
-                add_sample::<SPLIT>(m, sp, has_specular, li, &s, &mut visibility, &mut sum);
+                add(&mut sum, li, &s);
             }
         }
-        if count == 1 {
-            // `x / 1.0 == x` exactly: skip the divisions.
-            out += sum[0];
-            if SPLIT {
-                rest += sum[1];
-            }
-        } else {
-            out += sum[0] / count as f32;
-            if SPLIT {
-                rest += sum[1] / count as f32;
-            }
-        }
+        out.add_mean(sum, count);
     }
     if let Some(g) = group {
         // Each sample picks a light by power and is weighted by 1 / (pick
         // probability): the mean estimates the sum over the group's lights.
         let count = EmitterGroup::samples(env.area_samples);
-        let mut sum = [Vec3::ZERO; 2];
+        let mut sum = T::zero();
         for i in 0..count {
             let (li, pick, u) = g.pick(i, count, jitter(g.range.start, i));
             if pick <= 0.0 {
@@ -250,53 +447,12 @@ fn local_model<const SPLIT: bool>(
             }
             if let Some(mut s) = sample_light(&env.lights[li], sp.p, u) {
                 s.intensity /= pick;
-                add_sample::<SPLIT>(m, sp, has_specular, li, &s, &mut visibility, &mut sum);
+                add(&mut sum, li, &s);
             }
         }
-        out += sum[0] / count as f32;
-        if SPLIT {
-            rest += sum[1] / count as f32;
-        }
+        out.add_mean(sum, count);
     }
-    [out, if SPLIT { rest } else { Vec3::ZERO }]
-}
-
-/// Adds light sample `s` of light `li` to `sum` (`[total, rest]`, `rest`
-/// only when `SPLIT`): [`direct_from_sample`] / `eval_brdf_cos` inlined with
-/// the specular lobe evaluated once for both parts; `visibility` is asked
-/// only for samples in front of the surface.
-#[inline(always)]
-fn add_sample<const SPLIT: bool>(
-    m: &SurfaceMaterial,
-    sp: &ShadingPoint,
-    has_specular: bool,
-    li: usize,
-    s: &LightSample,
-    visibility: &mut impl FnMut(usize, &LightSample) -> Vec3,
-    sum: &mut [Vec3; 2],
-) {
-    let cos_i = s.wi.dot(sp.n);
-    if cos_i <= 0.0 {
-        return;
-    }
-    let v = visibility(li, s);
-    if v == Vec3::ZERO {
-        return;
-    }
-    let spec = if has_specular {
-        brdf::specular_cos(m, sp.n, sp.wo, s.wi, cos_i)
-    } else {
-        Vec3::ZERO
-    };
-    let mut f = m.kd * (std::f32::consts::FRAC_1_PI * cos_i);
-    if has_specular {
-        f += spec;
-    }
-    sum[0] += PI * f * s.intensity * v;
-    if SPLIT {
-        // eval_brdf_cos with kd = 0 is `spec` (zero without specular).
-        sum[1] += PI * spec * s.intensity * v;
-    }
+    out
 }
 
 /// Depth cueing (Foley et al. 16.1.3): blend the shaded colour `c` towards
@@ -479,6 +635,100 @@ mod tests {
                 assert_eq!(total, shade_local(&m, &sp, &env, jitter, vis));
                 assert_eq!(rest, shade_local(&no_kd, &sp, &env, jitter, vis));
                 assert!(total.x > rest.x && rest.cmpge(m.emission).all());
+            }
+        }
+    }
+
+    /// The light summed without colours gives, for any colours applied
+    /// afterwards, what the model gives for them: every lobe, classic and
+    /// metallic-roughness colours (`ks_ambient`), emission, area lights
+    /// and a partly shadowed sample.
+    #[test]
+    fn factored_light_gives_the_model_for_any_colours() {
+        use crate::scene::{AreaShape, MetallicRoughness, ReflectanceModel};
+        let lights = [
+            Light::Ambient {
+                color: Vec3::new(1.0, 0.9, 0.8),
+                intensity: 0.3,
+            },
+            Light::Point {
+                position: Vec3::new(1.0, 3.0, 0.5),
+                color: Vec3::new(1.0, 0.8, 0.6),
+                intensity: 5.0,
+                attenuation: Attenuation::InverseSquare,
+            },
+            Light::Area {
+                shape: AreaShape::Quad {
+                    corner: Vec3::new(-1.0, 4.0, -1.0),
+                    edge_u: Vec3::new(2.0, 0.0, 0.0),
+                    edge_v: Vec3::new(0.0, 0.0, 2.0),
+                },
+                color: Vec3::ONE,
+                intensity: 3.0,
+                two_sided: true,
+            },
+        ];
+        let env = LocalLighting {
+            lights: &lights,
+            area_samples: 4,
+            ambient: true,
+            group: None,
+        };
+        let vis = |li: usize, s: &LightSample| {
+            if li == 2 && s.point.x < 0.0 {
+                Vec3::new(0.5, 0.25, 0.0)
+            } else {
+                Vec3::ONE
+            }
+        };
+        let jitter = |_: usize, _: u32| Vec2::splat(0.5);
+        let n = Vec3::new(0.1, 1.0, 0.2).normalize();
+        let sp = ShadingPoint {
+            p: Vec3::new(0.2, 0.0, -0.1),
+            n,
+            ng: n,
+            wo: Vec3::new(0.3, 1.0, 0.4).normalize(),
+        };
+        let models = [
+            ReflectanceModel::Phong,
+            ReflectanceModel::Blinn,
+            ReflectanceModel::TorranceSparrow,
+        ];
+        for model in models {
+            let shape = SurfaceMaterial {
+                model,
+                shininess: 20.0,
+                roughness: 0.3,
+                ..SurfaceMaterial::default()
+            };
+            let light = shade_local_factored(&shape, &sp, &env, jitter, vis);
+            // Colours: classic with and without a lobe, a red metal and a
+            // blue dielectric (F0 = 0.04) of metallic-roughness, emissive.
+            let mut colours = vec![
+                (Vec3::new(0.7, 0.3, 0.2), Vec3::splat(0.6), Vec3::ZERO),
+                (Vec3::new(0.7, 0.3, 0.2), Vec3::ZERO, Vec3::ZERO),
+            ];
+            for metallic in [1.0, 0.0] {
+                let base = Vec3::new(0.9, 0.1, 0.2).lerp(Vec3::new(0.1, 0.2, 0.9), 1.0 - metallic);
+                let (kd, ks, _) = MetallicRoughness::coefficients(base, metallic, 0.5);
+                colours.push((kd, ks, ks));
+            }
+            for (kd, ks, ks_ambient) in colours {
+                let m = SurfaceMaterial {
+                    ka: Vec3::new(0.9, 0.8, 0.7),
+                    kd,
+                    ks,
+                    ks_ambient,
+                    emission: Vec3::new(0.01, 0.0, 0.02),
+                    ..shape
+                };
+                let want = shade_local(&m, &sp, &env, jitter, vis);
+                let got = light.radiance(&m);
+                assert!(
+                    (got - want).abs().max_element() <= 1e-5 * want.max_element().max(1.0),
+                    "{model:?} kd {kd} ks {ks}: {got} vs {want}"
+                );
+                assert!(want.min_element() > 0.0);
             }
         }
     }
