@@ -7,46 +7,59 @@
 
 use crate::pipeline::shading::{Ctx, Lit, SampleAt, Split};
 use crate::pipeline::triangles::TriData;
-use chiaro_core::shading::ShadingPoint;
-use glam::{Vec3, Vec3A};
+use chiaro_core::shading::{FactoredLight, ShadingPoint};
+use glam::{Vec2, Vec3, Vec3A};
 
 impl Ctx<'_, '_> {
-    /// Flat shading of triangle `td`: once, at the centroid, with the face
-    /// normal. The same values as `surface` at the centroid, `flipped` and
-    /// `untextured_material` give, from the cached triangle.
+    /// Flat shading of the untextured triangle `td`: once, at the centroid,
+    /// with the face normal and the material's colours. The same values as
+    /// `surface` at the centroid, `flipped` and `untextured_material` give,
+    /// from the cached triangle.
     pub(crate) fn flat_split(&self, td: &TriData<'_>) -> Split {
-        let t = td.t;
         let third = 1.0 / 3.0;
-        let (p, sm) = if td.textured {
-            let hit = self.surface(td, third, third, true, true);
-            (hit.p, self.untextured_material(&hit))
-        } else {
-            // surface(): w = 1 - u - v, then the same interpolations.
-            let w = 1.0 - third - third;
-            let mut sm = self.base(td);
-            sm.kd *= Vec3::from(td.c[0] * w + td.c[1] * third + td.c[2] * third);
-            (
-                Vec3::from(td.p[0] * w + td.p[1] * third + td.p[2] * third),
-                sm,
-            )
-        };
+        // surface(): w = 1 - u - v, then the same interpolations.
+        let w = 1.0 - third - third;
+        let mut sm = self.base(td);
+        sm.kd *= Vec3::from(td.c[0] * w + td.c[1] * third + td.c[2] * third);
+        let p = Vec3::from(td.p[0] * w + td.p[1] * third + td.p[2] * third);
+        self.illuminate_split(td.t, &sm, &self.flat_point(td, p))
+    }
+
+    /// Flat shading of the textured triangle `td`: the light once, at the
+    /// centroid, with the face normal and the lobe of the material there
+    /// (its roughness textured), without the colours, which
+    /// [`Ctx::factored_sample`] applies per pixel.
+    pub(crate) fn flat_factored(&self, td: &TriData<'_>) -> FactoredLight {
+        let third = 1.0 / 3.0;
+        let hit = self.surface(td, third, third, true, true);
+        let lobe = self.ps.surface_material_lod(&hit, Vec2::ZERO, Vec2::ZERO);
+        self.illuminate_factored(td.t, &lobe, &self.flat_point(td, hit.p))
+    }
+
+    /// The shading point of a flat triangle at `p`: the face normal, on the
+    /// viewer's side for the back of a two-sided surface.
+    fn flat_point(&self, td: &TriData<'_>, p: Vec3) -> ShadingPoint {
         let mut n = Vec3::from(td.ng);
         // flipped(t), with the cached face normal (PreparedScene::face_normal).
         if td.material.two_sided && td.ng.dot(Vec3A::from(self.rays.eye) - td.p[0]) < 0.0 {
             n = -n;
         }
         let wo = (self.rays.eye - p).normalize_or_zero();
-        let sp = ShadingPoint { p, n, ng: n, wo };
-        self.illuminate_split(t, &sm, &sp)
+        ShadingPoint { p, n, ng: n, wo }
     }
 }
 
 /// Flat shading of the sample `at` of triangle `td`: the triangle's one
-/// illumination ([`TriData::flat`]), textured per pixel, with the face
-/// normal.
+/// illumination ([`TriData::flat`], or [`TriData::flat_factored`] with the
+/// textured colours applied per pixel), with the face normal.
 #[inline]
 pub(crate) fn shade(ctx: &Ctx<'_, '_>, td: &TriData, at: &SampleAt) -> Lit {
-    ctx.split_sample(td, at, td.flat, at.hit.ng * at.sign)
+    let n = at.hit.ng * at.sign;
+    if td.textured {
+        ctx.factored_sample(td, at, &td.flat_factored, n)
+    } else {
+        ctx.split_sample(td, at, td.flat, n)
+    }
 }
 
 /// The colour of a [`TriData::lean`] flat sample: the triangle's one

@@ -12,10 +12,11 @@ use crate::pipeline::triangles::TriData;
 use crate::pipeline::triangles::needs_footprint;
 use crate::pipeline::visibility::Class;
 use crate::pipeline::visibility::TileVis;
-use glam::{Vec3, Vec3A};
+use glam::{Vec2, Vec3, Vec3A};
 
+use chiaro_core::prepared::SurfaceHit;
 use chiaro_core::scene::ShadeMode;
-use chiaro_core::shading::{ShadingPoint, SurfaceMaterial};
+use chiaro_core::shading::{FactoredLight, ShadingPoint, SurfaceMaterial};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -37,6 +38,13 @@ pub(crate) struct PolyShading {
     /// Gouraud triangles whose corners could not use shared vertex values
     /// (a vertex shared by faces of different materials).
     pub(crate) corners: HashMap<u32, [Split; 3]>,
+    /// The same three tables for the vertices of textured materials: their
+    /// light without the colours ([`Ctx::corner_factored`]), which the
+    /// samples colour per pixel (empty when no textured Gouraud triangle
+    /// is seen).
+    pub(crate) factored_front: Vec<FactoredLight>,
+    pub(crate) factored_back: Vec<FactoredLight>,
+    pub(crate) factored_corners: HashMap<u32, [FactoredLight; 3]>,
     /// When every Gouraud sample is a [`lean_sample`] of one untextured
     /// material lit by `point_lighting` ([`on_demand_gouraud`]): that
     /// material, and the tables above stay empty. The shading pass then
@@ -77,9 +85,26 @@ impl Ctx<'_, '_> {
         self.illuminate_split(u32::MAX, &sm, &ShadingPoint { p, n, ng: n, wo })
     }
 
-    /// Gouraud illumination at corner `k` of triangle `t`, on the front side
-    /// or (for the back of a two-sided surface) the back side.
+    /// Gouraud illumination at corner `k` of the untextured triangle `t`,
+    /// on the front side or (for the back of a two-sided surface) the back
+    /// side.
     pub(crate) fn corner_split(&self, t: u32, k: usize, back: bool) -> Split {
+        let (hit, sp) = self.corner_point(t, k, back);
+        self.illuminate_split(t, &self.untextured_material(&hit), &sp)
+    }
+
+    /// [`Ctx::corner_split`] of a textured triangle: the light without the
+    /// colours, with the lobe of the material at the corner (its roughness
+    /// textured), coloured per pixel by [`Ctx::factored_sample`].
+    pub(crate) fn corner_factored(&self, t: u32, k: usize, back: bool) -> FactoredLight {
+        let (hit, sp) = self.corner_point(t, k, back);
+        let lobe = self.ps.surface_material_lod(&hit, Vec2::ZERO, Vec2::ZERO);
+        self.illuminate_factored(t, &lobe, &sp)
+    }
+
+    /// The surface at corner `k` of triangle `t` and its shading point with
+    /// the vertex normal, flipped for the `back` side.
+    fn corner_point(&self, t: u32, k: usize, back: bool) -> (SurfaceHit, ShadingPoint) {
         let (u, v) = match k {
             0 => (0.0, 0.0),
             1 => (1.0, 0.0),
@@ -101,13 +126,13 @@ impl Ctx<'_, '_> {
             ng,
             wo,
         };
-        self.illuminate_split(t, &self.untextured_material(&hit), &sp)
+        (hit, sp)
     }
 }
 
 /// With the point-light model, the base material when every Gouraud
-/// triangle has the same material and it has no emission texture (the one
-/// texture vertex illumination reads).
+/// triangle has the same material and it is untextured (a textured one is
+/// lit without its colours, by [`poly_shading`]'s general path).
 pub(crate) fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMaterial> {
     ctx.point_lighting.as_ref()?;
     let ps = ctx.ps;
@@ -122,7 +147,7 @@ pub(crate) fn uniform_gouraud<'c>(ctx: &'c Ctx<'_, '_>) -> Option<&'c SurfaceMat
             .enumerate()
             .all(|(t, &mt)| mt == m || !is_gouraud(t));
     let base = ctx.bases.get(m.index())?;
-    (uniform && ps.material(m).emission_texture.is_none()).then_some(base)
+    (uniform && !needs_footprint(ps.material(m))).then_some(base)
 }
 
 /// With [`uniform_gouraud`]'s material, true when every sample of a
@@ -296,33 +321,55 @@ pub(crate) fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
             }
         }
     }
+    // A vertex is lit with its colours (untextured) or without them
+    // (textured), by the material of its triangles.
+    let textured = |t: u32| needs_footprint(ctx.material_of(t));
+    let lit = |v: usize, side: u8, want_textured: bool| -> Option<(u32, usize)> {
+        let (t, k) = rep[v];
+        (need[v] & side != 0 && !conflict[v] && t != u32::MAX && textured(t) == want_textured)
+            .then_some((t, k as usize))
+    };
     let shade_side = |side: u8| -> Vec<Split> {
         (0..nv)
             .into_par_iter()
-            .map(|v| {
-                let (t, k) = rep[v];
-                if need[v] & side == 0 || conflict[v] || t == u32::MAX {
-                    Split::default()
-                } else {
-                    ctx.corner_split(t, k as usize, side == 2)
-                }
+            .map(|v| match lit(v, side, false) {
+                Some((t, k)) => ctx.corner_split(t, k, side == 2),
+                None => Split::default(),
             })
             .collect()
     };
-    out.vertex_front = shade_side(1);
-    out.vertex_back = if need.iter().any(|&n| n & 2 != 0) {
-        shade_side(2)
-    } else {
-        Vec::new()
+    let factor_side = |side: u8| -> Vec<FactoredLight> {
+        (0..nv)
+            .into_par_iter()
+            .map(|v| match lit(v, side, true) {
+                Some((t, k)) => ctx.corner_factored(t, k, side == 2),
+                None => FactoredLight::default(),
+            })
+            .collect()
     };
-    out.corners = gouraud
-        .par_iter()
-        .filter(|(t, _)| {
+    let any_back = need.iter().any(|&n| n & 2 != 0);
+    out.vertex_front = shade_side(1);
+    out.vertex_back = if any_back { shade_side(2) } else { Vec::new() };
+    if gouraud.iter().any(|&(t, _)| textured(t)) {
+        out.factored_front = factor_side(1);
+        if any_back {
+            out.factored_back = factor_side(2);
+        }
+    }
+    let corner_triangles = || {
+        gouraud.par_iter().filter(|(t, _)| {
             ps.triangles[*t as usize]
                 .iter()
                 .any(|&v| conflict[v as usize])
         })
+    };
+    out.corners = corner_triangles()
+        .filter(|(t, _)| !textured(*t))
         .map(|&(t, back)| (t, [0, 1, 2].map(|k| ctx.corner_split(t, k, back))))
+        .collect();
+    out.factored_corners = corner_triangles()
+        .filter(|(t, _)| textured(*t))
+        .map(|&(t, back)| (t, [0, 1, 2].map(|k| ctx.corner_factored(t, k, back))))
         .collect();
     out
 }
@@ -368,31 +415,65 @@ impl<'a> Ctx<'a, '_> {
 /// Gouraud shading of the sample `at` of triangle `td`: the illumination of
 /// its corners (`poly`'s vertex tables, or the triangle's own corners where
 /// a vertex is shared by different materials) interpolated at the sample,
-/// textured per pixel, with the interpolated normal.
+/// with the interpolated normal; for a textured triangle the light without
+/// the colours, which are applied per sample.
 #[inline]
 pub(crate) fn shade(ctx: &Ctx<'_, '_>, poly: &PolyShading, td: &TriData, at: &SampleAt) -> Lit {
-    let (t, b) = (td.t, at.b);
-    let [i0, i1, i2] = td.idx;
+    let b = at.b;
     let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
+    let n = at.hit.ns * at.sign;
+    if td.textured {
+        let corners = corner_values(
+            td,
+            at,
+            &poly.factored_corners,
+            [&poly.factored_front, &poly.factored_back],
+        );
+        return ctx.factored_sample(td, at, &lerp_factored(corners, w), n);
+    }
+    let corners = corner_values(
+        td,
+        at,
+        &poly.corners,
+        [&poly.vertex_front, &poly.vertex_back],
+    );
+    ctx.split_sample(td, at, Split::lerp3(corners, w), n)
+}
+
+/// The values at the corners of triangle `td` for the sample `at`: its own
+/// (`corners`, for triangles with a vertex shared by different materials)
+/// or its vertices' in the table of the side seen (`tables`: front, back).
+#[inline]
+fn corner_values<T: Copy + Default>(
+    td: &TriData,
+    at: &SampleAt,
+    corners: &HashMap<u32, [T; 3]>,
+    [front, back]: [&Vec<T>; 2],
+) -> [T; 3] {
     // (No hashing when no triangle needed per-corner values.)
-    let corners = if poly.corners.is_empty() {
+    let own = if corners.is_empty() {
         None
     } else {
-        poly.corners.get(&t)
+        corners.get(&td.t)
     };
-    let split = match corners {
-        Some(c) => Split::lerp3(*c, w),
-        None => {
-            let table = if at.sign < 0.0 {
-                &poly.vertex_back
-            } else {
-                &poly.vertex_front
-            };
-            let get = |i: usize| table.get(i).copied().unwrap_or_default();
-            Split::lerp3([get(i0), get(i1), get(i2)], w)
-        }
-    };
-    ctx.split_sample(td, at, split, at.hit.ns * at.sign)
+    if let Some(c) = own {
+        return *c;
+    }
+    let table = if at.sign < 0.0 { back } else { front };
+    td.idx.map(|i| table.get(i).copied().unwrap_or_default())
+}
+
+/// The corners' light without colours interpolated at barycentric weights
+/// `w`, part by part.
+#[inline]
+fn lerp_factored(c: [FactoredLight; 3], w: Vec3) -> FactoredLight {
+    let l = |f: fn(&FactoredLight) -> Vec3| f(&c[0]) * w.x + f(&c[1]) * w.y + f(&c[2]) * w.z;
+    FactoredLight {
+        diffuse: l(|x| x.diffuse),
+        ambient: l(|x| x.ambient),
+        specular: l(|x| x.specular),
+        specular_offset: l(|x| x.specular_offset),
+    }
 }
 
 /// The colour of a [`TriData::lean`] Gouraud sample at barycentric weights

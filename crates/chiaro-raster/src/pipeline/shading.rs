@@ -26,13 +26,13 @@ use crate::pipeline::exact;
 use chiaro_core::film::TilePixels;
 use chiaro_core::prepared::{PreparedScene, SurfaceHit};
 use chiaro_core::scene::MaterialId;
-use chiaro_core::scene::{Material, RenderSettings, ShadeMode};
+use chiaro_core::scene::{AlphaMode, Material, RenderSettings, ShadeMode};
 use chiaro_core::shading::texture::{
     background_radiance, environment_diffuse, environment_radiance, environment_specular,
 };
 use chiaro_core::shading::{
-    LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize, shade_local,
-    shade_local_split,
+    FactoredLight, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize,
+    shade_local, shade_local_factored, shade_local_split,
 };
 use chiaro_core::shading::{PointLighting, SampleKey, group_jitter};
 use glam::{Vec2, Vec3, Vec3A};
@@ -227,16 +227,33 @@ impl Ctx<'_, '_> {
         }
     }
 
-    /// Untextured material (vertex colour applied) at a surface point: the
-    /// diffuse texture is applied per pixel by flat and Gouraud shading.
+    /// The light for flat and Gouraud shading of a textured surface: one
+    /// evaluation of [`shade_local_factored`] with the specular lobe of
+    /// `lobe` (its colours unread), which [`Ctx::factored_sample`] colours
+    /// per pixel.
+    pub(crate) fn illuminate_factored(
+        &self,
+        tri: u32,
+        lobe: &SurfaceMaterial,
+        sp: &ShadingPoint,
+    ) -> FactoredLight {
+        let current = Cell::new(0u32);
+        shade_local_factored(
+            lobe,
+            sp,
+            &self.lighting,
+            |li, i| {
+                current.set(i);
+                self.jitter(SampleKey::Point(sp.p), li, i)
+            },
+            |li, s| self.visibility(li, current.get(), tri, None, sp, s, None),
+        )
+    }
+
+    /// Untextured material (vertex colour applied) at a surface point, as
+    /// flat and Gouraud shading light an untextured surface.
     pub(crate) fn untextured_material(&self, hit: &SurfaceHit) -> SurfaceMaterial {
-        let m = self.ps.material(hit.material);
-        let mut sm = SurfaceMaterial::with_vertex_color(m, hit.color);
-        if let Some(t) = m.emission_texture {
-            let tc = PreparedScene::tex_coord(hit, Vec2::ZERO, Vec2::ZERO);
-            sm.emission *= self.ps.eval_texture(t, &tc).truncate();
-        }
-        sm
+        SurfaceMaterial::with_vertex_color(self.ps.material(hit.material), hit.color)
     }
 
     /// `SurfaceMaterial::from_material` of the triangle's material.
@@ -464,39 +481,61 @@ pub(crate) struct SampleAt {
 }
 
 impl Ctx<'_, '_> {
-    /// The sample `at` of a flat or Gouraud triangle, whose illumination
-    /// `split` is constant or interpolated: the diffuse part times the
-    /// diffuse texture (applied per pixel) plus the rest, shaded with the
-    /// normal `n`.
+    /// The sample `at` of an untextured flat or Gouraud triangle, whose
+    /// illumination `split` (colours included) is constant or
+    /// interpolated, shaded with the normal `n`.
     #[inline]
     pub(crate) fn split_sample(&self, td: &TriData, at: &SampleAt, split: Split, n: Vec3) -> Lit {
         let ps = self.ps;
-        let (hit, b) = (&at.hit, at.b);
-        // diffuse_texture_factor: one without a texture.
-        let tex = if td.material.texture.is_some() {
-            let tc = PreparedScene::tex_coord(hit, at.duv[0], at.duv[1]);
-            ps.diffuse_texture_factor(hit.material, &tc)
-        } else {
-            Vec3::ONE
-        };
+        let b = at.b;
         // The material with the vertex colour at the sample (flat and
-        // Gouraud triangles do not carry it) and the diffuse texture
-        // factor, for the environment terms.
+        // Gouraud triangles do not carry it), for the environment terms.
         let vertex_lobe = || {
             let [i0, i1, i2] = td.idx;
             let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
             let color = ps.colors[i0] * w.x + ps.colors[i1] * w.y + ps.colors[i2] * w.z;
-            let mut sm = SurfaceMaterial::with_vertex_color(td.material, color);
-            sm.kd *= tex;
-            sm
+            SurfaceMaterial::with_vertex_color(td.material, color)
         };
         let lobe = ps.prefiltered_environment().map(|_| vertex_lobe());
         Lit {
-            color: split.diffuse * tex + split.rest,
+            color: split.diffuse + split.rest,
             n,
             specular: split.rest,
             coverage_kt: None,
             reflects: (td.material.reflect, lobe),
+        }
+    }
+
+    /// The sample `at` of a textured flat or Gouraud triangle, whose light
+    /// without colours `light` is constant or interpolated, shaded with the
+    /// normal `n`: the colours of the surface layer at the sample (textures
+    /// filtered over its footprint, the vertex colour, alpha), applied to
+    /// `light` by the one local model ([`FactoredLight::radiance`]), so a
+    /// textured metal's F0 and a textured base colour show as in Phong
+    /// shading.
+    #[inline]
+    pub(crate) fn factored_sample(
+        &self,
+        td: &TriData,
+        at: &SampleAt,
+        light: &FactoredLight,
+        n: Vec3,
+    ) -> Lit {
+        let sm = self.ps.surface_material_lod(&at.hit, at.duv[0], at.duv[1]);
+        let mut owned = None;
+        let m = self.frame_material(&sm, &mut owned);
+        let color = light.radiance(m);
+        // What does not scale with the diffuse colour (as `Split::rest`).
+        let specular = light.radiance(&SurfaceMaterial {
+            kd: Vec3::ZERO,
+            ..*m
+        });
+        Lit {
+            color,
+            n,
+            specular,
+            coverage_kt: (td.material.alpha_mode == AlphaMode::Blend).then_some(sm.kt),
+            reflects: (sm.kr, self.ps.prefiltered_environment().map(|_| sm)),
         }
     }
 }
@@ -539,7 +578,10 @@ pub(crate) fn shade_sample(
     let b = td.bary(dir).unwrap_or(third);
     let material = td.material;
     let needs_footprint = td.textured;
-    let hit = ctx.surface(td, b.x, b.y, needs_footprint, td.mode != ShadeMode::Flat);
+    // Flat samples read no shading normal or vertex colour, unless
+    // textured (the colours are then applied per sample).
+    let shading = td.mode != ShadeMode::Flat || needs_footprint;
+    let hit = ctx.surface(td, b.x, b.y, needs_footprint, shading);
     let (duv_dx, duv_dy) = if needs_footprint {
         let uv_at = |x: f32, y: f32| {
             let bb = td.bary(ctx.rays.dir(x, y).into()).unwrap_or(b);

@@ -8,6 +8,7 @@ use crate::pipeline::shading::Split;
 use chiaro_core::prepared::SurfaceHit;
 use chiaro_core::scene::MaterialId;
 use chiaro_core::scene::{Material, ShadeMode};
+use chiaro_core::shading::FactoredLight;
 use glam::{Vec2, Vec3, Vec3A, Vec4};
 
 /// Barycentrics `(u, v)` of vertices 1 and 2 where the ray `o + t d` meets the
@@ -56,6 +57,9 @@ pub(crate) struct TriData<'a> {
     /// The flat-shading illumination of the polygon (zero unless `mode` is
     /// flat): computed with the triangle's data, once per tile that shows it.
     pub(crate) flat: Split,
+    /// The same for a textured triangle: its light without the colours
+    /// (zero unless `mode` is flat and `textured`).
+    pub(crate) flat_factored: FactoredLight,
     /// True when its opaque samples take [`lean_sample`] (set by
     /// [`Ctx::tri_data`]; false elsewhere).
     ///
@@ -175,9 +179,7 @@ impl<'a> Ctx<'a, '_> {
             ..
         } = cache;
         let d = &mut data[k];
-        if d.mode == ShadeMode::Flat {
-            d.flat = self.flat_split(d);
-        }
+        self.light_flat(d);
         // The cases shade_sample handles without textures, two-sided
         // flips, reflection maps, depth cueing or per-corner values.
         d.lean = self.lean_frame
@@ -199,15 +201,26 @@ impl<'a> Ctx<'a, '_> {
     /// The [`TriData`] of triangle `t`, computed.
     pub(crate) fn make_tri_data(&self, t: u32) -> TriData<'a> {
         let mut d = self.tri_geometry(t, true);
-        if d.mode == ShadeMode::Flat {
-            d.flat = self.flat_split(&d);
-        }
+        self.light_flat(&mut d);
         d
+    }
+
+    /// Sets the illumination of a flat triangle `d`: [`TriData::flat`], or
+    /// [`TriData::flat_factored`] where textured.
+    #[inline]
+    fn light_flat(&self, d: &mut TriData<'a>) {
+        if d.mode == ShadeMode::Flat {
+            if d.textured {
+                d.flat_factored = self.flat_factored(d);
+            } else {
+                d.flat = self.flat_split(d);
+            }
+        }
     }
 
     /// [`Ctx::make_tri_data`] without the flat-shading illumination; unless
     /// `all`, without the vertex data its samples do not read (the normals
-    /// of a flat triangle, the colours of a Gouraud one: zero), which
+    /// of a flat triangle, the colours of an untextured Gouraud one: zero), which
     /// the triangle cache then need not fetch.
     #[inline(always)]
     pub(crate) fn tri_geometry(&self, t: u32, all: bool) -> TriData<'a> {
@@ -227,6 +240,7 @@ impl<'a> Ctx<'a, '_> {
             .one_material
             .unwrap_or_else(|| self.ps.tri_material[t as usize]);
         let material = self.ps.material(material_id);
+        let textured = needs_footprint(material);
         TriData {
             t,
             idx,
@@ -237,7 +251,8 @@ impl<'a> Ctx<'a, '_> {
             } else {
                 [Vec3A::ZERO; 3]
             },
-            c: if all || mode != ShadeMode::Gouraud {
+            // (A textured Gouraud sample takes its colours per sample.)
+            c: if all || mode != ShadeMode::Gouraud || textured {
                 of(&self.ps.colors)
             } else {
                 [Vec3A::ZERO; 3]
@@ -245,12 +260,13 @@ impl<'a> Ctx<'a, '_> {
             mode,
             material,
             material_id,
-            textured: needs_footprint(material),
+            textured,
             e1,
             e2: p[2] - p[0],
             s,
             q: exact::cross(s, e1),
             flat: Split::default(),
+            flat_factored: FactoredLight::default(),
             lean: false,
             corners: [[Vec3A::ZERO; 2]; 3],
         }
