@@ -2,7 +2,10 @@
 //! evaluated once per polygon, at its centroid with the face normal, and
 //! used for every sample of it (constant shading: Foley, van Dam, Feiner
 //! and Hughes, *Computer Graphics: Principles and Practice*, 2nd ed.,
-//! 16.2.1). The per-sample steps every method shares are in
+//! 16.2.1). A textured polygon is lit without its colours (the light per
+//! unit of diffuse colour, ambient reflectance and F0), which each sample
+//! then applies from its textures; the lobe's roughness is the one at the
+//! centroid. The per-sample steps every method shares are in
 //! [`crate::pipeline::shading`].
 
 use crate::pipeline::shading::{Ctx, Lit, SampleAt, Split};

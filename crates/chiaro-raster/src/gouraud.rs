@@ -3,8 +3,11 @@
 //! et al. 16.2.4): the illumination model evaluated at the vertices and
 //! interpolated across the triangle. Here: which vertices are lit, once
 //! each, the vertex cache the shading pass fills, and the interpolation at
-//! a sample. The per-sample steps every method shares are in
-//! [`crate::pipeline::shading`].
+//! a sample. The vertices of a textured surface are lit without its
+//! colours (the light per unit of diffuse colour, ambient reflectance and
+//! F0), which each sample then applies from its textures; the lobe's
+//! roughness is the one at the vertex. The per-sample steps every method
+//! shares are in [`crate::pipeline::shading`].
 
 use crate::pipeline::NONE;
 use crate::pipeline::shading::{Ctx, Lit, SampleAt, Split};
