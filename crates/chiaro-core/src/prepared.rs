@@ -497,15 +497,6 @@ impl<'s> PreparedScene<'s> {
         }
     }
 
-    /// The factor the diffuse texture applies to `kd` at `tc` (RGB, one when
-    /// the material has no texture).
-    pub fn diffuse_texture_factor(&self, material: MaterialId, tc: &TexCoord) -> Vec3 {
-        match self.material(material).texture {
-            Some(t) => self.eval_texture(t, tc).truncate(),
-            None => Vec3::ONE,
-        }
-    }
-
     /// The material parameters at a surface point with vertex colours and
     /// textures applied; image textures are filtered over the pixel footprint
     /// given by the screen-space derivatives of the uvs, `duv_dx` and `duv_dy`
