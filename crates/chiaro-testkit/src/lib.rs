@@ -9,9 +9,11 @@ pub mod scenes;
 pub mod stats;
 
 use chiaro_core::film::Film;
+use chiaro_core::progress::Progress;
 use chiaro_core::scene::{RenderSettings, ShadowMethod, Technique};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
 
 /// Asserts `|a - b| <= eps` for floats, with both values in the message.
 #[macro_export]
@@ -200,6 +202,37 @@ pub fn whitted_and_path_direct(
     s.technique = Technique::Path;
     s.path.max_depth = 1;
     (whitted, render(s))
+}
+
+/// A [`Progress`] that keeps the warnings a render or a solve gives, in
+/// order, for the tests that check them (stages and counts are ignored).
+#[derive(Debug, Default)]
+pub struct Warnings(Mutex<Vec<String>>);
+
+impl Warnings {
+    /// The warnings given so far.
+    pub fn into_vec(self) -> Vec<String> {
+        self.0.into_inner().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The warnings given so far, one a line.
+    pub fn joined(&self) -> String {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .join("\n")
+    }
+}
+
+impl Progress for Warnings {
+    fn begin(&self, _stage: &str, _total: u64) {}
+    fn advance(&self, _n: u64) {}
+    fn warning(&self, text: &str) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(text.to_string());
+    }
 }
 
 /// Where failing tests write images: `target/test-output/<name>.ppm`.

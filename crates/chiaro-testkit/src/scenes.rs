@@ -6,7 +6,8 @@
 use chiaro_core::geometry::primitives;
 use chiaro_core::scene::{
     AreaShape, Attenuation, Camera, Environment, Geometry, ImageTexture, Light, Material,
-    MaterialId, Mesh, MeshId, Object, Scene, ShadowMethod, Texture, Transform, WrapMode,
+    MaterialId, Mesh, MeshId, Object, RenderSettings, Scene, ShadowMethod, Technique, Texture,
+    Transform, WrapMode,
 };
 use glam::{Vec2, Vec3};
 
@@ -18,6 +19,24 @@ pub fn point_light(position: Vec3, intensity: f32) -> Light {
         color: Vec3::ONE,
         intensity,
         attenuation: Attenuation::InverseSquare,
+    }
+}
+
+/// `scene`'s own render settings with `technique` at `width` x `height`
+/// pixels and `samples` samples a pixel.
+pub fn settings(
+    scene: &Scene,
+    technique: Technique,
+    width: u32,
+    height: u32,
+    samples: u32,
+) -> RenderSettings {
+    RenderSettings {
+        technique,
+        width,
+        height,
+        samples,
+        ..scene.render.clone()
     }
 }
 
