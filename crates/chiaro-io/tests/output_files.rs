@@ -48,6 +48,17 @@ fn gradient_film() -> Film {
     f
 }
 
+/// Writes `film` to `path` (its extension picks the format) with 16 bits
+/// a channel or 8, and returns the path.
+fn write_at_depth(film: &Film, path: &Path, sixteen: bool) -> PathBuf {
+    let opts = OutputOptions {
+        bit_depth16: sixteen,
+        ..OutputOptions::default()
+    };
+    write_film(film, path, &opts).expect("writes");
+    path.to_path_buf()
+}
+
 #[test]
 fn exr_round_trip_is_exact() {
     let dir = scratch("exr");
@@ -69,12 +80,7 @@ fn png_round_trips_within_one_code() {
         ("8.png", false, 0.5 / 255.0),
         ("16.png", true, 0.5 / 65535.0),
     ] {
-        let path = dir.join(name);
-        let opts = OutputOptions {
-            bit_depth16: sixteen,
-            ..OutputOptions::default()
-        };
-        write_film(&film, &path, &opts).expect("write png");
+        let path = write_at_depth(&film, &dir.join(name), sixteen);
         let back = read_image_as_film(&path).expect("read png");
         assert_eq!((back.width, back.height), (film.width, film.height));
         for (a, b) in film.color.iter().zip(&back.color) {
@@ -125,12 +131,7 @@ fn hdr_and_ppm_round_trip() {
         ("8.ppm", false, 0.5 / 255.0),
         ("16.ppm", true, 0.5 / 65535.0),
     ] {
-        let path = dir.join(name);
-        let opts = OutputOptions {
-            bit_depth16: sixteen,
-            ..OutputOptions::default()
-        };
-        write_film(&film, &path, &opts).expect("write ppm");
+        let path = write_at_depth(&film, &dir.join(name), sixteen);
         let bytes = std::fs::read(&path).expect("read bytes");
         assert!(bytes.starts_with(b"P6\n16 8\n"));
         let back = read_image_as_film(&path).expect("read ppm");

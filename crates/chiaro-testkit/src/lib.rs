@@ -235,6 +235,26 @@ impl Progress for Warnings {
     }
 }
 
+/// Runs `f` and returns its result with the number of panics raised
+/// meanwhile, counted by a panic hook, so that a panic the code under test
+/// catches itself (a loader's last-resort guard) still counts. The hook
+/// prints each panic as the default one does, and the default hook is
+/// back afterwards.
+pub fn count_panics<T>(f: impl FnOnce() -> T) -> (T, usize) {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let panics = Arc::new(AtomicUsize::new(0));
+    let counter = Arc::clone(&panics);
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        counter.fetch_add(1, Ordering::SeqCst);
+        previous(info);
+    }));
+    let result = f();
+    let _ = std::panic::take_hook();
+    (result, panics.load(Ordering::SeqCst))
+}
+
 /// Where failing tests write images: `target/test-output/<name>.ppm`.
 pub fn output_path(name: &str) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/test-output");
@@ -310,6 +330,23 @@ fn assets_folder(root: &Path, var: Option<std::ffi::OsString>) -> Option<PathBuf
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_caught_panic_is_counted() {
+        let (caught, panics) = count_panics(|| std::panic::catch_unwind(|| panic!("counted")));
+        assert!(caught.is_err());
+        assert_eq!(panics, 1);
+        assert_eq!(count_panics(|| 7), (7, 0));
+    }
+
+    #[test]
+    fn warnings_are_kept_in_order() {
+        let w = Warnings::default();
+        w.warning("a");
+        w.warning("b");
+        assert_eq!(w.joined(), "a\nb");
+        assert_eq!(w.into_vec(), ["a", "b"]);
+    }
 
     #[test]
     fn the_assets_folder_is_the_variable_or_none() {
