@@ -40,6 +40,19 @@ pub fn settings(
     }
 }
 
+/// A unit sphere of white (0.8 grey diffuse) at the origin, seen by the
+/// default camera with the default settings and no lights.
+pub fn white_sphere() -> Scene {
+    let mut s = Scene::default();
+    let white = s.add_material(Material::diffuse("white", Vec3::splat(0.8)));
+    s.objects.push(Object {
+        geometry: Geometry::Sphere { radius: 1.0 },
+        material: white,
+        ..Object::default()
+    });
+    s
+}
+
 /// Removes `s`'s ambient lights: what is left is direct light that
 /// casts shadows, which every technique computes alike.
 pub fn drop_ambient(s: &mut Scene) {
