@@ -427,6 +427,18 @@ impl Server {
         ServerHandle(Arc::clone(&self.state))
     }
 
+    /// Runs the server ([`Server::run`]) on a thread of its own and returns
+    /// the address it listens on: for tests, benchmarks and programs that
+    /// go on while it serves.
+    ///
+    /// # Errors
+    /// The operating system's error, if the socket has no address.
+    pub fn spawn(self) -> std::io::Result<SocketAddr> {
+        let addr = self.local_addr()?;
+        std::thread::spawn(move || self.run());
+        Ok(addr)
+    }
+
     /// Accepts connections until the process ends; each is served on its
     /// own thread, so one slow or broken client never blocks another.
     pub fn run(self) {

@@ -20,10 +20,8 @@ fn cornell() -> PathBuf {
 fn start(opts: ServeOptions) -> (SocketAddr, ServerHandle) {
     let opts = ServeOptions { port: 0, ..opts };
     let server = Server::bind(&cornell(), &opts).expect("binds");
-    let addr = server.local_addr().expect("addr");
     let handle = server.handle();
-    std::thread::spawn(move || server.run());
-    (addr, handle)
+    (server.spawn().expect("addr"), handle)
 }
 
 fn connect(addr: SocketAddr) -> TcpStream {
