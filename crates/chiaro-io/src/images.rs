@@ -252,6 +252,18 @@ fn linear_texels(img: &image::DynamicImage, srgb: bool) -> Vec<[f32; 4]> {
     }
 }
 
+/// The error for `name`, a `what` its decoder refused with `e` (the
+/// decoder's words in plain terms).
+fn undecodable(name: &Path, what: &str, e: &dyn std::fmt::Display) -> IoError {
+    IoError::format(
+        name,
+        format!(
+            "cannot decode the {what}: {}",
+            crate::plain::third_party(&e.to_string())
+        ),
+    )
+}
+
 /// Decodes a PNG, JPEG or Radiance HDR image, its size checked from the
 /// header first; `name` is for messages.
 fn decode_with_image_crate(
@@ -259,15 +271,7 @@ fn decode_with_image_crate(
     name: &Path,
     budget: MemoryBudget,
 ) -> Result<image::DynamicImage> {
-    let bad = |e: &dyn std::fmt::Display| {
-        IoError::format(
-            name,
-            format!(
-                "cannot decode the image: {}",
-                crate::plain::third_party(&e.to_string())
-            ),
-        )
-    };
+    let bad = |e: &dyn std::fmt::Display| undecodable(name, "image", e);
     let reader = || {
         image::ImageReader::new(Cursor::new(bytes))
             .with_guessed_format()
@@ -297,15 +301,7 @@ fn decode_with_image_crate(
 /// a layer prefix (`beauty.R`) for colour.
 fn decode_exr(bytes: &[u8], name: &Path, budget: MemoryBudget) -> Result<DecodedImage> {
     use exr::prelude::*;
-    let bad = |e: &dyn std::fmt::Display| {
-        IoError::format(
-            name,
-            format!(
-                "cannot decode the OpenEXR image: {}",
-                crate::plain::third_party(&e.to_string())
-            ),
-        )
-    };
+    let bad = |e: &dyn std::fmt::Display| undecodable(name, "OpenEXR image", e);
     // Check the header's size before reading pixels.
     let meta =
         exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| bad(&e))?;

@@ -9,14 +9,19 @@ fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// Why loading the crash input `name` is refused (`refused`: what the test
+/// expects to be refused).
+fn refusal(name: &str, refused: &str) -> String {
+    chiaro_io::load_scene(&data(name))
+        .expect_err(refused)
+        .to_string()
+}
+
 #[test]
 fn a_colour_with_one_number_in_an_mtl_is_a_grey() {
     // The crash input as it was: its mangled `v` line is a clean parse error
     // naming file, line and column.
-    let path = data("short-kd.obj");
-    let msg = chiaro_io::load_scene(&path)
-        .expect_err("a bad vertex")
-        .to_string();
+    let msg = refusal("short-kd.obj", "a bad vertex");
     assert!(
         msg.contains("short-kd.obj:6:21") && msg.contains("expected a finite number"),
         "{msg}"
@@ -61,10 +66,7 @@ fn a_buffer_view_image_without_a_mime_type_is_ignored_with_a_warning() {
 
 #[test]
 fn a_ply_element_count_larger_than_the_file_is_refused() {
-    let path = data("huge-element-count.ply");
-    let msg = chiaro_io::load_scene(&path)
-        .expect_err("a count no file can back")
-        .to_string();
+    let msg = refusal("huge-element-count.ply", "a count no file can back");
     assert!(
         msg.contains("huge-element-count.ply") && msg.contains("element `vertex` claims"),
         "{msg}"
@@ -83,9 +85,6 @@ fn a_ply_element_count_larger_than_the_file_is_refused() {
 /// `1.0` format line, and the parser allocated for 5e15 vertices.
 #[test]
 fn a_huge_element_count_is_refused_whatever_the_format_version() {
-    let path = data("odd-version-huge-count.ply");
-    let msg = chiaro_io::load_scene(&path)
-        .expect_err("a count no file can back")
-        .to_string();
+    let msg = refusal("odd-version-huge-count.ply", "a count no file can back");
     assert!(msg.contains("claims"), "{msg}");
 }

@@ -5,7 +5,6 @@
 use chiaro_core::scene::Geometry;
 use chiaro_io::load_scene;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Files above this size are skipped to keep the test fast.
 const MAX_BYTES: u64 = 20 << 20;
@@ -93,31 +92,23 @@ fn broken_validator_files_never_panic() {
     );
     assert!(files.len() >= 300, "found only {} files", files.len());
     // Count panics even where the loader's last-resort guard catches them.
-    static PANICS: AtomicUsize = AtomicUsize::new(0);
-    let previous = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        PANICS.fetch_add(1, Ordering::SeqCst);
-        previous(info);
-    }));
-    let (mut ok, mut err) = (0, 0);
-    for f in &files {
-        let r = std::panic::catch_unwind(|| load_scene(f));
-        match r {
-            Ok(Ok(_)) => ok += 1,
-            Ok(Err(e)) => {
-                assert!(!e.to_string().is_empty());
-                err += 1;
+    let ((ok, err), panics) = chiaro_testkit::count_panics(|| {
+        let (mut ok, mut err) = (0, 0);
+        for f in &files {
+            let r = std::panic::catch_unwind(|| load_scene(f));
+            match r {
+                Ok(Ok(_)) => ok += 1,
+                Ok(Err(e)) => {
+                    assert!(!e.to_string().is_empty());
+                    err += 1;
+                }
+                Err(_) => panic!("{} panicked", f.display()),
             }
-            Err(_) => panic!("{} panicked", f.display()),
         }
-    }
-    let _ = std::panic::take_hook();
+        (ok, err)
+    });
     println!("validator files: {ok} loaded, {err} refused");
-    assert_eq!(
-        PANICS.load(Ordering::SeqCst),
-        0,
-        "the loader panicked (see stderr)"
-    );
+    assert_eq!(panics, 0, "the loader panicked (see stderr)");
     // Every file is either loaded or refused with a message; most have no
     // triangle at all (they test the JSON), which is refused as nothing to
     // render.

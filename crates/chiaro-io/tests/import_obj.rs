@@ -5,7 +5,6 @@
 use chiaro_core::scene::Geometry;
 use chiaro_io::load_scene;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 fn assets() -> Option<PathBuf> {
     chiaro_testkit::shared_assets()
@@ -36,27 +35,23 @@ fn obj_edge_cases_load_or_fail_without_panicking() {
     let Some(root) = assets() else { return };
     let files = objs_in(&root.join("obj-edge-cases/tinyobjloader-models"));
     assert!(files.len() >= 30, "found {}", files.len());
-    static PANICS: AtomicUsize = AtomicUsize::new(0);
-    let previous = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        PANICS.fetch_add(1, Ordering::SeqCst);
-        previous(info);
-    }));
-    let mut report = Vec::new();
-    for f in &files {
-        let name = f
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        match std::panic::catch_unwind(|| load_scene(f)) {
-            Ok(Ok(l)) => report.push(format!("{name}: ok, {} triangles", triangles(&l))),
-            Ok(Err(e)) => report.push(format!("{name}: error: {e}")),
-            Err(_) => report.push(format!("{name}: PANIC")),
+    let (report, panics) = chiaro_testkit::count_panics(|| {
+        let mut report = Vec::new();
+        for f in &files {
+            let name = f
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            match std::panic::catch_unwind(|| load_scene(f)) {
+                Ok(Ok(l)) => report.push(format!("{name}: ok, {} triangles", triangles(&l))),
+                Ok(Err(e)) => report.push(format!("{name}: error: {e}")),
+                Err(_) => report.push(format!("{name}: PANIC")),
+            }
         }
-    }
-    let _ = std::panic::take_hook();
+        report
+    });
     println!("{}", report.join("\n"));
-    assert_eq!(PANICS.load(Ordering::SeqCst), 0, "{}", report.join("\n"));
+    assert_eq!(panics, 0, "{}", report.join("\n"));
     // Specific expectations.
     let find = |n: &str| {
         report

@@ -48,6 +48,24 @@ fn gradient_film() -> Film {
     f
 }
 
+/// Asserts that `dir` holds exactly the entries `names` (no temporary
+/// file left behind), then removes it.
+fn assert_holds_only(dir: &Path, names: &[&str]) {
+    assert_eq!(entries(dir), names);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Writes `film` to `path` (its extension picks the format) with 16 bits
+/// a channel or 8, and returns the path.
+fn write_at_depth(film: &Film, path: &Path, sixteen: bool) -> PathBuf {
+    let opts = OutputOptions {
+        bit_depth16: sixteen,
+        ..OutputOptions::default()
+    };
+    write_film(film, path, &opts).expect("writes");
+    path.to_path_buf()
+}
+
 #[test]
 fn exr_round_trip_is_exact() {
     let dir = scratch("exr");
@@ -57,8 +75,7 @@ fn exr_round_trip_is_exact() {
     write_film(&film, &path, &OutputOptions::default()).expect("write exr");
     let back = read_image_as_film(&path).expect("read exr");
     assert_eq!(back, film);
-    assert_eq!(entries(&dir), vec!["out.exr"]);
-    let _ = std::fs::remove_dir_all(&dir);
+    assert_holds_only(&dir, &["out.exr"]);
 }
 
 #[test]
@@ -69,12 +86,7 @@ fn png_round_trips_within_one_code() {
         ("8.png", false, 0.5 / 255.0),
         ("16.png", true, 0.5 / 65535.0),
     ] {
-        let path = dir.join(name);
-        let opts = OutputOptions {
-            bit_depth16: sixteen,
-            ..OutputOptions::default()
-        };
-        write_film(&film, &path, &opts).expect("write png");
+        let path = write_at_depth(&film, &dir.join(name), sixteen);
         let back = read_image_as_film(&path).expect("read png");
         assert_eq!((back.width, back.height), (film.width, film.height));
         for (a, b) in film.color.iter().zip(&back.color) {
@@ -125,12 +137,7 @@ fn hdr_and_ppm_round_trip() {
         ("8.ppm", false, 0.5 / 255.0),
         ("16.ppm", true, 0.5 / 65535.0),
     ] {
-        let path = dir.join(name);
-        let opts = OutputOptions {
-            bit_depth16: sixteen,
-            ..OutputOptions::default()
-        };
-        write_film(&film, &path, &opts).expect("write ppm");
+        let path = write_at_depth(&film, &dir.join(name), sixteen);
         let bytes = std::fs::read(&path).expect("read bytes");
         assert!(bytes.starts_with(b"P6\n16 8\n"));
         let back = read_image_as_film(&path).expect("read ppm");
@@ -226,8 +233,7 @@ fn unknown_extension_is_refused_with_the_list() {
         ..OutputOptions::default()
     };
     assert!(write_film(&gradient_film(), &dir.join("x.exr"), &opts).is_err());
-    assert!(entries(&dir).is_empty());
-    let _ = std::fs::remove_dir_all(&dir);
+    assert_holds_only(&dir, &[]);
 }
 
 #[test]
@@ -237,8 +243,7 @@ fn missing_directory_errors_and_leaves_nothing() {
     let e = write_film(&gradient_film(), &path, &OutputOptions::default()).expect_err("no dir");
     assert!(matches!(e, IoError::Io { .. }));
     assert!(e.to_string().contains("no/such/dir/out.png"), "{e}");
-    assert!(entries(&dir).is_empty());
-    let _ = std::fs::remove_dir_all(&dir);
+    assert_holds_only(&dir, &[]);
 }
 
 #[test]
@@ -248,8 +253,7 @@ fn overwriting_replaces_the_file_and_leaves_no_temporary() {
     std::fs::write(&path, b"old").expect("seed");
     write_film(&gradient_film(), &path, &OutputOptions::default()).expect("write");
     assert!(std::fs::read(&path).expect("read").starts_with(b"\x89PNG"));
-    assert_eq!(entries(&dir), vec!["o.png"]);
-    let _ = std::fs::remove_dir_all(&dir);
+    assert_holds_only(&dir, &["o.png"]);
 }
 
 #[test]
@@ -320,6 +324,5 @@ fn output_paths_are_checked_before_rendering() {
     perms.set_readonly(false);
     std::fs::set_permissions(&ro, perms).expect("chmod");
     // The probe leaves nothing behind.
-    assert_eq!(entries(&dir), vec!["ro", "sub.png"]);
-    let _ = std::fs::remove_dir_all(&dir);
+    assert_holds_only(&dir, &["ro", "sub.png"]);
 }

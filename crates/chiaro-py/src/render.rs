@@ -609,17 +609,7 @@ pub fn read_image<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Bo
 #[cfg(test)]
 mod tests {
     use super::*;
-    use chiaro::scene::{Geometry, Material, Object};
-
-    fn sphere_scene() -> Scene {
-        let mut scene = Scene::default();
-        scene.add_material(Material::diffuse("white", Vec3::splat(0.8)));
-        scene.objects.push(Object {
-            geometry: Geometry::Sphere { radius: 1.0 },
-            ..Default::default()
-        });
-        scene
-    }
+    use chiaro_testkit::scenes::white_sphere;
 
     #[test]
     fn progress_records_stage_and_counts() {
@@ -635,7 +625,7 @@ mod tests {
 
     #[test]
     fn a_cancelled_progress_stops_the_render() {
-        let scene = sphere_scene();
+        let scene = white_sphere();
         let mut s = scene.render.clone();
         s.technique = Technique::Preview;
         s.width = 32;

@@ -161,19 +161,11 @@ mod tests {
     }
 
     fn cornell() -> Scene {
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.toml");
-        let loaded = chiaro::io::load_scene(&path);
-        assert!(loaded.is_ok(), "{path:?}: {:?}", loaded.err());
-        loaded.map(|l| l.scene).unwrap_or_default()
+        chiaro_testkit::scenes::cornell_box(24)
     }
 
     fn settings(scene: &Scene, technique: Technique) -> RenderSettings {
-        let mut s = scene.render.clone();
-        s.technique = technique;
-        s.width = 24;
-        s.height = 20;
-        s.samples = 4;
+        let mut s = chiaro_testkit::scenes::settings(scene, technique, 24, 20, 4);
         s.radiosity.solver = chiaro::scene::RadiositySolver::Hierarchical;
         s
     }

@@ -5,21 +5,8 @@
 use super::*;
 use crate::formfactor::facing;
 use chiaro_core::geometry::primitives;
-use chiaro_core::progress::Progress;
 use chiaro_core::scene::{Geometry, Light, Material, Mesh, Object, RenderSettings};
-use std::sync::Mutex;
-
-/// Keeps the warnings of a solve.
-#[derive(Default)]
-struct Warnings(Mutex<Vec<String>>);
-
-impl Progress for Warnings {
-    fn begin(&self, _: &str, _: u64) {}
-    fn advance(&self, _: u64) {}
-    fn warning(&self, text: &str) {
-        self.0.lock().expect("lock").push(text.to_string());
-    }
-}
+use chiaro_testkit::Warnings;
 
 fn add(s: &mut Scene, mesh: Mesh, material: u32, name: &str) {
     let id = s.add_mesh(mesh);
@@ -100,7 +87,7 @@ fn every_solver() -> Vec<(Solver, Method)> {
 fn run(scene: &Scene, settings: &RenderSettings) -> (RadiositySolution, Vec<String>) {
     let w = Warnings::default();
     let sol = solve(&RenderContext::new(scene, settings, &w).expect("valid")).expect("solves");
-    (sol, w.0.into_inner().expect("lock"))
+    (sol, w.into_vec())
 }
 
 /// Coplanar elements exchange no light, even far from the origin where the

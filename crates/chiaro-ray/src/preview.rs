@@ -190,15 +190,10 @@ mod tests {
     use chiaro_core::accel::list::ListAccel;
     use chiaro_core::prepared::PreparedScene;
     use chiaro_core::progress::NoProgress;
-    use chiaro_core::scene::{Geometry, Material, Object, Scene};
+    use chiaro_core::scene::Scene;
 
     fn sphere_scene() -> Scene {
-        let mut s = Scene::default();
-        s.add_material(Material::diffuse("white", Vec3::splat(0.8)));
-        s.objects.push(Object {
-            geometry: Geometry::Sphere { radius: 1.0 },
-            ..Default::default()
-        });
+        let mut s = chiaro_testkit::scenes::white_sphere();
         s.render.width = 32;
         s.render.height = 32;
         s

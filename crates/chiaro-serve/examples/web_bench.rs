@@ -77,16 +77,23 @@ fn round_trip(ws: &mut Ws, req: &Value) -> (f64, f64) {
     }
 }
 
-fn bench(name: &str, scene: Scene, frames: usize) {
-    let (w, h) = (scene.render.width, scene.render.height);
-    let tris = scene.triangle_count();
+/// Serves `scene` as `name` on a free loopback port, on a thread of its
+/// own; returns the address.
+fn serve_on_a_free_port(scene: Scene, name: &str) -> std::net::SocketAddr {
     let opts = ServeOptions {
         port: 0,
         ..ServeOptions::default()
     };
-    let server = Server::bind_scene(scene, name, &opts).expect("bind");
-    let addr = server.local_addr().expect("addr");
-    std::thread::spawn(move || server.run());
+    Server::bind_scene(scene, name, &opts)
+        .expect("bind")
+        .spawn()
+        .expect("addr")
+}
+
+fn bench(name: &str, scene: Scene, frames: usize) {
+    let (w, h) = (scene.render.width, scene.render.height);
+    let tris = scene.triangle_count();
+    let addr = serve_on_a_free_port(scene, name);
     let (mut ws, _) = tungstenite::connect(format!("ws://{addr}/ws")).expect("connect");
     for technique in ["phong", "preview"] {
         let view = json!([{"technique": technique, "samples": 1}]);
@@ -165,13 +172,7 @@ fn orbit_bench(scene: Scene, frames: usize) {
         scene.render.samples,
         scene.render.light_samples,
     );
-    let opts = ServeOptions {
-        port: 0,
-        ..ServeOptions::default()
-    };
-    let server = Server::bind_scene(scene, "cornell-box", &opts).expect("bind");
-    let addr = server.local_addr().expect("addr");
-    std::thread::spawn(move || server.run());
+    let addr = serve_on_a_free_port(scene, "cornell-box");
     let (mut ws, _) = tungstenite::connect(format!("ws://{addr}/ws")).expect("connect");
     println!("| frames | size | samples per pixel / per area light | frames per second |");
     println!("| --- | --- | --- | --- |");

@@ -168,6 +168,15 @@ pub fn draft_settings(s: &RenderSettings) -> RenderSettings {
     }
 }
 
+/// A count of `what` the page asks for: `None` for 0 (keep the scene's),
+/// an error above `max`.
+fn page_count(requested: u32, what: &str, max: u32) -> Result<Option<u32>, String> {
+    if requested > max {
+        return Err(format!("{requested} {what} exceed the page limit of {max}"));
+    }
+    Ok((requested > 0).then_some(requested))
+}
+
 fn parse_named<T: for<'de> Deserialize<'de>>(what: &str, name: &str) -> Result<T, String> {
     serde_json::from_value(serde_json::Value::String(name.into()))
         .map_err(|_| format!("unknown {what} `{name}`"))
@@ -272,24 +281,12 @@ pub fn make_job(
         s.width = width;
         s.height = height;
         s.crop = None;
-        if v.samples > limits.max_samples {
-            return Err(format!(
-                "{} samples exceed the page limit of {}",
-                v.samples, limits.max_samples
-            ));
-        }
-        if v.samples > 0 {
-            s.samples = v.samples;
+        if let Some(n) = page_count(v.samples, "samples", limits.max_samples)? {
+            s.samples = n;
         }
         s.samples = s.samples.min(limits.max_samples);
-        if v.light_samples > limits.max_samples {
-            return Err(format!(
-                "{} light samples exceed the page limit of {}",
-                v.light_samples, limits.max_samples
-            ));
-        }
-        if v.light_samples > 0 {
-            s.light_samples = v.light_samples;
+        if let Some(n) = page_count(v.light_samples, "light samples", limits.max_samples)? {
+            s.light_samples = n;
         }
         if v.shadows != "scene" {
             s.shadows = parse_named::<ShadowMethod>("shadow method", &v.shadows)?;
@@ -454,37 +451,45 @@ mod tests {
         );
     }
 
+    /// [`make_job`] of `views` at `width` x `height`, the scene's own
+    /// camera, neither progressive nor refining.
+    fn job(
+        scene: &Scene,
+        limits: &Limits,
+        width: u32,
+        height: u32,
+        views: &[View],
+    ) -> Result<Job, String> {
+        make_job(
+            scene,
+            limits,
+            0,
+            width,
+            height,
+            Orbit::default(),
+            false,
+            false,
+            views,
+        )
+    }
+
     #[test]
     fn limits_refuse_large_requests() {
         let scene = Scene::default();
         let l = Limits::default();
         let v = [View::default()];
-        assert!(
-            make_job(
-                &scene,
-                &l,
-                0,
-                100_000,
-                10,
-                Orbit::default(),
-                false,
-                false,
-                &v
-            )
-            .is_err()
-        );
+        assert!(job(&scene, &l, 100_000, 10, &v).is_err());
         let many = [View {
             samples: 1 << 20,
             ..View::default()
         }];
-        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &many).is_err());
+        assert!(job(&scene, &l, 16, 16, &many).is_err());
         let bad = [View {
             technique: "nope".into(),
             ..View::default()
         }];
-        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &bad).is_err());
-        let ok =
-            make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &v).expect("valid");
+        assert!(job(&scene, &l, 16, 16, &bad).is_err());
+        let ok = job(&scene, &l, 16, 16, &v).expect("valid");
         assert_eq!(ok.settings[0].width, 16);
     }
 
@@ -502,24 +507,13 @@ mod tests {
         assert!(j.refine);
         let d = draft_settings(&j.settings[0]);
         assert_eq!((d.samples, d.light_samples, d.width), (1, 1, 16));
-        let keep = make_job(
-            &scene,
-            &l,
-            0,
-            16,
-            16,
-            Orbit::default(),
-            false,
-            false,
-            &[View::default()],
-        )
-        .expect("valid");
+        let keep = job(&scene, &l, 16, 16, &[View::default()]).expect("valid");
         assert_eq!(keep.settings[0].light_samples, scene.render.light_samples);
         let many = [View {
             light_samples: l.max_samples + 1,
             ..View::default()
         }];
-        assert!(make_job(&scene, &l, 0, 16, 16, Orbit::default(), false, false, &many).is_err());
+        assert!(job(&scene, &l, 16, 16, &many).is_err());
     }
 
     /// A render setting is checked by the facade's one settings check,
@@ -529,18 +523,8 @@ mod tests {
         let mut scene = Scene::default();
         scene.render.samples = 0;
         scene.render.radiosity.tolerance = 2.0;
-        let e = make_job(
-            &scene,
-            &Limits::default(),
-            0,
-            16,
-            16,
-            Orbit::default(),
-            false,
-            false,
-            &[View::default()],
-        )
-        .expect_err("invalid settings");
+        let e = job(&scene, &Limits::default(), 16, 16, &[View::default()])
+            .expect_err("invalid settings");
         assert_eq!(
             e,
             "invalid render settings: render.samples: expected 1..=65536, got 0; \
@@ -551,18 +535,8 @@ mod tests {
             ..View::default()
         }];
         scene.render.radiosity.tolerance = 0.5;
-        let j = make_job(
-            &scene,
-            &Limits::default(),
-            0,
-            16,
-            16,
-            Orbit::default(),
-            false,
-            false,
-            &v,
-        )
-        .expect("the view's samples replace the scene's");
+        let j = job(&scene, &Limits::default(), 16, 16, &v)
+            .expect("the view's samples replace the scene's");
         assert_eq!(j.settings[0].samples, 4);
     }
 
@@ -575,18 +549,7 @@ mod tests {
             model: "blinn".into(),
             ..View::default()
         }];
-        let j = make_job(
-            &scene,
-            &Limits::default(),
-            1,
-            8,
-            8,
-            Orbit::default(),
-            false,
-            false,
-            &v,
-        )
-        .expect("valid");
+        let j = job(&scene, &Limits::default(), 8, 8, &v).expect("valid");
         assert_eq!(j.settings[0].shadows, ShadowMethod::Map);
         assert_eq!(
             j.settings[0].transparency,
@@ -596,19 +559,6 @@ mod tests {
             shadows: "sometimes".into(),
             ..View::default()
         }];
-        assert!(
-            make_job(
-                &scene,
-                &Limits::default(),
-                1,
-                8,
-                8,
-                Orbit::default(),
-                false,
-                false,
-                &bad
-            )
-            .is_err()
-        );
+        assert!(job(&scene, &Limits::default(), 8, 8, &bad).is_err());
     }
 }

@@ -288,6 +288,10 @@ async function main() {
   state.info = await (await fetch("/api/info")).json();
   const i = state.info;
   $("scene-name").textContent = i.scene;
+  // The right view has the same controls as the left.
+  for (const label of $("view-a").querySelectorAll("label")) {
+    $("view-b").append(label.cloneNode(true));
+  }
   for (const fs of [$("view-a"), $("view-b")]) {
     const f = (n) => fs.querySelector(`[name=${n}]`);
     const asked = params.get("technique");

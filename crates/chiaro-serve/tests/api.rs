@@ -20,10 +20,10 @@ fn start() -> SocketAddr {
         port: 0,
         ..ServeOptions::default()
     };
-    let server = Server::bind(&cornell(), &opts).expect("binds");
-    let addr = server.local_addr().expect("addr");
-    std::thread::spawn(move || server.run());
-    addr
+    Server::bind(&cornell(), &opts)
+        .expect("binds")
+        .spawn()
+        .expect("addr")
 }
 
 /// Sends raw bytes and returns the whole response.
@@ -425,9 +425,10 @@ fn orbiting_a_radiosity_render_reuses_the_solution() {
         port: 0,
         ..ServeOptions::default()
     };
-    let server = Server::bind_scene(scene, "coarse-box", &opts).expect("binds");
-    let addr = server.local_addr().expect("addr");
-    std::thread::spawn(move || server.run());
+    let addr = Server::bind_scene(scene, "coarse-box", &opts)
+        .expect("binds")
+        .spawn()
+        .expect("addr");
     let mut c = ws(addr);
     let render = |id: u64, yaw: f32, model: &str| {
         json!({"type": "render", "id": id, "width": 16, "height": 16,

@@ -20,10 +20,8 @@ fn cornell() -> PathBuf {
 fn start(opts: ServeOptions) -> (SocketAddr, ServerHandle) {
     let opts = ServeOptions { port: 0, ..opts };
     let server = Server::bind(&cornell(), &opts).expect("binds");
-    let addr = server.local_addr().expect("addr");
     let handle = server.handle();
-    std::thread::spawn(move || server.run());
-    (addr, handle)
+    (server.spawn().expect("addr"), handle)
 }
 
 fn connect(addr: SocketAddr) -> TcpStream {
@@ -394,4 +392,49 @@ fn an_idle_websocket_is_closed_after_the_idle_timeout() {
     );
     std::thread::sleep(Duration::from_millis(200));
     assert_eq!(handle.open_connections(), 0);
+}
+
+/// Issue 47: with two `Origin` or two `Host` headers, only the first was
+/// checked. Each is refused now, whichever of the two is foreign, on the
+/// page and on the WebSocket handshake.
+#[test]
+fn two_host_or_origin_headers_get_400() {
+    let (addr, _handle) = start(ServeOptions::default());
+    let own = format!("127.0.0.1:{}", addr.port());
+    let ws = "Upgrade: websocket\r\nConnection: Upgrade\r\n\
+              Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n";
+    for (first, second) in [
+        (own.as_str(), "evil.example.com"),
+        ("evil.example.com", own.as_str()),
+    ] {
+        let r = raw_head(
+            addr,
+            &format!("GET / HTTP/1.1\r\nHost: {first}\r\nhost: {second}\r\n\r\n"),
+        );
+        assert!(r.starts_with("HTTP/1.1 400"), "{r}");
+    }
+    for (first, second) in [
+        (
+            format!("http://{own}"),
+            "http://evil.example.com".to_string(),
+        ),
+        (
+            "http://evil.example.com".to_string(),
+            format!("http://{own}"),
+        ),
+    ] {
+        let r = raw_head(
+            addr,
+            &format!(
+                "GET /ws HTTP/1.1\r\nHost: {own}\r\nOrigin: {first}\r\nORIGIN: {second}\r\n{ws}\r\n"
+            ),
+        );
+        assert!(r.starts_with("HTTP/1.1 400"), "{r}");
+    }
+    // One of each still opens.
+    let r = raw_head(
+        addr,
+        &format!("GET /ws HTTP/1.1\r\nHost: {own}\r\nOrigin: http://{own}\r\n{ws}\r\n"),
+    );
+    assert!(r.starts_with("HTTP/1.1 101"), "{r}");
 }

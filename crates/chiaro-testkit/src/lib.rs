@@ -9,9 +9,11 @@ pub mod scenes;
 pub mod stats;
 
 use chiaro_core::film::Film;
+use chiaro_core::progress::Progress;
 use chiaro_core::scene::{RenderSettings, ShadowMethod, Technique};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
 
 /// Asserts `|a - b| <= eps` for floats, with both values in the message.
 #[macro_export]
@@ -202,6 +204,57 @@ pub fn whitted_and_path_direct(
     (whitted, render(s))
 }
 
+/// A [`Progress`] that keeps the warnings a render or a solve gives, in
+/// order, for the tests that check them (stages and counts are ignored).
+#[derive(Debug, Default)]
+pub struct Warnings(Mutex<Vec<String>>);
+
+impl Warnings {
+    /// The warnings given so far.
+    pub fn into_vec(self) -> Vec<String> {
+        self.0.into_inner().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The warnings given so far, one a line.
+    pub fn joined(&self) -> String {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .join("\n")
+    }
+}
+
+impl Progress for Warnings {
+    fn begin(&self, _stage: &str, _total: u64) {}
+    fn advance(&self, _n: u64) {}
+    fn warning(&self, text: &str) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(text.to_string());
+    }
+}
+
+/// Runs `f` and returns its result with the number of panics raised
+/// meanwhile, counted by a panic hook, so that a panic the code under test
+/// catches itself (a loader's last-resort guard) still counts. The hook
+/// prints each panic as the default one does, and the default hook is
+/// back afterwards.
+pub fn count_panics<T>(f: impl FnOnce() -> T) -> (T, usize) {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let panics = Arc::new(AtomicUsize::new(0));
+    let counter = Arc::clone(&panics);
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        counter.fetch_add(1, Ordering::SeqCst);
+        previous(info);
+    }));
+    let result = f();
+    let _ = std::panic::take_hook();
+    (result, panics.load(Ordering::SeqCst))
+}
+
 /// Where failing tests write images: `target/test-output/<name>.ppm`.
 pub fn output_path(name: &str) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/test-output");
@@ -277,6 +330,23 @@ fn assets_folder(root: &Path, var: Option<std::ffi::OsString>) -> Option<PathBuf
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_caught_panic_is_counted() {
+        let (caught, panics) = count_panics(|| std::panic::catch_unwind(|| panic!("counted")));
+        assert!(caught.is_err());
+        assert_eq!(panics, 1);
+        assert_eq!(count_panics(|| 7), (7, 0));
+    }
+
+    #[test]
+    fn warnings_are_kept_in_order() {
+        let w = Warnings::default();
+        w.warning("a");
+        w.warning("b");
+        assert_eq!(w.joined(), "a\nb");
+        assert_eq!(w.into_vec(), ["a", "b"]);
+    }
 
     #[test]
     fn the_assets_folder_is_the_variable_or_none() {

@@ -6,7 +6,8 @@
 use chiaro_core::geometry::primitives;
 use chiaro_core::scene::{
     AreaShape, Attenuation, Camera, Environment, Geometry, ImageTexture, Light, Material,
-    MaterialId, Mesh, MeshId, Object, Scene, ShadowMethod, Texture, Transform, WrapMode,
+    MaterialId, Mesh, MeshId, Object, RenderSettings, Scene, ShadowMethod, Technique, Texture,
+    Transform, WrapMode,
 };
 use glam::{Vec2, Vec3};
 
@@ -19,6 +20,37 @@ pub fn point_light(position: Vec3, intensity: f32) -> Light {
         intensity,
         attenuation: Attenuation::InverseSquare,
     }
+}
+
+/// `scene`'s own render settings with `technique` at `width` x `height`
+/// pixels and `samples` samples a pixel.
+pub fn settings(
+    scene: &Scene,
+    technique: Technique,
+    width: u32,
+    height: u32,
+    samples: u32,
+) -> RenderSettings {
+    RenderSettings {
+        technique,
+        width,
+        height,
+        samples,
+        ..scene.render.clone()
+    }
+}
+
+/// A unit sphere of white (0.8 grey diffuse) at the origin, seen by the
+/// default camera with the default settings and no lights.
+pub fn white_sphere() -> Scene {
+    let mut s = Scene::default();
+    let white = s.add_material(Material::diffuse("white", Vec3::splat(0.8)));
+    s.objects.push(Object {
+        geometry: Geometry::Sphere { radius: 1.0 },
+        material: white,
+        ..Object::default()
+    });
+    s
 }
 
 /// Removes `s`'s ambient lights: what is left is direct light that

@@ -7,10 +7,10 @@ use chiaro::scene::Technique;
 use chiaro::{NoProgress, RenderSettings, Scene};
 use chiaro_testkit::scenes;
 use chiaro_tools::compare::{
-    CacheStatus, ReferenceSamples, ReferenceSpec, compare, reference_seed,
+    CacheStatus, Comparison, ReferenceSamples, ReferenceSpec, compare, reference_seed,
 };
 use chiaro_tools::sheet::{contact_sheet, sheet_size, write_sheet};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 const SIZE: u32 = 24;
 
@@ -28,6 +28,25 @@ fn path16() -> ReferenceSpec {
     ReferenceSpec::fixed(Technique::Path, 16)
 }
 
+/// `techniques` on `scene` with `base`, against the path tracer at 16 spp,
+/// the reference cached in `cache` when given.
+fn against_path16(
+    scene: &Scene,
+    base: &RenderSettings,
+    techniques: &[Technique],
+    cache: Option<&Path>,
+) -> Comparison {
+    compare(scene, base, techniques, &path16(), cache, &NoProgress).expect("compares")
+}
+
+/// The shipped Cornell box at `size` x `size` pixels, 4 samples a pixel.
+fn cornell_box(size: u32) -> (Scene, RenderSettings) {
+    let scene = scenes::cornell_box(size);
+    let mut base = scene.render.clone();
+    base.samples = 4;
+    (scene, base)
+}
+
 /// A fresh, empty directory under the test output directory.
 fn fresh_dir(name: &str) -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
@@ -39,15 +58,7 @@ fn fresh_dir(name: &str) -> PathBuf {
 #[test]
 fn phong_and_whitted_against_path_report_finite_metrics() {
     let (scene, base) = setup();
-    let c = compare(
-        &scene,
-        &base,
-        &[Technique::Phong, Technique::Whitted],
-        &path16(),
-        None,
-        &NoProgress,
-    )
-    .expect("compares");
+    let c = against_path16(&scene, &base, &[Technique::Phong, Technique::Whitted], None);
     assert_eq!(c.cache, CacheStatus::Disabled);
     assert_eq!(c.reference.technique, Technique::Path);
     assert_eq!(c.reference.settings.samples, 16);
@@ -107,15 +118,7 @@ fn phong_and_whitted_against_path_report_finite_metrics() {
 fn path_against_itself_at_another_seed_differs_only_by_noise() {
     let (scene, mut base) = setup();
     base.samples = 16;
-    let c = compare(
-        &scene,
-        &base,
-        &[Technique::Path, Technique::Phong],
-        &path16(),
-        None,
-        &NoProgress,
-    )
-    .expect("compares");
+    let c = against_path16(&scene, &base, &[Technique::Path, Technique::Phong], None);
     let (path, phong) = (&c.entries[0], &c.entries[1]);
     // A different seed: not the same image ...
     assert_ne!(path.settings.seed, c.reference.settings.seed);
@@ -141,17 +144,7 @@ fn path_against_itself_at_another_seed_differs_only_by_noise() {
 fn reference_is_cached_and_reused() {
     let (scene, base) = setup();
     let dir = fresh_dir("compare-cache");
-    let run = || {
-        compare(
-            &scene,
-            &base,
-            &[Technique::Phong],
-            &path16(),
-            Some(&dir),
-            &NoProgress,
-        )
-        .expect("compares")
-    };
+    let run = || against_path16(&scene, &base, &[Technique::Phong], Some(&dir));
     let first = run();
     let CacheStatus::Stored(file) = &first.cache else {
         panic!("first run should store the reference: {:?}", first.cache);
@@ -179,30 +172,14 @@ fn reference_is_cached_and_reused() {
     // Other reference settings miss the cache.
     let mut other = base.clone();
     other.seed += 1;
-    let third = compare(
-        &scene,
-        &other,
-        &[Technique::Phong],
-        &path16(),
-        Some(&dir),
-        &NoProgress,
-    )
-    .expect("compares");
+    let third = against_path16(&scene, &other, &[Technique::Phong], Some(&dir));
     assert!(matches!(third.cache, CacheStatus::Stored(ref f) if f != file));
 }
 
 #[test]
 fn sheet_has_the_documented_size_and_is_written() {
     let (scene, base) = setup();
-    let c = compare(
-        &scene,
-        &base,
-        &[Technique::Phong, Technique::Whitted],
-        &path16(),
-        None,
-        &NoProgress,
-    )
-    .expect("compares");
+    let c = against_path16(&scene, &base, &[Technique::Phong, Technique::Whitted], None);
     let sheet = contact_sheet(&c, "shadow_test").expect("sheet");
     let (w, h) = sheet_size(SIZE, SIZE, 3);
     assert_eq!((sheet.film.width, sheet.film.height), (w, h));
@@ -247,12 +224,7 @@ fn share(errors: &[f64], mask: &[bool]) -> f64 {
 
 #[test]
 fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominating() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/cornell-box.toml");
-    let scene = chiaro::io::load_scene(path.as_ref()).expect("loads").scene;
-    let mut base = scene.render.clone();
-    base.width = 48;
-    base.height = 48;
-    base.samples = 4;
+    let (scene, base) = cornell_box(48);
     let reference = ReferenceSpec::fixed(Technique::Path, 256);
     let c = compare(
         &scene,
@@ -326,12 +298,7 @@ fn metrics_rank_radiosity_first_on_the_cornell_box_without_the_emitter_dominatin
 
 #[test]
 fn the_reference_takes_samples_until_its_own_noise_is_below_the_target() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/cornell-box.toml");
-    let scene = chiaro::io::load_scene(path.as_ref()).expect("loads").scene;
-    let mut base = scene.render.clone();
-    base.width = 24;
-    base.height = 24;
-    base.samples = 4;
+    let (scene, base) = cornell_box(24);
     let cap = 1 << 14;
     let run = |samples| {
         let spec = ReferenceSpec {

@@ -6,11 +6,12 @@
 //! tests.
 
 use chiaro::budget::{ByteSize, MemoryBudget};
-use chiaro::scene::{Light, Material, Object, RenderSettings, Scene, ShadowMethod, Technique};
-use chiaro::{NoProgress, Progress, Vec3};
+use chiaro::scene::{Material, Object, RenderSettings, Scene, ShadowMethod, Technique};
+use chiaro::{NoProgress, Vec3};
 use chiaro_core::geometry::primitives;
-use std::path::PathBuf;
-use std::sync::Mutex;
+use chiaro_testkit::Warnings;
+use chiaro_testkit::scenes::{point_light, settings};
+use std::path::{Path, PathBuf};
 
 /// A fresh directory under the target folder for one test's files.
 fn dir(name: &str) -> PathBuf {
@@ -18,6 +19,48 @@ fn dir(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).expect("temp dir");
     d
+}
+
+/// Writes `contents` to the file `name` in `dir` and returns its path.
+fn put(dir: &Path, name: &str, contents: impl AsRef<[u8]>) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, contents).expect("write");
+    path
+}
+
+/// The warnings of loading `path` (which loads), one a line.
+fn load_warnings(path: &Path) -> String {
+    chiaro::io::load_scene(path)
+        .expect("loads")
+        .warnings
+        .join("\n")
+}
+
+/// Why loading `path` is refused (`refused`: what the test expects to be
+/// refused).
+fn refusal(path: &Path, refused: &str) -> String {
+    chiaro::io::load_scene(path).expect_err(refused).to_string()
+}
+
+/// A one-triangle OBJ file whose `mtllib` line names `library`.
+fn triangle_with_library(library: &str) -> String {
+    format!("mtllib {library}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+}
+
+/// A triangle glTF file with a base-colour texture: its image at
+/// `image_uri`, its 60 bytes of positions and texture coordinates at
+/// `buffer_uri`.
+fn textured_triangle_gltf(image_uri: &str, buffer_uri: &str) -> String {
+    format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+        "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_0": 1}}, "material": 0}}]}}],
+        "materials": [{{"pbrMetallicRoughness": {{"baseColorTexture": {{"index": 0}}}}}}],
+        "textures": [{{"source": 0}}], "images": [{{"uri": "{image_uri}"}}],
+        "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
+          {{"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}}],
+        "bufferViews": [{{"buffer": 0, "byteLength": 36}}, {{"buffer": 0, "byteOffset": 36, "byteLength": 24}}],
+        "buffers": [{{"byteLength": 60, "uri": "{buffer_uri}"}}]}}"#
+    )
 }
 
 /// The loaders' process budget of these tests: 1 GiB, as `--memory-limit 1G`.
@@ -83,10 +126,9 @@ fn base64(bytes: &[u8]) -> String {
 #[test]
 fn a_sparse_accessor_of_2_31_elements_is_refused() {
     limit_1g();
-    let d = dir("sparse");
-    let path = d.join("sparse.gltf");
-    std::fs::write(
-        &path,
+    let path = put(
+        &dir("sparse"),
+        "sparse.gltf",
         r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
         "accessors": [{"componentType": 5126, "count": 2147483648, "type": "VEC3",
@@ -95,11 +137,8 @@ fn a_sparse_accessor_of_2_31_elements_is_refused() {
             "values": {"bufferView": 1}}}],
         "bufferViews": [{"buffer": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 4, "byteLength": 12}],
         "buffers": [{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}]}"#,
-    )
-    .expect("write");
-    let msg = chiaro::io::load_scene(&path)
-        .expect_err("24 GiB of zeros")
-        .to_string();
+    );
+    let msg = refusal(&path, "24 GiB of zeros");
     assert!(
         msg.contains("sparse.gltf")
             && msg.contains("2147483648 elements")
@@ -112,7 +151,7 @@ fn a_sparse_accessor_of_2_31_elements_is_refused() {
 fn a_16384_square_png_is_refused_as_texture_environment_and_data_uri() {
     limit_1g();
     let d = dir("png");
-    std::fs::write(d.join("big.png"), huge_png()).expect("write");
+    put(&d, "big.png", huge_png());
     let expect_refusal = |msg: &str| {
         assert!(
             msg.contains("big.png") && msg.contains("16384x16384") && msg.contains("1.0 GiB"),
@@ -127,34 +166,25 @@ fn a_16384_square_png_is_refused_as_texture_environment_and_data_uri() {
     .into_iter()
     .enumerate()
     {
-        let scene = d.join(format!("s{i}.toml"));
-        std::fs::write(&scene, text).expect("write");
-        expect_refusal(&chiaro::io::load_scene(&scene).expect_err("refused").to_string());
+        let scene = put(&d, &format!("s{i}.toml"), text);
+        expect_refusal(&refusal(&scene, "refused"));
     }
     // As a data: URI in a glTF file: the texture is dropped with a warning
     // naming the refusal, and the triangle still loads.
-    let gltf = format!(
-        r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
-        "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_0": 1}}, "material": 0}}]}}],
-        "materials": [{{"pbrMetallicRoughness": {{"baseColorTexture": {{"index": 0}}}}}}],
-        "textures": [{{"source": 0}}],
-        "images": [{{"uri": "data:image/png;base64,{}"}}],
-        "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
-          {{"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}}],
-        "bufferViews": [{{"buffer": 0, "byteLength": 36}}, {{"buffer": 0, "byteOffset": 36, "byteLength": 24}}],
-        "buffers": [{{"byteLength": 60, "uri": "data:application/octet-stream;base64,{}"}}]}}"#,
-        base64(&huge_png()),
-        base64(
-            &[
-                0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0,
-            ]
-            .iter()
-            .flat_map(|f| f.to_le_bytes())
-            .collect::<Vec<u8>>()
+    let positions_and_uvs: Vec<u8> = [
+        0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0,
+    ]
+    .iter()
+    .flat_map(|f| f.to_le_bytes())
+    .collect();
+    let gltf = textured_triangle_gltf(
+        &format!("data:image/png;base64,{}", base64(&huge_png())),
+        &format!(
+            "data:application/octet-stream;base64,{}",
+            base64(&positions_and_uvs)
         ),
     );
-    let path = d.join("big.gltf");
-    std::fs::write(&path, gltf).expect("write");
+    let path = put(&d, "big.gltf", gltf);
     let loaded = chiaro::io::load_scene(&path).expect("the triangle loads");
     assert_eq!(loaded.scene.triangle_count(), 1);
     // No texture but the studio map of the automatic lighting.
@@ -169,18 +199,6 @@ fn a_16384_square_png_is_refused_as_texture_environment_and_data_uri() {
         w.contains("images[0]") && w.contains("16384x16384") && w.contains("texture ignored"),
         "{w}"
     );
-}
-
-/// Collects warnings.
-#[derive(Debug, Default)]
-struct Warnings(Mutex<Vec<String>>);
-
-impl Progress for Warnings {
-    fn begin(&self, _stage: &str, _total: u64) {}
-    fn advance(&self, _n: u64) {}
-    fn warning(&self, text: &str) {
-        self.0.lock().expect("lock").push(text.to_string());
-    }
 }
 
 /// A floor and a box on it under `n` point lights in a row.
@@ -199,11 +217,11 @@ fn lit_box(n: usize) -> Scene {
         scene.objects.push(o);
     }
     scene.lights = (0..n)
-        .map(|i| Light::Point {
-            position: Vec3::new(-2.0 + 4.0 * i as f32 / n as f32, 3.0, 0.5),
-            color: Vec3::ONE,
-            intensity: 20.0 / n as f32,
-            attenuation: chiaro::scene::Attenuation::InverseSquare,
+        .map(|i| {
+            point_light(
+                Vec3::new(-2.0 + 4.0 * i as f32 / n as f32, 3.0, 0.5),
+                20.0 / n as f32,
+            )
         })
         .collect();
     scene.camera.eye = Vec3::new(0.0, 4.0, 6.0);
@@ -211,16 +229,25 @@ fn lit_box(n: usize) -> Scene {
     scene
 }
 
+/// [`lit_box`] with `n` lights and its settings for `technique` at
+/// `width` x `height`, shadows from maps of `resolution` texels a side.
+fn lit_box_with_maps(
+    n: usize,
+    technique: Technique,
+    width: u32,
+    height: u32,
+    resolution: u32,
+) -> (Scene, RenderSettings) {
+    let scene = lit_box(n);
+    let mut s = settings(&scene, technique, width, height, 1);
+    s.shadows = ShadowMethod::Map;
+    s.shadow_map.resolution = resolution;
+    (scene, s)
+}
+
 #[test]
 fn forty_shadow_mapped_lights_degrade_to_shadow_rays_within_the_budget() {
-    let scene = lit_box(40);
-    let mut s = scene.render.clone();
-    s.technique = Technique::Phong;
-    s.width = 48;
-    s.height = 36;
-    s.samples = 1;
-    s.shadows = ShadowMethod::Map;
-    s.shadow_map.resolution = 512;
+    let (scene, mut s) = lit_box_with_maps(40, Technique::Phong, 48, 36, 512);
     // 64 MiB of maps (a quarter of 256 MiB): ten 6 MiB cubes, then rays.
     s.memory_limit = Some(ByteSize(256 << 20));
     let e = chiaro::memory_estimate(&scene, &s);
@@ -228,7 +255,7 @@ fn forty_shadow_mapped_lights_degrade_to_shadow_rays_within_the_budget() {
     let warnings = Warnings::default();
     let mapped = chiaro::render(&scene, &s, &warnings).expect("renders");
     assert!(mapped.is_clean());
-    let w = warnings.0.lock().expect("lock").join("\n");
+    let w = warnings.joined();
     assert!(
         w.contains("lights 10, 11,") && w.contains("39 use shadow rays") && w.contains("64 MiB"),
         "{w}"
@@ -249,13 +276,7 @@ fn forty_shadow_mapped_lights_degrade_to_shadow_rays_within_the_budget() {
 
 #[test]
 fn huge_shadow_maps_are_refused_or_replaced_by_rays() {
-    let scene = lit_box(3);
-    let mut s = scene.render.clone();
-    s.technique = Technique::Gouraud;
-    s.width = 32;
-    s.height = 24;
-    s.shadows = ShadowMethod::Map;
-    s.shadow_map.resolution = 16384;
+    let (scene, mut s) = lit_box_with_maps(3, Technique::Gouraud, 32, 24, 16384);
     let msg = chiaro::render(&scene, &s, &NoProgress)
         .expect_err("refused")
         .to_string();
@@ -265,7 +286,7 @@ fn huge_shadow_maps_are_refused_or_replaced_by_rays() {
     let warnings = Warnings::default();
     let film = chiaro::render(&scene, &s, &warnings).expect("renders");
     assert!(film.is_clean());
-    let w = warnings.0.lock().expect("lock").join("\n");
+    let w = warnings.joined();
     assert!(w.contains("lights 0, 1, 2 use shadow rays"), "{w}");
 }
 
@@ -273,14 +294,9 @@ fn huge_shadow_maps_are_refused_or_replaced_by_rays() {
 /// (`visible`: something in the frame is lit).
 fn load_and_render(name: &str, obj: &str, visible: bool) -> chiaro::io::Loaded {
     limit_1g();
-    let path = dir(name).join(format!("{name}.obj"));
-    std::fs::write(&path, obj).expect("write");
+    let path = put(&dir(name), &format!("{name}.obj"), obj);
     let loaded = chiaro::io::load_scene(&path).expect("loads");
-    let mut s = loaded.scene.render.clone();
-    s.technique = Technique::Gouraud;
-    s.width = 24;
-    s.height = 16;
-    s.samples = 1;
+    let s = settings(&loaded.scene, Technique::Gouraud, 24, 16, 1);
     let film = chiaro::render(&loaded.scene, &s, &NoProgress).expect("renders");
     assert!(film.is_clean());
     if visible {
@@ -334,17 +350,12 @@ fn a_grid_with_one_far_triangle_loads_and_renders() {
     assert!(b.max.x >= 1e12 && b.min.x == 0.0, "{b:?}");
 }
 
-/// Renders `scene` with `technique` at 64x48 and returns the film and the
-/// seconds it took.
+/// `scene`'s settings with `technique` at 64x48, one sample a pixel.
 fn small(scene: &Scene, technique: Technique) -> RenderSettings {
-    let mut s = scene.render.clone();
-    s.technique = technique;
-    s.width = 64;
-    s.height = 48;
-    s.samples = 1;
-    s
+    settings(scene, technique, 64, 48, 1)
 }
 
+/// Renders `scene` with `technique` at 64x48.
 fn render_small(scene: &Scene, technique: Technique) -> chiaro::Film {
     chiaro::render(scene, &small(scene, technique), &NoProgress).expect("renders")
 }
@@ -355,13 +366,12 @@ fn render_small(scene: &Scene, technique: Technique) -> chiaro::Film {
 #[test]
 fn two_faces_given_twice_render_with_radiosity_and_hybrid() {
     limit_1g();
-    let path = dir("twice").join("twice.obj");
-    std::fs::write(
-        &path,
+    let path = put(
+        &dir("twice"),
+        "twice.obj",
         "v 0.1 0.2 0.3\nv 1.37 0.51 -0.23\nv 1.11 1.73 0.41\nv 0.3 -0.9 1.7\n\
          f 1 2 3\nf 1 2 3\nf 2 1 4\nf 2 1 4\n# two faces, each given twice\n\n",
-    )
-    .expect("write");
+    );
     let loaded = chiaro::io::load_scene(&path).expect("loads");
     assert_eq!(loaded.scene.triangle_count(), 2);
     let w = loaded.warnings.join("\n");
@@ -381,66 +391,42 @@ fn two_faces_given_twice_render_with_radiosity_and_hybrid() {
 fn devices_named_by_a_scene_are_refused_not_read() {
     limit_1g();
     let d = dir("devices");
-    let obj = d.join("zero.obj");
-    std::fs::write(
-        &obj,
-        "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
-    )
-    .expect("write");
-    let w = chiaro::io::load_scene(&obj)
-        .expect("loads")
-        .warnings
-        .join("\n");
+    let obj = put(&d, "zero.obj", triangle_with_library("/dev/zero"));
+    let w = load_warnings(&obj);
     assert!(
         w.contains("/dev/zero: a character device, not a regular file"),
         "{w}"
     );
-    std::fs::write(d.join("m.mtl"), "newmtl m\nKd 1 1 1\nmap_Kd /dev/zero\n").expect("write");
-    std::fs::write(
-        &obj,
+    put(&d, "m.mtl", "newmtl m\nKd 1 1 1\nmap_Kd /dev/zero\n");
+    put(
+        &d,
+        "zero.obj",
         "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nusemtl m\nf 1/1 2/1 3/1\n",
-    )
-    .expect("write");
-    let w = chiaro::io::load_scene(&obj)
-        .expect("loads")
-        .warnings
-        .join("\n");
+    );
+    let w = load_warnings(&obj);
     assert!(w.contains("/dev/zero: a character device"), "{w}");
     // glTF: the image is skipped with a warning, the buffer is an error.
-    let gltf = |image: &str, buffer: &str| {
-        format!(
-            r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
-            "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "TEXCOORD_0": 1}}, "material": 0}}]}}],
-            "materials": [{{"pbrMetallicRoughness": {{"baseColorTexture": {{"index": 0}}}}}}],
-            "textures": [{{"source": 0}}], "images": [{{"uri": "{image}"}}],
-            "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
-              {{"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}}],
-            "bufferViews": [{{"buffer": 0, "byteLength": 36}}, {{"buffer": 0, "byteOffset": 36, "byteLength": 24}}],
-            "buffers": [{{"byteLength": 60, "uri": "{buffer}"}}]}}"#
-        )
-    };
-    std::fs::write(d.join("tri.bin"), [0u8; 60]).expect("write");
-    let path = d.join("image.gltf");
-    std::fs::write(&path, gltf("/dev/zero", "tri.bin")).expect("write");
-    let w = chiaro::io::load_scene(&path)
-        .expect("loads")
-        .warnings
-        .join("\n");
+    put(&d, "tri.bin", [0u8; 60]);
+    let path = put(
+        &d,
+        "image.gltf",
+        textured_triangle_gltf("/dev/zero", "tri.bin"),
+    );
+    let w = load_warnings(&path);
     assert!(w.contains("/dev/zero: a character device"), "{w}");
-    std::fs::write(&path, gltf("tri.png", "/dev/zero")).expect("write");
-    let msg = chiaro::io::load_scene(&path)
-        .expect_err("no buffer")
-        .to_string();
+    put(
+        &d,
+        "image.gltf",
+        textured_triangle_gltf("tri.png", "/dev/zero"),
+    );
+    let msg = refusal(&path, "no buffer");
     assert!(
         msg.contains("buffers[0].uri") && msg.contains("character device"),
         "{msg}"
     );
     // A TOML scene's mesh and texture paths.
-    let toml = d.join("s.toml");
-    std::fs::write(&toml, "[[object]]\nmesh = \"/dev/zero\"\n").expect("write");
-    let msg = chiaro::io::load_scene(&toml)
-        .expect_err("device")
-        .to_string();
+    let toml = put(&d, "s.toml", "[[object]]\nmesh = \"/dev/zero\"\n");
+    let msg = refusal(&toml, "device");
     assert!(
         msg.contains("s.toml:2:8") && msg.contains("character device"),
         "{msg}"
@@ -460,16 +446,7 @@ fn a_fifo_named_by_mtllib_does_not_block() {
         eprintln!("skipped: mkfifo is not available");
         return;
     }
-    let obj = d.join("pipe.obj");
-    std::fs::write(
-        &obj,
-        "mtllib pipe.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
-    )
-    .expect("write");
-    let w = chiaro::io::load_scene(&obj)
-        .expect("loads")
-        .warnings
-        .join("\n");
+    let w = load_warnings(&put(&d, "pipe.obj", triangle_with_library("pipe.mtl")));
     assert!(
         w.contains("pipe.mtl: a FIFO (named pipe), not a regular file"),
         "{w}"
@@ -481,15 +458,12 @@ fn a_fifo_named_by_mtllib_does_not_block() {
 #[test]
 fn a_vertex_at_1e30_is_named_not_the_camera() {
     limit_1g();
-    let path = dir("huge").join("huge.obj");
-    std::fs::write(
-        &path,
+    let path = put(
+        &dir("huge"),
+        "huge.obj",
         "o spike\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1e30 0 0\nf 1 2 3\nf 1 2 4\n",
-    )
-    .expect("write");
-    let msg = chiaro::io::load_scene(&path)
-        .expect_err("refused")
-        .to_string();
+    );
+    let msg = refusal(&path, "refused");
     assert!(
         msg.contains("huge.obj")
             && msg.contains("vertex")
@@ -503,12 +477,9 @@ fn a_vertex_at_1e30_is_named_not_the_camera() {
 #[test]
 fn a_deep_table_header_is_reported_on_its_line() {
     limit_1g();
-    let path = dir("deep").join("deep.toml");
     let text = "# comment\n".repeat(10) + "[" + &vec!["a"; 10_000].join(".") + "]\n";
-    std::fs::write(&path, text).expect("write");
-    let msg = chiaro::io::load_scene(&path)
-        .expect_err("refused")
-        .to_string();
+    let path = put(&dir("deep"), "deep.toml", text);
+    let msg = refusal(&path, "refused");
     assert!(
         msg.contains("deep.toml:11:") && msg.contains("10000 levels"),
         "{msg}"
@@ -535,8 +506,7 @@ fn the_emissive_duck_solves_within_ten_seconds() {
     for m in json["materials"].as_array_mut().expect("materials") {
         m["emissiveFactor"] = serde_json::json!([5120, 5120, 5120]);
     }
-    let path = d.join("Duck.gltf");
-    std::fs::write(&path, json.to_string()).expect("write");
+    let path = put(&d, "Duck.gltf", json.to_string());
     let loaded = chiaro::io::load_scene(&path).expect("loads");
     // Work, not time: the solve converges within its tolerance, well
     // before the iteration budget (a stalled solve ran to the budget).

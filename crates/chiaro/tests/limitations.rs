@@ -3,9 +3,9 @@
 //! the README's table, and the warning for a scene that nothing lights.
 
 use chiaro::limitations::{Feature, limitations, markdown_table};
-use chiaro::{NoProgress, Progress, Scene, Technique, Vec3};
+use chiaro::{NoProgress, Scene, Technique, Vec3};
+use chiaro_testkit::Warnings;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -23,17 +23,6 @@ fn named(scene: &Scene, t: Technique, feature: Feature) -> Option<Vec<String>> {
         .into_iter()
         .find(|l| l.feature == feature)
         .map(|l| l.objects)
-}
-
-#[derive(Default)]
-struct Warnings(Mutex<Vec<String>>);
-
-impl Progress for Warnings {
-    fn begin(&self, _: &str, _: u64) {}
-    fn advance(&self, _: u64) {}
-    fn warning(&self, text: &str) {
-        self.0.lock().expect("lock").push(text.to_string());
-    }
 }
 
 #[test]
@@ -100,16 +89,10 @@ fn transparency_scene_names_the_panes() {
 #[test]
 fn a_render_warns_once_per_limitation_naming_the_objects() {
     let s = load("whitted.toml");
-    let mut settings = s.render.clone();
-    (
-        settings.technique,
-        settings.width,
-        settings.height,
-        settings.samples,
-    ) = (Technique::Preview, 8, 6, 1);
+    let settings = chiaro_testkit::scenes::settings(&s, Technique::Preview, 8, 6, 1);
     let w = Warnings::default();
     chiaro::render(&s, &settings, &w).expect("renders");
-    let got = w.0.into_inner().expect("lock");
+    let got = w.into_vec();
     let expected: Vec<String> = limitations(&s, Technique::Preview)
         .iter()
         .map(ToString::to_string)

@@ -4,6 +4,7 @@
 use chiaro::budget::ByteSize;
 use chiaro::scene::{Geometry, Material, Object, Scene, Technique};
 use chiaro::{NoProgress, Vec3};
+use chiaro_testkit::scenes::settings;
 
 /// `n` unit spheres in a row (the scan converter tessellates each).
 fn spheres(n: usize) -> Scene {
@@ -24,10 +25,7 @@ fn spheres(n: usize) -> Scene {
 #[test]
 fn tessellated_spheres_beyond_the_budget_are_refused() {
     let scene = spheres(5000);
-    let mut settings = scene.render.clone();
-    settings.technique = Technique::Gouraud;
-    settings.width = 16;
-    settings.height = 16;
+    let mut settings = settings(&scene, Technique::Gouraud, 16, 16, 1);
     settings.memory_limit = Some(ByteSize(1 << 30));
     let e = chiaro::render(&scene, &settings, &NoProgress).expect_err("19.8M triangles");
     let msg = e.to_string();
@@ -46,11 +44,7 @@ fn tessellated_spheres_beyond_the_budget_are_refused() {
 #[test]
 fn the_estimate_counts_films_and_dense_radiosity() {
     let scene = spheres(1);
-    let mut settings = scene.render.clone();
-    settings.width = 8192;
-    settings.height = 8192;
-    settings.samples = 64;
-    settings.technique = Technique::Phong;
+    let mut settings = settings(&scene, Technique::Phong, 8192, 8192, 64);
     settings.memory_limit = Some(ByteSize(1 << 30));
     let msg = chiaro::render(&scene, &settings, &NoProgress)
         .expect_err("64 spp of 64 Mpixel")

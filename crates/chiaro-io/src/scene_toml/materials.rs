@@ -161,19 +161,7 @@ impl Ctx<'_> {
         if let Some(id) = self.images.get(&key) {
             return Ok(*id);
         }
-        if let Some(e) = crate::files::refuse_special(&path) {
-            return Err(self.at(rel.span(), format!("cannot load texture: {e}")));
-        }
-        if !path.is_file() {
-            return Err(self.at(
-                rel.span(),
-                format!(
-                    "texture file {:?} not found (looked for {})",
-                    rel.get_ref(),
-                    path.display()
-                ),
-            ));
-        }
+        self.check_file(rel, &path, "texture file", "cannot load texture")?;
         let mut img = crate::images::load_texture_within(&path, srgb, self.budget)
             .map_err(|e| self.at(rel.span(), format!("cannot load texture: {e}")))?;
         img.wrap = wrap;

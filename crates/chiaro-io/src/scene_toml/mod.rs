@@ -349,6 +349,26 @@ fn key_before(text: &str, at: usize) -> Option<&str> {
 }
 
 impl Ctx<'_> {
+    /// Refuses `path`, the file `rel` names, unless it is an existing
+    /// regular file, with an error at `rel`: `cannot` starts the message
+    /// for a device, FIFO or folder, `kind` names the missing file.
+    fn check_file(&self, rel: &Sp<String>, path: &Path, kind: &str, cannot: &str) -> Result<()> {
+        if let Some(e) = crate::files::refuse_special(path) {
+            return Err(self.at(rel.span(), format!("{cannot}: {e}")));
+        }
+        if !path.is_file() {
+            return Err(self.at(
+                rel.span(),
+                format!(
+                    "{kind} {:?} not found (looked for {})",
+                    rel.get_ref(),
+                    path.display()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     fn at(&self, span: Range<usize>, message: impl Into<String>) -> IoError {
         let (line, column) = line_col(self.text, span.start);
         IoError::At {

@@ -325,19 +325,7 @@ impl Ctx<'_> {
         span: Range<usize>,
     ) -> Result<()> {
         let path = crate::resolve(self.base, file.get_ref());
-        if let Some(e) = crate::files::refuse_special(&path) {
-            return Err(self.at(file.span(), format!("cannot read mesh file: {e}")));
-        }
-        if !path.is_file() {
-            return Err(self.at(
-                file.span(),
-                format!(
-                    "mesh file {:?} not found (looked for {})",
-                    file.get_ref(),
-                    path.display()
-                ),
-            ));
-        }
+        self.check_file(file, &path, "mesh file", "cannot read mesh file")?;
         let key = (
             std::fs::canonicalize(&path).unwrap_or(path.clone()),
             material,

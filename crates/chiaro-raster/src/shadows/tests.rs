@@ -11,10 +11,10 @@ use chiaro_core::film::Film;
 use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
-use chiaro_core::progress::Progress;
 use chiaro_core::scene::ShadowMethod;
 use chiaro_core::scene::{Camera, Geometry, Light, Object, Transform};
 use chiaro_core::scene::{Material, RenderSettings, Scene, ShadeMode, Technique, TransparencyMode};
+use chiaro_testkit::Warnings;
 use chiaro_testkit::scenes::{add_named, camera, point_light, translate};
 use glam::{Vec2, Vec3};
 
@@ -376,21 +376,6 @@ fn scanline_shadows_render_like_shadow_rays() {
     let _ = CoreError::Cancelled;
 }
 
-/// A [`Progress`] that keeps the warnings.
-#[derive(Default)]
-struct Warnings(std::sync::Mutex<Vec<String>>);
-
-impl Progress for Warnings {
-    fn begin(&self, _stage: &str, _total: u64) {}
-    fn advance(&self, _n: u64) {}
-    fn warning(&self, text: &str) {
-        self.0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .push(text.to_string());
-    }
-}
-
 /// The shipped Cornell box without the ambient light.
 fn cornell_box() -> Scene {
     let mut scene = chiaro_testkit::scenes::cornell_box(64);
@@ -564,10 +549,7 @@ fn open_occluders_are_named_in_a_warning_and_still_shadow() {
     let warnings = Warnings::default();
     let s = settings(ShadowMethod::Volume, 16, 12);
     render_prepared(&ps, &s, ShadeMode::Phong, &warnings).expect("render");
-    let w = warnings
-        .0
-        .into_inner()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let w = warnings.into_vec();
     assert_eq!(w.len(), 1, "{w:?}");
     assert!(
         w[0].contains("\"shelf\"") && w[0].contains("\"floor\""),
@@ -710,10 +692,7 @@ fn shadow_volumes_past_their_budget_use_rays_with_a_warning() {
     s.memory_limit = Some(chiaro_core::budget::ByteSize(2 << 20));
     let warnings = Warnings::default();
     let vol = render_prepared(&ps, &s, ShadeMode::Phong, &warnings).expect("render");
-    let w = warnings
-        .0
-        .into_inner()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let w = warnings.into_vec();
     let over: Vec<&String> = w.iter().filter(|w| w.contains("do not fit")).collect();
     assert_eq!(over.len(), 1, "{w:?}");
     assert!(over[0].contains("use shadow rays"), "{}", over[0]);
@@ -770,10 +749,7 @@ fn an_emitter_group_gets_shadow_rays_under_every_exact_method() {
         s.shadows = method;
         let warnings = Warnings::default();
         let f = render_prepared(&ps, &s, ShadeMode::Phong, &warnings).expect("render");
-        let w = warnings
-            .0
-            .into_inner()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let w = warnings.into_vec();
         assert_eq!(
             w.iter().filter(|w| w.contains(&named)).count(),
             1,
