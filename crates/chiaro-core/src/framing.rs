@@ -718,7 +718,7 @@ mod tests {
     #[test]
     fn a_mirrored_model_is_framed_from_outside() {
         let mirror = Transform::from_matrix(glam::Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
-        let s = scene_of(vec![(uv_sphere(1.0, 24, 12), mirror.clone())]);
+        let s = scene_of(vec![(uv_sphere(1.0, 24, 12), mirror)]);
         let f = frame_scene(&s, UpAxis::Y, 1.0, None);
         assert!(f.inside.is_none());
         assert!(f.camera.eye.length() > 1.5, "{}", f.camera.eye);

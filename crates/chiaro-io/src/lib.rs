@@ -8,6 +8,8 @@
 //! - [`images`]: decoding image textures (PNG, JPEG, HDR, EXR) to linear texels.
 //! - [`output`]: writing films (PNG 8/16-bit, OpenEXR with depth and normal,
 //!   Radiance HDR, PPM, palette PNG), always through a temporary file and a rename.
+//! - [`studio`]: the neutral studio environment that lights a model file
+//!   without lights.
 //!
 //! The entry point for scenes is [`load_scene`]: it reads a `.toml` scene,
 //! or an `.obj` / `.gltf` / `.glb` file as a whole scene (with a camera
@@ -71,9 +73,11 @@ pub(crate) fn lowercase_extension(path: &Path) -> String {
 /// `.mtl`), `.gltf`, `.glb` or `.ply`.
 ///
 /// A mesh file read this way becomes a whole scene: its first camera (or one
-/// framing its bounds, looking down -z), its lights (or an ambient light plus
-/// a directional light from over the camera's shoulder), and default render
-/// settings.
+/// framing it from its front, `framing::frame_scene`), its lights (or the
+/// neutral studio and a key light from over the camera's shoulder; in a
+/// room, a ceiling panel and an ambient fill: [`framed_lights`]), and
+/// default render settings. An OBJ or PLY file that looks Z-up gets a
+/// warning naming `--up z`.
 ///
 /// Returns an [`IoError`] naming the file (and the line and column, or the
 /// glTF JSON path) when the file cannot be read, does not parse, or

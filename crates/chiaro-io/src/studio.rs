@@ -11,7 +11,7 @@
 //! (a fill) and behind (a rim).
 //!
 //! [`neutral_studio_radiance`] is the radiance in a direction (y up, the
-//! model's front +z), relative: [`crate::studio_environment`] scales it to a
+//! model's front +z), relative: [`crate::add_studio_environment`] scales it to a
 //! chosen mean. [`neutral_studio_texture`] bakes it into a lat-long image
 //! laid out as `texture::latlong_uv` reads one, which every technique then
 //! uses as any other environment map.
