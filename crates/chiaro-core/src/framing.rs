@@ -239,7 +239,7 @@ pub fn world_bounds(scene: &Scene) -> Aabb {
 
 /// Fraction of a model's extent, from its lowest point, that counts as its
 /// base slab in [`looks_z_up`].
-const BASE_SLAB: f32 = 0.02;
+pub const BASE_SLAB: f32 = 0.02;
 
 /// True when a model read with +y up is probably +z up (a scan or CAD part
 /// lying on its back): its extent along y is the smallest of the three,
