@@ -1,17 +1,23 @@
 //! Automatic camera placement for a scene that brings no camera (a model
 //! file opened on its own), used by the loader, the CLI, serve and Python.
 //!
-//! - **Exterior** (the usual case): a three-quarter view from above (40
-//!   degrees round from the front, 25 degrees up), the camera's distance
-//!   and aim solved so that the model's projected vertices span 80 % of the
-//!   frame along the tighter axis, centred.
+//! - **Exterior** (the usual case): the model's front (+z for y up, -y for
+//!   z up) seen from [`ELEVATION_DEGREES`] above, so an object shows a
+//!   little of its top and a flat test board facing front is read head-on;
+//!   the camera's distance and aim solved so that the model's projected
+//!   vertices span 80 % of the frame along the tighter axis, centred.
+//!   Only vertices that triangles use count (a stray unreferenced vertex
+//!   does not shrink the model), placed by each object's full matrix
+//!   (negative scales included).
 //! - **Interior**: when a point inside the bounding box sees geometry in
 //!   nearly every direction, mostly front faces, and the model seen from
 //!   outside shows mostly back faces (a room whose walls face inwards), the
 //!   camera stands inside at that point, backed towards the near wall,
 //!   looking level at the far wall's centre. A solid model's inside sees
 //!   back faces, an open scene escapes, a hollow object (a helmet) shows
-//!   front faces outside, so none of them counts.
+//!   front faces outside, so none of them counts. Front and back follow
+//!   the winding as placed: an object whose matrix mirrors it (negative
+//!   determinant) has its winding turned, as glTF specifies.
 
 use crate::accel::{WatertightRay, intersect_sphere};
 use crate::geometry::{Aabb, Ray};
@@ -20,6 +26,9 @@ use glam::Vec3;
 
 /// Fraction of the frame (along its tighter axis) a framed model spans.
 pub const FILL: f32 = 0.8;
+/// How far above the horizontal an exterior camera looks down at the
+/// model's front, degrees.
+pub const ELEVATION_DEGREES: f32 = 18.0;
 /// Fraction of probe rays that must hit for a candidate eye to be inside.
 pub const INTERIOR_HITS: f32 = 0.9;
 /// Fraction of those hits that must be front faces.
@@ -80,18 +89,37 @@ pub struct Inside {
     pub point: Vec3,
     /// The mean distance from it to the geometry its probes hit.
     pub mean_distance: f32,
+    /// The distance from `point` straight up to the ceiling (the first
+    /// surface hit, else the bounds' top).
+    pub to_ceiling: f32,
+    /// The distance from `point` down to the floor: the bounds' bottom
+    /// (furniture below the point does not count).
+    pub to_floor: f32,
+    /// The interior's extent along the two horizontal axes (the model's
+    /// front axis, then its side axis), from its bounds.
+    pub horizontal_extent: [f32; 2],
+    /// The up axis the interior was judged with.
+    pub up: UpAxis,
 }
 
-/// Calls `f` with every world-space point of the scene's geometry: mesh
-/// vertices and the corners of each sphere's box. Non-finite points are
-/// skipped.
+/// Calls `f` with every world-space point of the scene's drawn geometry:
+/// the mesh vertices that a triangle uses, and the corners of each
+/// sphere's box. Non-finite points are skipped.
 pub fn for_each_world_point(scene: &Scene, mut f: impl FnMut(Vec3)) {
+    let mut used = Vec::new();
     for o in &scene.objects {
         let m = o.transform.world_from_object();
         match o.geometry {
             Geometry::Mesh(id) => {
                 if let Some(mesh) = scene.meshes.get(id.index()) {
-                    for p in &mesh.positions {
+                    used.clear();
+                    used.resize(mesh.positions.len(), false);
+                    for i in mesh.indices.iter().flatten() {
+                        if let Some(u) = used.get_mut(*i as usize) {
+                            *u = true;
+                        }
+                    }
+                    for (p, _) in mesh.positions.iter().zip(&used).filter(|(_, u)| **u) {
                         let q = m.transform_point3(*p);
                         if q.is_finite() {
                             f(q);
@@ -209,6 +237,35 @@ pub fn world_bounds(scene: &Scene) -> Aabb {
     b
 }
 
+/// Fraction of a model's extent, from its lowest point, that counts as its
+/// base slab in [`looks_z_up`].
+pub const BASE_SLAB: f32 = 0.02;
+
+/// True when a model read with +y up is probably +z up (a scan or CAD part
+/// lying on its back): its extent along y is the smallest of the three,
+/// and it rests on a flat base at its lowest z: at least 5 % of its drawn
+/// vertices lie in the slab of [`BASE_SLAB`] of the z extent above the z
+/// minimum, and at least three times the share in the same slab at the y
+/// minimum. (A y-up scan has its base at the y minimum; a y-up car, long
+/// along z and low along y, has no such slab at its nose.)
+pub fn looks_z_up(scene: &Scene) -> bool {
+    let b = world_bounds(scene);
+    if b.is_empty() {
+        return false;
+    }
+    let ext = b.extent();
+    if !(ext.y < ext.x && ext.y < ext.z) {
+        return false;
+    }
+    let (mut n, mut base_y, mut base_z) = (0usize, 0usize, 0usize);
+    for_each_world_point(scene, |p| {
+        n += 1;
+        base_y += usize::from(p.y - b.min.y <= BASE_SLAB * ext.y);
+        base_z += usize::from(p.z - b.min.z <= BASE_SLAB * ext.z);
+    });
+    base_z as f32 >= 0.05 * n as f32 && base_z >= 3 * base_y
+}
+
 /// Places a camera for `scene` (see the module documentation) with `up` as
 /// the vertical, for images of `aspect` = width / height. `fov_y_degrees`
 /// replaces the default field of view (45 degrees outside, 60 inside). An
@@ -233,7 +290,8 @@ pub fn frame_scene(scene: &Scene, up: UpAxis, aspect: f32, fov_y_degrees: Option
     }
 }
 
-/// The three-quarter view from above, fitted to the projected vertices.
+/// The front view from [`ELEVATION_DEGREES`] above, fitted to the
+/// projected vertices.
 fn exterior_camera(
     scene: &Scene,
     bounds: Aabb,
@@ -243,12 +301,11 @@ fn exterior_camera(
 ) -> Camera {
     let base = Camera::default();
     let fov = fov_y_degrees.unwrap_or(base.fov_y_degrees);
-    let (az, el) = (40f32.to_radians(), 25f32.to_radians());
+    let el = ELEVATION_DEGREES.to_radians();
     let upv = up.vector();
     let front = up.front();
-    let side = front.cross(upv); // the model's right, seen from the front
     // Unit vector from the target towards the eye.
-    let d = (front * az.cos() * el.cos() + side * az.sin() * el.cos() + upv * el.sin()).normalize();
+    let d = (front * el.cos() + upv * el.sin()).normalize();
     let forward = -d;
     let right = forward.cross(upv).normalize();
     let cam_up = right.cross(forward);
@@ -328,6 +385,9 @@ fn probe_rays(scene: &Scene, probes: &[Ray]) -> Vec<Option<(f32, bool)>> {
     let mut world: Vec<Vec3> = Vec::new();
     for o in &scene.objects {
         let m = o.transform.world_from_object();
+        // A mirroring matrix turns the winding: the front is then the side
+        // the stored winding calls the back (glTF 2.0, section 3.7.4).
+        let mirrored = m.determinant() < 0.0;
         match o.geometry {
             Geometry::Mesh(id) => {
                 let Some(mesh) = scene.meshes.get(id.index()) else {
@@ -346,7 +406,7 @@ fn probe_rays(scene: &Scene, probes: &[Ray]) -> Vec<Option<(f32, bool)>> {
                     let ng = (b - a).cross(c - a);
                     for (i, r) in rays.iter().enumerate() {
                         if let Some((t, _, _)) = r.intersect(a, b, c) {
-                            consider(i, t, ng.dot(dirs[i]) < 0.0);
+                            consider(i, t, (ng.dot(dirs[i]) < 0.0) != mirrored);
                         }
                     }
                 }
@@ -449,9 +509,14 @@ fn interior_camera(
         near: (diag * 1e-4).max(1e-6),
         far: 2.0 * diag.max(1e-3),
     };
+    let vertical = probe(scene, eye0, &[upv]);
     let inside = Inside {
         point: eye0,
         mean_distance,
+        to_ceiling: vertical[0].map_or(bounds.max.dot(upv) - eye0.dot(upv), |(t, _)| t),
+        to_floor: eye0.dot(upv) - low,
+        horizontal_extent: [ext.dot(front.abs()), ext.dot(side.abs())],
+        up,
     };
     Some((camera, inside))
 }
@@ -535,6 +600,11 @@ mod tests {
         let f = frame_scene(&room(), UpAxis::Y, 4.0 / 3.0, None);
         let inside = f.inside.expect("an interior");
         assert!(inside.mean_distance > 1.0 && inside.mean_distance < 5.0);
+        // The point is at mid-height of the 3-unit room (y from -1.5 to
+        // 1.5), above the table.
+        assert!((inside.to_ceiling - 1.5).abs() < 1e-3, "{inside:?}");
+        assert!((inside.to_floor - 1.5).abs() < 1e-3, "{inside:?}");
+        assert_eq!(inside.horizontal_extent, [8.0, 6.0]);
         let c = f.camera;
         let inside = |p: Vec3| p.abs().cmplt(Vec3::new(3.0, 1.5, 4.0)).all();
         assert!(inside(c.eye), "eye {}", c.eye);
@@ -600,5 +670,93 @@ mod tests {
             assert!((cam.eye - cam.look_at).dot(up.vector()) > 0.0);
             assert!(lo.z > 0.0 && hi.z < 1.0, "inside the clip range: {lo} {hi}");
         }
+    }
+
+    /// The exterior camera looks at the model's front (+z for y up, -y for
+    /// z up), from ELEVATION_DEGREES above, not round to one side.
+    #[test]
+    fn exterior_framing_looks_at_the_front_from_a_little_above() {
+        let s = scene_of(vec![(
+            box_mesh(Vec3::new(1.0, 0.7, 0.2)),
+            Transform::default(),
+        )]);
+        let el = ELEVATION_DEGREES.to_radians();
+        for (up, want) in [
+            (UpAxis::Y, Vec3::new(0.0, el.sin(), el.cos())),
+            (UpAxis::Z, Vec3::new(0.0, -el.cos(), el.sin())),
+        ] {
+            let c = frame_scene(&s, up, 4.0 / 3.0, None).camera;
+            let d = (c.eye - c.look_at).normalize();
+            assert!((d - want).length() < 1e-4, "{up:?}: {d} vs {want}");
+        }
+        assert!((15.0..=20.0).contains(&ELEVATION_DEGREES));
+    }
+
+    /// A vertex no triangle uses (a stray point far away) does not move or
+    /// shrink the framing: the bounds are those of the drawn geometry.
+    #[test]
+    fn unreferenced_vertices_do_not_count() {
+        let mesh = box_mesh(Vec3::ONE);
+        let framed = frame_scene(
+            &scene_of(vec![(mesh.clone(), Transform::default())]),
+            UpAxis::Y,
+            1.0,
+            None,
+        );
+        let mut stray = mesh;
+        stray.positions.push(Vec3::new(500.0, 0.0, 0.0));
+        let s = scene_of(vec![(stray, Transform::default())]);
+        assert_eq!(world_bounds(&s).max.x, 1.0);
+        assert_eq!(frame_scene(&s, UpAxis::Y, 1.0, None), framed);
+    }
+
+    /// A closed box placed by a mirroring matrix (scale -1 along x) has its
+    /// winding turned, so its outward faces are still its front: it is
+    /// framed from outside, not taken for a room with the camera inside
+    /// (issue 42: a glTF with negative-scale nodes rendered black). Mirrored
+    /// walls facing in still make a room.
+    #[test]
+    fn a_mirrored_model_is_framed_from_outside() {
+        let mirror = Transform::from_matrix(glam::Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
+        let s = scene_of(vec![(uv_sphere(1.0, 24, 12), mirror)]);
+        let f = frame_scene(&s, UpAxis::Y, 1.0, None);
+        assert!(f.inside.is_none());
+        assert!(f.camera.eye.length() > 1.5, "{}", f.camera.eye);
+        let mut room = room();
+        for o in &mut room.objects {
+            o.transform = Transform::from_matrix(
+                glam::Mat4::from_scale(Vec3::new(1.0, 1.0, -1.0)) * o.transform.world_from_object(),
+            );
+        }
+        assert!(frame_scene(&room, UpAxis::Y, 1.0, None).inside.is_some());
+    }
+
+    /// A model standing on a flat base with +z up, read as y up, looks
+    /// Z-up; the same model with +y up, and a long low model (a car along
+    /// z), do not.
+    #[test]
+    fn a_model_on_its_back_looks_z_up() {
+        // A figure: a wide flat base slab (many vertices) and a tall body.
+        let mut figure = box_mesh(Vec3::new(0.3, 0.2, 1.0));
+        let mut base = uv_sphere(0.5, 24, 12);
+        for p in &mut base.positions {
+            *p = Vec3::new(p.x, 0.6 * p.y, -1.0 + 0.01 * (p.z + 0.5));
+        }
+        let offset = figure.positions.len() as u32;
+        figure.positions.extend(base.positions.iter());
+        figure
+            .indices
+            .extend(base.indices.iter().map(|t| t.map(|i| i + offset)));
+        figure.normals.clear();
+        let z_up = scene_of(vec![(figure.clone(), Transform::default())]);
+        assert!(looks_z_up(&z_up));
+        let stood =
+            Transform::from_matrix(glam::Mat4::from_rotation_x(-std::f32::consts::FRAC_PI_2));
+        assert!(!looks_z_up(&scene_of(vec![(figure, stood)])));
+        let car = scene_of(vec![(
+            box_mesh(Vec3::new(0.9, 0.7, 2.2)),
+            Transform::default(),
+        )]);
+        assert!(!looks_z_up(&car));
     }
 }

@@ -1,5 +1,5 @@
-//! Regenerates `assets/studio_small_03_256x128.hdr` (the default studio
-//! environment) from Poly Haven's CC0 `studio_small_03_1k.hdr`: a box
+//! Regenerates `assets/studio_small_03_256x128.hdr` (the benchmarks'
+//! studio environment) from Poly Haven's CC0 `studio_small_03_1k.hdr`: a box
 //! filter over whole source texels down to `W H` (16x8 when not given;
 //! the shipped map is made with `256 128`).
 //!

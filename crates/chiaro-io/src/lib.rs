@@ -8,6 +8,8 @@
 //! - [`images`]: decoding image textures (PNG, JPEG, HDR, EXR) to linear texels.
 //! - [`output`]: writing films (PNG 8/16-bit, OpenEXR with depth and normal,
 //!   Radiance HDR, PPM, palette PNG), always through a temporary file and a rename.
+//! - [`studio`]: the neutral studio environment that lights a model file
+//!   without lights.
 //!
 //! The entry point for scenes is [`load_scene`]: it reads a `.toml` scene,
 //! or an `.obj` / `.gltf` / `.glb` file as a whole scene (with a camera
@@ -29,12 +31,13 @@ pub mod output;
 pub mod plain;
 pub mod ply;
 pub mod scene_toml;
+pub mod studio;
 mod warnings;
 
 pub use error::{IoError, Result};
 
 pub use chiaro_core::framing::world_bounds;
-use chiaro_core::framing::{self, Framing, UpAxis};
+use chiaro_core::framing::{self, Framing, Inside, UpAxis};
 use chiaro_core::scene::{
     Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, NamedCamera, Object, Scene,
     Severity, Texture, TextureId, Transform,
@@ -70,9 +73,11 @@ pub(crate) fn lowercase_extension(path: &Path) -> String {
 /// `.mtl`), `.gltf`, `.glb` or `.ply`.
 ///
 /// A mesh file read this way becomes a whole scene: its first camera (or one
-/// framing its bounds, looking down -z), its lights (or an ambient light plus
-/// a directional light from over the camera's shoulder), and default render
-/// settings.
+/// framing it from its front, `framing::frame_scene`), its lights (or the
+/// neutral studio and a key light from over the camera's shoulder; in a
+/// room, a ceiling panel and an ambient fill: [`framed_lights`]), and
+/// default render settings. An OBJ or PLY file that looks Z-up gets a
+/// warning naming `--up z`.
 ///
 /// Returns an [`IoError`] naming the file (and the line and column, or the
 /// glTF JSON path) when the file cannot be read, does not parse, or
@@ -366,6 +371,16 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
         None => {
             // A vertex at 1e30 would overflow the framing into a NaN camera.
             framing::check_framable(&scene).map_err(|m| IoError::format(path, m))?;
+            // OBJ and PLY do not say which axis is up (glTF is +y up).
+            if matches!(lowercase_extension(path).as_str(), "obj" | "ply")
+                && framing::looks_z_up(&scene)
+            {
+                warnings.push(format!(
+                    "{}: the model looks Z-up (thinnest along y, resting on a flat base \
+                     at its lowest z) and is shown with +y up: `--up z` stands it upright",
+                    path.display()
+                ));
+            }
             framing::frame_scene(&scene, UpAxis::Y, scene.render.aspect(), None)
         }
     };
@@ -382,7 +397,7 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
                 "the studio environment (lighting only, not the background) \
                  and a directional light"
             } else {
-                "an ambient light and a point light"
+                "an ambient light and an area light under the ceiling"
             };
             warnings.push(format!(
                 "{}: the file has no lights: added {added}",
@@ -395,54 +410,101 @@ pub fn whole_scene(imported: Imported, path: &Path) -> Result<Loaded> {
 
 /// The lights added to a file that has none, for the camera `framed`:
 /// [`default_lights`] outside; inside an interior (where a directional
-/// light would be shut out by the walls), ambient 0.1 and a point light at
-/// the open point the interior test passed, of intensity `d^2` for the
-/// mean distance `d` to the walls (so they receive about what a
-/// directional light of intensity 1 gives).
+/// light or the studio would be shut out by the walls), [`room_lights`].
 pub fn framed_lights(framed: &Framing) -> Vec<Light> {
-    let Some(inside) = framed.inside else {
-        return default_lights(&framed.camera);
+    match framed.inside {
+        Some(inside) => room_lights(&inside),
+        None => default_lights(&framed.camera),
+    }
+}
+
+/// The ambient fill of [`room_lights`]: with the default ambient
+/// reflectance (0.1 of the diffuse), what a wall in shadow keeps in the
+/// local techniques, which have no interreflection.
+pub const ROOM_AMBIENT: f32 = 0.5;
+
+/// The radiance a white (albedo 0.8) floor straight under the ceiling
+/// panel of [`room_lights`] reflects.
+pub const ROOM_FLOOR_RADIANCE: f32 = 0.5;
+
+/// The lights of an interior without its own: an ambient fill
+/// ([`ROOM_AMBIENT`]) and a ceiling panel, a downward area light a little
+/// under the ceiling above the interior's open point, as wide as the
+/// height it hangs at (at most half the room each way), so that the light
+/// falls evenly and a table under it gets no more than about 1.5 times
+/// what the floor gets. Its radiance makes a white floor straight below
+/// reflect [`ROOM_FLOOR_RADIANCE`] (by the point-to-rectangle form factor).
+pub fn room_lights(inside: &Inside) -> Vec<Light> {
+    use chiaro_core::scene::AreaShape;
+    let up = inside.up.vector();
+    let front = inside.up.front();
+    let side = front.cross(up);
+    let below_ceiling = 0.95 * inside.to_ceiling.max(0.0);
+    let height = (below_ceiling + inside.to_floor.max(0.0)).max(1e-6);
+    let [front_ext, side_ext] = inside.horizontal_extent;
+    let (half_f, half_s) = (
+        (0.25 * front_ext).min(height).max(1e-3 * height),
+        (0.25 * side_ext).min(height).max(1e-3 * height),
+    );
+    let centre = inside.point + up * below_ceiling;
+    // edge_u x edge_v = front x side = -up: the panel shines down.
+    let shape = AreaShape::Quad {
+        corner: centre - front * half_f - side * half_s,
+        edge_u: front * (2.0 * half_f),
+        edge_v: side * (2.0 * half_s),
     };
+    let f = centre_form_factor(half_f / height, half_s / height);
+    let radiance = ROOM_FLOOR_RADIANCE / (0.8 * f.max(1e-4));
     vec![
         Light::Ambient {
             color: Vec3::ONE,
-            intensity: 0.1,
+            intensity: ROOM_AMBIENT,
         },
-        Light::Point {
-            position: inside.point,
+        Light::Area {
+            shape,
             color: Vec3::ONE,
-            intensity: inside.mean_distance.powi(2),
-            attenuation: Default::default(),
+            intensity: radiance,
+            two_sided: false,
         },
     ]
 }
 
-/// The studio HDR that lights a model without lights (see
-/// `assets/README.md`: Poly Haven's CC0 "Studio Small 03", 256x128).
-const STUDIO_HDR: &[u8] = include_bytes!("../assets/studio_small_03_256x128.hdr");
+/// The form factor from a small area facing a parallel rectangle, to the
+/// rectangle, straight under its centre: four corner terms of half-sizes
+/// `a`, `b` (in units of the distance), `F = (1 / 2 pi) [X / sqrt(1 + X^2)
+/// atan(Y / sqrt(1 + X^2)) + (X <-> Y)]` each (Howell's catalogue of
+/// configuration factors, B-3).
+fn centre_form_factor(a: f32, b: f32) -> f32 {
+    let corner = |x: f32, y: f32| {
+        let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
+        (x / sx * (y / sx).atan() + y / sy * (x / sy).atan()) / std::f32::consts::TAU
+    };
+    4.0 * corner(a, b)
+}
 
-/// The mean radiance (luminance) the studio environment is scaled to: a
-/// white Lambertian surface reflects about half of what the key light
-/// (intensity 1, head-on) gives it.
+/// The mean radiance (luminance) the studio environment is scaled to,
+/// with the key light [`KEY_LIGHT_INTENSITY`] chosen with it so that a
+/// white (albedo 0.8) Lambertian model is not clipped anywhere (its
+/// brightest point, facing both the brightest part of the dome and the
+/// key, stays below 1: `studio_and_key_leave_white_unclipped`), while the
+/// soft dome, not the key, lights most of what a mirror-like metal shows.
 pub const STUDIO_MEAN_LUMINANCE: f32 = 0.5;
 
-/// The decoded studio map, its intensity and its mean radiance at that
-/// intensity ([`environment_mean_radiance`]), computed once.
+/// The intensity of the directional key light added to a model without
+/// lights ([`default_lights`]).
+pub const KEY_LIGHT_INTENSITY: f32 = 0.3;
+
+/// The size of the baked studio map: enough for the softboxes' edges.
+const STUDIO_SIZE: (u32, u32) = (256, 128);
+
+/// The neutral studio map ([`studio::neutral_studio_texture`]), its
+/// intensity (scaling it to [`STUDIO_MEAN_LUMINANCE`]) and its mean
+/// radiance at that intensity ([`environment_mean_radiance`]), computed
+/// once.
 fn studio() -> &'static (ImageTexture, f32, Vec3) {
     static STUDIO: OnceLock<(ImageTexture, f32, Vec3)> = OnceLock::new();
     STUDIO.get_or_init(|| {
-        let texture =
-            match images::load_texture_bytes(STUDIO_HDR, "studio_small_03_256x128.hdr", false) {
-                Ok(t) => t,
-                // Embedded and tested (`studio_environment_decodes`): not reached.
-                Err(_) => ImageTexture {
-                    source: "studio (constant)".into(),
-                    width: 1,
-                    height: 1,
-                    texels: vec![[1.0; 4]],
-                    ..ImageTexture::default()
-                },
-            };
+        let texture = studio::neutral_studio_texture(STUDIO_SIZE.0, STUDIO_SIZE.1);
         let mut scene = Scene::default();
         let id = scene.add_texture(Texture::Image(texture.clone()));
         scene.environment = Some(studio_env(id, 1.0));
@@ -487,8 +549,9 @@ pub fn studio_ambient() -> Vec3 {
 }
 
 /// The light added to a file that has none, besides the studio
-/// environment: a white directional light of intensity 1 shining from
-/// above the camera's right shoulder. (No ambient light: the map's
+/// environment: a white directional light of intensity
+/// [`KEY_LIGHT_INTENSITY`] shining from above the camera's right shoulder
+/// (where the studio's key softbox is, for a camera framing the front). (No ambient light: the map's
 /// diffuse light reaches the local techniques through its spherical
 /// harmonics, `texture::environment_diffuse`.)
 pub fn default_lights(camera: &Camera) -> Vec<Light> {
@@ -502,7 +565,7 @@ pub fn default_lights(camera: &Camera) -> Vec<Light> {
     vec![Light::Directional {
         direction,
         color: Vec3::ONE,
-        intensity: 1.0,
+        intensity: KEY_LIGHT_INTENSITY,
     }]
 }
 
@@ -624,11 +687,10 @@ pub fn transform_light(light: &Light, m: Mat4) -> Light {
 mod studio_tests {
     use super::*;
 
-    /// The embedded map decodes (not the constant stand-in), is finite and
-    /// is scaled to the stated mean luminance; `default_lights` adds no
-    /// ambient stand-in for it.
+    /// The computed map is finite and is scaled to the stated mean
+    /// luminance; `default_lights` adds no ambient stand-in for it.
     #[test]
-    fn studio_environment_decodes() {
+    fn studio_environment_is_scaled_to_its_mean() {
         let (t, intensity, mean) = studio();
         assert_eq!((t.width, t.height), (256, 128));
         assert!(
@@ -656,5 +718,116 @@ mod studio_tests {
             (again - *mean).abs().max_element() < 1e-4,
             "{again} vs {mean}"
         );
+    }
+
+    /// The brightest a white (albedo 0.8) Lambertian surface gets under
+    /// the automatic lights, over 400 normals: `0.8 (E(n) / pi + key)`
+    /// with `E(n)` the map's irradiance summed over its texels, stays below
+    /// 0.95 (no clipping at exposure 0), and the darkest (facing the floor,
+    /// away from the key) above 0.25 (no black side).
+    #[test]
+    fn studio_and_key_leave_white_unclipped() {
+        let (t, intensity, _) = studio();
+        let (w, h) = (t.width as usize, t.height as usize);
+        let pi = std::f32::consts::PI;
+        // Texel directions and solid angles (rows weighted by sin(theta)).
+        let mut texels = Vec::with_capacity(w * h);
+        for j in 0..h {
+            let theta = (j as f32 + 0.5) / h as f32 * pi;
+            let dw = (2.0 * pi / w as f32) * (pi / h as f32) * theta.sin();
+            for i in 0..w {
+                let phi = ((i as f32 + 0.5) / w as f32 - 0.5) * 2.0 * pi;
+                let d = Vec3::new(
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                    -theta.sin() * phi.cos(),
+                );
+                texels.push((d, t.texels[j * w + i][0] * intensity * dw));
+            }
+        }
+        let key = default_lights(&Camera::default());
+        let Some(Light::Directional { direction, .. }) = key.first() else {
+            panic!("a directional key light: {key:?}");
+        };
+        let (mut brightest, mut darkest) = (0.0f32, f32::INFINITY);
+        let golden = pi * (3.0 - 5f32.sqrt());
+        for k in 0..400 {
+            let y = 1.0 - (2.0 * k as f32 + 1.0) / 400.0;
+            let r = (1.0 - y * y).sqrt();
+            let n = Vec3::new(
+                r * (golden * k as f32).cos(),
+                y,
+                r * (golden * k as f32).sin(),
+            );
+            let e: f32 = texels.iter().map(|(d, l)| l * n.dot(*d).max(0.0)).sum();
+            let white = 0.8 * (e / pi + KEY_LIGHT_INTENSITY * n.dot(-*direction).max(0.0));
+            brightest = brightest.max(white);
+            darkest = darkest.min(white);
+        }
+        eprintln!("white under the automatic lights: {darkest} to {brightest}");
+        assert!(brightest < 0.95, "{brightest}");
+        assert!(darkest > 0.25, "{darkest}");
+    }
+
+    /// The ceiling panel of a room faces down from just under the ceiling,
+    /// and its radiance makes the white floor below reflect
+    /// ROOM_FLOOR_RADIANCE: checked against the form factor summed over a
+    /// fine grid of the panel.
+    #[test]
+    fn the_room_panel_shines_down_on_the_floor() {
+        use chiaro_core::scene::AreaShape;
+        let inside = Inside {
+            point: Vec3::new(1.0, 1.2, -2.0),
+            mean_distance: 3.0,
+            to_ceiling: 1.8,
+            to_floor: 1.2,
+            horizontal_extent: [10.0, 4.0],
+            up: UpAxis::Y,
+        };
+        let lights = room_lights(&inside);
+        let Some(Light::Area {
+            shape:
+                AreaShape::Quad {
+                    corner,
+                    edge_u,
+                    edge_v,
+                },
+            intensity,
+            ..
+        }) = lights
+            .iter()
+            .find(|l| matches!(l, Light::Area { .. }))
+            .cloned()
+        else {
+            panic!("a quad area light: {lights:?}");
+        };
+        let n = edge_u.cross(edge_v).normalize();
+        assert!((n - Vec3::NEG_Y).length() < 1e-6, "{n}");
+        assert!((corner.y - (1.2 + 0.95 * 1.8)).abs() < 1e-5);
+        // A quarter of the room's extent each way, at most the height.
+        assert!((edge_v.length() - 2.0).abs() < 1e-5, "{edge_v}");
+        assert!((edge_u.length() - 5.0).abs() < 1e-5, "{edge_u}");
+        // Irradiance / pi at the floor below the centre, by a 200 x 200 sum.
+        let floor = inside.point - Vec3::Y * inside.to_floor;
+        let mut f = 0.0;
+        let k = 200;
+        let da = edge_u.length() * edge_v.length() / (k * k) as f32;
+        for i in 0..k {
+            for j in 0..k {
+                let q = corner
+                    + edge_u * ((i as f32 + 0.5) / k as f32)
+                    + edge_v * ((j as f32 + 0.5) / k as f32);
+                let d = q - floor;
+                let r2 = d.length_squared();
+                let cos = d.y / r2.sqrt();
+                f += cos * cos / (std::f32::consts::PI * r2) * da;
+            }
+        }
+        let floor_radiance = 0.8 * intensity * f;
+        assert!(
+            (floor_radiance - ROOM_FLOOR_RADIANCE).abs() < 2e-3,
+            "{floor_radiance}"
+        );
+        assert!((centre_form_factor(1e4, 1e4) - 1.0).abs() < 1e-3);
     }
 }

@@ -184,9 +184,11 @@ fn an_eye_close_to_a_framed_model_is_not_clipped_by_the_old_near_plane() {
     apply_camera(&mut s, &frame, aspect).expect("frames");
     let framed_near = s.camera.near;
     let centre = chiaro::scene_bounds(&s).center();
-    // Along the framed view, 80 % of the way to the old near plane.
+    // Along the framed view, 80 % of the way to the model's nearest point
+    // (the framing puts the near plane at half its depth), well past the
+    // old near plane.
     let old_eye = s.camera.eye;
-    let eye = old_eye + (centre - old_eye).normalize() * 0.8 * framed_near;
+    let eye = old_eye + (centre - old_eye).normalize() * 1.6 * framed_near;
     let choice = CameraChoice {
         eye: Some(eye),
         look_at: Some(centre),

@@ -116,6 +116,7 @@ fn path_at_depth_one_equals_direct_local_shading_on_a_normal_mapped_model() {
     // its samples' shading on the base level, and the two agree only where
     // the footprint is about a texel (a prefiltered normal does not shade
     // as the mean of the normals it replaces).
+    scene.camera = front_view(&scene);
     let cam = &mut scene.camera;
     let dir = cam.ray_direction(78.0, 58.0, 256, 256);
     cam.look_at = cam.eye + dir * (-cam.eye.z / dir.z);
