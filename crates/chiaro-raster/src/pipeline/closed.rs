@@ -53,7 +53,9 @@ fn closed_opaque_outside(ps: &PreparedScene<'_>, ts: &[u32], eye: Vec3, reach: f
         }
     }
     let outside = (lo - eye).max(eye - hi).max(Vec3::ZERO).length();
-    if !(outside > reach * 1.01 + 1e-4 * (hi - lo).max_element()) {
+    let clear = outside > reach * 1.01 + 1e-4 * (hi - lo).max_element();
+    if !clear {
+        // (NaN bounds land here too.)
         return false;
     }
     // Closed and consistently wound: each directed edge once, and its reverse.
