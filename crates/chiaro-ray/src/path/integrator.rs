@@ -78,7 +78,7 @@ pub(super) struct MaterialInfo {
     /// The parameters and their lobe choice.
     pub(super) bsdf: Bsdf,
     /// Emits from both faces (`Material::emission_two_sided`).
-    pub(super) two_sided: bool,
+    pub(super) emission_two_sided: bool,
     /// The material's sidedness (the back of a one-sided one is black).
     pub(super) sidedness: Sidedness,
     /// True when the emission is positive in some channel.
@@ -115,7 +115,7 @@ impl MaterialInfo {
             dark: surface.kd == Vec3::ZERO && !lobes.specular,
             emissive: surface.emission.max_element() > 0.0,
             bsdf,
-            two_sided: m.emission_two_sided,
+            emission_two_sided: m.emission_two_sided,
             sidedness: m.sidedness,
             textured: m.is_textured() || m.bump.is_some() || m.normal_map.is_some(),
             blend: m.alpha_mode == AlphaMode::Blend,
@@ -456,7 +456,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             let m = &info.bsdf.m;
             let cos_o = v.ng.dot(wo);
             // Emission seen along the path (one-sided unless two-sided).
-            if info.emissive && (info.two_sided || cos_o > 0.0) {
+            if info.emissive && (info.emission_two_sided || cos_o > 0.0) {
                 let w = if prev_pdf == 0.0 {
                     1.0
                 } else {
