@@ -212,3 +212,45 @@ fn a_one_sided_back_is_black_in_every_technique() {
         }
     }
 }
+
+/// `render.cull_backfaces` is a speed option: on every shipped scene the
+/// scan converter's picture is the same with it on and off.
+#[test]
+fn cull_backfaces_never_changes_a_picture() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    for name in [
+        "cornell-box",
+        "mitsuba-cbox",
+        "spotlights",
+        "teapot",
+        "transparency",
+        "whitted",
+    ] {
+        let scene = chiaro::io::load_scene(&dir.join(format!("{name}.toml")))
+            .expect("loads")
+            .scene;
+        for t in [Technique::Flat, Technique::Gouraud, Technique::Phong] {
+            let mut s = RenderSettings {
+                technique: t,
+                width: 64,
+                height: 48,
+                samples: 4,
+                ..scene.render.clone()
+            };
+            s.cull_backfaces = true;
+            let on = chiaro::render(&scene, &s, &NoProgress).expect("renders");
+            s.cull_backfaces = false;
+            let off = chiaro::render(&scene, &s, &NoProgress).expect("renders");
+            let bits = |f: &Film| -> Vec<[u32; 3]> {
+                f.color
+                    .iter()
+                    .map(|c| c.to_array().map(f32::to_bits))
+                    .collect()
+            };
+            assert!(
+                bits(&on) == bits(&off),
+                "{name} {t:?}: cull_backfaces changed the picture"
+            );
+        }
+    }
+}

@@ -13,7 +13,8 @@ use std::collections::HashMap;
 /// Per object of `ps.scene`: true when the eye of `camera` (with image
 /// aspect `aspect`, width over height) cannot see any of its back faces.
 /// That holds when the object's triangles form a closed surface (each edge,
-/// keyed by its end positions, used once in each direction), wound
+/// keyed by its end positions to a millionth of the object's size, used
+/// once in each direction), wound
 /// outwards (positive signed volume), every material opaque (no
 /// transmission, no alpha), and the eye and the near plane's rectangle
 /// outside its bounding box.
@@ -59,17 +60,23 @@ fn closed_opaque_outside(ps: &PreparedScene<'_>, ts: &[u32], eye: Vec3, reach: f
         return false;
     }
     // Closed and consistently wound: each directed edge once, and its reverse.
-    let key = |p: Vec3| p.to_array().map(f32::to_bits);
-    let mut edges: HashMap<([u32; 3], [u32; 3]), i32> = HashMap::with_capacity(3 * ts.len());
+    // Positions within a millionth of the object's size are one vertex (a
+    // tessellated sphere's seam and poles are computed, not shared).
+    let cell = (hi - lo).max_element().max(f32::MIN_POSITIVE) * 1e-6;
+    let key = |p: Vec3| ((p - lo) / cell).round().to_array().map(|x| x as i64);
+    let mut edges: HashMap<([i64; 3], [i64; 3]), i32> = HashMap::with_capacity(3 * ts.len());
     let mut volume = 0.0f64;
     for &t in ts {
         let c = corners(t);
+        let keys = c.map(key);
+        // A triangle with two equal corners (a sphere's pole) has no area
+        // and would count an edge both ways.
+        if keys[0] == keys[1] || keys[1] == keys[2] || keys[2] == keys[0] {
+            continue;
+        }
         volume += f64::from(c[0].dot(c[1].cross(c[2])));
         for k in 0..3 {
-            let (a, b) = (key(c[k]), key(c[(k + 1) % 3]));
-            if a == b {
-                continue;
-            }
+            let (a, b) = (keys[k], keys[(k + 1) % 3]);
             let (e, s) = if a < b { ((a, b), 1) } else { ((b, a), 1 << 8) };
             *edges.entry(e).or_insert(0) += s;
         }
@@ -137,6 +144,19 @@ mod tests {
         s.camera.eye = Vec3::new(0.0, 0.0, 0.6);
         s.camera.near = 0.2;
         assert!(!hidden(&s));
+    }
+
+    #[test]
+    fn a_tessellated_sphere_hides_its_backs() {
+        let mut s = Scene::default();
+        s.add_material(Material::default());
+        s.objects.push(Object {
+            geometry: Geometry::Sphere { radius: 1.0 },
+            ..Default::default()
+        });
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        assert!(!ps.triangles.is_empty());
+        assert!(hidden_backs(&ps, &s.camera, 1.0)[0]);
     }
 
     #[test]
