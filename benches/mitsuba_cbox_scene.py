@@ -69,7 +69,7 @@ out += [
     "[material.light]",
     f"diffuse = {fmt(d[light['bsdf']['id']]['reflectance']['value'])}",
     f"emission = {fmt(light['emitter']['radiance']['value'])}",
-    "two_sided = false",
+    "sidedness = \"one-sided\"",
     "",
 ]
 for key in ("floor", "ceiling", "back", "green-wall", "red-wall", "small-box", "large-box", "light"):

@@ -218,7 +218,7 @@ impl<'s> PreparedScene<'s> {
                     shape: AreaShape::Triangle { a, b, c },
                     color,
                     intensity: 1.0,
-                    two_sided: m.two_sided,
+                    two_sided: m.emission_two_sided,
                 });
             }
         }
@@ -776,7 +776,7 @@ impl<'s> PreparedScene<'s> {
             dpdv,
             material,
             alpha,
-            two_sided: m.two_sided,
+            sidedness: m.sidedness,
         }
     }
 }
@@ -799,8 +799,19 @@ pub struct ShadingSurface {
     pub material: SurfaceMaterial,
     /// Coverage in `[0, 1]` ([`alpha_product`]).
     pub alpha: f32,
-    /// The material is shaded on both sides.
-    pub two_sided: bool,
+    /// The material's sidedness: how the back is seen
+    /// ([`crate::scene::Sidedness::seen_from`]).
+    pub sidedness: crate::scene::Sidedness,
+}
+
+impl ShadingSurface {
+    /// How a viewer in unit direction `wo` sees this surface (the one
+    /// sidedness rule, [`crate::scene::Sidedness::seen_from`]); the
+    /// surface transmits when its textured `kt` is positive.
+    pub fn facing(&self, wo: Vec3) -> crate::scene::Facing {
+        let transmissive = self.material.kt.max_element() > 0.0;
+        self.sidedness.seen_from(self.hit.ng.dot(wo), transmissive)
+    }
 }
 
 /// The rays through the neighbouring pixels `(x + 1, y)` and `(x, y + 1)`

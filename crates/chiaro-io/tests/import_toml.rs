@@ -554,3 +554,39 @@ fn scene_validate_issues_are_placed_at_the_key() {
         "{m}"
     );
 }
+
+#[test]
+fn material_sidedness_and_its_older_keys() {
+    use chiaro_core::scene::Sidedness;
+    let of = |keys: &str| {
+        let text = format!("[material.m]\ndiffuse = 0.5\n{keys}\n");
+        let scene = load_scene_str(&text, Path::new("/nonexistent-dir"), "t.toml")
+            .expect("parses")
+            .scene;
+        let m = scene.materials.iter().find(|m| m.name == "m").expect("m");
+        (m.sidedness, m.emission_two_sided)
+    };
+    // Nothing said: two-sided, emitting from the front.
+    assert_eq!(of(""), (Sidedness::TwoSided, false));
+    assert_eq!(
+        of("sidedness = \"one-sided\""),
+        (Sidedness::OneSided, false)
+    );
+    assert_eq!(of("sidedness = \"culled\""), (Sidedness::Culled, false));
+    assert_eq!(
+        of("sidedness = \"two-sided\"\nemission_two_sided = true"),
+        (Sidedness::TwoSided, true)
+    );
+    // The older keys.
+    assert_eq!(of("two_sided = true"), (Sidedness::TwoSided, true));
+    assert_eq!(of("two_sided = false"), (Sidedness::OneSided, false));
+    assert_eq!(of("cull_backface = true"), (Sidedness::Culled, false));
+    // `sidedness` wins over them.
+    assert_eq!(
+        of("sidedness = \"culled\"\ntwo_sided = true"),
+        (Sidedness::Culled, true)
+    );
+    let (l, c, m) = error_at("[material.m]\nsidedness = \"both\"\n");
+    assert_eq!((l, c), (2, 13), "{m}");
+    assert!(m.contains("one-sided"), "{m}");
+}

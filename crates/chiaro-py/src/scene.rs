@@ -200,7 +200,8 @@ impl PyScene {
     /// `ambient`, `diffuse`, `specular` (RGB or one number), `shininess`,
     /// `model` (`"phong"`, `"blinn"`, `"torrance-sparrow"`), `roughness`,
     /// `reflect`, `transmit`, `ior`, `absorption`, `fresnel`, `emission`,
-    /// `two_sided`, ...
+    /// `sidedness` (`"two-sided"`, the default, `"one-sided"`, `"culled"`),
+    /// `emission_two_sided`, ...
     #[pyo3(signature = (name, **props))]
     fn add_material(&mut self, name: &str, props: Option<&Bound<'_, PyDict>>) -> PyResult<u32> {
         let d = serde_json::to_value(Material::default()).unwrap_or(Value::Null);

@@ -27,8 +27,13 @@
 //!   radiance of irradiance `pi Ip f_att cos / d^2`) added to `E`, with shadow
 //!   rays. Ambient lights are ignored.
 //! - Elements are one-sided: light leaves the front (the side of the
-//!   counter-clockwise normal). Two-sided materials are treated as
-//!   one-sided. The display shows an element's radiance from either side.
+//!   counter-clockwise normal), and only the front gathers. A two-sided
+//!   surface (the default, `Sidedness::TwoSided`) is solved as one-sided
+//!   (a limitation): its back shows its front's reflected light, so a
+//!   surface lit only from behind shows dark from both sides. The display
+//!   follows the sidedness rule otherwise: the back of a `OneSided`
+//!   material is black, the back of a `Culled` one is not drawn, and
+//!   emission shows on a back only when `emission_two_sided`.
 //!
 //! # Glossary
 //! - **source triangle**: a triangle of the prepared scene (or of a meshed
@@ -70,7 +75,7 @@ use chiaro_core::error::CoreError;
 use chiaro_core::film::Film;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::{RenderSettings, Scene, Technique};
+use chiaro_core::scene::{Facing, RenderSettings, Scene, Technique};
 use chiaro_core::shading::texture::background_radiance;
 use chiaro_core::technique::{Description, Feature};
 use direct::point_light_direct;
@@ -659,9 +664,9 @@ pub(crate) fn render_solution(
         })
         .collect();
     let surfaces = DisplaySurfaces::new(ctx.tessellated(), solution);
-    // The eye does not see the backs of single-sided (`cull_backface`)
-    // materials, as in the other techniques: such elements are left out.
-    let culling = scene.materials.iter().any(|m| m.cull_backface);
+    // The eye does not see the backs of `Sidedness::Culled` materials, as in
+    // the other techniques: such elements are left out.
+    let culling = scene.materials.iter().any(|m| !m.sidedness.eye_sees_back());
     let (kept, ids): (Vec<[u32; 3]>, Vec<u32>) = if culling {
         let ps = &surfaces.ps;
         let nt = (solution.prepared_triangles as usize).min(ps.triangles.len());
@@ -672,7 +677,7 @@ pub(crate) fn render_solution(
                     let c0 = solution.vertices[solution.elements[e][0] as usize];
                     normals[e].dot(cam.eye - c0) < 0.0
                 };
-                !(s < nt && ps.material(ps.tri_material[s]).cull_backface && back())
+                !(s < nt && !ps.material(ps.tri_material[s]).sidedness.eye_sees_back() && back())
             })
             .map(|e| (solution.elements[e], e as u32))
             .unzip()
@@ -718,7 +723,8 @@ pub(crate) fn render_solution(
                                 0.0
                             };
                             let p = cam.eye + d * t;
-                            col += surfaces.radiance(solution, e, &c, p);
+                            let back = n.dot(d) > 0.0;
+                            col += surfaces.radiance(solution, e, &c, p, back);
                             if t.is_finite() && t < depth {
                                 depth = t;
                                 normal = n;
@@ -775,12 +781,26 @@ impl<'a> DisplaySurfaces<'a> {
     /// surface layer's emission plus its textured `kd / pi` times the
     /// Gouraud-interpolated irradiance of the solution (solved with each
     /// patch's albedo), so a texture keeps its detail within a patch; an
-    /// area light's element shows its emission.
-    fn radiance(&self, solution: &RadiositySolution, e: usize, c: &[Vec3; 3], p: Vec3) -> Vec3 {
+    /// area light's element shows its emission. Seen from the `back`, the
+    /// sidedness rule: a one-sided surface reflects nothing, and emission
+    /// shows only when two-sided (elements are one-sided: a two-sided
+    /// surface's back shows its front's irradiance, a listed limitation).
+    fn radiance(
+        &self,
+        solution: &RadiositySolution,
+        e: usize,
+        c: &[Vec3; 3],
+        p: Vec3,
+        back: bool,
+    ) -> Vec3 {
         let s = self.sources[e];
         let Some(uniform) = self.uniform.get(s as usize) else {
             return solution.element_emission[e];
         };
+        let m = self.ps.material(self.ps.tri_material[s as usize]);
+        let transmissive = m.transmit.max_element() > 0.0;
+        let black = back && m.sidedness.seen_from(-1.0, transmissive) == Facing::BackBlack;
+        let emits = !back || m.emission_two_sided;
         let irradiance = solution.interpolate(
             &solution.vertex_irradiance,
             e,
@@ -791,6 +811,10 @@ impl<'a> DisplaySurfaces<'a> {
                 clamped_weights(mesh::barycentric(&solution.source_corners[s as usize], p));
             surface(self.ps, s, u, v)
         });
+        let emission = if emits { emission } else { Vec3::ZERO };
+        if black {
+            return emission;
+        }
         emission + kd * irradiance * std::f32::consts::FRAC_1_PI
     }
 }

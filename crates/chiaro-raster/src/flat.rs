@@ -44,7 +44,9 @@ impl Ctx<'_, '_> {
     fn flat_point(&self, td: &TriData<'_>, p: Vec3) -> ShadingPoint {
         let mut n = Vec3::from(td.ng);
         // flipped(t), with the cached face normal (PreparedScene::face_normal).
-        if td.material.two_sided && td.ng.dot(Vec3A::from(self.rays.eye) - td.p[0]) < 0.0 {
+        if td.material.sidedness.eye_sees_back()
+            && td.ng.dot(Vec3A::from(self.rays.eye) - td.p[0]) < 0.0
+        {
             n = -n;
         }
         let wo = (self.rays.eye - p).normalize_or_zero();

@@ -171,7 +171,7 @@ pub(crate) fn on_demand_gouraud(ctx: &Ctx<'_, '_>) -> bool {
     let m = ps.material(id);
     ctx.lean_frame
         && !needs_footprint(m)
-        && !m.two_sided
+        && !m.sidedness.eye_sees_back()
         && !matches!(ctx.class.get(id.index()), Some(Class::Blend(_)))
 }
 
@@ -188,8 +188,12 @@ pub(crate) fn uniform_vertex_shading(
 ) -> PolyShading {
     let ps = ctx.ps;
     let nv = ps.positions.len();
-    // Without two-sided materials no back is seen (Ctx::flipped).
-    let two_sided = ps.scene.materials.iter().any(|m| m.two_sided);
+    // Without materials whose back the eye sees, no back is seen (Ctx::flipped).
+    let two_sided = ps
+        .scene
+        .materials
+        .iter()
+        .any(|m| m.sidedness.eye_sees_back());
     let flags = |n: usize| -> Vec<AtomicBool> { (0..n).map(|_| AtomicBool::new(false)).collect() };
     let front = flags(nv);
     let back = if two_sided { flags(nv) } else { Vec::new() };

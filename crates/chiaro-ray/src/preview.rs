@@ -10,7 +10,7 @@ use chiaro_core::error::Result;
 use chiaro_core::film::{Film, TilePixels, render_tiles};
 use chiaro_core::geometry::Ray;
 use chiaro_core::sampling::{pixel_rng, uniform2};
-use chiaro_core::scene::{Attenuation, Light, Technique};
+use chiaro_core::scene::{Attenuation, Facing, Light, Technique};
 use chiaro_core::shading::texture::background_radiance;
 use chiaro_core::shading::{LocalLighting, ShadingPoint, sanitize, shade_local};
 use chiaro_core::technique::{Description, Feature};
@@ -158,7 +158,18 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
                                 ng,
                                 wo,
                             };
-                            let m = ss.material;
+                            // The sidedness rule: the back of a one-sided
+                            // surface reflects nothing; emitters emit from
+                            // their front unless two-sided.
+                            let mut m = ss.material;
+                            if ss.facing(wo) == Facing::BackBlack {
+                                m = m.without_reflection();
+                            }
+                            if surf.ng.dot(wo) < 0.0
+                                && !prepared.material(surf.material).emission_two_sided
+                            {
+                                m.emission = Vec3::ZERO;
+                            }
                             sums[k] += shade_local(
                                 &m,
                                 &sp,

@@ -109,6 +109,36 @@ const EXCEPTIONS: &[(&str, &str, &str, &str)] = &[
         "map",
         "as teapot: one pixel beyond two pixels of the edge",
     ),
+    (
+        "back faces shown",
+        "quad-back",
+        "gouraud",
+        "the method, not the side: the vertex lighting of a 2 x 2 quad 3 units from its point light, interpolated over it, misses the falloff's curvature (the backdrop's 0.5-unit rows hold)",
+    ),
+    (
+        "back faces shown",
+        "quad-back",
+        "radiosity",
+        "radiosity's elements are one-sided (its listed limitation): the back of a surface gathers nothing, so a quad lit from behind is dark on both sides",
+    ),
+    (
+        "back faces shown",
+        "backdrop-behind",
+        "radiosity",
+        "as quad-back: one-sided elements",
+    ),
+    (
+        "radiosity = path (diffuse)",
+        "quad-back",
+        "radiosity, path",
+        "as back faces shown: one-sided elements",
+    ),
+    (
+        "radiosity = path (diffuse)",
+        "backdrop-behind",
+        "radiosity, path",
+        "as back faces shown: one-sided elements",
+    ),
 ];
 
 /// Cells not run at all, by (rule, case, technique) and the measured
@@ -341,7 +371,75 @@ fn cases() -> Vec<Case> {
     }
     v.push(environment_ball(true));
     v.push(environment_ball(false));
+    v.push(quad_back());
+    v.push(backdrop_behind());
     v
+}
+
+/// An OBJ scene (which says nothing about sidedness, so two-sided) with our
+/// own camera and a point light on the camera's side, on a black
+/// background, without automatic lights or environment.
+fn obj_case(name: &str, obj: &str, eye: Vec3, look_at: Vec3, light: Vec3) -> Case {
+    let mut scene = chiaro_testkit::scenes::load_text(&format!("{name}.obj"), obj);
+    scene.camera.eye = eye;
+    scene.camera.look_at = look_at;
+    scene.camera.up = Vec3::Y;
+    scene.environment = None;
+    scene.background = Vec3::ZERO;
+    scene.lights = vec![Light::Point {
+        position: light,
+        color: Vec3::ONE,
+        intensity: 15.0,
+        attenuation: Default::default(),
+    }];
+    Case {
+        name: name.into(),
+        scene,
+    }
+}
+
+/// An open mesh of one 2 x 2 quad facing +z, seen (and lit) from its back.
+fn quad_back() -> Case {
+    let obj = "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n";
+    let eye = Vec3::new(0.4, 0.3, -3.0);
+    obj_case("quad-back", obj, eye, Vec3::ZERO, Vec3::new(0.8, 1.2, -2.5))
+}
+
+/// A studio backdrop (an open sweep: a floor curving up into a wall, its
+/// front towards the studio at +y and +z) seen from behind the wall, lit
+/// from the camera's side.
+fn backdrop_behind() -> Case {
+    // The profile from the floor's far end to the wall's top, in (y, z).
+    // Rows of 0.5 or less, 8 columns: Gouraud's vertex lighting then
+    // follows the point light's falloff closely.
+    let mut profile: Vec<(f32, f32)> = (0..5).map(|k| (0.0, 3.0 - 0.5 * k as f32)).collect();
+    for k in 1..=4 {
+        let a = std::f32::consts::FRAC_PI_2 * k as f32 / 4.0;
+        profile.push((0.5 - 0.5 * a.cos(), 0.5 - 0.5 * a.sin()));
+    }
+    profile.extend((1..=4).map(|k| (0.5 + 0.5 * k as f32, 0.0)));
+    let mut obj = String::new();
+    for &(y, z) in &profile {
+        for c in 0..=8 {
+            let _ = writeln!(obj, "v {} {y} {z}", -2.0 + 0.5 * c as f32);
+        }
+    }
+    for i in 0..profile.len() - 1 {
+        for c in 0..8 {
+            let a = 9 * i + c + 1;
+            let b = a + 9;
+            let _ = writeln!(obj, "f {a} {} {} {b}", a + 1, b + 1);
+        }
+    }
+    let eye = Vec3::new(0.6, 1.6, -4.0);
+    let light = Vec3::new(1.5, 2.5, -3.0);
+    obj_case(
+        "backdrop-behind",
+        &obj,
+        eye,
+        Vec3::new(0.0, 1.0, 0.0),
+        light,
+    )
 }
 
 // ------------------------------------------------------------ rendering
@@ -967,6 +1065,54 @@ fn rule_radiosity_keeps_textures(m: &mut Matrix, case: &Case, ids: &Ids) {
     );
 }
 
+/// The cases whose first object is an open two-sided mesh seen from its
+/// back (ARCHITECTURE.md, "Sidedness").
+const BACK_CASES: &[&str] = &["quad-back", "backdrop-behind"];
+
+/// Every technique shows a two-sided surface seen from its back: on the
+/// interior pixels of the case's first object, every technique draws a
+/// surface (finite depth), and each lit technique's mean is within 4% of
+/// the path tracer's (relative error summed over channels, as the radiosity
+/// rule); the preview's eye light is checked for coverage only.
+fn rule_back_faces_shown(m: &mut Matrix, case: &str, ids: &Ids, cells: &[(Tech, Cell)]) {
+    let rule = "back faces shown";
+    if !BACK_CASES.contains(&case) {
+        m.not_applicable(rule, case, "all", "no surface seen from its back");
+        return;
+    }
+    let px: Vec<usize> = (0..ids.id.len())
+        .filter(|&i| ids.object_of(i) == Some(0) && !ids.silhouette(i))
+        .collect();
+    let mean = |f: &Film| px.iter().map(|&i| f.color[i]).sum::<Vec3>() / px.len() as f32;
+    let Some((_, path)) = cells
+        .iter()
+        .find(|(t, _)| *t == Tech::Facade(Technique::Path))
+    else {
+        return;
+    };
+    let want = mean(&path.film);
+    for (tech, cell) in cells {
+        let covered = px
+            .iter()
+            .filter(|&&i| cell.film.depth[i].is_finite())
+            .count();
+        let got = mean(&cell.film);
+        let rel = (got - want).abs().dot(Vec3::ONE) / want.dot(Vec3::ONE).max(1e-4);
+        let lit = *tech != Tech::Facade(Technique::Preview);
+        m.check(
+            rule,
+            case,
+            tech.name(),
+            px.len() >= 20 && covered == px.len() && (!lit || rel < 0.04),
+            format!(
+                "{covered} of {} back pixels drawn; mean {got:.3} against path's {want:.3} ({:.1}%)",
+                px.len(),
+                rel * 100.0
+            ),
+        );
+    }
+}
+
 // ---------------------------------------------------------------- matrix
 
 const RULES: &[&str] = &[
@@ -979,6 +1125,7 @@ const RULES: &[&str] = &[
     "fast path = reference",
     "radiosity = path (diffuse)",
     "radiosity keeps textures",
+    "back faces shown",
 ];
 
 #[test]
@@ -1026,6 +1173,7 @@ fn conformance_matrix() {
                 rule_same_background(&mut m, &case.name, &ids, *tech, &cell.film, wf);
             }
         }
+        rule_back_faces_shown(&mut m, &case.name, &ids, &cells);
         lap("phong = whitted", &case.name);
         rule_phong_equals_whitted(&mut m, case);
         lap("shadow methods", &case.name);

@@ -65,7 +65,6 @@ fn phong_and_whitted_shadow_rays_agree_through_transparent_occluders() {
     let mut scene = scenes::shadow_test(64);
     let pane = scene.add_material(Material {
         transmit: Vec3::new(0.9, 0.5, 0.2),
-        two_sided: true,
         ..Material::diffuse("pane", Vec3::splat(0.1))
     });
     let glass = scene.add_material(Material {

@@ -1,12 +1,12 @@
 //! Single-sided culling (glTF `doubleSided: false`, the material's
-//! `cull_backface`): the eye does not see the back of such a face in any
+//! `Sidedness::Culled`): the eye does not see the back of such a face in any
 //! technique, and sees its front; every other ray sees both sides, so a
 //! culled face still casts its shadow (ARCHITECTURE.md, "Single-sided
 //! culling").
 
 mod common;
 
-use chiaro::scene::Technique;
+use chiaro::scene::{Sidedness, Technique};
 use chiaro::{Film, Scene, Vec3};
 use chiaro_ray::path::Kernel;
 use chiaro_testkit::central_mean;
@@ -101,7 +101,10 @@ fn a_single_sided_quad_is_invisible_from_behind_in_every_technique() {
     for (back, double_sided) in [(false, false), (true, false), (true, true)] {
         let scene = load_text("quad.gltf", &quad_gltf(back, double_sided));
         // The importer's flag, read by every technique from the material.
-        assert_eq!(scene.materials[0].cull_backface, !double_sided);
+        assert_eq!(
+            scene.materials[0].sidedness == Sidedness::Culled,
+            !double_sided
+        );
         for (name, technique, kernel) in CELLS {
             let c = central_mean(&render(&scene, technique, kernel, 32), 4);
             let case = format!(
@@ -126,7 +129,7 @@ fn a_single_sided_quad_is_invisible_from_behind_in_every_technique() {
     }
     // The control: with the flag cleared the ray techniques draw the back.
     let mut scene = load_text("quad.gltf", &quad_gltf(true, false));
-    scene.materials[0].cull_backface = false;
+    scene.materials[0].sidedness = Sidedness::TwoSided;
     for (name, technique, kernel) in [CELLS[0], CELLS[4], CELLS[7]] {
         let c = central_mean(&render(&scene, technique, kernel, 32), 4);
         assert!(c.y < 0.5 * 0.8, "{name} without the flag: centre {c}");
@@ -184,7 +187,12 @@ fn a_culled_face_is_seen_through_but_still_casts_its_shadow() {
     let loaded = chiaro::io::load_scene_str(SHADOW_SCENE, std::path::Path::new("."), "shadow.toml")
         .expect("the scene loads");
     let scene = loaded.scene;
-    assert!(scene.materials.iter().any(|m| m.cull_backface));
+    assert!(
+        scene
+            .materials
+            .iter()
+            .any(|m| m.sidedness == Sidedness::Culled)
+    );
     let cells: [(&str, Technique, Option<Kernel>, &str); 5] = [
         ("phong (ray shadows)", Technique::Phong, None, "ray"),
         ("phong (shadow map)", Technique::Phong, None, "map"),
@@ -252,7 +260,12 @@ fn texture_settings_test_shows_no_red_in_any_technique() {
         return;
     }
     let scene = chiaro::io::load_scene(&path).expect("loads").scene;
-    assert!(scene.materials.iter().any(|m| m.cull_backface));
+    assert!(
+        scene
+            .materials
+            .iter()
+            .any(|m| m.sidedness == Sidedness::Culled)
+    );
     // The single-sided row's test cell at 640 x 480 from the file's camera
     // (the X spans about 30 x 30 pixels there).
     let cell = |scene: &Scene, technique: Technique, kernel: Option<Kernel>| {
@@ -278,7 +291,7 @@ fn texture_settings_test_shows_no_red_in_any_technique() {
     // The control: without the flag the back face is drawn.
     let mut unculled = scene.clone();
     for m in &mut unculled.materials {
-        m.cull_backface = false;
+        m.sidedness = Sidedness::TwoSided;
     }
     for (name, technique, kernel) in [CELLS[4], CELLS[7]] {
         let film = cell(&unculled, technique, kernel);

@@ -1,6 +1,6 @@
 //! Single-sided culling for the ray techniques: [`Culled`] wraps an
 //! [`Accelerator`] so that [`Accelerator::intersect_camera`] skips hits on
-//! the back of materials with `cull_backface` (glTF `doubleSided: false`),
+//! the back of `Sidedness::Culled` materials (glTF `doubleSided: false`),
 //! as the scan converter culls them. Only camera rays are culled; reflected,
 //! refracted, shadow and path-continuation rays see both sides
 //! (ARCHITECTURE.md, "Single-sided culling").
@@ -44,9 +44,14 @@ impl Culled {
             ps.scene
                 .materials
                 .get(m.index())
-                .is_some_and(|m| m.cull_backface)
+                .is_some_and(|m| !m.sidedness.eye_sees_back())
         };
-        if !ps.scene.materials.iter().any(|m| m.cull_backface) {
+        if ps
+            .scene
+            .materials
+            .iter()
+            .all(|m| m.sidedness.eye_sees_back())
+        {
             return inner;
         }
         let tri_normal = (0..ps.triangles.len())

@@ -32,7 +32,7 @@ pub trait Accelerator: Send + Sync {
     /// The closest hit with `t` in `(ray.t_min, ray.t_max)`.
     fn intersect(&self, ray: &Ray) -> Option<Hit>;
     /// The closest hit the eye sees along a camera ray: [`Self::intersect`]
-    /// without the backs of single-sided (`cull_backface`) materials
+    /// without the backs of single-sided (`Sidedness::Culled`) materials
     /// ([`cull::Culled`]). Every other ray uses `intersect`.
     fn intersect_camera(&self, ray: &Ray) -> Option<Hit> {
         self.intersect(ray)

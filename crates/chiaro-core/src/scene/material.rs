@@ -133,6 +133,61 @@ pub enum AlphaMode {
     Blend,
 }
 
+/// Which faces of a surface the eye sees and how its back is shaded: one
+/// rule for every technique (ARCHITECTURE.md, "Sidedness"). A triangle's
+/// front is the side its counter-clockwise normal faces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Sidedness {
+    /// Both faces are drawn and shaded facing the viewer (normals flipped
+    /// on the back): glTF `doubleSided: true`, and every format that says
+    /// nothing about sidedness (OBJ, PLY, TOML by default).
+    #[default]
+    TwoSided,
+    /// Both faces are drawn; the back reflects nothing, so it is black
+    /// (Mitsuba's one-sided BSDFs). A transmissive surface is still shaded
+    /// on the side the ray arrives from (the inside of a glass).
+    OneSided,
+    /// The eye does not see the back (glTF `doubleSided: false`): camera
+    /// rays pass it and the scan converter culls it; every other ray sees
+    /// both faces, shaded as `TwoSided` ("Single-sided culling").
+    Culled,
+}
+
+/// How a viewer sees a surface: from the result of [`Sidedness::seen_from`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Facing {
+    /// The front: shade with the normals as they are.
+    Front,
+    /// The back, shaded with both normals flipped towards the viewer.
+    Back,
+    /// The back of a one-sided surface: it reflects nothing.
+    BackBlack,
+}
+
+impl Sidedness {
+    /// How a viewer at cosine `cos_o = ng . wo` (geometric normal, unit
+    /// direction to the viewer) sees the surface: [`Facing::Front`] when
+    /// `cos_o >= 0`, else [`Facing::BackBlack`] for a one-sided surface that
+    /// does not transmit and [`Facing::Back`] otherwise. Whether the eye
+    /// sees a back at all is [`Sidedness::eye_sees_back`].
+    pub fn seen_from(self, cos_o: f32, transmissive: bool) -> Facing {
+        if cos_o >= 0.0 {
+            Facing::Front
+        } else if self == Sidedness::OneSided && !transmissive {
+            Facing::BackBlack
+        } else {
+            Facing::Back
+        }
+    }
+
+    /// False when camera rays skip the back and the scan converter culls it
+    /// ([`Sidedness::Culled`]).
+    pub fn eye_sees_back(self) -> bool {
+        self != Sidedness::Culled
+    }
+}
+
 /// A surface material. Colours are linear RGB.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -178,14 +233,12 @@ pub struct Material {
     pub emission: Vec3,
     /// Texture multiplying `emission`.
     pub emission_texture: Option<TextureId>,
-    /// Draw and shade both faces (no back-face culling, normals flipped to
-    /// face the viewer).
-    pub two_sided: bool,
-    /// Invisible from behind to the eye (glTF `doubleSided: false`): the
-    /// ray techniques skip a camera ray's hit on its back, as the scan
-    /// converter culls it; every other ray sees both sides (ARCHITECTURE.md,
-    /// "Single-sided culling"). Off for TOML materials unless asked for.
-    pub cull_backface: bool,
+    /// Which faces the eye sees and how a back face is shaded (the one
+    /// sidedness rule of every technique, ARCHITECTURE.md "Sidedness").
+    pub sidedness: Sidedness,
+    /// Emits from both faces; else from the front only, as one-sided area
+    /// lights (glTF `doubleSided: true`; TOML `emission_two_sided`).
+    pub emission_two_sided: bool,
     /// glTF metallic-roughness: when set, `diffuse`, `specular` and
     /// `roughness` are derived from it at every point (and hold its
     /// untextured values).
@@ -220,8 +273,8 @@ impl Default for Material {
             normal_map: None,
             emission: Vec3::ZERO,
             emission_texture: None,
-            two_sided: false,
-            cull_backface: false,
+            sidedness: Sidedness::TwoSided,
+            emission_two_sided: false,
             metallic_roughness: None,
             occlusion: None,
             alpha: 1.0,

@@ -404,7 +404,9 @@ pub struct RenderSettings {
     pub tonemap: ToneMap,
     /// Exposure in stops applied before tone mapping.
     pub exposure: f32,
-    /// Back-face culling for closed meshes.
+    /// Lets the scan converter cull the backs no camera ray reaches (of
+    /// closed, outward-wound, opaque meshes the eye is outside of): a speed
+    /// option that never changes a picture (ARCHITECTURE.md, "Sidedness").
     pub cull_backfaces: bool,
     /// Shadow map options.
     pub shadow_map: ShadowMapSettings,

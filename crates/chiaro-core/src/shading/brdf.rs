@@ -105,6 +105,21 @@ impl SurfaceMaterial {
         }
     }
 
+    /// The material as the back of a one-sided surface shows it
+    /// ([`crate::scene::Facing::BackBlack`]): no reflection of any kind
+    /// (ambient, diffuse, specular, mirror); emission and transmission kept.
+    #[inline]
+    pub fn without_reflection(self) -> Self {
+        Self {
+            ka: Vec3::ZERO,
+            kd: Vec3::ZERO,
+            ks: Vec3::ZERO,
+            kr: Vec3::ZERO,
+            ks_ambient: Vec3::ZERO,
+            ..self
+        }
+    }
+
     /// True when the specular lobe contributes.
     #[inline]
     pub fn has_specular(&self) -> bool {

@@ -4,8 +4,8 @@
 use super::{Builder, in_err};
 use crate::Result;
 use chiaro_core::scene::{
-    AlphaMode, Material, MetallicRoughness, Occlusion, ReflectanceModel, TransparencyMode,
-    UvTransform,
+    AlphaMode, Material, MetallicRoughness, Occlusion, ReflectanceModel, Sidedness,
+    TransparencyMode, UvTransform,
 };
 use chiaro_core::{Vec3, Vec4};
 
@@ -49,9 +49,13 @@ impl Builder<'_> {
             // Ia kd (and Ia F0 off the specular lobe), not a tenth of it.
             ambient: Vec3::ONE,
             emission: Vec3::from(gm.emissive_factor()).max(Vec3::ZERO) * strength,
-            two_sided: gm.double_sided(),
             // glTF 2.0 3.9.5: a single-sided material's back faces are culled.
-            cull_backface: !gm.double_sided(),
+            sidedness: if gm.double_sided() {
+                Sidedness::TwoSided
+            } else {
+                Sidedness::Culled
+            },
+            emission_two_sided: gm.double_sided(),
             metallic_roughness: Some(mr),
             ..Material::default()
         };

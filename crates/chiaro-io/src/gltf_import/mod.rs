@@ -31,8 +31,9 @@
 //! `strength`) scales the ambient term; `normalTexture` -> `normal_map`; `emissiveFactor *
 //! KHR_materials_emissive_strength` -> `emission`, `emissiveTexture` ->
 //! `emission_texture`; `KHR_materials_unlit` -> emission = base colour, no
-//! reflection; `doubleSided` -> `two_sided`, and `false` -> `cull_backface`
-//! (the backs invisible to the eye); `alphaMode`/`alphaCutoff` ->
+//! reflection; `doubleSided: true` -> `Sidedness::TwoSided` (and emission
+//! from both faces), `false` -> `Sidedness::Culled` (the backs invisible to
+//! the eye); `alphaMode`/`alphaCutoff` ->
 //! `alpha_mode`, and `BLEND` with a factor alpha below 1 -> `transmit = 1 -
 //! alpha` (ior 1) drawn `interpolated`. Samplers give both wrap axes and
 //! the min/mag/mip filters; `KHR_texture_transform` is applied to the base

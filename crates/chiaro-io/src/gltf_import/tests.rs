@@ -160,7 +160,8 @@ fn cameras_lights_and_materials_convert() {
     assert_eq!(m.diffuse, Vec3::ZERO);
     assert_eq!(m.specular, Vec3::new(1.0, 0.5, 0.0));
     assert_eq!(m.roughness, 0.25);
-    assert!(m.two_sided);
+    assert_eq!(m.sidedness, chiaro_core::scene::Sidedness::TwoSided);
+    assert!(m.emission_two_sided);
 }
 
 #[test]

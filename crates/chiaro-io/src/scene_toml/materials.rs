@@ -5,7 +5,7 @@ use super::raw::{Opt, RawMaterial, Sp, Splat3, TextureSpec};
 use crate::Result;
 use chiaro_core::Vec3;
 use chiaro_core::scene::{
-    Bump, Material, Procedural, ProceduralKind, Scene, Texture, TextureId, WrapMode,
+    Bump, Material, Procedural, ProceduralKind, Scene, Sidedness, Texture, TextureId, WrapMode,
 };
 
 impl Ctx<'_> {
@@ -36,8 +36,17 @@ impl Ctx<'_> {
             fresnel: m.fresnel.unwrap_or(d.fresnel),
             transparency: m.transparency.unwrap_or(d.transparency),
             emission: rgb(&m.emission, d.emission),
-            two_sided: m.two_sided.unwrap_or(d.two_sided),
-            cull_backface: m.cull_backface.unwrap_or(d.cull_backface),
+            // `sidedness`, else the older keys (`cull_backface = true`,
+            // `two_sided = false`), else two-sided.
+            sidedness: m.sidedness.unwrap_or(match (m.cull_backface, m.two_sided) {
+                (Some(true), _) => Sidedness::Culled,
+                (_, Some(false)) => Sidedness::OneSided,
+                _ => d.sidedness,
+            }),
+            emission_two_sided: m
+                .emission_two_sided
+                .or(m.two_sided)
+                .unwrap_or(d.emission_two_sided),
             ..d
         };
         if let Some(t) = &m.texture {

@@ -6,7 +6,7 @@
 use chiaro_core::glam::Vec3;
 use chiaro_core::scene::{
     AaMode, Distribution, PathSettings, PixelFilter, ProceduralKind, RadiositySettings,
-    ReflectanceModel, ShadeMode, ShadowMapSettings, ShadowMethod, Technique, ToneMap,
+    ReflectanceModel, ShadeMode, ShadowMapSettings, ShadowMethod, Sidedness, Technique, ToneMap,
     TransparencyMode, WhittedSettings, WrapMode,
 };
 use serde::Deserialize;
@@ -314,7 +314,12 @@ pub(crate) struct RawMaterial {
     pub normal_map: Opt<TextureSpec>,
     pub emission: Opt<Splat3>,
     pub emission_texture: Opt<TextureSpec>,
+    pub sidedness: Option<Sidedness>,
+    pub emission_two_sided: Option<bool>,
+    /// Older spelling: `true` is `sidedness = "two-sided"` with
+    /// `emission_two_sided = true`, `false` is `sidedness = "one-sided"`.
     pub two_sided: Option<bool>,
+    /// Older spelling: `true` is `sidedness = "culled"`.
     pub cull_backface: Option<bool>,
 }
 

@@ -120,9 +120,16 @@ pub(crate) fn bin_triangles(
     let cull_material: Vec<bool> = scene
         .materials
         .iter()
-        // A single-sided glTF material (`cull_backface`) is culled whatever the setting.
-        .map(|m| (settings.cull_backfaces && !m.two_sided) || m.cull_backface)
+        // The backs the ray techniques' camera rays skip too (`Sidedness::Culled`).
+        .map(|m| !m.sidedness.eye_sees_back())
         .collect();
+    // `cull_backfaces`: also the backs no camera ray reaches (a speed option).
+    let hidden = if settings.cull_backfaces {
+        let aspect = settings.width.max(1) as f32 / settings.height.max(1) as f32;
+        super::closed::hidden_backs(ps, &scene.camera, aspect)
+    } else {
+        Vec::new()
+    };
     let nt = ps.triangles.len();
     let chunk = nt.div_ceil(256).max(4096);
     if crop.x0 >= crop.x1 || crop.y0 >= crop.y1 {
@@ -142,7 +149,11 @@ pub(crate) fn bin_triangles(
                     let cull = cull_material
                         .get(ps.tri_material[t as usize].index())
                         .copied()
-                        .unwrap_or(settings.cull_backfaces);
+                        .unwrap_or(false)
+                        || hidden
+                            .get(ps.tri_object[t as usize] as usize)
+                            .copied()
+                            .unwrap_or(false);
                     let vp = if cull { vp_cull } else { vp_all };
                     let v = tri.map(|i| &verts[i as usize]);
                     if v[0].inside && v[1].inside && v[2].inside {

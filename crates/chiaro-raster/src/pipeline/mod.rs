@@ -61,6 +61,7 @@
 //! colour).
 
 pub mod binning;
+mod closed;
 pub(crate) mod exact;
 pub mod resolve;
 pub mod shading;

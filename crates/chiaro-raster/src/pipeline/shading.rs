@@ -26,7 +26,7 @@ use crate::pipeline::exact;
 use chiaro_core::film::TilePixels;
 use chiaro_core::prepared::{PreparedScene, SurfaceHit};
 use chiaro_core::scene::MaterialId;
-use chiaro_core::scene::{AlphaMode, Material, RenderSettings, ShadeMode};
+use chiaro_core::scene::{AlphaMode, Facing, Material, RenderSettings, ShadeMode};
 use chiaro_core::shading::texture::{
     background_radiance, environment_diffuse, environment_radiance, environment_specular,
 };
@@ -103,10 +103,10 @@ impl Ctx<'_, '_> {
         self.ps.material(self.ps.tri_material[t as usize])
     }
 
-    /// True if the viewer sees the back of a two-sided triangle `t` (its
-    /// normals are then flipped).
+    /// True if the viewer sees the back of triangle `t` (its normals are
+    /// then flipped; the back of a `Culled` material is never drawn).
     pub(crate) fn flipped(&self, t: u32) -> bool {
-        if !self.material_of(t).two_sided {
+        if !self.material_of(t).sidedness.eye_sees_back() {
             return false;
         }
         let p0 = self.ps.positions[self.ps.triangles[t as usize][0] as usize];
@@ -601,14 +601,14 @@ pub(crate) fn shade_sample(
     // Flat and Gouraud samples read the view direction only to tell the
     // back of a two-sided surface and for the reflection map.
     let wo = if td.mode == ShadeMode::Phong
-        || material.two_sided
+        || material.sidedness.eye_sees_back()
         || ctx.ps.scene.environment.is_some()
     {
         Vec3::from(exact::normalize_or_zero(eye_a - p_a))
     } else {
         Vec3::ZERO
     };
-    let flip = material.two_sided && hit.ng.dot(wo) < 0.0;
+    let flip = material.sidedness.eye_sees_back() && hit.ng.dot(wo) < 0.0;
     let at = SampleAt {
         hit,
         b,
@@ -628,6 +628,11 @@ pub(crate) fn shade_sample(
         ShadeMode::Phong => phong::shade(ctx, td, &at, counts, want_specular),
         ShadeMode::Gouraud => gouraud::shade(ctx, poly, td, &at),
         ShadeMode::Flat => flat::shade(ctx, td, &at),
+    };
+    let (kr, lobe) = if flip {
+        back_face(ctx, material, &hit, &mut color, &mut specular, (kr, lobe))
+    } else {
+        (kr, lobe)
     };
     // The environment's diffuse light and its reflection by the glossy
     // lobe (the split sum).
@@ -651,6 +656,35 @@ pub(crate) fn shade_sample(
         specular,
         coverage_kt,
     }
+}
+
+/// The sidedness rule on a back face the method has shaded with flipped
+/// normals (ARCHITECTURE.md, "Sidedness"): the back of a one-sided surface
+/// reflects nothing, and an emitter emits from its back only when
+/// `emission_two_sided`. Returns what reflects the environment.
+fn back_face(
+    ctx: &Ctx<'_, '_>,
+    material: &Material,
+    hit: &SurfaceHit,
+    color: &mut Vec3,
+    specular: &mut Vec3,
+    reflects: (Vec3, Option<SurfaceMaterial>),
+) -> (Vec3, Option<SurfaceMaterial>) {
+    let transmissive = material.transmit.max_element() > 0.0;
+    if material.sidedness.seen_from(-1.0, transmissive) == Facing::BackBlack {
+        *color = Vec3::ZERO;
+        *specular = Vec3::ZERO;
+        return (Vec3::ZERO, None);
+    }
+    if !material.emission_two_sided
+        && (material.emission != Vec3::ZERO || material.emission_texture.is_some())
+    {
+        // The methods add the emission once (`shade_local`): take it out.
+        let e = ctx.untextured_material(hit).emission;
+        *color = (*color - e).max(Vec3::ZERO);
+        *specular = (*specular - e).max(Vec3::ZERO);
+    }
+    reflects
 }
 
 impl<'a, 's> Ctx<'a, 's> {

@@ -184,7 +184,8 @@ impl<'a> Ctx<'a, '_> {
         // flips, reflection maps, depth cueing or per-corner values.
         d.lean = self.lean_frame
             && !d.textured
-            && !d.material.two_sided
+            && !(d.material.sidedness.eye_sees_back()
+                && d.ng.dot(Vec3A::from(self.rays.eye) - d.p[0]) < 0.0)
             && match d.mode {
                 ShadeMode::Phong => {
                     self.point_lighting.is_some() && self.bases.get(d.material_id.index()).is_some()

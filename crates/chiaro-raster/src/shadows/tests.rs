@@ -11,9 +11,9 @@ use chiaro_core::film::Film;
 use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
-use chiaro_core::scene::ShadowMethod;
 use chiaro_core::scene::{Camera, Geometry, Light, Object, Transform};
 use chiaro_core::scene::{Material, RenderSettings, Scene, ShadeMode, Technique, TransparencyMode};
+use chiaro_core::scene::{ShadowMethod, Sidedness};
 use chiaro_testkit::Warnings;
 use chiaro_testkit::scenes::{add_named, camera, point_light, translate};
 use glam::{Vec2, Vec3};
@@ -317,7 +317,7 @@ fn transparent_casters_tint_alike_in_every_shadow_method() {
     let floor = scene.add_material(Material::diffuse("floor", Vec3::splat(0.8)));
     let glass = scene.add_material(Material {
         transmit: Vec3::new(0.2, 0.4, 0.9),
-        two_sided: true,
+        sidedness: Sidedness::TwoSided,
         ..Material::diffuse("glass", Vec3::ZERO)
     });
     let plane = scene.add_mesh(primitives::plane(2.0, 2));

@@ -7,7 +7,7 @@ use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::sampling::{SobolSampler, power_heuristic};
-use chiaro_core::scene::{AlphaMode, AreaShape, Light, RenderSettings};
+use chiaro_core::scene::{AlphaMode, AreaShape, Facing, Light, RenderSettings, Sidedness};
 use chiaro_core::shading::texture::EnvironmentLight;
 use chiaro_core::shading::{Bsdf, BsdfSample, LightPowerTable, SurfaceMaterial, TriangleEmitter};
 use chiaro_core::shadow::ShadowCasters;
@@ -77,7 +77,10 @@ struct TriInfo {
 pub(super) struct MaterialInfo {
     /// The parameters and their lobe choice.
     pub(super) bsdf: Bsdf,
-    pub(super) two_sided: bool,
+    /// Emits from both faces (`Material::emission_two_sided`).
+    pub(super) emission_two_sided: bool,
+    /// The material's sidedness (the back of a one-sided one is black).
+    pub(super) sidedness: Sidedness,
     /// True when the emission is positive in some channel.
     pub(super) emissive: bool,
     /// True when textures, a bump map or a normal map change the
@@ -104,11 +107,16 @@ impl MaterialInfo {
         // = kd exactly; the kernel relies on both.)
         let lambert = wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular;
         Self {
-            lambert: lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd,
+            // (A one-sided material's back is black: the scalar loop's test.)
+            lambert: lambert
+                && lobes.p_diffuse == 1.0
+                && lobes.lambert_weight == surface.kd
+                && m.sidedness != Sidedness::OneSided,
             dark: surface.kd == Vec3::ZERO && !lobes.specular,
             emissive: surface.emission.max_element() > 0.0,
             bsdf,
-            two_sided: m.two_sided,
+            emission_two_sided: m.emission_two_sided,
+            sidedness: m.sidedness,
             textured: m.is_textured() || m.bump.is_some() || m.normal_map.is_some(),
             blend: m.alpha_mode == AlphaMode::Blend,
         }
@@ -448,13 +456,18 @@ impl<'a, 's> PathTracer<'a, 's> {
             let m = &info.bsdf.m;
             let cos_o = v.ng.dot(wo);
             // Emission seen along the path (one-sided unless two-sided).
-            if info.emissive && (info.two_sided || cos_o > 0.0) {
+            if info.emissive && (info.emission_two_sided || cos_o > 0.0) {
                 let w = if prev_pdf == 0.0 {
                     1.0
                 } else {
                     self.emitter_mis_weight(prim, prev_p, &v, wo, prev_pdf)
                 };
                 l += beta * m.emission * w;
+            }
+            // The back of a one-sided surface reflects nothing.
+            let transmissive = m.kt.max_element() > 0.0;
+            if info.sidedness.seen_from(cos_o, transmissive) == Facing::BackBlack {
+                break;
             }
             // Shading frame on the side of the viewer.
             let front = cos_o >= 0.0;

@@ -283,7 +283,7 @@ impl PathTracer<'_, '_> {
                 }
                 if m.emissive {
                     let wo = -ray.dir;
-                    if m.two_sided || v.ng.dot(wo) > 0.0 {
+                    if m.emission_two_sided || v.ng.dot(wo) > 0.0 {
                         let w = if prev_pdf[i] == 0.0 {
                             1.0
                         } else {

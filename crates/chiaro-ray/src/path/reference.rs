@@ -11,7 +11,7 @@
 use super::PathTracer;
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::sampling::{Rng, power_heuristic, uniform, uniform2};
-use chiaro_core::scene::AlphaMode;
+use chiaro_core::scene::{AlphaMode, Facing};
 use chiaro_core::shading::{Bsdf, sample_light, sample_light_pdf};
 use glam::Vec3;
 
@@ -58,7 +58,7 @@ impl PathTracer<'_, '_> {
             // estimation when the light could have been sampled.
             let cos_o = surf.ng.dot(wo);
             let le = bsdf.m.emission;
-            if le.max_element() > 0.0 && (mat.two_sided || cos_o > 0.0) {
+            if le.max_element() > 0.0 && (mat.emission_two_sided || cos_o > 0.0) {
                 let light_pdf = (prev_pdf > 0.0)
                     .then(|| self.triangle_light.get(hit.prim as usize))
                     .flatten()
@@ -70,6 +70,10 @@ impl PathTracer<'_, '_> {
                     });
                 let w = light_pdf.map_or(1.0, |lp| power_heuristic(prev_pdf, lp));
                 l += beta * le * w;
+            }
+            // The back of a one-sided surface reflects nothing.
+            if ss.facing(wo) == Facing::BackBlack {
+                break;
             }
             // The shading frame on the viewer's side.
             let front = cos_o >= 0.0;

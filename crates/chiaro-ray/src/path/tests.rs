@@ -24,7 +24,7 @@ fn furnace(geometry: Option<u32>) -> Scene {
     let mut s = Scene::default();
     s.add_material(Material {
         emission: Vec3::splat(1.0),
-        two_sided: true,
+        emission_two_sided: true,
         ..Material::diffuse("furnace", Vec3::splat(0.5))
     });
     let geometry = match geometry {
@@ -101,7 +101,7 @@ fn diffuse_sphere_inside_emitting_sphere_reflects_rho_times_le() {
     let mut s = Scene::default();
     let emitter = s.add_material(Material {
         emission: Vec3::splat(le),
-        two_sided: true,
+        emission_two_sided: true,
         ..Material::diffuse("enclosure", Vec3::ZERO)
     });
     let inner = s.add_material(Material::diffuse("inner", rho));
@@ -784,7 +784,6 @@ fn delta_box(size: u32) -> Scene {
         transmit: Vec3::ONE,
         ior: 1.5,
         fresnel: true,
-        two_sided: true,
         ..dark("red")
     };
     s.background = Vec3::new(0.2, 0.3, 0.4);

@@ -43,7 +43,7 @@ use chiaro_core::film::{Film, TilePixels, TileRect, render_tiles};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::prepared::{PreparedScene, RayDifferentials, SurfaceHit};
 use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
-use chiaro_core::scene::{AaMode, PixelRays, RenderSettings, ShadowMethod, Technique};
+use chiaro_core::scene::{AaMode, Facing, PixelRays, RenderSettings, ShadowMethod, Technique};
 use chiaro_core::shading::texture::{environment_diffuse, environment_specular, miss_radiance};
 use chiaro_core::shading::{
     EmitterGroup, LightSample, LocalLighting, SampleKey, ShadingPoint, SurfaceMaterial,
@@ -316,15 +316,18 @@ impl<'s> Tracer<'s> {
         };
         let front = sh.ng.dot(wo) >= 0.0;
         let transmissive = sm.kt.max_element() > 0.0;
-        // Two-sided materials and the insides of refracting objects are
-        // shaded on the side the ray arrives from.
-        let flip = !front && (material.two_sided || transmissive);
-        let (n, ng) = if flip {
+        // The sidedness rule: a back is shaded on the side the ray arrives
+        // from, or reflects nothing on a one-sided surface.
+        let facing = ss.facing(wo);
+        let (n, ng) = if facing == Facing::Back {
             (-ss.ns, -sh.ng)
         } else {
             (ss.ns, sh.ng)
         };
-        if !front && !material.two_sided {
+        if facing == Facing::BackBlack {
+            sm = sm.without_reflection();
+        }
+        if !front && !material.emission_two_sided {
             // One-sided emitters emit from their front only.
             sm.emission = Vec3::ZERO;
         }

@@ -102,7 +102,7 @@ fn an_emissive_mesh_costs_light_samples_shadow_rays_per_point() {
     s.lights.clear();
     let panel = s.add_material(Material {
         emission: Vec3::splat(2.0),
-        two_sided: true,
+        emission_two_sided: true,
         ..lambert(0.5)
     });
     add(

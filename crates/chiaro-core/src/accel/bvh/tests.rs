@@ -801,7 +801,7 @@ fn culled_camera_packets_match_single_rays() {
     // through its back and meet what lies beyond (or nothing).
     let mut s = tie_scene();
     for m in &mut s.materials {
-        m.cull_backface = true;
+        m.sidedness = crate::scene::Sidedness::Culled;
     }
     let ps = with_analytic_spheres(&s);
     let accel = crate::accel::cull::Culled::wrap(&ps, Box::new(SceneBvh::new(&ps)));

@@ -111,7 +111,7 @@ pub struct InstancedBvh {
 /// rounding; the choice only trades memory and build time against the
 /// per-instance cost of a ray transform. Wrapped in
 /// [`super::alpha::AlphaTested`] when the scene has masked materials, and in
-/// [`super::cull::Culled`] when it has single-sided (`cull_backface`) ones.
+/// [`super::cull::Culled`] when it has single-sided (`Sidedness::Culled`) ones.
 pub fn build_accelerator(ps: &PreparedScene<'_>) -> Box<dyn Accelerator> {
     let shared = shared_instances(ps);
     let inner: Box<dyn Accelerator> = if duplicated(ps, &shared) >= MIN_DUPLICATED_TRIANGLES {

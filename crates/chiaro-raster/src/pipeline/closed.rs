@@ -1,0 +1,171 @@
+//! `render.cull_backfaces`, a speed option that never changes a picture:
+//! the objects whose back faces no camera ray can reach, so that the scan
+//! converter may cull them. A ray from outside a closed, outward-wound,
+//! opaque surface meets a front face of it before any back face, so its
+//! backs are hidden whatever their material's sidedness (ARCHITECTURE.md,
+//! "Sidedness").
+
+use chiaro_core::prepared::PreparedScene;
+use chiaro_core::scene::{AlphaMode, Camera};
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// Per object of `ps.scene`: true when the eye of `camera` (with image
+/// aspect `aspect`, width over height) cannot see any of its back faces.
+/// That holds when the object's triangles form a closed surface (each edge,
+/// keyed by its end positions to a millionth of the object's size, used
+/// once in each direction), wound
+/// outwards (positive signed volume), every material opaque (no
+/// transmission, no alpha), and the eye and the near plane's rectangle
+/// outside its bounding box.
+pub(crate) fn hidden_backs(ps: &PreparedScene<'_>, camera: &Camera, aspect: f32) -> Vec<bool> {
+    let n = ps.scene.objects.len();
+    // The triangles of each object.
+    let mut tris: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for (t, &o) in ps.tri_object.iter().enumerate() {
+        if let Some(v) = tris.get_mut(o as usize) {
+            v.push(t as u32);
+        }
+    }
+    // Every point of the near plane's rectangle lies within this distance
+    // of the eye.
+    let tan = (camera.fov_y_degrees.to_radians() * 0.5).tan();
+    let reach = camera.near * (1.0 + tan * tan * (1.0 + aspect * aspect)).sqrt();
+    tris.iter()
+        .map(|ts| !ts.is_empty() && closed_opaque_outside(ps, ts, camera.eye, reach))
+        .collect()
+}
+
+fn closed_opaque_outside(ps: &PreparedScene<'_>, ts: &[u32], eye: Vec3, reach: f32) -> bool {
+    let opaque = |t: u32| {
+        let m = ps.material(ps.tri_material[t as usize]);
+        m.transmit == Vec3::ZERO && m.alpha_mode == AlphaMode::Opaque && m.alpha >= 1.0
+    };
+    if !ts.iter().all(|&t| opaque(t)) {
+        return false;
+    }
+    let corners = |t: u32| ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
+    // The eye and the near plane outside the bounds (with a margin for rounding).
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for &t in ts {
+        for p in corners(t) {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    let outside = (lo - eye).max(eye - hi).max(Vec3::ZERO).length();
+    let clear = outside > reach * 1.01 + 1e-4 * (hi - lo).max_element();
+    if !clear {
+        // (NaN bounds land here too.)
+        return false;
+    }
+    // Closed and consistently wound: each directed edge once, and its reverse.
+    // Positions within a millionth of the object's size are one vertex (a
+    // tessellated sphere's seam and poles are computed, not shared).
+    let cell = (hi - lo).max_element().max(f32::MIN_POSITIVE) * 1e-6;
+    let key = |p: Vec3| ((p - lo) / cell).round().to_array().map(|x| x as i64);
+    let mut edges: HashMap<([i64; 3], [i64; 3]), i32> = HashMap::with_capacity(3 * ts.len());
+    let mut volume = 0.0f64;
+    for &t in ts {
+        let c = corners(t);
+        let keys = c.map(key);
+        // A triangle with two equal corners (a sphere's pole) has no area
+        // and would count an edge both ways.
+        if keys[0] == keys[1] || keys[1] == keys[2] || keys[2] == keys[0] {
+            continue;
+        }
+        volume += f64::from(c[0].dot(c[1].cross(c[2])));
+        for k in 0..3 {
+            let (a, b) = (keys[k], keys[(k + 1) % 3]);
+            let (e, s) = if a < b { ((a, b), 1) } else { ((b, a), 1 << 8) };
+            *edges.entry(e).or_insert(0) += s;
+        }
+    }
+    // Each undirected edge counted once forwards (1) and once backwards (256).
+    volume > 0.0 && edges.values().all(|&c| c == 1 + (1 << 8))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chiaro_core::prepared::PrepareOptions;
+    use chiaro_core::scene::{Geometry, Material, Mesh, Object, Scene};
+
+    /// A unit cube centred at the origin, wound outwards, or inwards.
+    fn cube(outwards: bool) -> Scene {
+        let p: Vec<Vec3> = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32) - 0.5)
+            .collect();
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let mut indices = Vec::new();
+        for q in quads {
+            let [a, b, c, d] = q;
+            let mut tri =
+                |x: u32, y: u32, z: u32| indices.push(if outwards { [x, y, z] } else { [x, z, y] });
+            tri(a, b, c);
+            tri(a, c, d);
+        }
+        let mut s = Scene::default();
+        s.add_material(Material::default());
+        let m = s.add_mesh(Mesh {
+            positions: p,
+            indices,
+            ..Default::default()
+        });
+        s.objects.push(Object {
+            geometry: Geometry::Mesh(m),
+            ..Default::default()
+        });
+        s
+    }
+
+    fn hidden(s: &Scene) -> bool {
+        let ps = PreparedScene::new(s, PrepareOptions::default());
+        hidden_backs(&ps, &s.camera, 4.0 / 3.0)[0]
+    }
+
+    #[test]
+    fn a_closed_outward_cube_seen_from_outside_hides_its_backs() {
+        let mut s = cube(true);
+        assert!(hidden(&s));
+        // Wound inwards: its "backs" are what the eye sees.
+        assert!(!hidden(&cube(false)));
+        // The eye inside.
+        s.camera.eye = Vec3::new(0.1, 0.0, 0.2);
+        assert!(!hidden(&s));
+        // The near plane reaching into it.
+        s.camera.eye = Vec3::new(0.0, 0.0, 0.6);
+        s.camera.near = 0.2;
+        assert!(!hidden(&s));
+    }
+
+    #[test]
+    fn a_tessellated_sphere_hides_its_backs() {
+        let mut s = Scene::default();
+        s.add_material(Material::default());
+        s.objects.push(Object {
+            geometry: Geometry::Sphere { radius: 1.0 },
+            ..Default::default()
+        });
+        let ps = PreparedScene::new(&s, PrepareOptions::default());
+        assert!(!ps.triangles.is_empty());
+        assert!(hidden_backs(&ps, &s.camera, 1.0)[0]);
+    }
+
+    #[test]
+    fn an_open_or_transparent_cube_shows_its_backs() {
+        let mut s = cube(true);
+        s.meshes[0].indices.pop();
+        assert!(!hidden(&s));
+        let mut s = cube(true);
+        s.materials[0].transmit = Vec3::splat(0.5);
+        assert!(!hidden(&s));
+    }
+}
