@@ -145,7 +145,7 @@ pub const DESCRIPTION: Description = Description {
 /// triangle of the tessellated scene.
 pub fn solver_memory(scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
     if settings.radiosity.solver.is_matrix() {
-        let n = chiaro_core::context::tessellated_triangles(scene);
+        let n = chiaro_core::context::tessellated_triangles(scene, settings);
         estimate.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
     }
 }
