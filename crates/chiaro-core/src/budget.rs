@@ -176,9 +176,10 @@ impl MemoryBudget {
 /// The other half covers what the estimate does not count: a `Vec`'s spare
 /// capacity and the copy made while it grows, the loaders' transient
 /// buffers, and, under `RLIMIT_AS` (which counts address space, not
-/// memory), the thread stacks and the allocator's arena reservations. A
-/// gouraud render on 2 threads reserved about 90 MiB of address space
-/// beyond its resident memory, well inside this half of a 4 GB limit.
+/// memory), the thread stacks and the allocator's arena reservations: a
+/// gouraud or path render of a 2M-triangle plane on 2 threads peaked
+/// 250-300 MiB of address space above its resident peak (`VmPeak` against
+/// `VmHWM`), well inside this half of a 4 GB limit (decision 0036).
 pub const DEFAULT_SHARE: f64 = 0.5;
 
 /// A cgroup v1 `memory.limit_in_bytes` at or above this means "no limit"
