@@ -251,6 +251,41 @@ fn hostile_files_are_refused_or_rendered_within_the_address_space() {
         Ending::Refused(msg) => assert!(msg.contains("2147483648 elements"), "{msg}"),
         Ending::Rendered => panic!("sparse accessor rendered"),
     }
+    // Three primitives of 100M zeros each, and one of 120M: each accessor
+    // alone is within the 1.9 GiB budget as bytes, not as a mesh, nor
+    // together (both aborted in the loader, copying or deduplicating).
+    let text = std::fs::read_to_string(&sparse).expect("read");
+    let accessor = text
+        .split(r#""accessors": ["#)
+        .nth(1)
+        .and_then(|rest| rest.split(r#"}}],"#).next())
+        .expect("the accessor")
+        .to_string()
+        + "}}";
+    for (name, count, primitives) in [("three", 100_000_000u64, 3), ("one", 120_000_000, 1)] {
+        let accessor = accessor.replace("2147483648", &count.to_string());
+        let prims: Vec<String> = (0..primitives)
+            .map(|i| format!(r#"{{"attributes": {{"POSITION": {i}}}}}"#))
+            .collect();
+        let accessors = vec![accessor.as_str(); primitives].join(", ");
+        let path = dir.join(format!("{name}.gltf"));
+        std::fs::write(
+            &path,
+            text.replace(
+                r#"[{"primitives": [{"attributes": {"POSITION": 0}}]}]"#,
+                &format!(r#"[{{"primitives": [{}]}}]"#, prims.join(", ")),
+            )
+            .replace(
+                &accessor.replace(&count.to_string(), "2147483648"),
+                &accessors,
+            ),
+        )
+        .expect("write");
+        match ending(name, &render(&dir, &path, &[])) {
+            Ending::Refused(msg) => assert!(msg.contains("with the accessors before it"), "{msg}"),
+            Ending::Rendered => panic!("{name}: rendered"),
+        }
+    }
     // An environment whose Radiance header says 30000 x 60000 (7 GiB of
     // RGB f32); the header is all there is.
     std::fs::write(
