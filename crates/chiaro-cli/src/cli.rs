@@ -10,7 +10,8 @@ pub struct Cli {
     /// What to do.
     #[command(subcommand)]
     pub command: Command,
-    /// The memory a job may use (e.g. 512M, 8G; default: half the machine's).
+    /// The memory a job may use (e.g. 512M, 8G; default: half the process's
+    /// limit, the smallest of RAM, cgroup limit and RLIMIT_AS; see info --system).
     /// A scene whose estimate exceeds it is refused before allocating.
     #[arg(long, global = true, value_name = "SIZE")]
     pub memory_limit: Option<chiaro::budget::ByteSize>,
@@ -21,6 +22,7 @@ const EXAMPLES: &str = "Examples:
   chiaro render scenes/teapot.toml --technique gouraud --width 320 --height 240 -o teapot.png
   chiaro render scenes/whitted.toml --set whitted.max_depth=3 --samples 4 -o whitted.exr
   chiaro info scenes/cornell-box.toml
+  chiaro info --system
   chiaro compare scenes/cornell-box.toml --techniques phong,whitted --reference path:64 -o sheet.png --report report.json";
 
 /// The subcommands.
@@ -46,7 +48,12 @@ pub enum Command {
     /// Describe a scene: objects, triangles, lights, materials, textures, bounds, warnings.
     Info {
         /// The scene file.
-        scene: PathBuf,
+        #[arg(required_unless_present = "system")]
+        scene: Option<PathBuf>,
+        /// Show the machine's memory limits and the budget they give (alone,
+        /// or before the scene's description).
+        #[arg(long)]
+        system: bool,
     },
     /// Render a scene with several techniques and measure each against a
     /// reference: writes a contact sheet, prints a Markdown table.

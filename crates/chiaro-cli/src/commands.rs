@@ -295,6 +295,38 @@ fn light_list(s: &Scene) -> Vec<String> {
     lights
 }
 
+/// `chiaro info --system`: the memory limits read, the one that binds, and
+/// the budget a job gets.
+pub fn info_system() {
+    use chiaro::budget::{ByteSize, DEFAULT_SHARE, MemoryBudget, SystemMemory};
+    let m = SystemMemory::read();
+    let show = |v: Option<u64>, none: &str| v.map_or(none.to_string(), |b| ByteSize(b).to_string());
+    println!("memory     {}", show(m.mem_total, "unreadable"));
+    println!(
+        "cgroup     {}",
+        m.cgroup
+            .map_or("no limit".to_string(), |(b, source)| format!(
+                "{} ({source})",
+                ByteSize(b)
+            ))
+    );
+    println!("RLIMIT_AS  {}", show(m.address_space, "unlimited"));
+    match m.limit() {
+        Some((b, source)) => println!("limit      {} from {source}", ByteSize(b)),
+        None => println!("limit      unknown"),
+    }
+    let budget = MemoryBudget::process();
+    let default = m.default_budget();
+    if budget.limit.0 == default {
+        println!(
+            "budget     {} ({DEFAULT_SHARE} of the limit; --memory-limit or render.memory_limit set it)",
+            budget.limit
+        );
+    } else {
+        println!("budget     {} (set with --memory-limit)", budget.limit);
+    }
+}
+
 /// `chiaro info`.
 pub fn info(path: &Path) -> Result<()> {
     let loaded = chiaro::io::load_scene(path)?;

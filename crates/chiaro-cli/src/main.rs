@@ -22,7 +22,12 @@ fn main() -> ExitCode {
     }
     let result = match args.command {
         cli::Command::Render(r) => commands::render(r),
-        cli::Command::Info { scene } => commands::info(&scene),
+        cli::Command::Info { scene, system } => {
+            if system {
+                commands::info_system();
+            }
+            scene.map_or(Ok(()), |scene| commands::info(&scene))
+        }
         cli::Command::Serve {
             scene,
             port,

@@ -13,7 +13,8 @@ use crate::budget::{Estimate, bytes_of};
 use crate::error::{CoreError, Result};
 use crate::film::Film;
 use crate::geometry::primitives::MeshSize;
-use crate::prepared::{PrepareOptions, PreparedScene};
+use crate::geometry::tessellation::{FIXED_SEGMENTS, ProjectedView, Tessellation};
+use crate::prepared::{PrepareOptions, PreparedScene, sphere_in_world};
 use crate::progress::Progress;
 use crate::scene::{
     Geometry, Issue, RenderSettings, Scene, Severity, ShadowMethod, Technique, Texture,
@@ -237,10 +238,17 @@ impl<'a> RenderContext<'a> {
     }
 
     /// The scene flattened for scan conversion and radiosity: spheres
-    /// tessellated.
+    /// tessellated as the technique asks ([`tessellation`]).
     pub fn tessellated(&self) -> &PreparedScene<'a> {
-        self.tessellated
-            .get_or_init(|| PreparedScene::new(self.scene, PrepareOptions::default()))
+        self.tessellated.get_or_init(|| {
+            PreparedScene::new(
+                self.scene,
+                PrepareOptions {
+                    analytic_spheres: false,
+                    tessellation: tessellation(self.scene, &self.settings),
+                },
+            )
+        })
     }
 
     /// The ray accelerator over [`Self::tessellated`].
@@ -266,37 +274,54 @@ impl<'a> RenderContext<'a> {
     }
 }
 
+/// How `settings`' technique tessellates analytic primitives: radiosity and
+/// the hybrid with [`FIXED_SEGMENTS`] (their solutions, saved and reused,
+/// must not depend on the view), the scan converter by each primitive's
+/// projected size in the camera's image.
+pub fn tessellation(scene: &Scene, settings: &RenderSettings) -> Tessellation {
+    if settings.technique.solves_radiosity() {
+        Tessellation::Fixed(FIXED_SEGMENTS)
+    } else {
+        Tessellation::Projected(ProjectedView::new(&scene.camera, settings.height))
+    }
+}
+
 /// The triangles of `scene`'s meshes, and of its spheres once tessellated
-/// as the scan converter and radiosity tessellate them.
-fn triangle_counts(scene: &Scene) -> (MeshSize, MeshSize) {
+/// by `tessellation`, without tessellating them.
+fn triangle_counts(scene: &Scene, tessellation: Tessellation) -> (MeshSize, MeshSize) {
     let mut meshes = MeshSize {
         vertices: 0,
         triangles: 0,
     };
-    let mut spheres = 0u64;
+    let mut spheres = MeshSize {
+        vertices: 0,
+        triangles: 0,
+    };
     for obj in &scene.objects {
-        match obj.geometry {
-            Geometry::Mesh(id) => {
-                if let Some(m) = scene.meshes.get(id.index()) {
-                    let s = MeshSize::of(m);
-                    meshes.vertices = meshes.vertices.saturating_add(s.vertices);
-                    meshes.triangles = meshes.triangles.saturating_add(s.triangles);
-                }
+        let s = match obj.geometry {
+            Geometry::Mesh(id) => match scene.meshes.get(id.index()) {
+                Some(m) => MeshSize::of(m),
+                None => continue,
+            },
+            Geometry::Sphere { radius } => {
+                let (center, r) = sphere_in_world(obj.transform.world_from_object(), radius);
+                let slices = tessellation.sphere_segments(center, r);
+                let s = MeshSize::uv_sphere(slices, slices / 2);
+                spheres.vertices = spheres.vertices.saturating_add(s.vertices);
+                spheres.triangles = spheres.triangles.saturating_add(s.triangles);
+                continue;
             }
-            Geometry::Sphere { .. } => spheres += 1,
-        }
+        };
+        meshes.vertices = meshes.vertices.saturating_add(s.vertices);
+        meshes.triangles = meshes.triangles.saturating_add(s.triangles);
     }
-    let slices = PrepareOptions::default().sphere_slices;
-    (
-        meshes,
-        MeshSize::uv_sphere(slices, slices / 2).times(spheres),
-    )
+    (meshes, spheres)
 }
 
-/// Triangles of the tessellated scene (meshes and tessellated spheres), as
-/// the scan converter and radiosity see it.
-pub fn tessellated_triangles(scene: &Scene) -> u64 {
-    let (meshes, spheres) = triangle_counts(scene);
+/// Triangles of the scene as `settings`' technique tessellates it (meshes
+/// and tessellated spheres, [`tessellation`]).
+pub fn tessellated_triangles(scene: &Scene, settings: &RenderSettings) -> u64 {
+    let (meshes, spheres) = triangle_counts(scene, tessellation(scene, settings));
     meshes.triangles.saturating_add(spheres.triangles)
 }
 
@@ -314,7 +339,7 @@ pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
         settings.technique,
         Technique::Preview | Technique::Whitted | Technique::Path
     );
-    let (meshes, sphere) = triangle_counts(scene);
+    let (meshes, sphere) = triangle_counts(scene, tessellation(scene, settings));
     let spheres = scene
         .objects
         .iter()

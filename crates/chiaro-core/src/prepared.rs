@@ -4,6 +4,7 @@
 //! structures (BVH, shadow maps, patches) from this.
 
 use crate::geometry::normals::{tangents, vertex_normals};
+use crate::geometry::tessellation::{FIXED_SEGMENTS, Tessellation};
 use crate::geometry::{Aabb, Ray, face_normal, primitives};
 use crate::scene::TextureId;
 use crate::scene::{
@@ -22,15 +23,16 @@ use std::sync::OnceLock;
 pub struct PrepareOptions {
     /// Keep spheres analytic (ray tracers) instead of tessellating them.
     pub analytic_spheres: bool,
-    /// Slices of a tessellated sphere (stacks are half of it).
-    pub sphere_slices: u32,
+    /// Segments around a tessellated sphere (slices; stacks are half of
+    /// it): fixed, or by its projected size in the view.
+    pub tessellation: Tessellation,
 }
 
 impl Default for PrepareOptions {
     fn default() -> Self {
         Self {
             analytic_spheres: false,
-            sphere_slices: 64,
+            tessellation: Tessellation::Fixed(FIXED_SEGMENTS),
         }
     }
 }
@@ -61,6 +63,15 @@ impl PreparedSphere {
             .unwrap_or(Vec3::Y);
         (p, n)
     }
+}
+
+/// The world-space centre and radius of a sphere of `radius` about the
+/// origin of an object placed by `world_from_object` (the largest axis
+/// scale applied: the analytic sphere is round).
+pub fn sphere_in_world(world_from_object: Mat4, radius: f32) -> (Vec3, f32) {
+    let center = world_from_object.transform_point3(Vec3::ZERO);
+    let scale = world_from_object.to_scale_rotation_translation().0;
+    (center, radius * scale.abs().max_element())
 }
 
 /// The flattened scene.
@@ -176,10 +187,8 @@ impl<'s> PreparedScene<'s> {
                     None => continue,
                 },
                 Geometry::Sphere { radius } => {
+                    let (center, r) = sphere_in_world(world_from_object, radius);
                     if opts.analytic_spheres {
-                        let center = world_from_object.transform_point3(Vec3::ZERO);
-                        let scale = world_from_object.to_scale_rotation_translation().0;
-                        let r = radius * scale.abs().max_element();
                         ps.spheres.push(PreparedSphere {
                             center,
                             radius: r,
@@ -193,8 +202,8 @@ impl<'s> PreparedScene<'s> {
                             .grow(center + Vec3::splat(r));
                         continue;
                     }
-                    tessellated =
-                        primitives::uv_sphere(radius, opts.sphere_slices, opts.sphere_slices / 2);
+                    let slices = opts.tessellation.sphere_segments(center, r);
+                    tessellated = primitives::uv_sphere(radius, slices, slices / 2);
                     &tessellated
                 }
             };

@@ -126,7 +126,22 @@ pub fn load_mesh_file(path: &Path) -> Option<Result<Imported>> {
 /// sheet made of two faces) is kept.
 pub fn dedupe_faces(imported: &mut Imported, path: &Path) {
     for mesh in &mut imported.meshes {
-        let mut seen = std::collections::HashSet::with_capacity(mesh.indices.len());
+        // The table of faces seen is the largest transient of a load (about
+        // 64 bytes a triangle): where it cannot be had, the mesh keeps its
+        // duplicates rather than the process aborting.
+        let mut seen = std::collections::HashSet::new();
+        let mut keep: Vec<bool> = Vec::new();
+        if seen.try_reserve(mesh.indices.len()).is_err()
+            || keep.try_reserve_exact(mesh.indices.len()).is_err()
+        {
+            imported.warnings.push(format!(
+                "{}: mesh \"{}\": {} triangles, too many to look for faces given twice in the memory left; any are kept",
+                path.display(),
+                mesh.name,
+                mesh.indices.len()
+            ));
+            continue;
+        }
         let positions = &mesh.positions;
         let key = |t: &[u32; 3]| {
             let p = t.map(|i| {
@@ -140,7 +155,6 @@ pub fn dedupe_faces(imported: &mut Imported, path: &Path) {
             [p[start], p[(start + 1) % 3], p[(start + 2) % 3]]
         };
         let has_materials = mesh.face_materials.len() == mesh.indices.len();
-        let mut keep = Vec::with_capacity(mesh.indices.len());
         for t in &mesh.indices {
             keep.push(seen.insert(key(t)));
         }

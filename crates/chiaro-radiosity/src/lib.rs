@@ -106,7 +106,24 @@ impl Renderer for Radiosity {
 
     fn memory(&self, scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
         solver_memory(scene, settings, estimate);
+        // The display's item buffer: a depth key and an element id a
+        // supersample.
+        let ss = u64::from(display_supersampling(settings));
+        let pixels = u64::from(settings.width) * u64::from(settings.height);
+        estimate.add(
+            "radiosity display supersamples",
+            bytes_of(pixels.saturating_mul(ss * ss), 8),
+        );
     }
+}
+
+/// The display's supersamples along each axis: the square root of the
+/// samples per pixel, rounded, 1 to 8.
+fn display_supersampling(settings: &RenderSettings) -> u32 {
+    (settings.samples.max(1) as f32)
+        .sqrt()
+        .round()
+        .clamp(1.0, 8.0) as u32
 }
 
 /// The radiosity technique, described.
@@ -150,7 +167,7 @@ pub const DESCRIPTION: Description = Description {
 /// triangle of the tessellated scene.
 pub fn solver_memory(scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
     if settings.radiosity.solver.is_matrix() {
-        let n = chiaro_core::context::tessellated_triangles(scene);
+        let n = chiaro_core::context::tessellated_triangles(scene, settings);
         estimate.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
     }
 }
@@ -644,10 +661,7 @@ pub(crate) fn render_solution(
     let (scene, settings, progress) = (ctx.scene(), ctx.settings(), ctx.progress());
     solution.check_scene(scene)?;
     let (w, h) = (settings.width.max(1), settings.height.max(1));
-    let ss = (settings.samples.max(1) as f32)
-        .sqrt()
-        .round()
-        .clamp(1.0, 8.0) as u32;
+    let ss = display_supersampling(settings);
     let (sw, sh) = (w * ss, h * ss);
     progress.begin("radiosity display", 1);
     if progress.cancelled() {

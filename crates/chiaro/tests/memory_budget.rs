@@ -25,7 +25,8 @@ fn spheres(n: usize) -> Scene {
 #[test]
 fn tessellated_spheres_beyond_the_budget_are_refused() {
     let scene = spheres(5000);
-    let mut settings = settings(&scene, Technique::Gouraud, 16, 16, 1);
+    // Radiosity tessellates every sphere with 64 segments, whatever its size.
+    let mut settings = settings(&scene, Technique::Radiosity, 16, 16, 1);
     settings.memory_limit = Some(ByteSize(1 << 30));
     let e = chiaro::render(&scene, &settings, &NoProgress).expect_err("19.8M triangles");
     let msg = e.to_string();
@@ -34,6 +35,17 @@ fn tessellated_spheres_beyond_the_budget_are_refused() {
             && msg.contains("memory limit is 1.0 GiB"),
         "{msg}"
     );
+    // The scan converter tessellates them by their size in the image (here
+    // under a pixel: 8 segments, 48 triangles each), so they fit and render.
+    settings.technique = Technique::Gouraud;
+    let e = chiaro::memory_estimate(&scene, &settings);
+    assert!(
+        e.items
+            .iter()
+            .any(|(w, _)| w == "5000 tessellated spheres (240000 triangles)"),
+        "{e:?}"
+    );
+    assert!(chiaro::render(&scene, &settings, &NoProgress).is_ok());
     // The ray tracers keep spheres analytic: the same scene fits and renders.
     settings.technique = Technique::Preview;
     assert!(chiaro::memory_estimate(&scene, &settings).total() < 1 << 20);

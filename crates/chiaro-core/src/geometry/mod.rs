@@ -1,5 +1,6 @@
 //! Geometry: rays, bounds, orthonormal frames, normals and tangents,
-//! built-in primitives and the Utah teapot.
+//! built-in primitives, the Utah teapot, and how finely analytic
+//! primitives are tessellated.
 
 mod bounds;
 mod frame;
@@ -7,6 +8,7 @@ pub mod normals;
 pub mod primitives;
 mod ray;
 pub mod teapot;
+pub mod tessellation;
 
 pub use bounds::Aabb;
 pub use frame::Frame;

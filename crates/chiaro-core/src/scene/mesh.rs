@@ -36,7 +36,9 @@ pub enum Geometry {
     /// A triangle mesh.
     Mesh(MeshId),
     /// An analytic sphere of this radius at the object origin. Ray tracers
-    /// intersect it exactly; the scan converter tessellates it.
+    /// intersect it exactly; the scan converter tessellates it by its size
+    /// in the image, radiosity with a fixed count
+    /// ([`crate::geometry::tessellation`]).
     Sphere { radius: f32 },
 }
 

@@ -423,7 +423,7 @@ pub struct RenderSettings {
     pub crop: Option<[u32; 4]>,
     /// The memory this render may use (`"8G"`, or bytes), a ceiling below
     /// the process budget ([`crate::budget::MemoryBudget::process`]: the
-    /// CLI's `--memory-limit`, else half the machine's memory).
+    /// CLI's `--memory-limit`, else a share of the process's memory limit).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub memory_limit: Option<crate::budget::ByteSize>,
 }

@@ -284,6 +284,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         texture_map: HashMap::new(),
         noted: BTreeSet::new(),
         budget,
+        decoded_bytes: std::cell::Cell::new(0),
     };
     b.out.warnings = warnings;
     // The default scene, else the first, else every root node.
@@ -355,8 +356,10 @@ struct Builder<'a> {
     material_map: HashMap<usize, usize>,
     texture_map: HashMap<TextureKey, Option<TextureId>>,
     noted: BTreeSet<String>,
-    /// Bounds what accessors without a buffer view may expand to.
+    /// Bounds what the accessors decode to, together.
     budget: MemoryBudget,
+    /// Bytes the accessors checked so far decode to.
+    decoded_bytes: std::cell::Cell<u64>,
 }
 
 impl Builder<'_> {

@@ -13,9 +13,10 @@ use gltf::mesh::Mode;
 impl Builder<'_> {
     /// Checks an accessor: element type among `allowed`, count >= 1, every
     /// byte it reads inside its buffer view and buffer (so its count is
-    /// backed by bytes), the sparse count within the count, and, for an
-    /// accessor without a buffer view (zeros, whose count nothing backs),
-    /// its decoded size within the memory budget.
+    /// backed by bytes), the sparse count within the count, and its
+    /// decoded size, added to the accessors' before it, within the memory
+    /// budget (an accessor without a buffer view holds zeros whose count
+    /// nothing backs).
     fn check_accessor(
         &self,
         acc: &gltf::Accessor,
@@ -38,16 +39,34 @@ impl Builder<'_> {
         if acc.count() == 0 {
             return Err(in_err(self.path, loc, format!("{what}: count is 0")));
         }
-        if acc.view().is_none() {
-            // Decoded, an element takes at most 16 bytes (a `Vec4` of f32).
-            let bytes = chiaro_core::budget::bytes_of(acc.count() as u64, 16);
-            self.budget
-                .check(
-                    &format!("{what}: {} elements without a buffer view", acc.count()),
-                    bytes,
-                )
-                .map_err(|m| in_err(self.path, loc.clone(), m))?;
-        }
+        // Decoded, a component takes 4 bytes (f32 or u32), and a position
+        // stands for a whole mesh vertex (the normals and tangents made for
+        // it too); the scene holds a second copy of the import. The total
+        // of every accessor decoded so far is checked: accessors that each
+        // fit must not together exceed the budget (nor zeros that no
+        // buffer view backs).
+        let each = if what == "POSITION" {
+            chiaro_core::budget::MESH_VERTEX_BYTES
+        } else {
+            4 * acc.dimensions().multiplicity() as u64
+        };
+        let decoded = chiaro_core::budget::bytes_of(acc.count() as u64, 2 * each);
+        let total = self.decoded_bytes.get().saturating_add(decoded);
+        let unbacked = if acc.view().is_none() {
+            " without a buffer view"
+        } else {
+            ""
+        };
+        self.budget
+            .check(
+                &format!(
+                    "{what}: {} elements{unbacked}, with the accessors before it,",
+                    acc.count()
+                ),
+                total,
+            )
+            .map_err(|m| in_err(self.path, loc.clone(), m))?;
+        self.decoded_bytes.set(total);
         let elem = acc.size();
         let check_view =
             |view: &gltf::buffer::View, offset: usize, count: usize, elem: usize, vloc: &str| {

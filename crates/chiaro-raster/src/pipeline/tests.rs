@@ -154,7 +154,14 @@ fn phong_mode_equals_ray_cast_shading() {
     let st = settings(Technique::Phong, w, h);
     let film = render(&scene, &st, &NoProgress).expect("render");
     assert!(film.is_clean());
-    let ps = PreparedScene::new(&scene, PrepareOptions::default());
+    // The spheres tessellated as the render tessellates them (by size).
+    let ps = PreparedScene::new(
+        &scene,
+        PrepareOptions {
+            analytic_spheres: false,
+            tessellation: chiaro_core::context::tessellation(&scene, &st),
+        },
+    );
     let reference = ray_cast(&ps, w, h);
     let mut compared = 0;
     for (i, r) in reference.iter().enumerate() {

@@ -110,7 +110,7 @@ fn prepare(s: &Scene, analytic_spheres: bool) -> PreparedScene<'_> {
         s,
         PrepareOptions {
             analytic_spheres,
-            sphere_slices: 16,
+            tessellation: crate::geometry::tessellation::Tessellation::Fixed(16),
         },
     )
 }
