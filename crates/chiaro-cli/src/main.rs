@@ -22,7 +22,7 @@ fn main() -> ExitCode {
     }
     let result = match args.command {
         cli::Command::Render(r) => commands::render(r),
-        cli::Command::Info { scene } => commands::info(&scene),
+        cli::Command::Info { scene, define } => commands::info(&scene, &define),
         cli::Command::Serve {
             scene,
             port,
