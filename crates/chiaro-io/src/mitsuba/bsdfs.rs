@@ -100,16 +100,13 @@ impl Builder<'_> {
                     t.tag
                 )));
             }
-            (
-                t,
-                Some(format!("bsdf:{}", el.attr("id").unwrap_or_default())),
-            )
+            (t, format!("bsdf:{}", el.attr("id").unwrap_or_default()))
         } else {
-            (el, None)
+            // An inline BSDF is one material however often its shape is
+            // placed (a shape group instanced several times).
+            (el, format!("at:{}", el.loc.describe()))
         };
-        if let Some(k) = &key
-            && let Some((id, built)) = self.built.get(k)
-        {
+        if let Some((id, built)) = self.built.get(&key) {
             return Ok((*id, built.clone()));
         }
         let mut built = self.bsdf(target, 0)?;
@@ -120,9 +117,7 @@ impl Builder<'_> {
             );
         }
         let id = self.scene.add_material(built.material.clone());
-        if let Some(k) = key {
-            self.built.insert(k, (id, built.clone()));
-        }
+        self.built.insert(key, (id, built.clone()));
         Ok((id, built))
     }
 
@@ -417,8 +412,9 @@ impl Builder<'_> {
         self.warn_unused(&p);
         if one_sided && self.one_sided.is_none() {
             self.one_sided = Some(format!(
-                "{}: approximate: Mitsuba draws the back faces of one-sided BSDFs (every BSDF but the dielectrics and `twosided`) black; chiaro's ray techniques shade them like the front",
-                el.loc.describe()
+                "{}: <{}>: approximate: Mitsuba draws the back faces of one-sided BSDFs (every BSDF but the dielectrics and `twosided`) black; chiaro's ray techniques shade them like the front",
+                el.loc.describe(),
+                el.plugin_name()
             ));
         }
         Ok(Built {

@@ -136,6 +136,8 @@ pub struct Builder<'d> {
     images: HashMap<String, ImageTexture>,
     /// Mesh files read, by path and `flip_normals`.
     files: HashMap<(PathBuf, bool), Imported>,
+    /// The mesh of each primitive shape (`rectangle|false`, ...).
+    primitives: HashMap<String, chiaro_core::scene::MeshId>,
     /// One shared copy of a file's meshes per material and `flip_normals`.
     shared: HashMap<(PathBuf, u32, bool), SharedImport>,
     /// A one-sided BSDF was put on a surface (noted once).
@@ -160,6 +162,7 @@ impl<'d> Builder<'d> {
             built: HashMap::new(),
             images: HashMap::new(),
             files: HashMap::new(),
+            primitives: HashMap::new(),
             shared: HashMap::new(),
             one_sided: None,
         }

@@ -161,12 +161,28 @@ impl Builder<'_> {
                         .loc
                         .error("a mesh_attribute texture needs a mesh file (obj or ply)"));
                 }
-                let mut mesh = mesh;
-                mesh.name = object_name(el);
-                if flip {
-                    flip_mesh(&mut mesh);
-                }
-                let id = self.scene.add_mesh(mesh);
+                // One copy of each primitive's mesh, shared by its placements.
+                let key = format!(
+                    "{ty}|{flip}|{}",
+                    if ty == "cylinder" {
+                        el.loc.describe()
+                    } else {
+                        String::new()
+                    }
+                );
+                let id = match self.primitives.get(&key) {
+                    Some(id) => *id,
+                    None => {
+                        let mut mesh = mesh;
+                        mesh.name = ty.to_owned();
+                        if flip {
+                            flip_mesh(&mut mesh);
+                        }
+                        let id = self.scene.add_mesh(mesh);
+                        self.primitives.insert(key, id);
+                        id
+                    }
+                };
                 self.scene.objects.push(Object {
                     name: object_name(el),
                     geometry: Geometry::Mesh(id),
