@@ -40,34 +40,34 @@ fn load(text: &str, defines: &[(&str, &str)]) -> chiaro_io::Result<Loaded> {
 
 fn tmp_dir(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
-    std::fs::create_dir_all(&d).unwrap();
+    std::fs::create_dir_all(&d).expect("test input");
     d
 }
 
 #[test]
 fn defaults_params_and_defines() {
     let text = scene(r#"<shape type="sphere"/>"#);
-    let s = load(&text, &[]).unwrap().scene;
+    let s = load(&text, &[]).expect("test input").scene;
     assert_eq!(s.render.samples, 8);
     assert_eq!((s.render.width, s.render.height), (32, 16));
     assert_eq!(s.render.filter, PixelFilter::Box);
     assert_eq!(s.render.technique, Technique::Path);
     // -D wins over <default>.
-    let s = load(&text, &[("spp", "3")]).unwrap().scene;
+    let s = load(&text, &[("spp", "3")]).expect("test input").scene;
     assert_eq!(s.render.samples, 3);
     // A parameter used before its <default> and inside a longer value.
     let text = r#"<scene version="3.0.0">
   <shape type="sphere"><float name="radius" value="0.$r"/></shape>
   <default name="r" value="25"/>
 </scene>"#;
-    let s = load(text, &[]).unwrap().scene;
+    let s = load(text, &[]).expect("test input").scene;
     assert_eq!(s.objects[0].geometry, Geometry::Sphere { radius: 0.25 });
 }
 
 #[test]
 fn unknown_parameter_names_its_place() {
     let text = "<scene version=\"3.0.0\">\n  <shape type=\"sphere\"><float name=\"radius\" value=\"$nope\"/></shape>\n</scene>";
-    let e = load(text, &[]).unwrap_err().to_string();
+    let e = load(text, &[]).expect_err("an error").to_string();
     assert!(e.starts_with("t.xml:2:"), "{e}");
     assert!(e.contains("$nope") && e.contains("-D nope="), "{e}");
 }
@@ -75,27 +75,27 @@ fn unknown_parameter_names_its_place() {
 #[test]
 fn include_ref_and_path() {
     let dir = tmp_dir("mitsuba-include");
-    std::fs::create_dir_all(dir.join("parts")).unwrap();
+    std::fs::create_dir_all(dir.join("parts")).expect("test input");
     std::fs::write(
         dir.join("parts/materials.xml"),
         r#"<scene version="3.0.0">
   <bsdf type="diffuse" id="red"><rgb name="reflectance" value="0.8, 0.1, 0.1"/></bsdf>
 </scene>"#,
     )
-    .unwrap();
+    .expect("test input");
     std::fs::write(
         dir.join("parts/quad.obj"),
         "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n",
     )
-    .unwrap();
+    .expect("test input");
     let main = scene(
         r#"<path value="parts"/>
   <include filename="materials.xml"/>
   <shape type="obj"><string name="filename" value="quad.obj"/><ref id="red"/></shape>
   <shape type="rectangle"><ref id="red"/></shape>"#,
     );
-    std::fs::write(dir.join("main.xml"), &main).unwrap();
-    let loaded = chiaro_io::load_scene(&dir.join("main.xml")).unwrap();
+    std::fs::write(dir.join("main.xml"), &main).expect("test input");
+    let loaded = chiaro_io::load_scene(&dir.join("main.xml")).expect("test input");
     let s = &loaded.scene;
     assert_eq!(s.objects.len(), 2);
     // One material for both references.
@@ -107,9 +107,9 @@ fn include_ref_and_path() {
         dir.join("self.xml"),
         "<scene version=\"3.0.0\">\n  <include filename=\"self.xml\"/>\n</scene>",
     )
-    .unwrap();
+    .expect("test input");
     let e = chiaro_io::load_scene(&dir.join("self.xml"))
-        .unwrap_err()
+        .expect_err("an error")
         .to_string();
     assert!(
         e.contains("self.xml:2:3") && e.contains("includes itself"),
@@ -124,7 +124,7 @@ fn lights_follow_chiaros_conventions() {
   <emitter type="directional"><vector name="direction" value="0, 0, -1"/><rgb name="irradiance" value="1.5"/></emitter>
   <shape type="sphere"/>
 </scene>"#;
-    let s = load(text, &[]).unwrap().scene;
+    let s = load(text, &[]).expect("test input").scene;
     // Mitsuba's I (W/sr) and E are pi times chiaro's intensity.
     match &s.lights[0] {
         Light::Point {
@@ -155,7 +155,7 @@ fn lights_follow_chiaros_conventions() {
 fn sensor_frame_and_fov() {
     // fov 60 along x on a 2:1 image: tan(fov_y / 2) = tan(30) / 2.
     let s = load(&scene(r#"<shape type="sphere"/>"#), &[])
-        .unwrap()
+        .expect("test input")
         .scene;
     let want = (2.0 * (30f32.to_radians().tan() / 2.0).atan()).to_degrees();
     assert!((s.camera.fov_y_degrees - want).abs() < 1e-4);
@@ -166,7 +166,7 @@ fn sensor_frame_and_fov() {
         r#"<float name="fov" value="60"/>"#,
         r#"<float name="fov" value="60"/><string name="fov_axis" value="y"/>"#,
     );
-    let s = load(&text, &[]).unwrap().scene;
+    let s = load(&text, &[]).expect("test input").scene;
     assert!((s.camera.fov_y_degrees - 60.0).abs() < 1e-3);
 }
 
@@ -178,7 +178,7 @@ fn bsdfs_map_onto_the_material() {
   <shape type="sphere" id="two"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></shape>
   <shape type="sphere" id="rough"><bsdf type="roughconductor"><float name="alpha" value="0.2"/><string name="distribution" value="ggx"/></bsdf></shape>"#,
     );
-    let loaded = load(&text, &[]).unwrap();
+    let loaded = load(&text, &[]).expect("test input");
     let s = &loaded.scene;
     let mat = |i: usize| &s.materials[s.objects[i].material.index()];
     let gold = mat(0);
@@ -210,14 +210,15 @@ fn envmap_turns_half_a_turn() {
         depth: vec![1.0; 2],
         normal: vec![Vec3::Z; 2],
     };
-    chiaro_io::output::write_film(&film, &dir.join("env.exr"), &Default::default()).unwrap();
+    chiaro_io::output::write_film(&film, &dir.join("env.exr"), &Default::default())
+        .expect("test input");
     let text = scene(
         r#"<emitter type="envmap"><string name="filename" value="env.exr"/><float name="scale" value="2"/>
     <transform name="to_world"><rotate y="1" angle="30"/></transform></emitter>
   <shape type="sphere"/>"#,
     );
     let s = load_str(&text, &dir, "t.xml", &LoadOptions::default())
-        .unwrap()
+        .expect("test input")
         .scene;
     let env = s.environment.expect("an environment");
     assert_eq!(env.intensity, 2.0);
@@ -235,7 +236,7 @@ fn shapegroups_are_instanced_over_shared_meshes() {
   <shape type="instance"><ref id="g"/></shape>
   <shape type="instance"><ref id="g"/><transform name="to_world"><translate x="3"/></transform></shape>"#,
     );
-    let s = load(&text, &[]).unwrap().scene;
+    let s = load(&text, &[]).expect("test input").scene;
     assert_eq!(s.objects.len(), 2);
     assert_eq!(s.meshes.len(), 1);
     assert_eq!(s.objects[0].material, s.objects[1].material);

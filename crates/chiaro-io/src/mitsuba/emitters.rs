@@ -2,10 +2,10 @@
 //! `constant` become chiaro lights and environments; `area` (inside a
 //! `<shape>`) becomes the shape material's emitted radiance.
 //!
-//! chiaro's point-like lights give the irradiance `pi * intensity * color
-//! * cos / d^2` (ARCHITECTURE.md, "Radiometric conventions"), so Mitsuba's
-//! radiant intensity `I` (W/sr) and irradiance `E` become `intensity = I /
-//! pi` and `E / pi`.
+//! chiaro's point-like lights give the irradiance
+//! `pi * intensity * color * cos / d^2` (ARCHITECTURE.md, "Radiometric
+//! conventions"), so Mitsuba's radiant intensity `I` (W/sr) and irradiance
+//! `E` become `intensity * color = I / pi` and `E / pi`.
 
 use super::Builder;
 use super::bsdfs::Value;

@@ -26,7 +26,7 @@
 //!   <shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.5, 0.8"/></bsdf></shape>
 //! </scene>"#;
 //! let options = chiaro_io::LoadOptions { defines: vec![("spp".into(), "4".into())] };
-//! let loaded = chiaro_io::mitsuba::load_str(xml, std::path::Path::new("."), "doc.xml", &options).unwrap();
+//! let loaded = chiaro_io::mitsuba::load_str(xml, std::path::Path::new("."), "doc.xml", &options).expect("test input");
 //! assert_eq!(loaded.scene.render.samples, 4);
 //! assert_eq!((loaded.scene.render.width, loaded.scene.render.height), (64, 48));
 //! ```
@@ -220,7 +220,7 @@ impl<'d> Builder<'d> {
     }
 
     /// The type of a plugin element, or an error at it.
-    pub fn plugin_type<'e>(el: &'e Element) -> Result<&'e str> {
+    pub fn plugin_type(el: &Element) -> Result<&str> {
         el.require("type")
     }
 

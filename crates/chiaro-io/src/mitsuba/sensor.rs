@@ -360,14 +360,14 @@ mod tests {
     #[test]
     fn fov_axes() {
         let aspect = 2.0;
-        let x = fov_x_degrees(Some(60.0), "x", None, aspect).unwrap();
+        let x = fov_x_degrees(Some(60.0), "x", None, aspect).expect("test input");
         assert!((x - 60.0).abs() < 1e-4);
         // fov along y: tan(x/2) = aspect tan(y/2).
-        let x = fov_x_degrees(Some(60.0), "y", None, aspect).unwrap();
+        let x = fov_x_degrees(Some(60.0), "y", None, aspect).expect("test input");
         let want = (2.0 * (aspect * 30f32.to_radians().tan()).atan()).to_degrees();
         assert!((x - want).abs() < 1e-4);
         // Diagonal of a 2:1 image: the x half-width is 2/sqrt(5) of the diagonal's.
-        let x = fov_x_degrees(Some(60.0), "diagonal", None, aspect).unwrap();
+        let x = fov_x_degrees(Some(60.0), "diagonal", None, aspect).expect("test input");
         let want = (2.0 * (30f32.to_radians().tan() * 2.0 / 5f32.sqrt()).atan()).to_degrees();
         assert!((x - want).abs() < 1e-4);
         // Wide image: smaller is y, larger is x; tall image the other way.
@@ -384,7 +384,7 @@ mod tests {
             fov_x_degrees(Some(60.0), "x", None, 0.5)
         );
         // 50 mm on 35 mm film: 46.8 degrees along the diagonal.
-        let x = fov_x_degrees(None, "x", None, 1.5).unwrap();
+        let x = fov_x_degrees(None, "x", None, 1.5).expect("test input");
         let d = (2.0 * (x.to_radians() * 0.5).tan() * (1.0f32 + 1.0 / 2.25).sqrt() / 2.0).atan();
         assert!(((2.0 * d).to_degrees() - 46.793).abs() < 1e-2);
         assert!(fov_x_degrees(Some(60.0), "z", None, 1.0).is_err());

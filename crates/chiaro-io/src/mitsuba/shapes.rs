@@ -317,7 +317,8 @@ impl Builder<'_> {
                 uv.y = 1.0 - uv.y;
             }
         }
-        let (name, map): (&str, Box<dyn Fn(&[f32]) -> Vec3>) = match use_ {
+        type ToColor = Box<dyn Fn(&[f32]) -> Vec3>;
+        let (name, map): (&str, ToColor) = match use_ {
             AttributeUse::Color(n) => (
                 n.as_str(),
                 Box::new(|v: &[f32]| match v {
@@ -538,7 +539,7 @@ mod tests {
         outward(&rectangle());
         outward(&cube());
         outward(&disk());
-        outward(&cylinder(Vec3::ZERO, Vec3::Z, 0.5).unwrap());
+        outward(&cylinder(Vec3::ZERO, Vec3::Z, 0.5).expect("test input"));
         // Cube normals point away from the centre.
         let c = cube();
         for (p, n) in c.positions.iter().zip(&c.normals) {

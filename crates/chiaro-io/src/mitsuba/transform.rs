@@ -117,8 +117,9 @@ mod tests {
     fn transform(body: &str) -> Mat4 {
         let text =
             format!(r#"<scene version="3.0.0"><transform name="t">{body}</transform></scene>"#);
-        let doc = parse_document(&text, Path::new("t.xml"), Path::new("."), &[]).unwrap();
-        parse_transform(&doc.elements[0]).unwrap()
+        let doc =
+            parse_document(&text, Path::new("t.xml"), Path::new("."), &[]).expect("test input");
+        parse_transform(&doc.elements[0]).expect("test input")
     }
 
     fn close(a: Mat4, b: Mat4) -> bool {
@@ -171,8 +172,11 @@ mod tests {
             r#"<translate value="1, nan, 0"/>"#,
         ] {
             let text = format!(r#"<scene><transform name="t">{body}</transform></scene>"#);
-            let doc = parse_document(&text, Path::new("t.xml"), Path::new("."), &[]).unwrap();
-            let e = parse_transform(&doc.elements[0]).unwrap_err().to_string();
+            let doc =
+                parse_document(&text, Path::new("t.xml"), Path::new("."), &[]).expect("test input");
+            let e = parse_transform(&doc.elements[0])
+                .expect_err("an error")
+                .to_string();
             assert!(e.starts_with("t.xml:1:"), "{e}");
         }
     }
