@@ -410,13 +410,6 @@ impl Builder<'_> {
             }
         }
         self.warn_unused(&p);
-        if one_sided && self.one_sided.is_none() {
-            self.one_sided = Some(format!(
-                "{}: <{}>: approximate: Mitsuba draws the back faces of one-sided BSDFs (every BSDF but the dielectrics and `twosided`) black; chiaro's ray techniques shade them like the front",
-                el.loc.describe(),
-                el.plugin_name()
-            ));
-        }
         Ok(Built {
             material: m,
             attribute,

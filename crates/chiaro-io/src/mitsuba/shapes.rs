@@ -79,6 +79,13 @@ impl Builder<'_> {
             Some(b) => self.material_of(b)?,
             None => self.default_material(),
         };
+        if built.one_sided && self.one_sided.is_none() {
+            self.one_sided = Some(format!(
+                "{}: <{}>: approximate: Mitsuba draws the back faces of one-sided BSDFs (every BSDF but the dielectrics and `twosided`) black; chiaro's ray techniques shade them like the front (said once, for the first such shape)",
+                el.loc.describe(),
+                el.plugin_name()
+            ));
+        }
         if let Some(e) = p.children("emitter").first() {
             let l = self.area_radiance(e)?;
             let mut em: Material = self.scene.materials[material.index()].clone();
