@@ -3,11 +3,11 @@
 
 Mutates seed files (the shipped scenes, the fuzz corpora's OBJ, PLY and
 glTF inputs, the `techniques` corpus and the Mitsuba XML scenes) as a
-hostile user would: flipped bytes, deleted or repeated lines, numbers replaced by extreme values (1e30,
-NaN, 2^64, 0, -1), and runs `chiaro info` and `chiaro render` on each
-mutant with a random technique at 64x48, a radiosity budget of 500
-iterations, under an address-space cap (`prlimit --as`, 4 GB by default)
-and a timeout. A finding is:
+hostile user would: flipped bytes, deleted or repeated lines, numbers
+replaced by extreme values (1e30, NaN, 2^64, 0, -1), and runs `chiaro
+info` and `chiaro render` on each mutant with a random technique at
+64x48, a radiosity budget of 500 iterations, under an address-space cap
+(`prlimit --as`, 4 GB by default) and a timeout. A finding is:
 
 - a hang: the command ran past `--timeout` seconds;
 - a crash: the process died by a signal (an abort on allocation failure

@@ -220,25 +220,41 @@ pub fn mitsuba_z_test(
     variance: &[[f64; 3]],
     spp: f64,
 ) -> ZTest {
+    let fails = mitsuba_z_failures(mean, reference, variance, spp);
+    ZTest {
+        pixels: fails.len(),
+        failed: fails.iter().filter(|f| **f).count(),
+    }
+}
+
+/// Which pixels fail [`mitsuba_z_test`] (to map where a render disagrees).
+///
+/// # Panics
+/// If the three slices differ in length.
+pub fn mitsuba_z_failures(
+    mean: &[[f64; 3]],
+    reference: &[[f64; 3]],
+    variance: &[[f64; 3]],
+    spp: f64,
+) -> Vec<bool> {
     assert!(mean.len() == reference.len() && mean.len() == variance.len());
     let pixels = mean.len();
     let alpha = 1.0 - 0.99f64.powf(1.0 / pixels.max(1) as f64);
-    let mut failed = 0;
-    for i in 0..pixels {
-        let (m, r, v) = (
-            srgb_to_xyz(mean[i]),
-            srgb_to_xyz(reference[i]),
-            srgb_to_xyz(variance[i]),
-        );
-        let fails = (0..3).any(|c| {
-            let z = (m[c] - r[c]).abs() * (spp / v[c].max(1e-4)).sqrt();
-            let p = erfc(z / std::f64::consts::SQRT_2);
-            // NaN fails too.
-            p.partial_cmp(&alpha).is_none_or(|o| o.is_lt())
-        });
-        failed += usize::from(fails);
-    }
-    ZTest { pixels, failed }
+    (0..pixels)
+        .map(|i| {
+            let (m, r, v) = (
+                srgb_to_xyz(mean[i]),
+                srgb_to_xyz(reference[i]),
+                srgb_to_xyz(variance[i]),
+            );
+            (0..3).any(|c| {
+                let z = (m[c] - r[c]).abs() * (spp / v[c].max(1e-4)).sqrt();
+                let p = erfc(z / std::f64::consts::SQRT_2);
+                // NaN fails too.
+                p.partial_cmp(&alpha).is_none_or(|o| o.is_lt())
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]

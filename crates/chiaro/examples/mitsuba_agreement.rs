@@ -6,7 +6,7 @@
 //! per scene (Mitsuba's scenes pass at 99.75 %).
 //!
 //! ```text
-//! CHIARO_ASSETS=../shared/assets cargo run --release -p chiaro --example mitsuba_agreement -- [--spp N] [--only NAME]
+//! CHIARO_ASSETS=../shared/assets cargo run --release -p chiaro --example mitsuba_agreement -- [--spp N] [--only NAME] [--filter box|tent]
 //! ```
 //!
 //! `--spp` defaults to Mitsuba's budget, 2,000,000 / pixels. The renders
@@ -15,7 +15,7 @@
 use chiaro::Technique;
 use chiaro::progress::NoProgress;
 use chiaro_testkit::bench::flag_value;
-use chiaro_testkit::stats::mitsuba_z_test;
+use chiaro_testkit::stats::{mitsuba_z_failures, mitsuba_z_test};
 use std::path::{Path, PathBuf};
 
 /// Each scene file and the stem of its reference (`refs/STEM_ref_rgb.exr`).
@@ -78,6 +78,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let scene = loaded.scene;
         let mut settings = scene.render.clone();
         settings.technique = Technique::Path;
+        // `--filter box|tent` overrides the imported filter (to see its share).
+        match flag_value(&args, "--filter").as_deref() {
+            Some("box") => settings.filter = chiaro::scene::PixelFilter::Box,
+            Some("tent") => settings.filter = chiaro::scene::PixelFilter::Tent,
+            _ => {}
+        }
         settings.width = w;
         settings.height = h;
         let budget = (2_000_000 / (w as u64 * h as u64)).max(1) as u32;
@@ -94,6 +100,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let name = file.replace('/', "_").replace(".xml", "");
         let opts = chiaro::io::output::OutputOptions::default();
         chiaro::io::output::write_film(&film, &out_dir.join(format!("{name}.png")), &opts)?;
+        // Where the render disagrees: failing pixels white.
+        let mut fail_film = chiaro::Film::new(w, h);
+        let fails = mitsuba_z_failures(&mean, &reference, &variance, settings.samples as f64);
+        for (d, f) in fail_film.color.iter_mut().zip(&fails) {
+            *d = chiaro::Vec3::splat(if *f { 1.0 } else { 0.0 });
+        }
+        chiaro::io::output::write_film(
+            &fail_film,
+            &out_dir.join(format!("{name}_fails.png")),
+            &opts,
+        )?;
         let mut ref_film = chiaro::Film::new(w, h);
         for (d, r) in ref_film.color.iter_mut().zip(&reference) {
             *d = chiaro::Vec3::new(r[0] as f32, r[1] as f32, r[2] as f32);
