@@ -169,7 +169,12 @@ impl State {
                 path: name.to_path_buf(),
                 line: pos.row as usize,
                 column: pos.col as usize,
-                message: format!("not well-formed XML: {e}"),
+                // roxmltree ends its message with the position, given above.
+                message: format!(
+                    "not well-formed XML: {}",
+                    e.to_string()
+                        .trim_end_matches(&format!(" at {}:{}", pos.row, pos.col))
+                ),
             }
         })?;
         let root = doc.root_element();
