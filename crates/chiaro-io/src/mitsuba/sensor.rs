@@ -112,18 +112,17 @@ impl Builder<'_> {
                 "near_clip and far_clip must satisfy 0 < near < far, got {near} and {far}"
             )));
         }
-        for name in ["aperture_radius", "focus_distance"] {
-            if p.named(name).is_some() && ty == "perspective" {
-                self.warn(el, &format!("`{name}` ignored"));
-            }
+        if ty == "thinlens" {
+            // Read so they are not reported as unknown; the warning above covers them.
+            let _ = p.float("aperture_radius", 0.0)?;
+            let _ = p.float("focus_distance", 0.0)?;
         }
         for key in ["principal_point_offset_x", "principal_point_offset_y"] {
             if p.float(key, 0.0)? != 0.0 {
                 self.warn(el, "approximate: the principal point offset is ignored");
             }
         }
-        let _ = p.float("aperture_radius", 0.0)?;
-        let _ = p.float("focus_distance", 0.0)?;
+        // The sensor's spectral response: chiaro renders RGB.
         let _ = p.string("srf")?;
         self.set_camera(el, world_from_camera, fov_x, aspect, near, far);
         self.warn_unused(&p);
