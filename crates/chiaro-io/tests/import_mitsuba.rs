@@ -73,6 +73,28 @@ fn unknown_parameter_names_its_place() {
 }
 
 #[test]
+fn deep_nesting_is_refused_not_a_stack_overflow() {
+    let n = 50_000;
+    let text = format!(
+        "<scene>\n<!-- <a> <b> -->{}{}</scene>",
+        "<shape type=\"sphere\">".repeat(n),
+        "</shape>".repeat(n)
+    );
+    let e = load(&text, &[]).expect_err("refused").to_string();
+    assert!(
+        e.starts_with("t.xml:2:") && e.contains("nested deeper"),
+        "{e}"
+    );
+    // Self-closing tags, quoted `>` and comments do not count as nesting.
+    let text = format!(
+        "<scene>{}<shape type=\"sphere\"><string name=\"x\" value=\"a>b\"/></shape></scene>",
+        "<!-- <shape> -->".repeat(300)
+    );
+    let e = load(&text, &[]).map(|_| ()).map_err(|e| e.to_string());
+    assert!(!e.as_ref().is_err_and(|m| m.contains("nested")), "{e:?}");
+}
+
+#[test]
 fn include_ref_and_path() {
     let dir = tmp_dir("mitsuba-include");
     std::fs::create_dir_all(dir.join("parts")).expect("test input");

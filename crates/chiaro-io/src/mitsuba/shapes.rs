@@ -90,6 +90,12 @@ impl Builder<'_> {
             let l = self.area_radiance(e)?;
             let mut em: Material = self.scene.materials[material.index()].clone();
             em.emission = l;
+            // Mitsuba's area emitters emit from the front only, whatever
+            // the BSDF; chiaro emits from both sides of a two-sided material.
+            if em.two_sided {
+                em.two_sided = false;
+                self.warn(el, "approximate: the emitter's two-sided BSDF is drawn one-sided (chiaro would emit from both faces)");
+            }
             em.name = format!("{} (emitter)", em.name);
             material = self.scene.add_material(em);
         }

@@ -12,6 +12,10 @@ use std::sync::Arc;
 /// How deep `<include>` may nest (a file including itself is refused first).
 const MAX_INCLUDE_DEPTH: usize = 16;
 
+/// How deep elements may nest (scenes nest a few levels; a hostile file's
+/// 200,000 levels would overflow the stack of the recursive reading).
+const MAX_ELEMENT_DEPTH: usize = 128;
+
 /// A position in a scene file (1-based line and column).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Loc {
@@ -163,6 +167,12 @@ impl State {
         out: &mut Vec<Element>,
     ) -> Result<()> {
         let file = Arc::new(name.to_path_buf());
+        if let Some(at) = too_deep(text, MAX_ELEMENT_DEPTH) {
+            let lines = Lines::new(text, file);
+            return Err(lines.loc(at).error(format!(
+                "elements nested deeper than {MAX_ELEMENT_DEPTH} levels"
+            )));
+        }
         let doc = roxmltree::Document::parse(text).map_err(|e| {
             let pos = e.pos();
             IoError::At {
@@ -210,7 +220,7 @@ impl State {
                     let value = self.substitute(attr_of(&node, "filename", &loc)?, &loc)?;
                     self.include(&value, base, &loc, out)?;
                 }
-                _ => out.push(self.element(&lines, &node)?),
+                _ => out.push(self.element(&lines, &node, 1)?),
             }
         }
         self.stack.pop();
@@ -248,15 +258,20 @@ impl State {
         self.read_text(&text, &path, &inner_base, out)
     }
 
-    fn element(&self, lines: &Lines, node: &roxmltree::Node) -> Result<Element> {
+    fn element(&self, lines: &Lines, node: &roxmltree::Node, depth: usize) -> Result<Element> {
         let loc = lines.of(node);
+        if depth > MAX_ELEMENT_DEPTH {
+            return Err(loc.error(format!(
+                "elements nested deeper than {MAX_ELEMENT_DEPTH} levels"
+            )));
+        }
         let mut attrs = Vec::new();
         for a in node.attributes() {
             attrs.push((a.name().to_owned(), self.substitute(a.value(), &loc)?));
         }
         let mut children = Vec::new();
         for child in node.children().filter(|n| n.is_element()) {
-            children.push(self.element(lines, &child)?);
+            children.push(self.element(lines, &child, depth + 1)?);
         }
         Ok(Element {
             tag: node.tag_name().name().to_owned(),
@@ -275,6 +290,64 @@ impl State {
             ))
         })
     }
+}
+
+/// The byte offset of the first start tag nested deeper than `max`, by a
+/// scan of the tags alone (comments, CDATA, declarations and quoted
+/// attribute values skipped), or `None`. roxmltree parses nesting by
+/// recursion, so a hostile file's 20,000 levels overflow the stack before
+/// any element is seen: this bound comes first.
+fn too_deep(text: &str, max: usize) -> Option<usize> {
+    let b = text.as_bytes();
+    let mut depth = 0usize;
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] != b'<' {
+            i += 1;
+            continue;
+        }
+        let rest = &b[i..];
+        // Skip to the end of constructs that are not elements.
+        let skip_to = |end: &[u8]| {
+            rest.windows(end.len())
+                .position(|w| w == end)
+                .map_or(b.len(), |k| i + k + end.len())
+        };
+        if rest.starts_with(b"<!--") {
+            i = skip_to(b"-->");
+        } else if rest.starts_with(b"<![CDATA[") {
+            i = skip_to(b"]]>");
+        } else if rest.starts_with(b"<?") {
+            i = skip_to(b"?>");
+        } else if rest.starts_with(b"<!") {
+            i = skip_to(b">");
+        } else if rest.starts_with(b"</") {
+            depth = depth.saturating_sub(1);
+            i = skip_to(b">");
+        } else {
+            // A start tag: find its `>` outside quotes; `/>` closes it.
+            let start = i;
+            let mut quote = None;
+            let mut j = i + 1;
+            while j < b.len() {
+                match (quote, b[j]) {
+                    (None, q @ (b'"' | b'\'')) => quote = Some(q),
+                    (Some(q), c) if c == q => quote = None,
+                    (None, b'>') => break,
+                    _ => {}
+                }
+                j += 1;
+            }
+            if j >= b.len() || b[j - 1] != b'/' {
+                depth += 1;
+                if depth > max {
+                    return Some(start);
+                }
+            }
+            i = j + 1;
+        }
+    }
+    None
 }
 
 /// `value` with every `$name` (`[A-Za-z_][A-Za-z0-9_]*`) replaced from
