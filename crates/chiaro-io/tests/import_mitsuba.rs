@@ -354,6 +354,11 @@ fn broken_files_name_line_and_column() {
         ),
         ("", "t.xml:1:1", "XML"),
         (
+            "<scene>\n <shape type=\"shapegroup\" id=\"g\"><shape type=\"instance\"><ref id=\"g\"/></shape></shape>\n <shape type=\"instance\"><ref id=\"g\"/></shape>\n</scene>",
+            "t.xml:2:",
+            "refused",
+        ),
+        (
             "<!DOCTYPE a [<!ENTITY a 'aaaa'><!ENTITY b '&a;&a;&a;&a;'>]><scene v=\"&b;\"/>",
             "t.xml:",
             "",

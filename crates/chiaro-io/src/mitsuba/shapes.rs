@@ -15,9 +15,6 @@ use std::f32::consts::TAU;
 /// Segments around a meshed disk or cylinder.
 const SEGMENTS: u32 = 64;
 
-/// How deep instances may nest shape groups.
-const MAX_GROUP_DEPTH: usize = 8;
-
 impl Builder<'_> {
     /// A `<shape>` placed with `world_from_parent` (identity at top level,
     /// the instance's transform inside a shape group).
@@ -40,10 +37,10 @@ impl Builder<'_> {
                 return Ok(());
             }
             "instance" => {
-                if depth >= MAX_GROUP_DEPTH {
-                    return Err(el
-                        .loc
-                        .error(format!("instances nested deeper than {MAX_GROUP_DEPTH}")));
+                // Mitsuba does not nest instances; refusing them also keeps a
+                // group instancing itself many times from growing exponentially.
+                if depth > 0 {
+                    return Err(el.loc.error("an instance inside a shapegroup is refused (Mitsuba does not nest instances)"));
                 }
                 let m = parent * p.transform("to_world")?;
                 let refs = p.children("ref");
