@@ -489,8 +489,7 @@ impl Builder<'_> {
         }
         let eta = self.value(p, "eta", Vec3::ZERO)?.constant_or(Vec3::ZERO);
         let k = self.value(p, "k", Vec3::ONE)?.constant_or(Vec3::ONE);
-        let ext = self.ior_value(p, "ext_eta", 1.0)?;
-        Ok((eta / ext, k / ext))
+        Ok((eta, k))
     }
 
     /// `int_ior / ext_ior` (numbers or Mitsuba's names).
@@ -510,13 +509,6 @@ impl Builder<'_> {
             )));
         }
         Ok(eta)
-    }
-
-    fn ior_value(&mut self, p: &Props, name: &str, default: f32) -> Result<f32> {
-        match p.named(name) {
-            Some(e) => ior_of(e),
-            None => Ok(default),
-        }
     }
 
     /// A spectrum-valued parameter by name (`<rgb>`, `<spectrum>`,
