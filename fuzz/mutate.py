@@ -2,12 +2,12 @@
 """CLI-level mutation fuzzing of chiaro, for machines without nightly Rust.
 
 Mutates seed files (the shipped scenes, the fuzz corpora's OBJ, PLY and
-glTF inputs and the `techniques` corpus) as a hostile user would: flipped
-bytes, deleted or repeated lines, numbers replaced by extreme values (1e30,
-NaN, 2^64, 0, -1), and runs `chiaro info` and `chiaro render` on each
-mutant with a random technique at 64x48, a radiosity budget of 500
-iterations, under an address-space cap (`prlimit --as`, 4 GB by default)
-and a timeout. A finding is:
+glTF inputs, the `techniques` corpus and the Mitsuba XML scenes) as a
+hostile user would: flipped bytes, deleted or repeated lines, numbers
+replaced by extreme values (1e30, NaN, 2^64, 0, -1), and runs `chiaro
+info` and `chiaro render` on each mutant with a random technique at
+64x48, a radiosity budget of 500 iterations, under an address-space cap
+(`prlimit --as`, 4 GB by default) and a timeout. A finding is:
 
 - a hang: the command ran past `--timeout` seconds;
 - a crash: the process died by a signal (an abort on allocation failure
@@ -54,7 +54,7 @@ def seeds():
         out.append((".toml", p.read_bytes()))
     corpus = ROOT / "fuzz" / "corpus"
     for target, suffix in [("obj_mtl", ".obj"), ("ply", ".ply"), ("gltf", None),
-                           ("techniques", None)]:
+                           ("techniques", None), ("mitsuba_xml", ".xml")]:
         for p in sorted((corpus / target).glob("*")):
             data = p.read_bytes()
             if len(data) > 64 << 10:

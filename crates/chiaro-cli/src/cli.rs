@@ -23,12 +23,13 @@ const EXAMPLES: &str = "Examples:
   chiaro render scenes/whitted.toml --set whitted.max_depth=3 --samples 4 -o whitted.exr
   chiaro info scenes/cornell-box.toml
   chiaro info --system
+  chiaro render scene.xml -D spp=64 -o mitsuba.exr
   chiaro compare scenes/cornell-box.toml --techniques phong,whitted --reference path:64 -o sheet.png --report report.json";
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Render a scene (.toml, .obj, .ply, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
+    /// Render a scene (.toml, .xml (Mitsuba 3), .obj, .ply, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
     Render(RenderArgs),
     /// Serve a web viewer for SCENE: techniques side by side, orbit camera,
     /// difference images (loopback only unless --host is given).
@@ -54,6 +55,10 @@ pub enum Command {
         /// or before the scene's description).
         #[arg(long)]
         system: bool,
+        /// A Mitsuba scene parameter: `-D spp=64` gives `$spp` this value
+        /// over the file's `<default>`.
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
     },
     /// Render a scene with several techniques and measure each against a
     /// reference: writes a contact sheet, prints a Markdown table.
@@ -104,6 +109,10 @@ pub struct RenderOptions {
     /// Override any render setting, e.g. `--set shadows=map --set whitted.max_depth=3`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// A Mitsuba scene parameter: `-D spp=64` gives `$spp` this value over
+    /// the file's `<default>`.
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    pub define: Vec<String>,
     /// The camera.
     #[command(flatten)]
     pub camera: CameraFlags,

@@ -7,9 +7,11 @@ use chiaro::scene::{Geometry, Scene, Texture, ToneMap};
 use chiaro::{RenderSettings, Technique};
 use std::path::Path;
 
-/// Loads a scene, printing its warnings to stderr.
-fn load(path: &Path) -> Result<Scene> {
-    let loaded = chiaro::io::load_scene(path)?;
+/// Loads a scene with the `-D name=value` parameters, printing its
+/// warnings to stderr.
+fn load(path: &Path, defines: &[String]) -> Result<Scene> {
+    let options = chiaro::io::LoadOptions::from_defines(defines).map_err(|e| anyhow!(e))?;
+    let loaded = chiaro::io::load_scene_with(path, &options)?;
     for w in &loaded.warnings {
         eprintln!("warning: {w}");
     }
@@ -152,7 +154,7 @@ fn render_solution_files(
 pub fn render(args: RenderArgs) -> Result<()> {
     let format = check_output(&args.output)?;
     check_output_options(&args, format)?;
-    let mut scene = load(&args.scene)?;
+    let mut scene = load(&args.scene, &args.opts.define)?;
     let mut settings = settings_from(&scene, &args.opts)?;
     place_camera(&mut scene, &args.opts, &settings)?;
     if let Some(t) = args.tonemap {
@@ -328,8 +330,9 @@ pub fn info_system() {
 }
 
 /// `chiaro info`.
-pub fn info(path: &Path) -> Result<()> {
-    let loaded = chiaro::io::load_scene(path)?;
+pub fn info(path: &Path, defines: &[String]) -> Result<()> {
+    let options = chiaro::io::LoadOptions::from_defines(defines).map_err(|e| anyhow!(e))?;
+    let loaded = chiaro::io::load_scene_with(path, &options)?;
     let s = &loaded.scene;
     let prepared = chiaro::scene_bounds(s);
     println!("scene      {}", path.display());
@@ -428,7 +431,7 @@ pub fn compare(args: CompareArgs) -> Result<()> {
     if let Some(report) = &args.report {
         check_output_dir(report)?;
     }
-    let mut scene = load(&args.scene)?;
+    let mut scene = load(&args.scene, &args.opts.define)?;
     let settings = settings_from(&scene, &args.opts)?;
     place_camera(&mut scene, &args.opts, &settings)?;
     if let Some(n) = args.opts.threads {

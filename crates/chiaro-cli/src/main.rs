@@ -22,11 +22,15 @@ fn main() -> ExitCode {
     }
     let result = match args.command {
         cli::Command::Render(r) => commands::render(r),
-        cli::Command::Info { scene, system } => {
+        cli::Command::Info {
+            scene,
+            system,
+            define,
+        } => {
             if system {
                 commands::info_system();
             }
-            scene.map_or(Ok(()), |scene| commands::info(&scene))
+            scene.map_or(Ok(()), |scene| commands::info(&scene, &define))
         }
         cli::Command::Serve {
             scene,

@@ -324,3 +324,41 @@ fn numeric_flags_take_negative_numbers_as_values() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("'-16' for '--width"), "{}", stderr(&o));
 }
+
+#[test]
+fn mitsuba_scenes_take_d_parameters() {
+    let dir = fresh_dir("mitsuba");
+    let scene = dir.join("ball.xml");
+    std::fs::write(
+        &scene,
+        r#"<scene version="3.0.0">
+  <default name="spp" value="8"/>
+  <sensor type="perspective">
+    <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="12"/><rfilter type="box"/></film>
+  </sensor>
+  <emitter type="point"><point name="position" x="0" y="2" z="3"/><rgb name="intensity" value="5"/></emitter>
+  <shape type="sphere"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></shape>
+</scene>"#,
+    )
+    .expect("scene written");
+    let scene = scene.to_str().expect("utf-8 path");
+    let o = chiaro(&["info", scene, "-D", "spp=3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("samples = 3"), "{}", stdout(&o));
+    let out = dir.join("ball.png");
+    let o = chiaro(&[
+        "render",
+        scene,
+        "-D",
+        "spp=2",
+        "-o",
+        out.to_str().expect("utf-8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.is_file());
+    // A -D without `=` is refused in one line.
+    let o = chiaro(&["info", scene, "-D", "spp"]);
+    assert_one_line_error(&o, "name=value");
+}

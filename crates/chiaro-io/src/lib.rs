@@ -5,6 +5,8 @@
 //! - [`obj`]: Wavefront OBJ + MTL, read by our own parser (positions in errors).
 //! - [`gltf_import`]: glTF 2.0 (`.gltf`, `.glb`, embedded) through the gltf crate.
 //! - [`ply`]: Stanford PLY (ASCII and binary) through ply-rs-bw.
+//! - [`mitsuba`]: Mitsuba 3 XML scenes (`.xml`) through roxmltree, mapped
+//!   onto the same `Scene` (docs/import-mitsuba.md).
 //! - [`images`]: decoding image textures (PNG, JPEG, HDR, EXR) to linear texels.
 //! - [`output`]: writing films (PNG 8/16-bit, OpenEXR with depth and normal,
 //!   Radiance HDR, PPM, palette PNG), always through a temporary file and a rename.
@@ -26,6 +28,7 @@ pub mod error;
 pub mod files;
 pub mod gltf_import;
 pub mod images;
+pub mod mitsuba;
 pub mod obj;
 pub mod output;
 pub mod plain;
@@ -69,8 +72,8 @@ pub(crate) fn lowercase_extension(path: &Path) -> String {
 }
 
 /// Reads a scene file, choosing the reader by extension (case-insensitive):
-/// `.toml` (the chiaro scene format, see [`scene_toml`]), `.obj` (with its
-/// `.mtl`), `.gltf`, `.glb` or `.ply`.
+/// `.toml` (the chiaro scene format, see [`scene_toml`]), `.xml` (Mitsuba
+/// 3, see [`mitsuba`]), `.obj` (with its `.mtl`), `.gltf`, `.glb` or `.ply`.
 ///
 /// A mesh file read this way becomes a whole scene: its first camera (or one
 /// framing it from its front, `framing::frame_scene`), its lights (or the
@@ -83,6 +86,38 @@ pub(crate) fn lowercase_extension(path: &Path) -> String {
 /// glTF JSON path) when the file cannot be read, does not parse, or
 /// describes a scene that `Scene::validate` rejects.
 pub fn load_scene(path: &Path) -> Result<Loaded> {
+    load_scene_with(path, &LoadOptions::default())
+}
+
+/// Options of a scene load that the file format may use.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LoadOptions {
+    /// `-D name=value` parameters: a Mitsuba scene's `$name` takes this
+    /// value over its `<default>`. Other formats ignore them.
+    pub defines: Vec<(String, String)>,
+}
+
+impl LoadOptions {
+    /// Options from `name=value` strings (the CLI's `-D`); an error names
+    /// the string without `=` or with an empty name.
+    pub fn from_defines<S: AsRef<str>>(defines: &[S]) -> std::result::Result<Self, String> {
+        let mut out = Vec::with_capacity(defines.len());
+        for d in defines {
+            let d = d.as_ref();
+            match d.split_once('=') {
+                Some((k, v)) if !k.trim().is_empty() => {
+                    out.push((k.trim().to_owned(), v.to_owned()))
+                }
+                _ => return Err(format!("-D {d:?}: expected name=value")),
+            }
+        }
+        Ok(Self { defines: out })
+    }
+}
+
+/// [`load_scene`] with [`LoadOptions`]; `.xml` files are Mitsuba 3 scenes
+/// ([`mitsuba`]).
+pub fn load_scene_with(path: &Path, options: &LoadOptions) -> Result<Loaded> {
     let ext = lowercase_extension(path);
     match ext.as_str() {
         "toml" => {
@@ -90,12 +125,13 @@ pub fn load_scene(path: &Path) -> Result<Loaded> {
             let base = path.parent().unwrap_or_else(|| Path::new("."));
             scene_toml::parse_scene(&text, base, path)
         }
+        "xml" => mitsuba::load(path, options),
         _ => match load_mesh_file(path) {
             Some(imported) => whole_scene(imported?, path),
             None => Err(IoError::format(
                 path,
                 format!(
-                    "unknown scene file extension {ext:?}: expected .toml, .obj, .gltf, .glb or .ply"
+                    "unknown scene file extension {ext:?}: expected .toml, .xml (Mitsuba 3), .obj, .gltf, .glb or .ply"
                 ),
             )),
         },

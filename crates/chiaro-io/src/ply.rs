@@ -186,21 +186,106 @@ pub fn load_ply(path: &Path) -> Result<Imported> {
 
 /// Reads PLY bytes held in memory; `path` names the input in messages.
 pub fn load_ply_slice(bytes: &[u8], path: &Path) -> Result<Imported> {
+    let ply = parse(bytes, path)?;
+    imported_from(&ply, path)
+}
+
+/// The scalar properties of a PLY file's `vertex` and `face` elements
+/// other than those [`load_ply_slice`] reads (Mitsuba's mesh attributes:
+/// `color_0`, `weight_0`, ...), by name, one value per element.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ExtraProperties {
+    /// Per-vertex properties.
+    pub vertex: Vec<(String, Vec<f32>)>,
+    /// Per-face properties.
+    pub face: Vec<(String, Vec<f32>)>,
+    /// For each face, how many triangles its fan gave (0 for a skipped
+    /// face), in the order [`load_ply_slice`] emits them.
+    pub triangles_per_face: Vec<u32>,
+}
+
+/// Reads a PLY file as [`load_ply`] does, with its [`ExtraProperties`].
+pub fn load_ply_with_properties(path: &Path) -> Result<(Imported, ExtraProperties)> {
+    let bytes = crate::files::read_file_within(path, MemoryBudget::process(), MAX_FILE_BYTES)?;
+    let ply = parse(&bytes, path)?;
+    let imported = imported_from(&ply, path)?;
+    const READ: [&str; 14] = [
+        "x",
+        "y",
+        "z",
+        "nx",
+        "ny",
+        "nz",
+        "red",
+        "green",
+        "blue",
+        "u",
+        "v",
+        "s",
+        "t",
+        "vertex_indices",
+    ];
+    let extra = |name: &str| -> Vec<(String, Vec<f32>)> {
+        let Some(list) = ply.payload.get(name) else {
+            return Vec::new();
+        };
+        let Some(first) = list.first() else {
+            return Vec::new();
+        };
+        let mut keys: Vec<&String> = first
+            .iter()
+            .filter(|(k, v)| !READ.contains(&k.as_str()) && scalar(v).is_some())
+            .map(|(k, _)| k)
+            .collect();
+        keys.sort();
+        keys.into_iter()
+            .map(|k| {
+                let vals = list
+                    .iter()
+                    .map(|e| e.get(k).and_then(scalar).unwrap_or(0.0) as f32)
+                    .collect();
+                (k.clone(), vals)
+            })
+            .collect()
+    };
+    let faces = ply.payload.get("face").map_or(&[][..], |f| &f[..]);
+    let triangles_per_face = faces
+        .iter()
+        .map(|f| {
+            let list = f.get("vertex_indices").or_else(|| f.get("vertex_index"));
+            list.and_then(index_list)
+                .map_or(0, |l| l.len().saturating_sub(2) as u32)
+        })
+        .collect();
+    Ok((
+        imported,
+        ExtraProperties {
+            vertex: extra("vertex"),
+            face: extra("face"),
+            triangles_per_face,
+        },
+    ))
+}
+
+/// Parses PLY bytes (counts checked first, a parser panic caught).
+fn parse(bytes: &[u8], path: &Path) -> Result<ply_rs_bw::ply::Ply<DefaultElement>> {
     check_counts(bytes).map_err(|m| IoError::format(path, format!("malformed PLY: {m}")))?;
     // The parser is not known to panic; a panic on unforeseen input is still an error.
     let parsed = std::panic::catch_unwind(|| {
         Parser::<DefaultElement>::new().read_ply(&mut std::io::Cursor::new(bytes))
     });
-    let ply = match parsed {
-        Ok(Ok(p)) => p,
-        Ok(Err(e)) => return Err(parse_error(&e, path)),
-        Err(_) => {
-            return Err(IoError::format(
-                path,
-                "malformed PLY: the reader failed on this file",
-            ));
-        }
-    };
+    match parsed {
+        Ok(Ok(p)) => Ok(p),
+        Ok(Err(e)) => Err(parse_error(&e, path)),
+        Err(_) => Err(IoError::format(
+            path,
+            "malformed PLY: the reader failed on this file",
+        )),
+    }
+}
+
+/// The mesh of a parsed PLY file.
+fn imported_from(ply: &ply_rs_bw::ply::Ply<DefaultElement>, path: &Path) -> Result<Imported> {
     let mut warnings = Vec::new();
     let Some(vertices) = ply.payload.get("vertex") else {
         return Err(IoError::format(path, "no `vertex` element"));

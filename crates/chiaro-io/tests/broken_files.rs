@@ -131,6 +131,27 @@ fn the_issue_cases_read_as_plain_words() {
         m.contains(":3:") && m.contains("before any `element`"),
         "{m}"
     );
+    // Mitsuba XML: file, line and column, and what was expected.
+    let m = msg("bad-xml.xml");
+    assert!(
+        m.contains("bad-xml.xml:4:3:") && m.contains("'bsdf'") && !m.contains(" at 4:3"),
+        "{m}"
+    );
+    let m = msg("unknown-plugin.xml");
+    assert!(
+        m.contains("unknown-plugin.xml:3:3:") && m.contains("\"teapot\""),
+        "{m}"
+    );
+    let m = msg("missing-attribute.xml");
+    assert!(
+        m.contains("missing-attribute.xml:2:3:") && m.contains("filename"),
+        "{m}"
+    );
+    let m = msg("unset-parameter.xml");
+    assert!(
+        m.contains("unset-parameter.xml:3:5:") && m.contains("$size"),
+        "{m}"
+    );
     // PNG: the chunk by its name.
     let m = msg("idat-corrupt.png");
     assert!(m.contains("idat-corrupt.png") && m.contains("IDAT"), "{m}");

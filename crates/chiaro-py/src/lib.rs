@@ -39,13 +39,23 @@ pub(crate) fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
     Ok(())
 }
 
-/// Reads a scene file (`.toml`, `.obj`, `.gltf`, `.glb`). Loader warnings
-/// become `UserWarning`s; errors raise `SceneError` carrying `path`, `line`
-/// and `column`, or `OSError` for a missing or unreadable file.
+/// Reads a scene file (`.toml`, `.xml` (Mitsuba 3), `.obj`, `.gltf`,
+/// `.glb`, `.ply`); `defines` gives a Mitsuba scene's `$name` parameters
+/// (as the CLI's `-D name=value`). Loader warnings become `UserWarning`s;
+/// errors raise `SceneError` carrying `path`, `line` and `column`, or
+/// `OSError` for a missing or unreadable file.
 #[pyfunction]
-fn load(py: Python<'_>, path: PathBuf) -> PyResult<PyScene> {
+#[pyo3(signature = (path, defines = None))]
+fn load(
+    py: Python<'_>,
+    path: PathBuf,
+    defines: Option<std::collections::BTreeMap<String, String>>,
+) -> PyResult<PyScene> {
+    let options = chiaro::io::LoadOptions {
+        defines: defines.unwrap_or_default().into_iter().collect(),
+    };
     let loaded = py
-        .detach(|| chiaro::io::load_scene(&path))
+        .detach(|| chiaro::io::load_scene_with(&path, &options))
         .map_err(io_err)?;
     warn_all(py, &loaded.warnings)?;
     Ok(PyScene {

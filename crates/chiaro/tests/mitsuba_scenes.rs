@@ -1,0 +1,128 @@
+//! The seven Mitsuba 3 test scene files of the shared assets
+//! (`$CHIARO_ASSETS/mitsuba3-test-scenes/tests/scenes/*/*.xml`): each loads
+//! through `chiaro::io::load_scene` and renders small with every technique;
+//! the path tracer agrees with Mitsuba's reference by its z-test on the
+//! scenes whose mapping is exact (the full-budget pass fractions of all
+//! seven come from `examples/mitsuba_agreement.rs`). Skipped, saying so,
+//! where the assets are absent.
+
+use chiaro::Technique;
+use chiaro::progress::NoProgress;
+use chiaro_testkit::stats::mitsuba_z_test;
+use std::path::{Path, PathBuf};
+
+/// Each scene file, its reference's stem, and whether its mapping is exact
+/// (the infinite mirrors' conductor Fresnel and the texture scene's
+/// Gaussian filter are approximate).
+const SCENES: [(&str, &str, bool); 7] = [
+    (
+        "floating_sphere/test_directional_direct.xml",
+        "test_directional",
+        true,
+    ),
+    ("infinite_mirrors/scene_path.xml", "scene", false),
+    (
+        "instancing/test_instancing_path.xml",
+        "test_instancing",
+        true,
+    ),
+    (
+        "mesh_attributes/test_mesh_attributes_1_face_direct.xml",
+        "test_mesh_attributes_1_face",
+        true,
+    ),
+    (
+        "mesh_attributes/test_mesh_attributes_3_face_direct.xml",
+        "test_mesh_attributes_3_face",
+        true,
+    ),
+    (
+        "mesh_attributes/test_mesh_attributes_3_vertex_direct.xml",
+        "test_mesh_attributes_3_vertex",
+        true,
+    ),
+    (
+        "texture_interp/test_texture_interp_direct.xml",
+        "test_texture_interp",
+        false,
+    ),
+];
+
+fn scenes_dir() -> Option<PathBuf> {
+    let d = chiaro_testkit::shared_assets()?.join("mitsuba3-test-scenes/tests/scenes");
+    if d.is_dir() {
+        Some(d)
+    } else {
+        eprintln!("skipped: {} is absent", d.display());
+        None
+    }
+}
+
+#[test]
+fn every_technique_renders_every_scene() {
+    let Some(dir) = scenes_dir() else { return };
+    for (file, _, _) in SCENES {
+        let scene = chiaro::io::load_scene(&dir.join(file))
+            .unwrap_or_else(|e| panic!("{file}: {e}"))
+            .scene;
+        for technique in Technique::ALL {
+            let mut s = scene.render.clone();
+            s.technique = technique;
+            s.width = 24;
+            s.height = 24;
+            s.samples = 1;
+            let film = chiaro::render(&scene, &s, &NoProgress)
+                .unwrap_or_else(|e| panic!("{file} with {}: {e}", technique.name()));
+            assert_eq!((film.width, film.height), (24, 24));
+            assert!(
+                film.color.iter().all(|c| c.is_finite()),
+                "{file}: {}",
+                technique.name()
+            );
+        }
+    }
+}
+
+fn rgb(path: &Path) -> Vec<[f64; 3]> {
+    let img = chiaro::io::images::load_texture(path, false).expect("reference image");
+    (0..img.texel_count())
+        .map(|i| {
+            let t = img.texel_at(i);
+            [t[0] as f64, t[1] as f64, t[2] as f64]
+        })
+        .collect()
+}
+
+#[test]
+fn path_agrees_with_mitsuba_where_exact() {
+    let Some(dir) = scenes_dir() else { return };
+    // 32 spp: the z-test scales with the render's own sample count.
+    let spp = 32;
+    for (file, stem, exact) in SCENES {
+        if !exact {
+            continue;
+        }
+        let path = dir.join(file);
+        let refs = path.parent().expect("folder").join("refs");
+        let reference = rgb(&refs.join(format!("{stem}_ref_rgb.exr")));
+        let variance = rgb(&refs.join(format!("{stem}_ref_rgb_var.exr")));
+        let scene = chiaro::io::load_scene(&path).expect("loads").scene;
+        let mut s = scene.render.clone();
+        s.technique = Technique::Path;
+        s.samples = spp;
+        let film = chiaro::render(&scene, &s, &NoProgress).expect("renders");
+        assert_eq!(film.color.len(), reference.len(), "{file}: size");
+        let mean: Vec<[f64; 3]> = film
+            .color
+            .iter()
+            .map(|c| [c.x as f64, c.y as f64, c.z as f64])
+            .collect();
+        let t = mitsuba_z_test(&mean, &reference, &variance, spp as f64);
+        assert!(
+            t.pass_fraction() >= 0.9975,
+            "{file}: {} of {} pixels fail the z-test",
+            t.failed,
+            t.pixels
+        );
+    }
+}
