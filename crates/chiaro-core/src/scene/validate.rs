@@ -7,6 +7,12 @@ use super::{
 use glam::Vec3;
 use std::fmt;
 
+/// The largest world-space coordinate a scene may use: squared distances
+/// and edge cross products of points this far out stay finite in `f32`
+/// (1e15 squared is 1e30, under `f32::MAX` = 3.4e38), so no technique meets
+/// an infinity or a NaN in its geometry.
+pub const MAX_COORDINATE: f32 = 1e15;
+
 /// How bad an [`Issue`] is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Severity {
@@ -59,6 +65,15 @@ impl Checker {
     fn finite(&mut self, path: &str, v: Vec3) {
         if !v.is_finite() {
             self.error(path, format!("expected finite numbers, got {v}"));
+        }
+    }
+    /// A position: finite and within [`MAX_COORDINATE`].
+    fn coordinate(&mut self, path: &str, v: Vec3) {
+        if !within_range(v) {
+            self.error(
+                path,
+                format!("expected finite coordinates within ±{MAX_COORDINATE:e}, got {v}"),
+            );
         }
     }
     fn non_negative(&mut self, path: &str, v: Vec3) {
@@ -294,6 +309,11 @@ impl Scene {
                     format!("{p}.positions"),
                     "a vertex position is NaN or infinite",
                 );
+            } else if let Some(v) = mesh.positions.iter().find(|v| !within_range(**v)) {
+                c.error(
+                    format!("{p}.positions"),
+                    format!("a vertex position is beyond ±{MAX_COORDINATE:e}: {v}"),
+                );
             }
             for (name, len) in [
                 ("normals", mesh.normals.len()),
@@ -404,13 +424,50 @@ impl Scene {
                     "transform is singular (a scale of 0?)",
                 );
             }
+            // Where the object lands: the corners of its local box moved
+            // into the world.
+            let local = match o.geometry {
+                Geometry::Sphere { radius } if radius.is_finite() => {
+                    Some((Vec3::splat(-radius), Vec3::splat(radius)))
+                }
+                Geometry::Mesh(id) => self.meshes.get(id.index()).and_then(|mesh| {
+                    let ps = mesh.positions.iter().filter(|v| within_range(**v));
+                    let lo = ps.clone().copied().reduce(Vec3::min)?;
+                    Some((lo, ps.copied().fold(lo, Vec3::max)))
+                }),
+                Geometry::Sphere { .. } => None,
+            };
+            if let Some((lo, hi)) = local
+                && m.is_finite()
+            {
+                let far = (0..8)
+                    .map(|k| {
+                        let corner = Vec3::select(
+                            glam::BVec3::new(k & 1 != 0, k & 2 != 0, k & 4 != 0),
+                            hi,
+                            lo,
+                        );
+                        m.transform_point3(corner)
+                    })
+                    .find(|w| !within_range(*w));
+                if let Some(w) = far {
+                    c.error(
+                        format!("{p}.transform"),
+                        format!(
+                            "the object reaches {w} in the world, beyond ±{MAX_COORDINATE:e}"
+                        ),
+                    );
+                }
+            }
         }
 
         for (i, l) in self.lights.iter().enumerate() {
             let p = format!("lights[{i}] ({})", l.kind());
             c.non_negative(&format!("{p}.color"), l.power_rgb());
             match l {
-                Light::Point { position, .. } => c.finite(&format!("{p}.position"), *position),
+                Light::Point { position, .. } => {
+                    c.coordinate(&format!("{p}.position"), *position);
+                }
                 Light::Directional { direction, .. } => {
                     c.finite(&format!("{p}.direction"), *direction);
                     if direction.length_squared() == 0.0 {
@@ -418,7 +475,7 @@ impl Scene {
                     }
                 }
                 Light::Spot(s) => {
-                    c.finite(&format!("{p}.position"), s.position);
+                    c.coordinate(&format!("{p}.position"), s.position);
                     c.finite(&format!("{p}.direction"), s.direction);
                     if s.direction.length_squared() == 0.0 {
                         c.error(format!("{p}.direction"), "direction is the zero vector");
@@ -440,6 +497,17 @@ impl Scene {
                             "area light has zero or non-finite area",
                         );
                     }
+                    let (at, reach) = match shape {
+                        AreaShape::Quad {
+                            corner,
+                            edge_u,
+                            edge_v,
+                        } => (*corner, edge_u.abs() + edge_v.abs()),
+                        AreaShape::Disk { center, radius, .. }
+                        | AreaShape::Sphere { center, radius } => (*center, Vec3::splat(*radius)),
+                        AreaShape::Triangle { a, b, c } => (*a, (*b - *a).abs() + (*c - *a).abs()),
+                    };
+                    c.coordinate(&format!("{p}.shape"), at.abs() + reach.abs());
                     if let AreaShape::Disk { normal, .. } = shape
                         && normal.length_squared() == 0.0
                     {
@@ -478,8 +546,8 @@ fn check_depth_cue(c: &mut Checker, cue: &super::DepthCue) {
 
 /// The checks of one camera, reported under `path` (`camera`, `cameras[2]`).
 fn check_camera(c: &mut Checker, path: &str, cam: &super::Camera) {
-    c.finite(&format!("{path}.eye"), cam.eye);
-    c.finite(&format!("{path}.look_at"), cam.look_at);
+    c.coordinate(&format!("{path}.eye"), cam.eye);
+    c.coordinate(&format!("{path}.look_at"), cam.look_at);
     c.finite(&format!("{path}.up"), cam.up);
     if !(cam.fov_y_degrees > 0.0 && cam.fov_y_degrees < 180.0) {
         c.error(
@@ -506,6 +574,11 @@ fn check_camera(c: &mut Checker, path: &str, cam: &super::Camera) {
     }
 }
 
+/// Finite and within [`MAX_COORDINATE`] on every axis.
+fn within_range(v: Vec3) -> bool {
+    v.is_finite() && v.abs().max_element() <= MAX_COORDINATE
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::*;
@@ -526,6 +599,44 @@ mod tests {
             .filter(|i| i.severity == Severity::Error)
             .count();
         assert!(errors >= 4, "{issues:#?}");
+    }
+
+    /// Geometry near `f32::MAX` (a fuzzed quad corner of 3.4e38, a cube
+    /// moved by 1e30) overflowed the BVH's slab test into infinities and
+    /// NaNs; such a scene is refused, naming what is too far out.
+    #[test]
+    fn coordinates_beyond_the_range_are_refused() {
+        use crate::geometry::primitives;
+        use crate::scene::{Light, Material, Transform};
+        let with = |corner_z: f32, shift: f32| {
+            let mut s = Scene::default();
+            let m = s.add_material(Material::default());
+            let q = primitives::quad(Vec3::new(0.0, 0.0, corner_z), Vec3::X, Vec3::Y);
+            let mesh = s.add_mesh(q);
+            s.objects.push(Object {
+                material: m,
+                geometry: Geometry::Mesh(mesh),
+                transform: Transform {
+                    translate: Vec3::new(shift, 0.0, 0.0),
+                    ..Default::default()
+                },
+                ..Default::default()
+            });
+            s.lights.push(Light::Point {
+                position: Vec3::new(0.0, 2.0, 0.0),
+                color: Vec3::ONE,
+                intensity: 1.0,
+                attenuation: Default::default(),
+            });
+            s.validate()
+                .into_iter()
+                .filter(|i| i.severity == Severity::Error)
+                .map(|i| i.path)
+                .collect::<Vec<_>>()
+        };
+        assert!(with(1.0, 1e3).is_empty());
+        assert_eq!(with(3.4e38, 0.0), ["meshes[0] (quad).positions"]);
+        assert_eq!(with(1.0, 1e30), ["objects[0] ().transform"]);
     }
 
     #[test]
