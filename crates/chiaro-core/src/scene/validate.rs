@@ -453,9 +453,7 @@ impl Scene {
                 if let Some(w) = far {
                     c.error(
                         format!("{p}.transform"),
-                        format!(
-                            "the object reaches {w} in the world, beyond ±{MAX_COORDINATE:e}"
-                        ),
+                        format!("the object reaches {w} in the world, beyond ±{MAX_COORDINATE:e}"),
                     );
                 }
             }
