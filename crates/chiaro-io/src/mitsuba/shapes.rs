@@ -473,7 +473,7 @@ pub fn cube() -> Mesh {
 }
 
 /// Mitsuba's `disk`: radius 1 in the z = 0 plane facing +z, as a fan of
-/// [`SEGMENTS`] triangles; uv `(r, phi / 2 pi)`.
+/// `SEGMENTS` (64) triangles; uv `(r, phi / 2 pi)`.
 pub fn disk() -> Mesh {
     let mut mesh = Mesh {
         positions: vec![Vec3::ZERO],
