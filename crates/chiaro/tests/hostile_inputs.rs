@@ -9,23 +9,13 @@ use chiaro::budget::{ByteSize, MemoryBudget};
 use chiaro::scene::{Material, Object, RenderSettings, Scene, ShadowMethod, Technique};
 use chiaro::{NoProgress, Vec3};
 use chiaro_core::geometry::primitives;
-use chiaro_testkit::Warnings;
 use chiaro_testkit::scenes::{point_light, settings};
+use chiaro_testkit::{SPARSE_GLTF_24_GIB, Warnings, base64, put};
 use std::path::{Path, PathBuf};
 
 /// A fresh directory under the target folder for one test's files.
 fn dir(name: &str) -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("hostile-{name}"));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-/// Writes `contents` to the file `name` in `dir` and returns its path.
-fn put(dir: &Path, name: &str, contents: impl AsRef<[u8]>) -> PathBuf {
-    let path = dir.join(name);
-    std::fs::write(&path, contents).expect("write");
-    path
+    chiaro_testkit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), &format!("hostile-{name}"))
 }
 
 /// The warnings of loading `path` (which loads), one a line.
@@ -104,40 +94,10 @@ fn huge_png() -> Vec<u8> {
     png
 }
 
-/// Standard base64 with padding.
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for i in 0..4 {
-            if i <= c.len() {
-                out.push(A[(n >> (18 - 6 * i) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn a_sparse_accessor_of_2_31_elements_is_refused() {
     limit_1g();
-    let path = put(
-        &dir("sparse"),
-        "sparse.gltf",
-        r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
-        "accessors": [{"componentType": 5126, "count": 2147483648, "type": "VEC3",
-          "min": [0, 0, 0], "max": [1, 2, 3],
-          "sparse": {"count": 1, "indices": {"bufferView": 0, "componentType": 5125},
-            "values": {"bufferView": 1}}}],
-        "bufferViews": [{"buffer": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 4, "byteLength": 12}],
-        "buffers": [{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}]}"#,
-    );
+    let path = put(&dir("sparse"), "sparse.gltf", SPARSE_GLTF_24_GIB);
     let msg = refusal(&path, "24 GiB of zeros");
     assert!(
         msg.contains("sparse.gltf")
