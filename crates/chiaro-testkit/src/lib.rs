@@ -304,6 +304,34 @@ pub const SPARSE_GLTF_24_GIB: &str = r#"{"asset": {"version": "2.0"}, "scenes": 
         "bufferViews": [{"buffer": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 4, "byteLength": 12}],
         "buffers": [{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}]}"#;
 
+/// Marsaglia's xorshift64 (shifts 13, 7, 17): tests' fixed-seed streams.
+#[derive(Debug, Clone)]
+pub struct XorShift64(pub u64);
+
+impl XorShift64 {
+    /// The next state (never zero from a nonzero seed).
+    pub fn next_u64(&mut self) -> u64 {
+        let mut s = self.0;
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        self.0 = s;
+        s
+    }
+
+    /// Uniform in [0, 1), from the top 24 bits of the next state.
+    pub fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Asserts that `text` (a message) contains every one of `words`.
+pub fn assert_contains_all(text: &str, words: &[&str]) {
+    for w in words {
+        assert!(text.contains(w), "{w:?} not in {text}");
+    }
+}
+
 /// Where failing tests write images: `target/test-output/<name>.ppm`.
 pub fn output_path(name: &str) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/test-output");

@@ -140,12 +140,7 @@ mod tests {
 
     #[test]
     fn a_tessellated_sphere_hides_its_backs() {
-        let mut s = Scene::default();
-        s.add_material(Material::default());
-        s.objects.push(Object {
-            geometry: Geometry::Sphere { radius: 1.0 },
-            ..Default::default()
-        });
+        let s = chiaro_testkit::scenes::white_sphere();
         let ps = PreparedScene::new(&s, PrepareOptions::default());
         assert!(!ps.triangles.is_empty());
         assert!(hidden_backs(&ps, &s.camera, 1.0)[0]);
