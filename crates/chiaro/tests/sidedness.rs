@@ -200,17 +200,16 @@ fn a_one_sided_back_is_black_in_every_technique() {
 #[test]
 fn cull_backfaces_never_changes_a_picture() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
-    for name in [
-        "cornell-box",
-        "mitsuba-cbox",
-        "spotlights",
-        "teapot",
-        "transparency",
-        "whitted",
-    ] {
-        let scene = chiaro::io::load_scene(&dir.join(format!("{name}.toml")))
-            .expect("loads")
-            .scene;
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .expect("the scenes folder")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 6, "{} shipped scenes", files.len());
+    for file in &files {
+        let name = file.display();
+        let scene = chiaro::io::load_scene(file).expect("loads").scene;
         for t in [Technique::Flat, Technique::Gouraud, Technique::Phong] {
             let mut s = RenderSettings {
                 technique: t,
