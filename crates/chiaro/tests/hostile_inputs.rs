@@ -115,7 +115,7 @@ fn a_16384_square_png_is_refused_as_texture_environment_and_data_uri() {
     let d = dir("png");
     put(&d, "big.png", huge_png());
     let expect_refusal = |msg: &str| {
-        assert_contains_all(&msg, &["big.png", "16384x16384", "1.0 GiB"]);
+        assert_contains_all(msg, &["big.png", "16384x16384", "1.0 GiB"]);
     };
     // As a material's texture and as the environment of a TOML scene.
     for (i, text) in [
