@@ -5,18 +5,24 @@
 //! (exit 0), never an abort (SIGABRT, exit 134) on a failed allocation.
 //! Skipped with a message where util-linux's `prlimit` is not installed.
 
+use chiaro_testkit::{SPARSE_GLTF_24_GIB, put};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// The address-space limit of these tests, bytes.
 const LIMIT: &str = "--as=4000000000";
 
-/// Whether `prlimit` runs here (it prints its usage with `--version`).
-fn have_prlimit() -> bool {
-    Command::new("prlimit")
+/// Whether `prlimit` is missing here (it prints its usage with
+/// `--version`); says the test is skipped when it is.
+fn prlimit_missing() -> bool {
+    let have = Command::new("prlimit")
         .arg("--version")
         .output()
-        .is_ok_and(|o| o.status.success())
+        .is_ok_and(|o| o.status.success());
+    if !have {
+        eprintln!("skipped: prlimit (util-linux) is not installed");
+    }
+    !have
 }
 
 /// `chiaro ARGS` under the address-space limit.
@@ -31,10 +37,7 @@ fn chiaro_limited(args: &[&str]) -> Output {
 
 /// A fresh, empty directory for one test.
 fn fresh_dir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("as-limit-{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("test directory");
-    dir
+    chiaro_testkit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), &format!("as-limit-{name}"))
 }
 
 /// How a run ended.
@@ -104,37 +107,34 @@ fn render(dir: &Path, scene: &Path, extra: &[&str]) -> Output {
 
 #[test]
 fn the_budget_reads_the_address_space_limit() {
-    if !have_prlimit() {
-        eprintln!("skipped: prlimit (util-linux) is not installed");
+    if prlimit_missing() {
         return;
     }
     let o = chiaro_limited(&["info", "--system"]);
     let text = String::from_utf8_lossy(&o.stdout).into_owned();
     assert!(o.status.success(), "{o:?}");
     // 4e9 bytes are 3.7 GiB; the budget is half of it.
-    assert!(
-        text.contains("RLIMIT_AS  3.7 GiB")
-            && text.contains("limit      3.7 GiB from RLIMIT_AS")
-            && text.contains("budget     1.9 GiB"),
-        "{text}"
-    );
+    for line in [
+        "RLIMIT_AS  3.7 GiB",
+        "limit      3.7 GiB from RLIMIT_AS",
+        "budget     1.9 GiB",
+    ] {
+        assert!(text.contains(line), "{line:?} not in {text}");
+    }
 }
 
 #[test]
 fn big_scenes_are_refused_or_rendered_within_the_address_space() {
-    if !have_prlimit() {
-        eprintln!("skipped: prlimit (util-linux) is not installed");
+    if prlimit_missing() {
         return;
     }
     let dir = fresh_dir("scenes");
-    let plane = dir.join("plane.toml");
-    std::fs::write(
-        &plane,
+    let plane = put(
+        &dir,
+        "plane.toml",
         "[[object]]\nprimitive = \"plane\"\nsubdivisions = 4096\n",
-    )
-    .expect("write");
-    let spheres = dir.join("spheres.toml");
-    std::fs::write(&spheres, spheres_toml(5000)).expect("write");
+    );
+    let spheres = put(&dir, "spheres.toml", spheres_toml(5000));
     let cornell = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.toml");
     let refused = |what: &str, o: &Output, expect: &str| match ending(what, o) {
         Ending::Refused(msg) => assert!(msg.contains(expect), "{what}: {msg}"),
@@ -189,12 +189,11 @@ fn big_scenes_are_refused_or_rendered_within_the_address_space() {
         ),
         "elements",
     );
-    let grid = dir.join("grid.toml");
-    std::fs::write(
-        &grid,
+    let grid = put(
+        &dir,
+        "grid.toml",
         "[[object]]\nprimitive = \"plane\"\nsubdivisions = 256\n",
-    )
-    .expect("write");
+    );
     refused(
         "jacobi",
         &render(
@@ -228,25 +227,12 @@ fn big_scenes_are_refused_or_rendered_within_the_address_space() {
 
 #[test]
 fn hostile_files_are_refused_or_rendered_within_the_address_space() {
-    if !have_prlimit() {
-        eprintln!("skipped: prlimit (util-linux) is not installed");
+    if prlimit_missing() {
         return;
     }
     let dir = fresh_dir("files");
     // A sparse glTF accessor of 2^31 VEC3 elements (24 GiB of zeros).
-    let sparse = dir.join("sparse.gltf");
-    std::fs::write(
-        &sparse,
-        r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
-        "accessors": [{"componentType": 5126, "count": 2147483648, "type": "VEC3",
-          "min": [0, 0, 0], "max": [1, 2, 3],
-          "sparse": {"count": 1, "indices": {"bufferView": 0, "componentType": 5125},
-            "values": {"bufferView": 1}}}],
-        "bufferViews": [{"buffer": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 4, "byteLength": 12}],
-        "buffers": [{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}]}"#,
-    )
-    .expect("write");
+    let sparse = put(&dir, "sparse.gltf", SPARSE_GLTF_24_GIB);
     match ending("sparse accessor", &render(&dir, &sparse, &[])) {
         Ending::Refused(msg) => assert!(msg.contains("2147483648 elements"), "{msg}"),
         Ending::Rendered => panic!("sparse accessor rendered"),
@@ -293,12 +279,11 @@ fn hostile_files_are_refused_or_rendered_within_the_address_space() {
         "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 30000 +X 60000\n",
     )
     .expect("write");
-    let env = dir.join("env.toml");
-    std::fs::write(
-        &env,
+    let env = put(
+        &dir,
+        "env.toml",
         "[environment]\ntexture = \"huge.hdr\"\n\n[[object]]\nprimitive = \"sphere\"\n",
-    )
-    .expect("write");
+    );
     match ending("huge environment", &render(&dir, &env, &[])) {
         Ending::Refused(msg) => assert!(msg.contains("huge.hdr"), "{msg}"),
         Ending::Rendered => panic!("a 30000 x 60000 environment rendered"),

@@ -2,6 +2,7 @@
 //! and the exit codes (0 success, 1 bad input, 2 usage) with one-line
 //! error messages.
 
+use chiaro_testkit::put;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -21,10 +22,7 @@ fn cornell() -> String {
 
 /// A fresh, empty directory for one test.
 fn fresh_dir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("test directory");
-    dir
+    chiaro_testkit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), &format!("cli-{name}"))
 }
 
 fn stderr(o: &Output) -> String {
@@ -81,8 +79,7 @@ fn info_describes_the_scene() {
 #[test]
 fn bad_scenes_exit_1_with_one_line() {
     let dir = fresh_dir("bad-scene");
-    let bad = dir.join("bad.toml");
-    std::fs::write(&bad, "[camera]\neye = [0, 0\n").expect("writes");
+    let bad = put(&dir, "bad.toml", "[camera]\neye = [0, 0\n");
     let out = dir.join("x.png");
     let out = out.to_str().expect("utf-8 path");
     let o = chiaro(&["render", bad.to_str().expect("utf-8"), "-o", out]);
@@ -214,12 +211,11 @@ fn compare_writes_sheet_and_report_and_reuses_the_reference() {
 #[test]
 fn memory_limit_and_output_path_are_checked_before_rendering() {
     let dir = fresh_dir("memory");
-    let scene = dir.join("plane.toml");
-    std::fs::write(
-        &scene,
+    let scene = put(
+        &dir,
+        "plane.toml",
         "[[object]]\nprimitive = \"plane\"\nsubdivisions = 4096\n",
-    )
-    .expect("write scene");
+    );
     let scene = scene.display().to_string();
     // `info` too: the plane is refused before it is tessellated.
     let o = chiaro(&["info", &scene, "--memory-limit", "1G"]);

@@ -5,6 +5,7 @@
 //! form or leave the file unnamed.
 
 use chiaro_io::images::load_texture;
+use chiaro_testkit::assert_contains_all;
 use std::path::{Path, PathBuf};
 
 fn corpus() -> PathBuf {
@@ -106,6 +107,8 @@ fn no_message_in_the_broken_corpus_shows_a_debug_form() {
 #[test]
 fn the_issue_cases_read_as_plain_words() {
     let msg = |f: &str| messages(&corpus().join(f)).join("\n");
+    // The messages of `f` hold every one of `words`.
+    let says = |f: &str, words: &[&str]| assert_contains_all(&msg(f), words);
     // A 10,000-deep table header on line 11 is reported on line 11.
     let m = msg("deep-header.toml");
     assert!(m.contains("deep-header.toml:11:"), "{m}");
@@ -121,15 +124,10 @@ fn the_issue_cases_read_as_plain_words() {
     let m = msg("attribute-out-of-range.gltf");
     assert!(m.contains("NORMAL refers to accessor 65536"), "{m}");
     // PLY: the line and what was found.
-    let m = msg("bad-float.ply");
-    assert!(
-        m.contains("bad-float.ply:11:3:") && m.contains("`zero`"),
-        "{m}"
-    );
-    let m = msg("property-before-element.ply");
-    assert!(
-        m.contains(":3:") && m.contains("before any `element`"),
-        "{m}"
+    says("bad-float.ply", &["bad-float.ply:11:3:", "`zero`"]);
+    says(
+        "property-before-element.ply",
+        &[":3:", "before any `element`"],
     );
     // Mitsuba XML: file, line and column, and what was expected.
     let m = msg("bad-xml.xml");
@@ -137,20 +135,17 @@ fn the_issue_cases_read_as_plain_words() {
         m.contains("bad-xml.xml:4:3:") && m.contains("'bsdf'") && !m.contains(" at 4:3"),
         "{m}"
     );
-    let m = msg("unknown-plugin.xml");
-    assert!(
-        m.contains("unknown-plugin.xml:3:3:") && m.contains("\"teapot\""),
-        "{m}"
+    says(
+        "unknown-plugin.xml",
+        &["unknown-plugin.xml:3:3:", "\"teapot\""],
     );
-    let m = msg("missing-attribute.xml");
-    assert!(
-        m.contains("missing-attribute.xml:2:3:") && m.contains("filename"),
-        "{m}"
+    says(
+        "missing-attribute.xml",
+        &["missing-attribute.xml:2:3:", "filename"],
     );
-    let m = msg("unset-parameter.xml");
-    assert!(
-        m.contains("unset-parameter.xml:3:5:") && m.contains("$size"),
-        "{m}"
+    says(
+        "unset-parameter.xml",
+        &["unset-parameter.xml:3:5:", "$size"],
     );
     // PNG: the chunk by its name.
     let m = msg("idat-corrupt.png");

@@ -1,6 +1,7 @@
 //! Inputs the fuzz targets (`fuzz/`) once crashed on, each loaded through
 //! the public loaders and expected to end cleanly (`tests/data/fuzz/README.md`).
 
+use chiaro_testkit::assert_contains_all;
 use std::path::{Path, PathBuf};
 
 fn data(name: &str) -> PathBuf {
@@ -22,10 +23,7 @@ fn a_colour_with_one_number_in_an_mtl_is_a_grey() {
     // The crash input as it was: its mangled `v` line is a clean parse error
     // naming file, line and column.
     let msg = refusal("short-kd.obj", "a bad vertex");
-    assert!(
-        msg.contains("short-kd.obj:6:21") && msg.contains("expected a finite number"),
-        "{msg}"
-    );
+    assert_contains_all(&msg, &["short-kd.obj:6:21", "expected a finite number"]);
     // Its library under a valid OBJ: `Kd 000000` is the MTL format's grey
     // (one number for all three), `Ks 0 al` is dropped; the materials load.
     let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fuzz-short-kd");
@@ -58,19 +56,13 @@ fn a_buffer_view_image_without_a_mime_type_is_ignored_with_a_warning() {
     let loaded = chiaro_io::load_scene(&path).expect("the meshes load");
     assert!(loaded.scene.triangle_count() > 0);
     let w = loaded.warnings.join("\n");
-    assert!(
-        w.contains("needs a mimeType") && w.contains("texture ignored"),
-        "{w}"
-    );
+    assert_contains_all(&w, &["needs a mimeType", "texture ignored"]);
 }
 
 #[test]
 fn a_ply_element_count_larger_than_the_file_is_refused() {
     let msg = refusal("huge-element-count.ply", "a count no file can back");
-    assert!(
-        msg.contains("huge-element-count.ply") && msg.contains("element `vertex` claims"),
-        "{msg}"
-    );
+    assert_contains_all(&msg, &["huge-element-count.ply", "element `vertex` claims"]);
     // A real file is not touched by the check.
     let ok = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
                property float z\nelement face 1\nproperty list uchar int vertex_indices\n\

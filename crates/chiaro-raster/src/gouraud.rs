@@ -336,23 +336,13 @@ pub(crate) fn poly_shading(ctx: &Ctx<'_, '_>, vis: &[TileVis]) -> PolyShading {
         (need[v] & side != 0 && !conflict[v] && t != u32::MAX && textured(t) == want_textured)
             .then_some((t, k as usize))
     };
-    let shade_side = |side: u8| -> Vec<Split> {
-        (0..nv)
-            .into_par_iter()
-            .map(|v| match lit(v, side, false) {
-                Some((t, k)) => ctx.corner_split(t, k, side == 2),
-                None => Split::default(),
-            })
-            .collect()
+    let shade_side = |side: u8| {
+        let lit = |v| lit(v, side, false);
+        per_vertex(nv, lit, |t, k| ctx.corner_split(t, k, side == 2))
     };
-    let factor_side = |side: u8| -> Vec<FactoredLight> {
-        (0..nv)
-            .into_par_iter()
-            .map(|v| match lit(v, side, true) {
-                Some((t, k)) => ctx.corner_factored(t, k, side == 2),
-                None => FactoredLight::default(),
-            })
-            .collect()
+    let factor_side = |side: u8| {
+        let lit = |v| lit(v, side, true);
+        per_vertex(nv, lit, |t, k| ctx.corner_factored(t, k, side == 2))
     };
     let any_back = need.iter().any(|&n| n & 2 != 0);
     out.vertex_front = shade_side(1);
@@ -417,6 +407,19 @@ impl<'a> Ctx<'a, '_> {
             d.corners = [get(d.idx[0]), get(d.idx[1]), get(d.idx[2])];
         }
     }
+}
+
+/// `light(t, k)` of each of the `nv` vertices at the corner `k` of
+/// triangle `t` that `lit` gives it, the default where it gives none.
+fn per_vertex<T: Default + Send>(
+    nv: usize,
+    lit: impl Fn(usize) -> Option<(u32, usize)> + Sync,
+    light: impl Fn(u32, usize) -> T + Sync,
+) -> Vec<T> {
+    (0..nv)
+        .into_par_iter()
+        .map(|v| lit(v).map_or_else(T::default, |(t, k)| light(t, k)))
+        .collect()
 }
 
 /// Gouraud shading of the sample `at` of triangle `td`: the illumination of

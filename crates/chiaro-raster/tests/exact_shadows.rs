@@ -133,13 +133,8 @@ fn check_tiling(scene: &Scene, light_pos: Vec3, lit: f32, what: &str) {
     let obj = ObjectShadows::build(&ps, 0).expect("build");
     let bvh = SceneBvh::new(&ps);
     let mut total = 0.0;
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut rnd = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut rng = chiaro_testkit::XorShift64(0x9e37_79b9_7f4a_7c15u64);
+    let mut rnd = move || rng.unit();
     let (mut bad, mut samples) = (0, 0);
     for t in 0..2u32 {
         let frags = obj.fragments(t);

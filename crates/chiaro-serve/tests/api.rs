@@ -93,6 +93,12 @@ fn until(ws: &mut Ws, kind: &str) -> (Value, Vec<(Value, Vec<u8>)>) {
     }
 }
 
+/// A render far longer than any test: path tracing at the page limits.
+fn long_render(id: u64) -> Value {
+    json!({"type": "render", "id": id, "width": 1024, "height": 1024,
+           "progressive": true, "views": [{"technique": "path", "samples": 256}]})
+}
+
 fn small_render(id: u64, technique: &str) -> Value {
     json!({"type": "render", "id": id, "width": 32, "height": 32, "progressive": true,
            "views": [{"technique": technique}]})
@@ -245,11 +251,7 @@ fn closing_the_tab_mid_render_cancels_it_and_the_server_goes_on() {
     for _ in 0..3 {
         let mut c = ws(addr);
         // A render far longer than the test: path tracing at the page limits.
-        send(
-            &mut c,
-            json!({"type": "render", "id": 1, "width": 1024, "height": 1024,
-            "progressive": true, "views": [{"technique": "path", "samples": 256}]}),
-        );
+        send(&mut c, long_render(1));
         std::thread::sleep(Duration::from_millis(50));
         drop(c);
     }
@@ -278,11 +280,7 @@ fn closing_the_tab_mid_render_cancels_it_and_the_server_goes_on() {
 fn a_newer_request_supersedes_the_running_one() {
     let addr = start();
     let mut c = ws(addr);
-    send(
-        &mut c,
-        json!({"type": "render", "id": 1, "width": 1024, "height": 1024,
-        "progressive": true, "views": [{"technique": "path", "samples": 256}]}),
-    );
+    send(&mut c, long_render(1));
     send(&mut c, small_render(2, "preview"));
     let (done, _) = until(&mut c, "done");
     assert_eq!(

@@ -255,6 +255,83 @@ pub fn count_panics<T>(f: impl FnOnce() -> T) -> (T, usize) {
     (result, panics.load(Ordering::SeqCst))
 }
 
+/// A fresh, empty directory `root/name` for one test's files (what a
+/// previous run left there is removed).
+pub fn fresh_dir(root: &str, name: &str) -> PathBuf {
+    let dir = Path::new(root).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("test directory");
+    dir
+}
+
+/// Writes `contents` to `dir/name` and returns the path.
+pub fn put(dir: &Path, name: &str, contents: impl AsRef<[u8]>) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, contents).expect("write");
+    path
+}
+
+/// Standard base64 (RFC 4648, with padding) of `bytes`, for data URIs.
+pub fn base64(bytes: &[u8]) -> String {
+    const ABC: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::new();
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(ABC[(n >> (18 - 6 * k) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+/// A glTF whose one sparse accessor has 2^31 VEC3 elements (24 GiB of
+/// zeros) in a 16-byte buffer: a memory limit must refuse it.
+pub const SPARSE_GLTF_24_GIB: &str = r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "accessors": [{"componentType": 5126, "count": 2147483648, "type": "VEC3",
+          "min": [0, 0, 0], "max": [1, 2, 3],
+          "sparse": {"count": 1, "indices": {"bufferView": 0, "componentType": 5125},
+            "values": {"bufferView": 1}}}],
+        "bufferViews": [{"buffer": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 4, "byteLength": 12}],
+        "buffers": [{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}]}"#;
+
+/// Marsaglia's xorshift64 (shifts 13, 7, 17): tests' fixed-seed streams.
+#[derive(Debug, Clone)]
+pub struct XorShift64(pub u64);
+
+impl XorShift64 {
+    /// The next state (never zero from a nonzero seed).
+    pub fn next_u64(&mut self) -> u64 {
+        let mut s = self.0;
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        self.0 = s;
+        s
+    }
+
+    /// Uniform in [0, 1), from the top 24 bits of the next state.
+    pub fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Asserts that `text` (a message) contains every one of `words`.
+pub fn assert_contains_all(text: &str, words: &[&str]) {
+    for w in words {
+        assert!(text.contains(w), "{w:?} not in {text}");
+    }
+}
+
 /// Where failing tests write images: `target/test-output/<name>.ppm`.
 pub fn output_path(name: &str) -> PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/test-output");

@@ -205,6 +205,40 @@ pub fn add_grid_of(s: &mut Scene, mesh: MeshId, material: MaterialId) {
     };
 }
 
+/// The six faces of a box as quads of its corners (corner `k` takes the
+/// high end on x, y, z where bit 1, 2, 4 of `k` is set), wound outwards.
+pub const BOX_FACES: [[usize; 4]; 6] = [
+    [0, 4, 6, 2],
+    [1, 3, 7, 5],
+    [0, 1, 5, 4],
+    [2, 6, 7, 3],
+    [0, 2, 3, 1],
+    [4, 5, 7, 6],
+];
+
+/// Corner `k` (0..8, bits as in [`BOX_FACES`]) of the box from `lo` to `hi`.
+pub fn box_corner(lo: Vec3, hi: Vec3, k: usize) -> Vec3 {
+    Vec3::new(
+        if k & 1 == 0 { lo.x } else { hi.x },
+        if k & 2 == 0 { lo.y } else { hi.y },
+        if k & 4 == 0 { lo.z } else { hi.z },
+    )
+}
+
+/// Appends to OBJ text the box from `lo` to `hi` (faces wound outwards, or
+/// inwards) as 8 vertices and 6 quads, after the `base` vertices before it.
+pub fn obj_box(obj: &mut String, base: usize, lo: Vec3, hi: Vec3, inward: bool) {
+    for k in 0..8 {
+        let p = box_corner(lo, hi, k);
+        obj.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
+    }
+    for f in BOX_FACES {
+        let f = if inward { [f[0], f[3], f[2], f[1]] } else { f };
+        let [a, b, c, d] = f.map(|i| base + i + 1);
+        obj.push_str(&format!("f {a} {b} {c} {d}\n"));
+    }
+}
+
 /// The Cornell box's white albedo (Cornell's measured data as the
 /// community's RGB, as in `scenes/cornell-box.toml`).
 pub const CORNELL_WHITE: Vec3 = Vec3::new(0.725, 0.71, 0.68);

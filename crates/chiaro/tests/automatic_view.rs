@@ -7,6 +7,8 @@
 use chiaro::scene::{Light, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
 use chiaro_core::shading::bsdf::luminance;
+use chiaro_testkit::base64;
+use chiaro_testkit::scenes::obj_box;
 use std::path::{Path, PathBuf};
 
 fn render(scene: &Scene, technique: Technique, size: (u32, u32), samples: u32) -> Film {
@@ -18,28 +20,6 @@ fn render(scene: &Scene, technique: Technique, size: (u32, u32), samples: u32) -
         ..scene.render.clone()
     };
     chiaro::render(scene, &settings, &NoProgress).expect("renders")
-}
-
-/// Standard base64 (RFC 4648, with padding) of `bytes`, for data URIs.
-fn base64(bytes: &[u8]) -> String {
-    const ABC: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        for k in 0..4 {
-            if k <= chunk.len() {
-                out.push(ABC[(n >> (18 - 6 * k) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }
 
 /// A file under the system's temporary folder, unique to this process and
@@ -244,33 +224,7 @@ fn room_obj() -> String {
     let mut obj = String::from("o room\n");
     let mut base = 0;
     let mut add_box = |obj: &mut String, lo: Vec3, hi: Vec3, inward: bool| {
-        for k in 0..8 {
-            let p = Vec3::new(
-                if k & 1 == 0 { lo.x } else { hi.x },
-                if k & 2 == 0 { lo.y } else { hi.y },
-                if k & 4 == 0 { lo.z } else { hi.z },
-            );
-            obj.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
-        }
-        // Faces of the cube, outward winding (corner bits x=1, y=2, z=4).
-        let faces = [
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-        ];
-        for f in faces {
-            let f = if inward { [f[0], f[3], f[2], f[1]] } else { f };
-            obj.push_str(&format!(
-                "f {} {} {} {}\n",
-                base + f[0] + 1,
-                base + f[1] + 1,
-                base + f[2] + 1,
-                base + f[3] + 1
-            ));
-        }
+        obj_box(obj, base, lo, hi, inward);
         base += 8;
     };
     add_box(

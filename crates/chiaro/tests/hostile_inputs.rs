@@ -9,23 +9,13 @@ use chiaro::budget::{ByteSize, MemoryBudget};
 use chiaro::scene::{Material, Object, RenderSettings, Scene, ShadowMethod, Technique};
 use chiaro::{NoProgress, Vec3};
 use chiaro_core::geometry::primitives;
-use chiaro_testkit::Warnings;
 use chiaro_testkit::scenes::{point_light, settings};
+use chiaro_testkit::{SPARSE_GLTF_24_GIB, Warnings, assert_contains_all, base64, put};
 use std::path::{Path, PathBuf};
 
 /// A fresh directory under the target folder for one test's files.
 fn dir(name: &str) -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("hostile-{name}"));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-/// Writes `contents` to the file `name` in `dir` and returns its path.
-fn put(dir: &Path, name: &str, contents: impl AsRef<[u8]>) -> PathBuf {
-    let path = dir.join(name);
-    std::fs::write(&path, contents).expect("write");
-    path
+    chiaro_testkit::fresh_dir(env!("CARGO_TARGET_TMPDIR"), &format!("hostile-{name}"))
 }
 
 /// The warnings of loading `path` (which loads), one a line.
@@ -104,46 +94,18 @@ fn huge_png() -> Vec<u8> {
     png
 }
 
-/// Standard base64 with padding.
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for c in bytes.chunks(3) {
-        let n = (u32::from(c[0]) << 16)
-            | (u32::from(*c.get(1).unwrap_or(&0)) << 8)
-            | u32::from(*c.get(2).unwrap_or(&0));
-        for i in 0..4 {
-            if i <= c.len() {
-                out.push(A[(n >> (18 - 6 * i) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn a_sparse_accessor_of_2_31_elements_is_refused() {
     limit_1g();
-    let path = put(
-        &dir("sparse"),
-        "sparse.gltf",
-        r#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
-        "accessors": [{"componentType": 5126, "count": 2147483648, "type": "VEC3",
-          "min": [0, 0, 0], "max": [1, 2, 3],
-          "sparse": {"count": 1, "indices": {"bufferView": 0, "componentType": 5125},
-            "values": {"bufferView": 1}}}],
-        "bufferViews": [{"buffer": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 4, "byteLength": 12}],
-        "buffers": [{"byteLength": 16, "uri": "data:application/octet-stream;base64,AQAAAAAAgD8AAABAAABAQA=="}]}"#,
-    );
+    let path = put(&dir("sparse"), "sparse.gltf", SPARSE_GLTF_24_GIB);
     let msg = refusal(&path, "24 GiB of zeros");
-    assert!(
-        msg.contains("sparse.gltf")
-            && msg.contains("2147483648 elements")
-            && msg.contains("memory limit is 1.0 GiB"),
-        "{msg}"
+    assert_contains_all(
+        &msg,
+        &[
+            "sparse.gltf",
+            "2147483648 elements",
+            "memory limit is 1.0 GiB",
+        ],
     );
 }
 
@@ -153,10 +115,7 @@ fn a_16384_square_png_is_refused_as_texture_environment_and_data_uri() {
     let d = dir("png");
     put(&d, "big.png", huge_png());
     let expect_refusal = |msg: &str| {
-        assert!(
-            msg.contains("big.png") && msg.contains("16384x16384") && msg.contains("1.0 GiB"),
-            "{msg}"
-        );
+        assert_contains_all(msg, &["big.png", "16384x16384", "1.0 GiB"]);
     };
     // As a material's texture and as the environment of a TOML scene.
     for (i, text) in [
@@ -195,10 +154,7 @@ fn a_16384_square_png_is_refused_as_texture_environment_and_data_uri() {
         loaded.scene.textures.len()
     );
     let w = loaded.warnings.join("\n");
-    assert!(
-        w.contains("images[0]") && w.contains("16384x16384") && w.contains("texture ignored"),
-        "{w}"
-    );
+    assert_contains_all(&w, &["images[0]", "16384x16384", "texture ignored"]);
 }
 
 /// A floor and a box on it under `n` point lights in a row.
@@ -256,10 +212,7 @@ fn forty_shadow_mapped_lights_degrade_to_shadow_rays_within_the_budget() {
     let mapped = chiaro::render(&scene, &s, &warnings).expect("renders");
     assert!(mapped.is_clean());
     let w = warnings.joined();
-    assert!(
-        w.contains("lights 10, 11,") && w.contains("39 use shadow rays") && w.contains("64 MiB"),
-        "{w}"
-    );
+    assert_contains_all(&w, &["lights 10, 11,", "39 use shadow rays", "64 MiB"]);
     // The same picture as shadow rays for every light, up to the maps'
     // bias at the shadow edges.
     s.shadows = ShadowMethod::Ray;
@@ -420,17 +373,11 @@ fn devices_named_by_a_scene_are_refused_not_read() {
         textured_triangle_gltf("tri.png", "/dev/zero"),
     );
     let msg = refusal(&path, "no buffer");
-    assert!(
-        msg.contains("buffers[0].uri") && msg.contains("character device"),
-        "{msg}"
-    );
+    assert_contains_all(&msg, &["buffers[0].uri", "character device"]);
     // A TOML scene's mesh and texture paths.
     let toml = put(&d, "s.toml", "[[object]]\nmesh = \"/dev/zero\"\n");
     let msg = refusal(&toml, "device");
-    assert!(
-        msg.contains("s.toml:2:8") && msg.contains("character device"),
-        "{msg}"
-    );
+    assert_contains_all(&msg, &["s.toml:2:8", "character device"]);
 }
 
 /// Issue 47: an `mtllib` naming a FIFO blocked forever. It is refused
@@ -480,10 +427,7 @@ fn a_deep_table_header_is_reported_on_its_line() {
     let text = "# comment\n".repeat(10) + "[" + &vec!["a"; 10_000].join(".") + "]\n";
     let path = put(&dir("deep"), "deep.toml", text);
     let msg = refusal(&path, "refused");
-    assert!(
-        msg.contains("deep.toml:11:") && msg.contains("10000 levels"),
-        "{msg}"
-    );
+    assert_contains_all(&msg, &["deep.toml:11:", "10000 levels"]);
 }
 
 /// Issue 47: the Khronos Duck with an emissive factor of 5120 took 31.8 s

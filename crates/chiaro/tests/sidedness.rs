@@ -6,7 +6,7 @@
 
 use chiaro::scene::{Light, Material, ShadowMethod, Sidedness, Technique};
 use chiaro::{Film, NoProgress, RenderSettings, Scene, Vec3};
-use chiaro_testkit::scenes::load_text;
+use chiaro_testkit::scenes::{load_text, obj_box};
 use std::fmt::Write as _;
 
 /// A stand-in for an OBJ pine: a closed box trunk and `needles` single
@@ -23,26 +23,8 @@ fn tree_obj(needles: usize) -> String {
     };
     let mut obj = String::from("# a tree of single-sided quads\n");
     // The trunk: a 0.2 x 2 x 0.2 box wound outwards.
-    for i in 0..8 {
-        let (x, y, z) = (i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        let _ = writeln!(
-            obj,
-            "v {} {} {}",
-            0.2 * x as f32 - 0.1,
-            2.0 * y as f32,
-            0.2 * z as f32 - 0.1
-        );
-    }
-    for f in [
-        [1, 3, 4, 2],
-        [5, 6, 8, 7],
-        [1, 2, 6, 5],
-        [3, 7, 8, 4],
-        [1, 5, 7, 3],
-        [2, 4, 8, 6],
-    ] {
-        let _ = writeln!(obj, "f {} {} {} {}", f[0], f[1], f[2], f[3]);
-    }
+    let (lo, hi) = (Vec3::new(-0.1, 0.0, -0.1), Vec3::new(0.1, 2.0, 0.1));
+    obj_box(&mut obj, 0, lo, hi, false);
     // The needles: 0.5 x 0.15 quads about the upper trunk, each turned at
     // random, so that the camera sees the backs of about half of them.
     for k in 0..needles {
@@ -218,17 +200,16 @@ fn a_one_sided_back_is_black_in_every_technique() {
 #[test]
 fn cull_backfaces_never_changes_a_picture() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
-    for name in [
-        "cornell-box",
-        "mitsuba-cbox",
-        "spotlights",
-        "teapot",
-        "transparency",
-        "whitted",
-    ] {
-        let scene = chiaro::io::load_scene(&dir.join(format!("{name}.toml")))
-            .expect("loads")
-            .scene;
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .expect("the scenes folder")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 6, "{} shipped scenes", files.len());
+    for file in &files {
+        let name = file.display();
+        let scene = chiaro::io::load_scene(file).expect("loads").scene;
         for t in [Technique::Flat, Technique::Gouraud, Technique::Phong] {
             let mut s = RenderSettings {
                 technique: t,

@@ -558,12 +558,13 @@ mod tests {
         );
     }
 
-    #[test]
-    fn split_is_total_and_kd_zero_evaluation_exactly() {
-        use crate::scene::{AreaShape, ReflectanceModel};
-        let lights = [
+    /// An ambient light of colour `ambient`, a point, a directional and a
+    /// two-sided area light: every kind local shading sums.
+    fn every_light(ambient: Vec3) -> [Light; 4] {
+        use crate::scene::AreaShape;
+        [
             Light::Ambient {
-                color: Vec3::ONE,
+                color: ambient,
                 intensity: 0.3,
             },
             Light::Point {
@@ -587,19 +588,36 @@ mod tests {
                 intensity: 3.0,
                 two_sided: true,
             },
-        ];
+        ]
+    }
+
+    /// Visibility of [`every_light`]'s samples: the area light's samples
+    /// with x < 0 are partly shadowed, to exercise visibility.
+    fn part_shadow(li: usize, s: &LightSample) -> Vec3 {
+        if li == 3 && s.point.x < 0.0 {
+            Vec3::new(0.5, 0.25, 0.0)
+        } else {
+            Vec3::ONE
+        }
+    }
+
+    /// The reflectance models local shading evaluates.
+    const MODELS: [crate::scene::ReflectanceModel; 3] = [
+        crate::scene::ReflectanceModel::Phong,
+        crate::scene::ReflectanceModel::Blinn,
+        crate::scene::ReflectanceModel::TorranceSparrow,
+    ];
+
+    #[test]
+    fn split_is_total_and_kd_zero_evaluation_exactly() {
+        let lights = every_light(Vec3::ONE);
         let env = LocalLighting {
             lights: &lights,
             area_samples: 4,
             ambient: true,
             group: None,
         };
-        let models = [
-            ReflectanceModel::Phong,
-            ReflectanceModel::Blinn,
-            ReflectanceModel::TorranceSparrow,
-        ];
-        for (k, model) in models.into_iter().enumerate() {
+        for (k, model) in MODELS.into_iter().enumerate() {
             for ks in [0.0f32, 0.6] {
                 let m = SurfaceMaterial {
                     ka: Vec3::splat(0.2),
@@ -618,22 +636,14 @@ mod tests {
                     ng: n,
                     wo: Vec3::new(0.3, 1.0, 0.4).normalize(),
                 };
-                // A partly shadowed light sample, to exercise visibility.
-                let vis = |li: usize, s: &LightSample| {
-                    if li == 3 && s.point.x < 0.0 {
-                        Vec3::new(0.5, 0.25, 0.0)
-                    } else {
-                        Vec3::ONE
-                    }
-                };
                 let jitter = |_: usize, _: u32| Vec2::splat(0.5);
-                let [total, rest] = shade_local_split(&m, &sp, &env, jitter, vis);
+                let [total, rest] = shade_local_split(&m, &sp, &env, jitter, part_shadow);
                 let no_kd = SurfaceMaterial {
                     kd: Vec3::ZERO,
                     ..m
                 };
-                assert_eq!(total, shade_local(&m, &sp, &env, jitter, vis));
-                assert_eq!(rest, shade_local(&no_kd, &sp, &env, jitter, vis));
+                assert_eq!(total, shade_local(&m, &sp, &env, jitter, part_shadow));
+                assert_eq!(rest, shade_local(&no_kd, &sp, &env, jitter, part_shadow));
                 assert!(total.x > rest.x && rest.cmpge(m.emission).all());
             }
         }
@@ -645,41 +655,13 @@ mod tests {
     /// and a partly shadowed sample.
     #[test]
     fn factored_light_gives_the_model_for_any_colours() {
-        use crate::scene::{AreaShape, MetallicRoughness, ReflectanceModel};
-        let lights = [
-            Light::Ambient {
-                color: Vec3::new(1.0, 0.9, 0.8),
-                intensity: 0.3,
-            },
-            Light::Point {
-                position: Vec3::new(1.0, 3.0, 0.5),
-                color: Vec3::new(1.0, 0.8, 0.6),
-                intensity: 5.0,
-                attenuation: Attenuation::InverseSquare,
-            },
-            Light::Area {
-                shape: AreaShape::Quad {
-                    corner: Vec3::new(-1.0, 4.0, -1.0),
-                    edge_u: Vec3::new(2.0, 0.0, 0.0),
-                    edge_v: Vec3::new(0.0, 0.0, 2.0),
-                },
-                color: Vec3::ONE,
-                intensity: 3.0,
-                two_sided: true,
-            },
-        ];
+        use crate::scene::MetallicRoughness;
+        let lights = every_light(Vec3::new(1.0, 0.9, 0.8));
         let env = LocalLighting {
             lights: &lights,
             area_samples: 4,
             ambient: true,
             group: None,
-        };
-        let vis = |li: usize, s: &LightSample| {
-            if li == 2 && s.point.x < 0.0 {
-                Vec3::new(0.5, 0.25, 0.0)
-            } else {
-                Vec3::ONE
-            }
         };
         let jitter = |_: usize, _: u32| Vec2::splat(0.5);
         let n = Vec3::new(0.1, 1.0, 0.2).normalize();
@@ -689,19 +671,14 @@ mod tests {
             ng: n,
             wo: Vec3::new(0.3, 1.0, 0.4).normalize(),
         };
-        let models = [
-            ReflectanceModel::Phong,
-            ReflectanceModel::Blinn,
-            ReflectanceModel::TorranceSparrow,
-        ];
-        for model in models {
+        for model in MODELS {
             let shape = SurfaceMaterial {
                 model,
                 shininess: 20.0,
                 roughness: 0.3,
                 ..SurfaceMaterial::default()
             };
-            let light = shade_local_factored(&shape, &sp, &env, jitter, vis);
+            let light = shade_local_factored(&shape, &sp, &env, jitter, part_shadow);
             // Colours: classic with and without a lobe, a red metal and a
             // blue dielectric (F0 = 0.04) of metallic-roughness, emissive.
             let mut colours = vec![
@@ -722,7 +699,7 @@ mod tests {
                     emission: Vec3::new(0.01, 0.0, 0.02),
                     ..shape
                 };
-                let want = shade_local(&m, &sp, &env, jitter, vis);
+                let want = shade_local(&m, &sp, &env, jitter, part_shadow);
                 let got = light.radiance(&m);
                 assert!(
                     (got - want).abs().max_element() <= 1e-5 * want.max_element().max(1.0),

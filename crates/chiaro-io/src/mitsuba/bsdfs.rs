@@ -123,16 +123,7 @@ impl Builder<'_> {
         if depth > 32 {
             return Err(el.loc.error("BSDFs nested more than 32 deep"));
         }
-        let el = if el.tag == "ref" {
-            self.lookup(el)?
-        } else {
-            el
-        };
-        if el.tag != "bsdf" {
-            return Err(el
-                .loc
-                .error(format!("expected a <bsdf>, found <{}>", el.tag)));
-        }
+        let el = self.plugin_of(el, "bsdf")?;
         let ty = Self::plugin_type(el)?;
         let p = Props::new(el);
         let mut m = Material {
@@ -237,33 +228,18 @@ impl Builder<'_> {
                 }
             }
             "twosided" => {
-                let inner = p.children("bsdf");
-                let refs = p.children("ref");
-                let mut all: Vec<&Element> = inner.into_iter().chain(refs).collect();
+                let all = p.nested_bsdfs(ty)?;
                 if all.len() == 2 {
                     self.warn(el, "approximate: a different back BSDF is ignored; the front one is used on both sides");
                 }
-                let Some(front) = all.drain(..).next() else {
-                    return Err(el
-                        .loc
-                        .error("<bsdf type=\"twosided\"> needs a nested <bsdf>"));
-                };
+                let front = all[0];
                 let mut b = self.bsdf(front, depth + 1)?;
                 b.material.sidedness = Sidedness::TwoSided;
                 self.warn_unused(&p);
                 return Ok(b);
             }
             "normalmap" | "bumpmap" => {
-                let inner = p
-                    .children("bsdf")
-                    .into_iter()
-                    .chain(p.children("ref"))
-                    .next();
-                let Some(inner) = inner else {
-                    return Err(el
-                        .loc
-                        .error(format!("<bsdf type=\"{ty}\"> needs a nested <bsdf>")));
-                };
+                let inner = p.nested_bsdfs(ty)?[0];
                 let mut b = self.bsdf(inner, depth + 1)?;
                 let map = match p
                     .named("normalmap")
@@ -292,14 +268,7 @@ impl Builder<'_> {
                 return Ok(b);
             }
             "mask" => {
-                let inner = p
-                    .children("bsdf")
-                    .into_iter()
-                    .chain(p.children("ref"))
-                    .next();
-                let Some(inner) = inner else {
-                    return Err(el.loc.error("<bsdf type=\"mask\"> needs a nested <bsdf>"));
-                };
+                let inner = p.nested_bsdfs(ty)?[0];
                 let mut b = self.bsdf(inner, depth + 1)?;
                 let opacity = self.value(&p, "opacity", Vec3::splat(0.5))?;
                 match opacity {
@@ -598,12 +567,7 @@ impl Builder<'_> {
     /// A `bitmap` or `checkerboard` texture added to the scene (`raw`
     /// forces linear data for normal and bump maps).
     pub fn texture_id(&mut self, e: &Element, raw_data: bool) -> Result<TextureId> {
-        let e = if e.tag == "ref" { self.lookup(e)? } else { e };
-        if e.tag != "texture" {
-            return Err(e
-                .loc
-                .error(format!("expected a <texture>, found <{}>", e.tag)));
-        }
+        let e = self.plugin_of(e, "texture")?;
         let ty = Self::plugin_type(e)?;
         let p = Props::new(e);
         let uv = p.transform("to_uv")?;

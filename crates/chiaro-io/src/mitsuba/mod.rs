@@ -210,6 +210,25 @@ impl<'d> Builder<'d> {
         })
     }
 
+    /// `el`, or the plugin it names where it is a `<ref>`; an error unless
+    /// that is a `<tag>`.
+    pub fn plugin_of<'e>(&self, el: &'e Element, tag: &str) -> Result<&'e Element>
+    where
+        'd: 'e,
+    {
+        let el = if el.tag == "ref" {
+            self.lookup(el)?
+        } else {
+            el
+        };
+        if el.tag != tag {
+            return Err(el
+                .loc
+                .error(format!("expected a <{tag}>, found <{}>", el.tag)));
+        }
+        Ok(el)
+    }
+
     /// A file name resolved against the `<path>` folders and the scene's.
     pub fn resolve(&self, name: &str) -> PathBuf {
         self.doc.resolve(name)

@@ -63,6 +63,20 @@ impl<'a> Props<'a> {
         out
     }
 
+    /// The nested BSDFs of a BSDF (`<bsdf>` children, then unnamed
+    /// `<ref>`s), marked as used; an error unless there is one.
+    pub fn nested_bsdfs(&self, ty: &str) -> Result<Vec<&'a Element>> {
+        let mut all = self.children("bsdf");
+        all.extend(self.children("ref"));
+        if all.is_empty() {
+            return Err(self
+                .el
+                .loc
+                .error(format!("<bsdf type=\"{ty}\"> needs a nested <bsdf>")));
+        }
+        Ok(all)
+    }
+
     /// The names (or tags) of children never read, with their elements.
     pub fn unused(&self) -> Vec<&'a Element> {
         self.el

@@ -93,20 +93,12 @@ mod tests {
 
     /// A unit cube centred at the origin, wound outwards, or inwards.
     fn cube(outwards: bool) -> Scene {
+        use chiaro_testkit::scenes::{BOX_FACES, box_corner};
         let p: Vec<Vec3> = (0..8)
-            .map(|i| Vec3::new((i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32) - 0.5)
+            .map(|k| box_corner(Vec3::splat(-0.5), Vec3::splat(0.5), k))
             .collect();
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
         let mut indices = Vec::new();
-        for q in quads {
-            let [a, b, c, d] = q;
+        for [a, b, c, d] in BOX_FACES.map(|q| q.map(|i| i as u32)) {
             let mut tri =
                 |x: u32, y: u32, z: u32| indices.push(if outwards { [x, y, z] } else { [x, z, y] });
             tri(a, b, c);
@@ -148,12 +140,7 @@ mod tests {
 
     #[test]
     fn a_tessellated_sphere_hides_its_backs() {
-        let mut s = Scene::default();
-        s.add_material(Material::default());
-        s.objects.push(Object {
-            geometry: Geometry::Sphere { radius: 1.0 },
-            ..Default::default()
-        });
+        let s = chiaro_testkit::scenes::white_sphere();
         let ps = PreparedScene::new(&s, PrepareOptions::default());
         assert!(!ps.triangles.is_empty());
         assert!(hidden_backs(&ps, &s.camera, 1.0)[0]);

@@ -71,11 +71,9 @@ mod tests {
 
     #[test]
     fn vec3a_helpers_match_vec3_bit_for_bit() {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut rng = chiaro_testkit::XorShift64(0x2545_f491_4f6c_dd1d);
         let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
+            let state = rng.next_u64();
             // Spread over many magnitudes, both signs, with exact zeros.
             let m = (state >> 41) as f32 / (1u64 << 23) as f32 - 0.5;
             let e = ((state >> 8) % 40) as i32 - 20;

@@ -34,7 +34,7 @@ use chiaro_core::shading::{
     FactoredLight, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize,
     shade_local, shade_local_factored, shade_local_split,
 };
-use chiaro_core::shading::{PointLighting, SampleKey, group_jitter};
+use chiaro_core::shading::{LightSample, PointLighting, SampleKey, group_jitter};
 use glam::{Vec2, Vec3, Vec3A};
 use std::cell::Cell;
 
@@ -145,15 +145,34 @@ impl Ctx<'_, '_> {
             );
         }
         let current = Cell::new(0u32);
-        shade_local(
-            m,
-            sp,
-            &self.lighting,
-            |li, i| {
+        let (jitter, visibility) = self.sampling(tri, key, pixel, sp, counts, &current);
+        shade_local(m, sp, &self.lighting, jitter, visibility)
+    }
+
+    /// The jitter and visibility of the light samples at `sp` on triangle
+    /// `tri`, for the local model: visibility takes the sample index from
+    /// the jitter's last call, through `current`.
+    #[inline]
+    fn sampling<'s>(
+        &'s self,
+        tri: u32,
+        key: SampleKey,
+        pixel: Option<(u32, u32)>,
+        sp: &'s ShadingPoint,
+        counts: Option<&'s [i32]>,
+        current: &'s Cell<u32>,
+    ) -> (
+        impl FnMut(usize, u32) -> Vec2 + 's,
+        impl FnMut(usize, &LightSample) -> Vec3 + 's,
+    ) {
+        (
+            move |li, i| {
                 current.set(i);
                 self.jitter(key, li, i)
             },
-            |li, s| self.visibility(li, current.get(), tri, pixel, sp, s, counts),
+            move |li, s: &LightSample| {
+                self.visibility(li, current.get(), tri, pixel, sp, s, counts)
+            },
         )
     }
 
@@ -211,16 +230,9 @@ impl Ctx<'_, '_> {
             };
         }
         let current = Cell::new(0u32);
-        let [total, rest] = shade_local_split(
-            m,
-            sp,
-            &self.lighting,
-            |li, i| {
-                current.set(i);
-                self.jitter(SampleKey::Point(sp.p), li, i)
-            },
-            |li, s| self.visibility(li, current.get(), tri, None, sp, s, None),
-        );
+        let (jitter, visibility) =
+            self.sampling(tri, SampleKey::Point(sp.p), None, sp, None, &current);
+        let [total, rest] = shade_local_split(m, sp, &self.lighting, jitter, visibility);
         Split {
             diffuse: total - rest,
             rest,
@@ -238,16 +250,9 @@ impl Ctx<'_, '_> {
         sp: &ShadingPoint,
     ) -> FactoredLight {
         let current = Cell::new(0u32);
-        shade_local_factored(
-            lobe,
-            sp,
-            &self.lighting,
-            |li, i| {
-                current.set(i);
-                self.jitter(SampleKey::Point(sp.p), li, i)
-            },
-            |li, s| self.visibility(li, current.get(), tri, None, sp, s, None),
-        )
+        let (jitter, visibility) =
+            self.sampling(tri, SampleKey::Point(sp.p), None, sp, None, &current);
+        shade_local_factored(lobe, sp, &self.lighting, jitter, visibility)
     }
 
     /// Untextured material (vertex colour applied) at a surface point, as

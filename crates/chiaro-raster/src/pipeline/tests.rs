@@ -686,13 +686,8 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
     let mut s = test_scene();
     // Point and ambient lights only, so that PointLighting applies.
     s.lights.truncate(3);
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut rng = chiaro_testkit::XorShift64(0x9e37_79b9_7f4a_7c15u64);
+    let mut next = move || rng.unit();
     let (w, h) = (40u32, 30u32);
     let mut checked = 0;
     for model in [ReflectanceModel::Phong, ReflectanceModel::Blinn] {
