@@ -553,7 +553,12 @@ const STUDIO_SIZE: (u32, u32) = (256, 128);
 /// once.
 fn studio() -> &'static (ImageTexture, f32, Vec3) {
     static STUDIO: OnceLock<(ImageTexture, f32, Vec3)> = OnceLock::new();
-    STUDIO.get_or_init(|| {
+    if let Some(s) = STUDIO.get() {
+        return s;
+    }
+    // Computed outside the lock, which rayon work inside `get_or_init`
+    // could deadlock (see `albedo_tables` in chiaro-core).
+    let computed = {
         let texture = studio::neutral_studio_texture(STUDIO_SIZE.0, STUDIO_SIZE.1);
         let mut scene = Scene::default();
         let id = scene.add_texture(Texture::Image(texture.clone()));
@@ -566,7 +571,8 @@ fn studio() -> &'static (ImageTexture, f32, Vec3) {
             1.0
         };
         (texture, intensity, raw * intensity)
-    })
+    };
+    STUDIO.get_or_init(|| computed)
 }
 
 /// The studio environment with texture `id`: lighting and reflections only,

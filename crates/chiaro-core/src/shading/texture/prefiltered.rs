@@ -401,12 +401,18 @@ fn directional_albedo(dist: Distribution, cos_o: f32, alpha: f32, samples: u32) 
 /// not depend on the scene).
 fn albedo_tables() -> &'static [AlbedoTable; 2] {
     static TABLES: OnceLock<[AlbedoTable; 2]> = OnceLock::new();
-    TABLES.get_or_init(|| {
-        [
-            AlbedoTable::new(Distribution::Ggx),
-            AlbedoTable::new(Distribution::Beckmann),
-        ]
-    })
+    if let Some(t) = TABLES.get() {
+        return t;
+    }
+    // Built outside the lock: the tables use rayon, and a rayon worker
+    // blocked in `get_or_init` while the initialising thread waits for
+    // that pool deadlocks (seen with tests rendering in parallel). Two
+    // threads may both build them; the values are the same.
+    let tables = [
+        AlbedoTable::new(Distribution::Ggx),
+        AlbedoTable::new(Distribution::Beckmann),
+    ];
+    TABLES.get_or_init(|| tables)
 }
 
 /// The split sum's second factor for Torrance-Sparrow: `(scale, bias)` with
