@@ -511,7 +511,7 @@ fn hostile_input_never_panics() {
         run(&bytes[..cut]);
     }
     let alphabet = b"[]\"# 0-1e9.xAttributeEndObjectBeginShape";
-    for _ in 0..300 {
+    for _ in 0..3000 {
         let mut b = bytes.to_vec();
         for _ in 0..(1 + next() % 8) {
             let i = (next() as usize) % b.len();

@@ -421,7 +421,7 @@ mod tests {
         let e = read("\"float fov\" [ 1 \"x\" ]")
             .expect_err("string in floats")
             .to_string();
-        assert!(e.contains("t.pbrt:1:18"), "{e}");
+        assert!(e.contains("t.pbrt:1:17"), "{e}");
         let e = read("\"quaternion q\" 1").expect_err("type").to_string();
         assert!(
             e.contains("t.pbrt:1:1") && e.contains("unknown parameter type"),

@@ -193,7 +193,7 @@ impl Builder {
             }
             "disk" | "cylinder" => {
                 let radius = p.float("radius", 1.0)?;
-                if !(radius > 0.0) {
+                if radius.is_nan() || radius <= 0.0 {
                     return Err(p
                         .loc_of("radius")
                         .error(format!("radius must be positive, got {radius}")));
