@@ -526,3 +526,58 @@ fn hostile_input_never_panics() {
         run(&b);
     }
 }
+
+#[test]
+fn plymesh_is_read_once_and_instanced() {
+    let dir = tmp_dir("pbrt-ply");
+    std::fs::write(
+        dir.join("tri.ply"),
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+    )
+    .expect("test input");
+    let body = r#"ObjectBegin "p"
+  Shape "plymesh" "string filename" "tri.ply"
+ObjectEnd
+Translate 3 0 0
+ObjectInstance "p"
+Translate 3 0 0
+ObjectInstance "p"
+Shape "plymesh" "string filename" "tri.ply""#;
+    let s = load_str(&scene(body), &dir, "t.pbrt").expect("test input").scene;
+    assert_eq!(s.objects.len(), 3);
+    assert_eq!(s.meshes.len(), 1, "one copy of the file's mesh");
+    let near = |a: Vec3, b: Vec3| (a - b).length() < 1e-5;
+    assert!(near(vertex(&s, 0, 1), Vec3::new(4.0, 0.0, 0.0)), "{}", vertex(&s, 0, 1));
+    assert!(near(vertex(&s, 1, 1), Vec3::new(7.0, 0.0, 0.0)), "{}", vertex(&s, 1, 1));
+    assert!(near(vertex(&s, 2, 1), Vec3::new(7.0, 0.0, 0.0)), "{}", vertex(&s, 2, 1));
+    assert!(!s.objects[0].smooth, "no normals: flat, as pbrt");
+    let e = load_str(&scene("Shape \"plymesh\" \"string filename\" \"missing.ply\""), &dir, "t.pbrt")
+        .expect_err("missing")
+        .to_string();
+    assert!(e.contains("t.pbrt:7:1") && e.contains("missing.ply"), "{e}");
+}
+
+#[test]
+fn pbrt_v4_equal_area_map_is_resampled() {
+    let dir = tmp_dir("pbrt-env-v4");
+    // An 8 x 8 equal-area map, bright only at its centre (light-space +z).
+    let mut img = image::Rgb32FImage::new(8, 8);
+    for (x, y, p) in img.enumerate_pixels_mut() {
+        let centre = (3..=4).contains(&x) && (3..=4).contains(&y);
+        *p = image::Rgb(if centre { [8.0; 3] } else { [0.5; 3] });
+    }
+    image::DynamicImage::ImageRgb32F(img).save(dir.join("sky.hdr")).expect("test input");
+    // Rotate -90 about x: light-space +z is world +y.
+    let body = "AttributeBegin\nRotate -90 1 0 0\nLightSource \"infinite\" \"string filename\" \"sky.hdr\" \"float scale\" 2\nAttributeEnd\n";
+    let loaded = load_str(&scene(body), &dir, "t.pbrt").expect("test input");
+    let s = &loaded.scene;
+    let env = s.environment.as_ref().expect("environment");
+    assert!((env.intensity - 2.0).abs() < 1e-6);
+    let chiaro_core::scene::Texture::Image(t) = &s.textures[env.texture.index()] else {
+        panic!("an image")
+    };
+    assert_eq!((t.width, t.height), (16, 8));
+    assert!(t.texel(5, 0)[0] > 4.0, "up is bright: {:?}", t.texel(5, 0));
+    assert!((t.texel(5, t.height - 1)[0] - 0.5).abs() < 1e-3, "down is not");
+    assert!(loaded.warnings.iter().any(|w| w.contains("equal-area")), "{:?}", loaded.warnings);
+}
