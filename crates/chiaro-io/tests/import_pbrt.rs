@@ -216,7 +216,22 @@ LightSource "point" "rgb I" [1 1 1] "point3 from" [0 3 0]"#;
         (m.diffuse - Vec3::new(0.75, 0.0, 0.25)).length() < 1e-6,
         "{m:?}"
     );
-    assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
+    assert!(
+        !loaded.warnings.iter().any(|w| w.contains("mix")),
+        "{:?}",
+        loaded.warnings
+    );
+    // No PixelFilter: pbrt's Gaussian, said once at the Film.
+    assert_eq!(loaded.scene.render.filter, PixelFilter::Tent);
+    assert!(
+        loaded
+            .warnings
+            .iter()
+            .any(|w| w.starts_with("t.pbrt:4:1: Film \"rgb\": approximate")
+                && w.contains("Gaussian")),
+        "{:?}",
+        loaded.warnings
+    );
 }
 
 #[test]
@@ -543,17 +558,35 @@ ObjectInstance "p"
 Translate 3 0 0
 ObjectInstance "p"
 Shape "plymesh" "string filename" "tri.ply""#;
-    let s = load_str(&scene(body), &dir, "t.pbrt").expect("test input").scene;
+    let s = load_str(&scene(body), &dir, "t.pbrt")
+        .expect("test input")
+        .scene;
     assert_eq!(s.objects.len(), 3);
     assert_eq!(s.meshes.len(), 1, "one copy of the file's mesh");
     let near = |a: Vec3, b: Vec3| (a - b).length() < 1e-5;
-    assert!(near(vertex(&s, 0, 1), Vec3::new(4.0, 0.0, 0.0)), "{}", vertex(&s, 0, 1));
-    assert!(near(vertex(&s, 1, 1), Vec3::new(7.0, 0.0, 0.0)), "{}", vertex(&s, 1, 1));
-    assert!(near(vertex(&s, 2, 1), Vec3::new(7.0, 0.0, 0.0)), "{}", vertex(&s, 2, 1));
+    assert!(
+        near(vertex(&s, 0, 1), Vec3::new(4.0, 0.0, 0.0)),
+        "{}",
+        vertex(&s, 0, 1)
+    );
+    assert!(
+        near(vertex(&s, 1, 1), Vec3::new(7.0, 0.0, 0.0)),
+        "{}",
+        vertex(&s, 1, 1)
+    );
+    assert!(
+        near(vertex(&s, 2, 1), Vec3::new(7.0, 0.0, 0.0)),
+        "{}",
+        vertex(&s, 2, 1)
+    );
     assert!(!s.objects[0].smooth, "no normals: flat, as pbrt");
-    let e = load_str(&scene("Shape \"plymesh\" \"string filename\" \"missing.ply\""), &dir, "t.pbrt")
-        .expect_err("missing")
-        .to_string();
+    let e = load_str(
+        &scene("Shape \"plymesh\" \"string filename\" \"missing.ply\""),
+        &dir,
+        "t.pbrt",
+    )
+    .expect_err("missing")
+    .to_string();
     assert!(e.contains("t.pbrt:7:1") && e.contains("missing.ply"), "{e}");
 }
 
@@ -566,7 +599,9 @@ fn pbrt_v4_equal_area_map_is_resampled() {
         let centre = (3..=4).contains(&x) && (3..=4).contains(&y);
         *p = image::Rgb(if centre { [8.0; 3] } else { [0.5; 3] });
     }
-    image::DynamicImage::ImageRgb32F(img).save(dir.join("sky.hdr")).expect("test input");
+    image::DynamicImage::ImageRgb32F(img)
+        .save(dir.join("sky.hdr"))
+        .expect("test input");
     // Rotate -90 about x: light-space +z is world +y.
     let body = "AttributeBegin\nRotate -90 1 0 0\nLightSource \"infinite\" \"string filename\" \"sky.hdr\" \"float scale\" 2\nAttributeEnd\n";
     let loaded = load_str(&scene(body), &dir, "t.pbrt").expect("test input");
@@ -578,6 +613,13 @@ fn pbrt_v4_equal_area_map_is_resampled() {
     };
     assert_eq!((t.width, t.height), (16, 8));
     assert!(t.texel(5, 0)[0] > 4.0, "up is bright: {:?}", t.texel(5, 0));
-    assert!((t.texel(5, t.height - 1)[0] - 0.5).abs() < 1e-3, "down is not");
-    assert!(loaded.warnings.iter().any(|w| w.contains("equal-area")), "{:?}", loaded.warnings);
+    assert!(
+        (t.texel(5, t.height - 1)[0] - 0.5).abs() < 1e-3,
+        "down is not"
+    );
+    assert!(
+        loaded.warnings.iter().any(|w| w.contains("equal-area")),
+        "{:?}",
+        loaded.warnings
+    );
 }

@@ -183,6 +183,9 @@ pub struct Builder {
     /// The environment, placed once the mirroring is known.
     pub env: Option<PendingEnv>,
     world_seen: bool,
+    /// Whether a `PixelFilter` was given, and where the film is.
+    filter_seen: bool,
+    film_loc: Option<(Loc, String)>,
 }
 
 impl Builder {
@@ -233,6 +236,8 @@ impl Builder {
             camera: None,
             env: None,
             world_seen: false,
+            filter_seen: false,
+            film_loc: None,
         }
     }
 
@@ -513,6 +518,7 @@ impl Builder {
                 let ty = lx.string("a filter type")?;
                 let p = Params::read(lx)?;
                 let what = format!("PixelFilter \"{}\"", ty.text);
+                self.filter_seen = true;
                 match ty.text.as_str() {
                     "box" => {
                         let r = p.float("xradius", 0.5)?.max(p.float("yradius", 0.5)?);
@@ -779,6 +785,7 @@ impl Builder {
         let ty = lx.string("a film type")?;
         let p = Params::read(lx)?;
         let what = format!("Film \"{}\"", ty.text);
+        self.film_loc = Some((loc.clone(), what.clone()));
         let size = |name: &str, default: i64| -> Result<u32> {
             let v = p.int(name, default)?;
             u32::try_from(v).ok().filter(|v| *v > 0).ok_or_else(|| {
@@ -870,6 +877,15 @@ impl Builder {
                 column: 0,
             },
         });
+        if !self.filter_seen {
+            // pbrt's default reconstruction filter is a Gaussian.
+            self.scene.render.filter = PixelFilter::Tent;
+            let message = "approximate: pbrt's default Gaussian pixel filter (no PixelFilter) is drawn with chiaro's tent (radius 1); the ray techniques box-filter";
+            match self.film_loc.clone() {
+                Some((loc, what)) => self.warn(&loc, &what, message),
+                None => self.warnings.push(message.to_owned()),
+            }
+        }
         if self.camera.is_none() {
             self.warnings.push("the scene has no Camera: pbrt's default is used (at the origin looking down +z, fov 90)".into());
         }
