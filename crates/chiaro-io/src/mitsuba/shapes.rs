@@ -13,7 +13,7 @@ use chiaro_core::{Mat4, Vec2, Vec3};
 use std::f32::consts::TAU;
 
 /// Segments around a meshed disk or cylinder.
-const SEGMENTS: u32 = 64;
+pub const SEGMENTS: u32 = 64;
 
 impl Builder<'_> {
     /// A `<shape>` placed with `world_from_parent` (identity at top level,
