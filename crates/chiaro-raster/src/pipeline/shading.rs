@@ -15,6 +15,7 @@ use crate::{flat, gouraud, phong};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TileRect};
 use chiaro_core::progress::Progress;
+use chiaro_core::scene::Camera;
 use chiaro_core::shading::EmitterGroup;
 use rayon::prelude::*;
 use std::sync::{Mutex, PoisonError};
@@ -699,6 +700,7 @@ impl<'a, 's> Ctx<'a, 's> {
     pub(crate) fn new(
         ps: &'a PreparedScene<'s>,
         settings: &'a RenderSettings,
+        camera: &Camera,
         mode: ShadeMode,
         emitters: &'a Option<EmitterGroup>,
         shadows: Shadows,
@@ -718,7 +720,7 @@ impl<'a, 's> Ctx<'a, 's> {
         Ctx {
             ps,
             settings,
-            rays: Rays::new(scene, w, h),
+            rays: Rays::new(camera, w, h),
             lighting: LocalLighting {
                 lights: &ps.lights,
                 area_samples: settings.light_samples.max(1),

@@ -265,6 +265,7 @@ impl Shadows {
     pub(crate) fn new(
         ps: &PreparedScene<'_>,
         settings: &RenderSettings,
+        camera: &chiaro_core::scene::Camera,
         progress: &dyn chiaro_core::progress::Progress,
     ) -> Result<Self, chiaro_core::error::CoreError> {
         let group = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
@@ -303,7 +304,7 @@ impl Shadows {
             ShadowMethod::Scanline => Shadows::Scanline {
                 lines: crate::shadows::scanline::scanline_visibility_per_light(
                     ps,
-                    &ps.scene.camera,
+                    camera,
                     settings.width,
                     settings.height,
                     &exact,
