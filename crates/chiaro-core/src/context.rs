@@ -29,7 +29,7 @@ use crate::scene::{
 };
 use crate::technique::Description;
 use std::any::Any;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 /// Statistics of one render.
@@ -86,6 +86,46 @@ type PreparedSlot<'a> = Arc<OnceLock<PreparedScene<'a>>>;
 /// An accelerator's slot, shared as its prepared scene's.
 type AccelSlot = Arc<OnceLock<Box<dyn Accelerator>>>;
 
+/// What a technique derives from a prepared scene alone (neither the
+/// camera nor the settings: the scan converter's shadow-ray BVH, which
+/// objects are closed), one value per type, kept and shared with the
+/// prepared scene ([`RenderContext::tessellated_derived`]).
+#[derive(Default)]
+pub struct Derived(Mutex<Vec<Arc<dyn Any + Send + Sync>>>);
+
+impl std::fmt::Debug for Derived {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Derived").finish_non_exhaustive()
+    }
+}
+
+impl Derived {
+    /// The value of type `T` kept, else `build()`'s, kept from now on.
+    /// `build` runs outside the lock (it may use rayon; see
+    /// [`init_outside`]); two threads may both build, one value is kept.
+    pub fn get_or_build<T: Any + Send + Sync>(&self, build: impl FnOnce() -> T) -> Arc<T> {
+        if let Some(v) = self.find::<T>() {
+            return v;
+        }
+        let built = Arc::new(build());
+        let mut all = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(v) = all.iter().find_map(|v| Arc::clone(v).downcast::<T>().ok()) {
+            return v;
+        }
+        all.push(Arc::clone(&built) as Arc<dyn Any + Send + Sync>);
+        built
+    }
+
+    fn find<T: Any + Send + Sync>(&self) -> Option<Arc<T>> {
+        let all = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        all.iter().find_map(|v| Arc::clone(v).downcast::<T>().ok())
+    }
+}
+
+/// The tessellated prepared scene's slots: the scene, its accelerator and
+/// what techniques derive from it.
+type TessellatedSlots<'a> = (PreparedSlot<'a>, AccelSlot, Arc<Derived>);
+
 /// One render's validated inputs and the state every technique shares,
 /// prepared lazily: the flattened scene with analytic spheres (ray tracers)
 /// or tessellated spheres (scan conversion, radiosity), each with its ray
@@ -104,6 +144,7 @@ pub struct RenderContext<'a> {
     analytic_accel: AccelSlot,
     tessellated: PreparedSlot<'a>,
     tessellated_accel: AccelSlot,
+    tessellated_derived: Arc<Derived>,
     solution: SolutionSlot,
 }
 
@@ -121,7 +162,7 @@ pub struct RenderContext<'a> {
 pub struct FrameCache<'a> {
     scene: Option<&'a Scene>,
     analytic: Option<((), (PreparedSlot<'a>, AccelSlot))>,
-    tessellated: Option<(Vec<u32>, (PreparedSlot<'a>, AccelSlot))>,
+    tessellated: Option<(Vec<u32>, TessellatedSlots<'a>)>,
     solution: Option<(RadiositySettings, SolutionSlot)>,
     misses: u64,
 }
@@ -236,6 +277,7 @@ impl<'a> RenderContext<'a> {
             analytic_accel: AccelSlot::default(),
             tessellated: PreparedSlot::default(),
             tessellated_accel: AccelSlot::default(),
+            tessellated_derived: Arc::default(),
             solution: SolutionSlot::default(),
         })
     }
@@ -261,6 +303,7 @@ impl<'a> RenderContext<'a> {
         if ctx.sphere_segments() == self.sphere_segments() {
             ctx.tessellated = Arc::clone(&self.tessellated);
             ctx.tessellated_accel = Arc::clone(&self.tessellated_accel);
+            ctx.tessellated_derived = Arc::clone(&self.tessellated_derived);
         }
         if settings.radiosity == self.settings.radiosity {
             ctx.solution = Arc::clone(&self.solution);
@@ -276,6 +319,7 @@ impl<'a> RenderContext<'a> {
             self.camera = camera;
             self.tessellated = PreparedSlot::default();
             self.tessellated_accel = AccelSlot::default();
+            self.tessellated_derived = Arc::default();
         }
         self
     }
@@ -297,8 +341,11 @@ impl<'a> RenderContext<'a> {
         if self.default_accel {
             (self.analytic, self.analytic_accel) =
                 FrameCache::slot(&mut cache.analytic, (), misses);
-            (self.tessellated, self.tessellated_accel) =
-                FrameCache::slot(&mut cache.tessellated, self.sphere_segments(), misses);
+            (
+                self.tessellated,
+                self.tessellated_accel,
+                self.tessellated_derived,
+            ) = FrameCache::slot(&mut cache.tessellated, self.sphere_segments(), misses);
         }
         if self.settings.technique.solves_radiosity() && self.solution.get().is_none() {
             self.solution =
@@ -430,6 +477,12 @@ impl<'a> RenderContext<'a> {
             (self.make_accel)(self.tessellated())
         })
         .as_ref()
+    }
+
+    /// What techniques derive from [`Self::tessellated`] alone, kept with
+    /// it (in a [`FrameCache`] too).
+    pub fn tessellated_derived(&self) -> &Derived {
+        &self.tessellated_derived
     }
 
     /// Whether the progress asks to stop.

@@ -61,6 +61,7 @@ impl ScanConversion {
             Frame {
                 settings: ctx.settings(),
                 camera: ctx.camera(),
+                derived: ctx.tessellated_derived(),
             },
             mode,
             &self.options,
@@ -210,9 +211,11 @@ pub(crate) mod test_support {
     ) -> Result<Film> {
         let mut film = Film::new(settings.width, settings.height);
         let work = RasterWork::default();
+        let derived = chiaro_core::context::Derived::default();
         let frame = Frame {
             settings,
             camera: &ps.scene.camera,
+            derived: &derived,
         };
         render_work(ps, frame, mode, options, progress, &mut film, &work)?;
         Ok(film)

@@ -87,6 +87,7 @@ use crate::shadows::volumes::bin_volumes;
 #[cfg(test)]
 pub(crate) use crate::technique::test_support::*;
 use chiaro_core::accel::alpha::Coverage;
+use chiaro_core::context::Derived;
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, tiles};
 use chiaro_core::prepared::PreparedScene;
@@ -128,6 +129,9 @@ pub struct RasterOptions {
 pub(crate) struct Frame<'f> {
     pub(crate) settings: &'f RenderSettings,
     pub(crate) camera: &'f Camera,
+    /// What the frame derives from the prepared scene alone, kept between
+    /// frames by the render context.
+    pub(crate) derived: &'f Derived,
 }
 
 /// Scan converts the prepared scene (spheres tessellated) with the default
@@ -143,7 +147,11 @@ pub(crate) fn render_work(
     film: &mut Film,
     work: &RasterWork,
 ) -> Result<(), CoreError> {
-    let Frame { settings, camera } = frame;
+    let Frame {
+        settings,
+        camera,
+        derived,
+    } = frame;
     let n = settings.width as usize * settings.height as usize;
     if film.width != settings.width
         || film.height != settings.height
@@ -152,7 +160,7 @@ pub(crate) fn render_work(
         *film = Film::new(settings.width, settings.height);
     }
     progress.begin("shadows", 1);
-    let mut shadows = Shadows::new(ps, settings, camera, progress)?;
+    let mut shadows = Shadows::new(ps, frame, progress)?;
     progress.advance(1);
     let scene = ps.scene;
     let (w, h) = (settings.width, settings.height);
@@ -173,7 +181,8 @@ pub(crate) fn render_work(
     let (out_crop, crop, tent) = binning::crop_windows(settings, spp);
     // `cull_backfaces`: also the backs no camera ray reaches (a speed option).
     let hidden = if settings.cull_backfaces {
-        closed::hidden_backs(ps, camera, w.max(1) as f32 / h.max(1) as f32)
+        let closed = derived.get_or_build(|| closed::closed_objects(ps));
+        closed::hidden_backs(&closed, camera, w.max(1) as f32 / h.max(1) as f32)
     } else {
         Vec::new()
     };
@@ -241,7 +250,7 @@ pub(crate) fn render_work(
     // 4. Shading: Gouraud's vertex lighting of the visible triangles (flat
     // polygons are lit with their `TriData`), then every visible sample.
     let emitters = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
-    let ctx = Ctx::new(ps, settings, camera, mode, &emitters, shadows, class);
+    let ctx = Ctx::new(ps, frame, mode, &emitters, shadows, class);
     progress.begin("poly", 1);
     let poly = poly_shading(&ctx, &vis);
     progress.advance(1);

@@ -5,6 +5,7 @@
 //! [`crate::gouraud`] and [`crate::phong`].
 
 use crate::gouraud::PolyShading;
+use crate::pipeline::Frame;
 use crate::pipeline::NONE;
 use crate::pipeline::triangles::TriData;
 use crate::pipeline::vertex::Rays;
@@ -15,7 +16,6 @@ use crate::{flat, gouraud, phong};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, TileRect};
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::Camera;
 use chiaro_core::shading::EmitterGroup;
 use rayon::prelude::*;
 use std::sync::{Mutex, PoisonError};
@@ -699,13 +699,17 @@ impl<'a, 's> Ctx<'a, 's> {
     /// drawn.
     pub(crate) fn new(
         ps: &'a PreparedScene<'s>,
-        settings: &'a RenderSettings,
-        camera: &Camera,
+        frame: Frame<'a>,
         mode: ShadeMode,
         emitters: &'a Option<EmitterGroup>,
         shadows: Shadows,
         class: Vec<Class>,
     ) -> Self {
+        let Frame {
+            settings,
+            camera,
+            derived,
+        } = frame;
         let scene = ps.scene;
         let (w, h) = (settings.width, settings.height);
         let object_mode: Vec<ShadeMode> = scene
@@ -716,7 +720,7 @@ impl<'a, 's> Ctx<'a, 's> {
         let group_rays = (emitters.is_some()
             && !matches!(shadows, Shadows::None | Shadows::Ray(_))
             || matches!(&shadows, Shadows::Volume(v) if v.by_ray.contains(&true)))
-        .then(|| RayShadows::new(ps));
+        .then(|| RayShadows::kept(ps, derived));
         Ctx {
             ps,
             settings,

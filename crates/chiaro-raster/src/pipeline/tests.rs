@@ -859,9 +859,11 @@ fn rendering_into_a_used_film_gives_the_fresh_picture() {
         let opts = RasterOptions::default();
         let fresh = render_prepared_with(&ps, &st, mode, &opts, &NoProgress).expect("fresh");
         let work = RasterWork::default();
+        let derived = chiaro_core::context::Derived::default();
         let frame = Frame {
             settings: &st,
             camera: &ps.scene.camera,
+            derived: &derived,
         };
         render_work(&ps, frame, mode, &opts, &NoProgress, &mut film, &work).expect("into");
         assert!(film == fresh, "{technique:?} {crop:?}");
