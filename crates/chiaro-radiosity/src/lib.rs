@@ -667,7 +667,7 @@ pub(crate) fn render_solution(
     if progress.cancelled() {
         return Err(CoreError::Cancelled);
     }
-    let cam = &scene.camera;
+    let cam = ctx.camera();
     let clip_from_world = cam.projection_matrix(w as f32 / h as f32) * cam.view_matrix();
     let normals: Vec<Vec3> = solution
         .elements
