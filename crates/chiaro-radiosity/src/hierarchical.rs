@@ -339,7 +339,16 @@ pub(crate) fn solve(
     // (BENCHMARKS.md, "Radiosity").
     t.eps = (0.01 * tolerance * max_e).max(f32::MIN_POSITIVE);
     let roots = t.roots.clone();
+    // Every pair of roots is linked first (quadratic in the source
+    // triangles): say so, and poll for cancellation between receivers.
+    progress.message(&format!(
+        "hierarchical: linking {} source triangles pairwise",
+        roots.len()
+    ));
     for &p in &roots {
+        if progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
         for &q in &roots {
             if p != q {
                 t.refine(p, q);
