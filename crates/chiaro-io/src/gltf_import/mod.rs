@@ -52,9 +52,12 @@
 
 mod buffers;
 mod extensions;
+#[cfg(test)]
+mod geometry_tests;
 mod materials;
 mod nodes;
 mod primitives;
+mod skins;
 #[cfg(test)]
 mod tests;
 mod textures;
@@ -268,11 +271,11 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
     } else {
         bytes.to_vec()
     };
-    let warnings = serde_json::from_slice::<serde_json::Value>(&json_bytes)
-        .map(|json| unsupported_features(&json, path))
-        .unwrap_or_default();
+    let json = serde_json::from_slice::<serde_json::Value>(&json_bytes).unwrap_or_default();
+    let warnings = unsupported_features(&json, path);
 
     let buffers = load_buffers(doc, base, gltf.blob.clone(), path, budget)?;
+    let node_world = rest_world_matrices(doc);
     let mut b = Builder {
         doc,
         buffers: &buffers,
@@ -283,6 +286,9 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         material_map: HashMap::new(),
         texture_map: HashMap::new(),
         noted: BTreeSet::new(),
+        node_world,
+        json,
+        uv_slots: textures::UvSlots::default(),
         budget,
         decoded_bytes: std::cell::Cell::new(0),
     };
@@ -338,9 +344,57 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
     Ok(b.out)
 }
 
-/// A texture reference: image, colour space, sampler and the bits of its
-/// uv transform (offset, rotation, scale).
-type TextureKey = (usize, bool, Option<usize>, [u32; 5]);
+/// The world matrix of every node at its rest (non-animated) transform:
+/// the product of its own and its ancestors' local matrices (glTF 2.0
+/// section 3.5.3). A node reached through a cycle, or whose product is not
+/// finite, gets the identity (the traversal skips it with a warning).
+fn rest_world_matrices(doc: &gltf::Document) -> Vec<Mat4> {
+    let n = doc.nodes().len();
+    let mut parent: Vec<Option<usize>> = vec![None; n];
+    for node in doc.nodes() {
+        for c in node.children() {
+            // The first parent wins, as in the traversal.
+            parent[c.index()].get_or_insert(node.index());
+        }
+    }
+    let local: Vec<Mat4> = doc
+        .nodes()
+        .map(|node| Mat4::from_cols_array_2d(&node.transform().matrix()))
+        .collect();
+    let mut world: Vec<Option<Mat4>> = vec![None; n];
+    // `walk[i] == start + 1` marks the nodes of the current walk (cycles).
+    let mut walk = vec![0usize; n];
+    for start in 0..n {
+        // Walk up to a node whose matrix is known (or a root), then down.
+        let mut chain = vec![start];
+        walk[start] = start + 1;
+        while let Some(&top) = chain.last() {
+            match parent[top] {
+                Some(p) if world[p].is_none() && walk[p] != start + 1 => {
+                    walk[p] = start + 1;
+                    chain.push(p);
+                }
+                _ => break,
+            }
+        }
+        for &i in chain.iter().rev() {
+            if world[i].is_some() {
+                continue;
+            }
+            let above = parent[i].and_then(|p| world[p]).unwrap_or(Mat4::IDENTITY);
+            let m = above * local[i];
+            world[i] = Some(if m.is_finite() { m } else { Mat4::IDENTITY });
+        }
+    }
+    world
+        .into_iter()
+        .map(|m| m.unwrap_or(Mat4::IDENTITY))
+        .collect()
+}
+
+/// A texture reference: image, colour space, sampler, the bits of its
+/// uv transform (offset, rotation, scale) and its uv slot.
+type TextureKey = (usize, bool, Option<usize>, [u32; 5], u8);
 
 /// A converted primitive: its mesh index in the output and its material.
 type ConvertedPrimitive = (usize, Option<usize>);
@@ -356,6 +410,12 @@ struct Builder<'a> {
     material_map: HashMap<usize, usize>,
     texture_map: HashMap<TextureKey, Option<TextureId>>,
     noted: BTreeSet<String>,
+    /// Every node's world matrix at rest (skins read their joints' from it).
+    node_world: Vec<Mat4>,
+    /// The document's JSON (what the gltf crate does not expose).
+    json: serde_json::Value,
+    /// The uv slots of the material being converted.
+    uv_slots: textures::UvSlots,
     /// Bounds what the accessors decode to, together.
     budget: MemoryBudget,
     /// Bytes the accessors checked so far decode to.
