@@ -263,3 +263,77 @@ fn a_material_on_one_set_reads_it_as_the_first() {
     assert_eq!(image(&imp, imp.materials[0].texture).uv_set, 0);
     assert!(imp.warnings.is_empty(), "{:#?}", imp.warnings);
 }
+
+/// The Draco-compressed Box and Duck of the Khronos samples decode to the
+/// geometry of their uncompressed versions: the same triangle count and
+/// bounds (Draco quantizes positions: within a thousandth of the extent)
+/// and uvs within the same.
+#[test]
+fn draco_samples_decode_to_their_uncompressed_geometry() {
+    let Some(assets) = chiaro_testkit::shared_assets() else {
+        eprintln!("skipped: no shared assets (set CHIARO_ASSETS)");
+        return;
+    };
+    let dir = assets.join("khronos-gltf-sample-assets");
+    for model in ["Box", "Duck"] {
+        let plain = load_gltf(&dir.join(format!("{model}/glTF/{model}.gltf"))).expect("loads");
+        let draco =
+            load_gltf(&dir.join(format!("{model}/glTF-Draco/{model}.gltf"))).expect("decodes");
+        let bounds = |imp: &Imported| {
+            let mut lo = Vec3::splat(f32::MAX);
+            let mut hi = Vec3::splat(f32::MIN);
+            for o in &imp.objects {
+                for p in &imp.meshes[o.mesh].positions {
+                    let w = o.matrix.transform_point3(*p);
+                    lo = lo.min(w);
+                    hi = hi.max(w);
+                }
+            }
+            (lo, hi)
+        };
+        let tris = |imp: &Imported| -> usize {
+            imp.objects
+                .iter()
+                .map(|o| imp.meshes[o.mesh].indices.len())
+                .sum()
+        };
+        assert_eq!(tris(&plain), tris(&draco), "{model}");
+        let ((a, b), (c, d)) = (bounds(&plain), bounds(&draco));
+        let tol = (b - a).max_element() * 1e-3;
+        assert!(
+            (a - c).abs().max_element() <= tol && (b - d).abs().max_element() <= tol,
+            "{model}: {a}..{b} vs {c}..{d}"
+        );
+        let (mp, md) = (&plain.meshes[0], &draco.meshes[0]);
+        assert_eq!(mp.uvs.is_empty(), md.uvs.is_empty(), "{model}");
+        assert_eq!(md.normals.len(), md.positions.len(), "{model}");
+        assert!(
+            draco.warnings.iter().all(|w| !w.contains("draco")),
+            "{model}: {:#?}",
+            draco.warnings
+        );
+    }
+}
+
+/// A Draco extension whose buffer view holds no Draco stream is an error
+/// naming the file and the extension, never a panic.
+#[test]
+fn a_bad_draco_stream_is_an_error_naming_the_extension() {
+    let file = r#"{"asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_draco_mesh_compression"],
+        "extensionsRequired": ["KHR_draco_mesh_compression"],
+        "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0},
+          "extensions": {"KHR_draco_mesh_compression": {"bufferView": 0, "attributes": {"POSITION": 0}}}}]}],
+        "accessors": [{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}],
+        "bufferViews": [{"buffer": 0, "byteLength": 8}],
+        "buffers": [{"byteLength": 8, "uri": "data:application/octet-stream;base64,AAECAwQFBgc="}]}"#;
+    let e = load_gltf_slice(file.as_bytes(), None, Path::new("d.gltf")).expect_err("not Draco");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("d.gltf")
+            && msg.contains("KHR_draco_mesh_compression")
+            && msg.contains("could not be decoded"),
+        "{msg}"
+    );
+}

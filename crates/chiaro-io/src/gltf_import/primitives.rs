@@ -181,6 +181,42 @@ impl Builder<'_> {
         ];
         const SIGNED: &[DataType] = &[DataType::F32, DataType::I8, DataType::I16];
         self.check_accessor(&pos_acc, "POSITION", &[Dimensions::Vec3], QUANTIZED)?;
+        let name = format!(
+            "{}:{}#{}",
+            self.path
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            mesh.name().unwrap_or("mesh"),
+            prim.index()
+        );
+        if let Some(ext) = self.draco_extension(mesh, prim) {
+            // The accessors give the counts (checked against the budget);
+            // the geometry is in the Draco stream.
+            let max_faces = match prim.indices() {
+                Some(acc) => {
+                    self.check_accessor(
+                        &acc,
+                        "indices",
+                        &[Dimensions::Scalar],
+                        &[DataType::U8, DataType::U16, DataType::U32],
+                    )?;
+                    acc.count() / 3
+                }
+                None => pos_acc.count() / 3,
+            };
+            let mut m = Mesh {
+                name,
+                ..Mesh::default()
+            };
+            let slots = UvSlots::of(&self.json, prim.material().index());
+            self.decode_draco(&mut m, &ext, &loc, slots, pos_acc.count(), max_faces)?;
+            let material = match prim.material().index() {
+                Some(i) => Some(self.material(i)?),
+                None => None,
+            };
+            return Ok(Some((m, material)));
+        }
         let buffers = self.buffers;
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
         let positions: Vec<Vec3> = match read_f32::<3>(&pos_acc, buffers) {
@@ -203,15 +239,7 @@ impl Builder<'_> {
             ));
         }
         let mut m = Mesh {
-            name: format!(
-                "{}:{}#{}",
-                self.path
-                    .file_name()
-                    .map(|f| f.to_string_lossy().into_owned())
-                    .unwrap_or_default(),
-                mesh.name().unwrap_or("mesh"),
-                prim.index()
-            ),
+            name,
             positions,
             ..Mesh::default()
         };
