@@ -337,3 +337,43 @@ fn a_bad_draco_stream_is_an_error_naming_the_extension() {
         "{msg}"
     );
 }
+
+/// The Khronos skinned samples' rest pose is their bind pose: posed by
+/// their joints, their bounds are the POSITION accessor's (SimpleSkin: a
+/// 1 x 2 sheet; RiggedSimple: a column 2 wide and 9.15 tall), and every
+/// posed object is placed by the identity.
+#[test]
+fn skinned_samples_at_rest_keep_their_bind_pose_bounds() {
+    let Some(assets) = chiaro_testkit::shared_assets() else {
+        eprintln!("skipped: no shared assets (set CHIARO_ASSETS)");
+        return;
+    };
+    let dir = assets.join("khronos-gltf-sample-assets");
+    for (file, lo, hi) in [
+        (
+            "SimpleSkin/glTF/SimpleSkin.gltf",
+            Vec3::new(-0.5, 0.0, 0.0),
+            Vec3::new(0.5, 2.0, 0.0),
+        ),
+        (
+            "RiggedSimple/glTF-Binary/RiggedSimple.glb",
+            Vec3::new(-1.0, -4.5751, -1.0),
+            Vec3::new(1.0, 4.5751, 1.0),
+        ),
+    ] {
+        let imp = load_gltf(&dir.join(file)).expect("loads");
+        let mut a = Vec3::splat(f32::MAX);
+        let mut b = Vec3::splat(f32::MIN);
+        for o in &imp.objects {
+            assert_eq!(o.matrix, Mat4::IDENTITY, "{file}");
+            for p in &imp.meshes[o.mesh].positions {
+                a = a.min(*p);
+                b = b.max(*p);
+            }
+        }
+        assert!(
+            (a - lo).abs().max_element() < 1e-3 && (b - hi).abs().max_element() < 1e-3,
+            "{file}: {a}..{b}"
+        );
+    }
+}
