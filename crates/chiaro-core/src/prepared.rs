@@ -15,7 +15,7 @@ use crate::shading::texture::{
     MipMap, PrefilteredEnvironment, TexCoord, bump_normal, eval_height, eval_texture,
     normal_map_normal, uv_surface_gradient,
 };
-use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use glam::{Mat2, Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::sync::OnceLock;
 
 /// How to flatten the scene.
@@ -88,6 +88,9 @@ pub struct PreparedScene<'s> {
     pub normals: Vec<Vec3>,
     /// Texture coordinates (zero when the mesh has none).
     pub uvs: Vec<Vec2>,
+    /// The second texture-coordinate set (a mesh's `uvs1`, else its
+    /// `uvs`); empty when no mesh of the scene has a second set.
+    pub uvs1: Vec<Vec2>,
     /// World-space tangents with bitangent sign in `w`.
     pub tangents: Vec<Vec4>,
     /// Vertex colours (one when the mesh has none).
@@ -141,6 +144,11 @@ pub struct SurfaceHit {
     pub ns: Vec3,
     /// Texture coordinates.
     pub uv: Vec2,
+    /// The second texture-coordinate set (`uv` where there is none).
+    pub uv1: Vec2,
+    /// `d(uv1)/d(uv)` on the triangle: carries a footprint in `uv` to one
+    /// in `uv1` (identity without a second set, zero where `uv` degenerates).
+    pub uv1_from_uv: Mat2,
     /// Object-space position (solid textures).
     pub p_object: Vec3,
     /// Tangent with bitangent sign.
@@ -165,6 +173,7 @@ impl<'s> PreparedScene<'s> {
             object_positions: Vec::new(),
             normals: Vec::new(),
             uvs: Vec::new(),
+            uvs1: Vec::new(),
             tangents: Vec::new(),
             colors: Vec::new(),
             color_alphas: Vec::new(),
@@ -178,6 +187,7 @@ impl<'s> PreparedScene<'s> {
             mip_maps: OnceLock::new(),
             prefiltered: OnceLock::new(),
         };
+        let two_sets = scene.meshes.iter().any(|m| !m.uvs1.is_empty());
         for (oi, obj) in scene.objects.iter().enumerate() {
             let world_from_object = obj.transform.world_from_object();
             let tessellated;
@@ -207,7 +217,7 @@ impl<'s> PreparedScene<'s> {
                     &tessellated
                 }
             };
-            ps.add_mesh(mesh, obj, oi as u32, world_from_object);
+            ps.add_mesh(mesh, obj, oi as u32, world_from_object, two_sets);
         }
         ps.emissive_triangles = (0..ps.triangles.len() as u32)
             .filter(|&t| ps.material(ps.tri_material[t as usize]).is_emissive())
@@ -261,13 +271,14 @@ impl<'s> PreparedScene<'s> {
             ));
             // `sample_uniform_triangle` weights (a, b, c) by (x, y, 1 - x - y).
             let w = [b.x, b.y, 1.0 - b.x - b.y];
+            let uv = self.uvs[i0] * w[0] + self.uvs[i1] * w[1] + self.uvs[i2] * w[2];
             let tc = TexCoord {
-                uv: self.uvs[i0] * w[0] + self.uvs[i1] * w[1] + self.uvs[i2] * w[2],
-                duv_dx: Vec2::ZERO,
-                duv_dy: Vec2::ZERO,
+                uv,
                 p_object: self.object_positions[i0] * w[0]
                     + self.object_positions[i1] * w[1]
                     + self.object_positions[i2] * w[2],
+                uv1: self.second_uv([i0, i1, i2], w[1], w[2], uv).0,
+                ..TexCoord::default()
             };
             sum += self.eval_texture(tex, &tc).truncate().max(Vec3::ZERO);
         }
@@ -281,6 +292,7 @@ impl<'s> PreparedScene<'s> {
         obj: &crate::scene::Object,
         oi: u32,
         world_from_object: Mat4,
+        two_sets: bool,
     ) {
         let nv = mesh.positions.len();
         let valid: Vec<(usize, [u32; 3])> = mesh
@@ -327,6 +339,10 @@ impl<'s> PreparedScene<'s> {
             self.object_positions.push(mesh.positions[v]);
             self.uvs
                 .push(mesh.uvs.get(v).copied().unwrap_or(Vec2::ZERO));
+            if two_sets {
+                let uv1 = mesh.uvs1.get(v).or(mesh.uvs.get(v));
+                self.uvs1.push(uv1.copied().unwrap_or(Vec2::ZERO));
+            }
             self.colors
                 .push(mesh.colors.get(v).copied().unwrap_or(Vec3::ONE));
             self.color_alphas
@@ -334,9 +350,20 @@ impl<'s> PreparedScene<'s> {
             self.bounds = self.bounds.grow(world[v]);
         }
         self.normals.extend(normals.iter().copied());
+        // Tangents follow the uv set of the object's normal map.
+        let normal_map_set = self.material(obj.material).normal_map.and_then(|t| {
+            match self.scene.textures.get(t.index()) {
+                Some(Texture::Image(img)) => Some(img.uv_set),
+                _ => None,
+            }
+        });
+        let tangent_uvs = match normal_map_set {
+            Some(1) if !mesh.uvs1.is_empty() => &mesh.uvs1,
+            _ => &mesh.uvs,
+        };
         let local_uvs: Vec<Vec2> = src
             .iter()
-            .map(|&v| mesh.uvs.get(v as usize).copied().unwrap_or(Vec2::ZERO))
+            .map(|&v| tangent_uvs.get(v as usize).copied().unwrap_or(Vec2::ZERO))
             .collect();
         let local_pos: Vec<Vec3> = src.iter().map(|&v| world[v as usize]).collect();
         if mesh.tangents.len() == nv && !flip {
@@ -402,6 +429,8 @@ impl<'s> PreparedScene<'s> {
                 ng: n,
                 ns: n,
                 uv,
+                uv1: uv,
+                uv1_from_uv: Mat2::IDENTITY,
                 p_object: po,
                 tangent,
                 color: Vec3::ONE,
@@ -424,11 +453,15 @@ impl<'s> PreparedScene<'s> {
             ns = ng;
         }
         let tan = self.tangents[i0] * w + self.tangents[i1] * u + self.tangents[i2] * v;
+        let uv = self.uvs[i0] * w + self.uvs[i1] * u + self.uvs[i2] * v;
+        let (uv1, uv1_from_uv) = self.second_uv([i0, i1, i2], u, v, uv);
         SurfaceHit {
             p: lerp3(&self.positions),
             ng,
             ns,
-            uv: self.uvs[i0] * w + self.uvs[i1] * u + self.uvs[i2] * v,
+            uv,
+            uv1,
+            uv1_from_uv,
             p_object: lerp3(&self.object_positions),
             tangent: tan.truncate().normalize_or_zero().extend(if tan.w < 0.0 {
                 -1.0
@@ -442,6 +475,31 @@ impl<'s> PreparedScene<'s> {
             material: self.tri_material[t as usize],
             object: self.tri_object[t as usize],
         }
+    }
+
+    /// The second uv set at barycentrics `(u, v)` of the triangle with
+    /// vertices `idx`, where the first set is `uv`, and `d(uv1)/d(uv)`
+    /// over the triangle (both sets are affine in the barycentrics, so
+    /// `uv1 = J uv + c` with `J = D1 D0^-1`, `D` the edge differences):
+    /// `(uv, identity)` when the scene has no second set, a zero `J` where
+    /// the first set is degenerate on the triangle.
+    #[inline]
+    pub fn second_uv(&self, idx: [usize; 3], u: f32, v: f32, uv: Vec2) -> (Vec2, Mat2) {
+        if self.uvs1.is_empty() {
+            return (uv, Mat2::IDENTITY);
+        }
+        let [i0, i1, i2] = idx;
+        let (a, b, c) = (self.uvs1[i0], self.uvs1[i1], self.uvs1[i2]);
+        let uv1 = a * (1.0 - u - v) + b * u + c * v;
+        let d0 = Mat2::from_cols(self.uvs[i1] - self.uvs[i0], self.uvs[i2] - self.uvs[i0]);
+        let d1 = Mat2::from_cols(b - a, c - a);
+        let det = d0.determinant();
+        let j = if det.abs() > 1e-12 {
+            d1 * d0.inverse()
+        } else {
+            Mat2::ZERO
+        };
+        (uv1, if j.is_finite() { j } else { Mat2::ZERO })
     }
 
     /// The material parameters at a surface point with textures and vertex
@@ -501,13 +559,17 @@ impl<'s> PreparedScene<'s> {
         eval_texture(tex, mip, tc)
     }
 
-    /// The texture lookup point of `hit` with screen-space uv derivatives.
+    /// The texture lookup point of `hit` with screen-space uv derivatives
+    /// (those of the second set follow by `hit.uv1_from_uv`).
     pub fn tex_coord(hit: &SurfaceHit, duv_dx: Vec2, duv_dy: Vec2) -> TexCoord {
         TexCoord {
             uv: hit.uv,
             duv_dx,
             duv_dy,
             p_object: hit.p_object,
+            uv1: hit.uv1,
+            duv1_dx: hit.uv1_from_uv * duv_dx,
+            duv1_dy: hit.uv1_from_uv * duv_dy,
         }
     }
 

@@ -14,7 +14,7 @@ use crate::geometry::Ray;
 use crate::prepared::{PreparedScene, alpha_product};
 use crate::scene::{AlphaMode, Texture};
 use crate::shading::texture::{TexCoord, eval_texture};
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 
 /// No slot: the primitive is not alpha-tested.
 const NONE: u32 = u32::MAX;
@@ -86,11 +86,13 @@ impl Coverage {
             }
             let idx = tri.map(|i| i as usize);
             prim_slot[t] = slots.len() as u32;
-            slots.push((
-                mask,
-                idx.map(|i| ps.uvs[i]),
-                idx.map(|i| ps.color_alphas[i]),
-            ));
+            // The uvs of the set the mask's texture reads (eval_texture's rule).
+            let second = matches!(
+                &masks[mask as usize].texture,
+                Some(Texture::Image(img)) if img.uv_set == 1
+            ) && !ps.uvs1.is_empty();
+            let uvs = if second { &ps.uvs1 } else { &ps.uvs };
+            slots.push((mask, idx.map(|i| uvs[i]), idx.map(|i| ps.color_alphas[i])));
         }
         (!slots.is_empty()).then_some(Self {
             prim_slot,
@@ -113,11 +115,12 @@ impl Coverage {
         let m = &self.masks[mask as usize];
         let w = 1.0 - u - v;
         let tex = m.texture.as_ref().map_or(1.0, |t| {
+            // The slot holds the uvs of the texture's own set: both sets read them.
+            let at = uv[0] * w + uv[1] * u + uv[2] * v;
             let tc = TexCoord {
-                uv: uv[0] * w + uv[1] * u + uv[2] * v,
-                duv_dx: Vec2::ZERO,
-                duv_dy: Vec2::ZERO,
-                p_object: Vec3::ZERO,
+                uv: at,
+                uv1: at,
+                ..TexCoord::default()
             };
             eval_texture(t, None, &tc).w
         });
@@ -201,6 +204,7 @@ mod tests {
     use crate::accel::bvh::SceneBvh;
     use crate::prepared::PrepareOptions;
     use crate::scene::{Filter, ImageTexture, Material, Mesh, Object, Scene};
+    use glam::Vec3;
 
     /// A quad `z = 0` (x, y in [-1, 1], u = (x + 1) / 2) masked by a 2x1
     /// texture whose left texel has alpha `left` and right texel alpha 1,

@@ -17,6 +17,10 @@ pub struct Mesh {
     pub normals: Vec<Vec3>,
     /// Texture coordinates, or empty.
     pub uvs: Vec<Vec2>,
+    /// A second texture-coordinate set (glTF `TEXCOORD_1`), read by image
+    /// textures whose `uv_set` is 1; empty: those read `uvs`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub uvs1: Vec<Vec2>,
     /// Tangents `xyz` with bitangent sign in `w` (glTF convention), or empty.
     pub tangents: Vec<Vec4>,
     /// Linear RGB vertex colours multiplying the diffuse colour, or empty.

@@ -183,6 +183,14 @@ pub struct ImageTexture {
     /// Transform of the texture coordinates before the lookup.
     #[serde(default)]
     pub uv_transform: UvTransform,
+    /// Which texture-coordinate set the lookup reads: 0 the mesh's `uvs`,
+    /// 1 its `uvs1` (its `uvs` where it has no second set).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub uv_set: u8,
+}
+
+fn is_zero(v: &u8) -> bool {
+    *v == 0
 }
 
 fn default_mip_filter() -> Option<Filter> {
@@ -203,6 +211,7 @@ impl Default for ImageTexture {
             min_filter: Filter::Linear,
             mip_filter: default_mip_filter(),
             uv_transform: UvTransform::default(),
+            uv_set: 0,
         }
     }
 }

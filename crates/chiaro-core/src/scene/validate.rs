@@ -318,6 +318,7 @@ impl Scene {
             for (name, len) in [
                 ("normals", mesh.normals.len()),
                 ("uvs", mesh.uvs.len()),
+                ("uvs1", mesh.uvs1.len()),
                 ("tangents", mesh.tangents.len()),
                 ("colors", mesh.colors.len()),
             ] {
@@ -329,7 +330,7 @@ impl Scene {
                 }
             }
             if mesh.normals.iter().any(|v| !v.is_finite())
-                || mesh.uvs.iter().any(|v| !v.is_finite())
+                || mesh.uvs.iter().chain(&mesh.uvs1).any(|v| !v.is_finite())
             {
                 c.error(p.clone(), "a normal or uv is NaN or infinite");
             }

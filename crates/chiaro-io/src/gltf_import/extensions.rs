@@ -1,4 +1,4 @@
-//! Unsupported features (extensions, skins, animations, morph targets, ...):
+//! Unsupported features (extensions, animations, morph targets, ...):
 //! one warning each, naming the file and the JSON pointer of the first use.
 
 use super::SUPPORTED;
@@ -8,9 +8,10 @@ use std::path::Path;
 /// warning per feature naming `path`, the JSON pointer of its first
 /// occurrence and how many more there are: extensions chiaro does not
 /// implement (wherever an `extensions` object names one, else their place
-/// in `extensionsUsed`), skins, animations, morph targets and weights,
-/// orthographic cameras, a light's `range`, scenes other than the one
-/// loaded, and materials whose textures use different `texCoord` sets.
+/// in `extensionsUsed`), animations (skins are posed at rest), morph
+/// targets and weights, orthographic cameras, a light's `range`, and
+/// scenes other than the one loaded. (A material whose textures read more
+/// than two `texCoord` sets is warned about as its textures are read.)
 pub(super) fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
     use serde_json::Value;
     // (feature, pointers), in the order first met.
@@ -64,12 +65,6 @@ pub(super) fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec
             );
         }
     }
-    for (i, _) in array("skins").iter().enumerate() {
-        add(
-            "skins are not applied (the bind pose is loaded)".into(),
-            format!("/skins/{i}"),
-        );
-    }
     for (i, _) in array("animations").iter().enumerate() {
         add("animations are ignored".into(), format!("/animations/{i}"));
     }
@@ -117,37 +112,6 @@ pub(super) fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec
                 "scenes other than the default one are not loaded".into(),
                 format!("/scenes/{s}"),
             );
-        }
-    }
-    // texCoord of each textureInfo (KHR_texture_transform's override first).
-    let slots = [
-        "/pbrMetallicRoughness/baseColorTexture",
-        "/pbrMetallicRoughness/metallicRoughnessTexture",
-        "/emissiveTexture",
-        "/normalTexture",
-        "/occlusionTexture",
-    ];
-    for (m, mat) in array("materials").iter().enumerate() {
-        let mut first: Option<u64> = None;
-        for slot in slots {
-            let Some(info) = mat.pointer(slot) else {
-                continue;
-            };
-            let (set, at) = match info.pointer("/extensions/KHR_texture_transform/texCoord") {
-                Some(v) => (v.as_u64(), "/extensions/KHR_texture_transform/texCoord"),
-                None => (info.get("texCoord").and_then(Value::as_u64), "/texCoord"),
-            };
-            let set = set.unwrap_or(0);
-            match first {
-                None => first = Some(set),
-                Some(f) if f != set => add(
-                    "textures of one material on different texCoord sets \
-                     (the first texture's set is used for all)"
-                        .into(),
-                    format!("/materials/{m}{slot}{at}"),
-                ),
-                Some(_) => {}
-            }
         }
     }
     found

@@ -1,11 +1,12 @@
 //! Materials: glTF metallic-roughness (and its extensions) to a chiaro
 //! Torrance-Sparrow [`Material`] with a [`MetallicRoughness`].
 
+use super::textures::UvSlots;
 use super::{Builder, in_err};
 use crate::Result;
 use chiaro_core::scene::{
     AlphaMode, Material, MetallicRoughness, Occlusion, ReflectanceModel, Sidedness,
-    TransparencyMode, UvTransform,
+    TransparencyMode,
 };
 use chiaro_core::{Vec3, Vec4};
 
@@ -21,6 +22,8 @@ impl Builder<'_> {
                 "missing material",
             ));
         };
+        // The texCoord sets this material's textures read go to uv slots.
+        self.uv_slots = UvSlots::of(&self.json, Some(index));
         let pbr = gm.pbr_metallic_roughness();
         let base = Vec4::from(pbr.base_color_factor());
         let base_rgb = if base.is_finite() {
@@ -72,11 +75,13 @@ impl Builder<'_> {
             mat.emission_texture = self.info_texture(&info, true);
         }
         if let Some(nt) = gm.normal_texture() {
-            mat.normal_map = self.texture_info(nt.texture(), UvTransform::default(), false);
+            let at = format!("/materials/{index}/normalTexture");
+            mat.normal_map = self.slot_texture(nt.texture(), nt.tex_coord(), &at, false);
         }
         if let Some(ot) = gm.occlusion_texture() {
+            let at = format!("/materials/{index}/occlusionTexture");
             mat.occlusion = self
-                .texture_info(ot.texture(), UvTransform::default(), false)
+                .slot_texture(ot.texture(), ot.tex_coord(), &at, false)
                 .map(|texture| Occlusion {
                     texture,
                     strength: ot.strength().clamp(0.0, 1.0),
@@ -121,27 +126,4 @@ impl Builder<'_> {
         self.material_map.insert(index, i);
         Ok(i)
     }
-}
-
-/// The uv set the textures of `gm` use (after `KHR_texture_transform`'s
-/// `texCoord` override), the base colour's when they differ, and whether they do.
-pub(super) fn uv_set(gm: &gltf::Material) -> (u32, bool) {
-    let info_set = |i: &gltf::texture::Info| {
-        i.texture_transform()
-            .and_then(|t| t.tex_coord())
-            .unwrap_or(i.tex_coord())
-    };
-    let pbr = gm.pbr_metallic_roughness();
-    let sets: Vec<u32> = [
-        pbr.base_color_texture().map(|i| info_set(&i)),
-        pbr.metallic_roughness_texture().map(|i| info_set(&i)),
-        gm.emissive_texture().map(|i| info_set(&i)),
-        gm.normal_texture().map(|t| t.tex_coord()),
-        gm.occlusion_texture().map(|t| t.tex_coord()),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
-    let first = sets.first().copied().unwrap_or(0);
-    (first, sets.iter().any(|&s| s != first))
 }

@@ -5,14 +5,18 @@
 //! the file names no scene), each node's mesh primitives (triangles; strips
 //! and fans are converted; points and lines are skipped with a warning) with
 //! positions, normals, tangents (float, or normalized integers with
-//! `KHR_mesh_quantization`), the material's `TEXCOORD_n`, `COLOR_0` and
-//! sparse accessors; perspective cameras; `KHR_lights_punctual`; materials.
-//! Skins, morph targets and animations are not applied: the bind pose is
-//! loaded and a warning given.
+//! `KHR_mesh_quantization`), the two `TEXCOORD_n` sets a material's
+//! textures read (the first into `Mesh::uvs`, a second into `uvs1`; each
+//! texture names its set, a third set is one warning), `COLOR_0` and
+//! sparse accessors, or the same from a `KHR_draco_mesh_compression`
+//! stream; perspective cameras; `KHR_lights_punctual`; materials. A
+//! skinned mesh is posed at its joints' rest transforms (the skinned
+//! node's own transform ignored, glTF 2.0 section 3.7.3); morph targets
+//! and animations are not applied, with one warning each.
 //!
 //! The file is checked before anything is read: JSON errors give the line
 //! and column, schema errors the JSON path (`meshes[0].primitives[0].indices`),
-//! a required extension chiaro does not implement (Draco, meshopt, ...) is an
+//! a required extension chiaro does not implement (meshopt, ...) is an
 //! error naming it, a file whose meshes hold no triangles is an error, and every accessor's type and byte range is checked
 //! against its buffer, and every index against its vertex count, so a
 //! malformed file gives an error, never a panic.
@@ -36,9 +40,9 @@
 //! the eye); `alphaMode`/`alphaCutoff` ->
 //! `alpha_mode`, and `BLEND` with a factor alpha below 1 -> `transmit = 1 -
 //! alpha` (ior 1) drawn `interpolated`. Samplers give both wrap axes and
-//! the min/mag/mip filters; `KHR_texture_transform` is applied to the base
-//! colour, metallic-roughness and emissive textures; the mesh carries the
-//! one `TEXCOORD_n` set its material's textures use.
+//! the min/mag/mip filters; `KHR_texture_transform` (and its `texCoord`
+//! override) is applied to every texture slot, normal and occlusion
+//! included.
 //!
 //! # Lights
 //!
@@ -51,10 +55,14 @@
 //! 0. `range` is ignored.
 
 mod buffers;
+mod draco;
 mod extensions;
+#[cfg(test)]
+mod geometry_tests;
 mod materials;
 mod nodes;
 mod primitives;
+mod skins;
 #[cfg(test)]
 mod tests;
 mod textures;
@@ -70,6 +78,7 @@ use std::path::Path;
 
 /// Extensions chiaro reads: a file may require them.
 const SUPPORTED: &[&str] = &[
+    "KHR_draco_mesh_compression",
     "KHR_lights_punctual",
     "KHR_materials_emissive_strength",
     "KHR_materials_unlit",
@@ -211,7 +220,6 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
                 format!(
                     "the file requires extension {ext}, which chiaro does not support{}",
                     match ext {
-                        "KHR_draco_mesh_compression" => " (Draco-compressed meshes)",
                         "EXT_meshopt_compression" => " (meshopt-compressed buffers)",
                         _ => "",
                     }
@@ -239,6 +247,19 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
             }
         }
     }
+    let json_bytes = if is_glb {
+        gltf::Glb::from_slice(bytes)
+            .map(|g| g.json.into_owned())
+            .unwrap_or_default()
+    } else {
+        bytes.to_vec()
+    };
+    let json = serde_json::from_slice::<serde_json::Value>(&json_bytes).unwrap_or_default();
+    // Draco primitives' accessors have no buffer view: the stream holds their data.
+    let draco_accessors: BTreeSet<String> = draco_accessors(&json)
+        .into_iter()
+        .map(|i| format!("accessors[{i}].bufferView"))
+        .collect();
     {
         use gltf::json::validation::Validate;
         let mut errors = Vec::new();
@@ -247,7 +268,8 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
             let p = p();
             // The validator knows only the extensions of the crate's features.
             let s = p.to_string();
-            let ours = s.starts_with("extensions") && SUPPORTED.iter().any(|x| s.contains(x));
+            let ours = (s.starts_with("extensions") && SUPPORTED.iter().any(|x| s.contains(x)))
+                || draco_accessors.contains(&s);
             if !ours {
                 errors.push((p, e));
             }
@@ -261,18 +283,10 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
             return Err(in_err(path, p.to_string(), format!("{e}{more}")));
         }
     }
-    let json_bytes = if is_glb {
-        gltf::Glb::from_slice(bytes)
-            .map(|g| g.json.into_owned())
-            .unwrap_or_default()
-    } else {
-        bytes.to_vec()
-    };
-    let warnings = serde_json::from_slice::<serde_json::Value>(&json_bytes)
-        .map(|json| unsupported_features(&json, path))
-        .unwrap_or_default();
+    let warnings = unsupported_features(&json, path);
 
     let buffers = load_buffers(doc, base, gltf.blob.clone(), path, budget)?;
+    let node_world = rest_world_matrices(doc);
     let mut b = Builder {
         doc,
         buffers: &buffers,
@@ -283,6 +297,9 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         material_map: HashMap::new(),
         texture_map: HashMap::new(),
         noted: BTreeSet::new(),
+        node_world,
+        json,
+        uv_slots: textures::UvSlots::default(),
         budget,
         decoded_bytes: std::cell::Cell::new(0),
     };
@@ -338,9 +355,86 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
     Ok(b.out)
 }
 
-/// A texture reference: image, colour space, sampler and the bits of its
-/// uv transform (offset, rotation, scale).
-type TextureKey = (usize, bool, Option<usize>, [u32; 5]);
+/// The accessors that `KHR_draco_mesh_compression` primitives of the
+/// document `json` name (attributes and indices): the Draco stream holds
+/// their data, so they have no buffer view.
+fn draco_accessors(json: &serde_json::Value) -> BTreeSet<u64> {
+    let mut out = BTreeSet::new();
+    let meshes = json.get("meshes").and_then(serde_json::Value::as_array);
+    for mesh in meshes.into_iter().flatten() {
+        let prims = mesh.get("primitives").and_then(serde_json::Value::as_array);
+        for prim in prims.into_iter().flatten() {
+            if prim
+                .pointer("/extensions/KHR_draco_mesh_compression")
+                .is_none()
+            {
+                continue;
+            }
+            let attrs = prim
+                .get("attributes")
+                .and_then(serde_json::Value::as_object);
+            let named = attrs.into_iter().flat_map(|a| a.values());
+            out.extend(
+                named
+                    .chain(prim.get("indices"))
+                    .filter_map(serde_json::Value::as_u64),
+            );
+        }
+    }
+    out
+}
+
+/// The world matrix of every node at its rest (non-animated) transform:
+/// the product of its own and its ancestors' local matrices (glTF 2.0
+/// section 3.5.3). A node reached through a cycle, or whose product is not
+/// finite, gets the identity (the traversal skips it with a warning).
+fn rest_world_matrices(doc: &gltf::Document) -> Vec<Mat4> {
+    let n = doc.nodes().len();
+    let mut parent: Vec<Option<usize>> = vec![None; n];
+    for node in doc.nodes() {
+        for c in node.children() {
+            // The first parent wins, as in the traversal.
+            parent[c.index()].get_or_insert(node.index());
+        }
+    }
+    let local: Vec<Mat4> = doc
+        .nodes()
+        .map(|node| Mat4::from_cols_array_2d(&node.transform().matrix()))
+        .collect();
+    let mut world: Vec<Option<Mat4>> = vec![None; n];
+    // `walk[i] == start + 1` marks the nodes of the current walk (cycles).
+    let mut walk = vec![0usize; n];
+    for start in 0..n {
+        // Walk up to a node whose matrix is known (or a root), then down.
+        let mut chain = vec![start];
+        walk[start] = start + 1;
+        while let Some(&top) = chain.last() {
+            match parent[top] {
+                Some(p) if world[p].is_none() && walk[p] != start + 1 => {
+                    walk[p] = start + 1;
+                    chain.push(p);
+                }
+                _ => break,
+            }
+        }
+        for &i in chain.iter().rev() {
+            if world[i].is_some() {
+                continue;
+            }
+            let above = parent[i].and_then(|p| world[p]).unwrap_or(Mat4::IDENTITY);
+            let m = above * local[i];
+            world[i] = Some(if m.is_finite() { m } else { Mat4::IDENTITY });
+        }
+    }
+    world
+        .into_iter()
+        .map(|m| m.unwrap_or(Mat4::IDENTITY))
+        .collect()
+}
+
+/// A texture reference: image, colour space, sampler, the bits of its
+/// uv transform (offset, rotation, scale) and its uv slot.
+type TextureKey = (usize, bool, Option<usize>, [u32; 5], u8);
 
 /// A converted primitive: its mesh index in the output and its material.
 type ConvertedPrimitive = (usize, Option<usize>);
@@ -356,6 +450,12 @@ struct Builder<'a> {
     material_map: HashMap<usize, usize>,
     texture_map: HashMap<TextureKey, Option<TextureId>>,
     noted: BTreeSet<String>,
+    /// Every node's world matrix at rest (skins read their joints' from it).
+    node_world: Vec<Mat4>,
+    /// The document's JSON (what the gltf crate does not expose).
+    json: serde_json::Value,
+    /// The uv slots of the material being converted.
+    uv_slots: textures::UvSlots,
     /// Bounds what the accessors decode to, together.
     budget: MemoryBudget,
     /// Bytes the accessors checked so far decode to.

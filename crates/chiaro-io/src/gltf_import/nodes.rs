@@ -1,7 +1,7 @@
 //! The node hierarchy: each node's world transform, its camera, mesh
 //! primitives and `KHR_lights_punctual` light (candela and lux to chiaro's `Ip`).
 
-use super::Builder;
+use super::{Builder, ConvertedPrimitive};
 use crate::{ImportedObject, Result};
 use chiaro_core::scene::{Attenuation, Camera, Light, NamedCamera, SpotLight};
 use chiaro_core::{Mat4, Vec3};
@@ -52,15 +52,21 @@ impl Builder<'_> {
         let Some(mesh) = node.mesh() else {
             return Ok(());
         };
+        let skin = node.skin();
         for prim in mesh.primitives() {
             let key = (mesh.index(), prim.index());
-            let entry = match self.mesh_cache.get(&key) {
-                Some(e) => *e,
-                None => {
-                    let e = self.primitive(&mesh, &prim)?;
-                    self.mesh_cache.insert(key, e);
-                    e
-                }
+            // A skinned primitive is posed for this node (not shared) and
+            // placed by its joints, not by the node's transform.
+            let (entry, matrix) = match &skin {
+                Some(skin) => self.skinned_primitive(&mesh, &prim, skin, world)?,
+                None => match self.mesh_cache.get(&key) {
+                    Some(e) => (*e, world),
+                    None => {
+                        let e = self.primitive(&mesh, &prim)?;
+                        self.mesh_cache.insert(key, e);
+                        (e, world)
+                    }
+                },
             };
             if let Some((mesh_index, material)) = entry {
                 let name = match (node.name(), mesh.name()) {
@@ -71,12 +77,33 @@ impl Builder<'_> {
                 self.out.objects.push(ImportedObject {
                     name,
                     mesh: mesh_index,
-                    matrix: world,
+                    matrix,
                     material,
                 });
             }
         }
         Ok(())
+    }
+
+    /// Reads primitive `prim` of a node with `skin` and poses it at rest
+    /// ([`Builder::pose_skin`]); returns the converted primitive and its
+    /// object matrix: the identity when posed, the node's `world` when the
+    /// primitive has no joints and weights.
+    fn skinned_primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        skin: &gltf::Skin,
+        world: Mat4,
+    ) -> Result<(Option<ConvertedPrimitive>, Mat4)> {
+        let Some((mut m, material)) = self.read_primitive(mesh, prim)? else {
+            return Ok((None, world));
+        };
+        let loc = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
+        let posed = self.pose_skin(&mut m, prim, skin, &loc)?;
+        self.out.meshes.push(m);
+        let matrix = if posed { Mat4::IDENTITY } else { world };
+        Ok((Some((self.out.meshes.len() - 1, material)), matrix))
     }
 
     pub(super) fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: Mat4) {

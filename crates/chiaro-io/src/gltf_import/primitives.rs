@@ -1,7 +1,7 @@
 //! Mesh primitives: accessors checked against their buffers and the budget,
 //! read (quantized, sparse) into a chiaro [`Mesh`].
 
-use super::materials::uv_set;
+use super::textures::UvSlots;
 use super::{Builder, ConvertedPrimitive, in_err};
 use crate::Result;
 use chiaro_core::scene::Mesh;
@@ -17,7 +17,7 @@ impl Builder<'_> {
     /// decoded size, added to the accessors' before it, within the memory
     /// budget (an accessor without a buffer view holds zeros whose count
     /// nothing backs).
-    fn check_accessor(
+    pub(super) fn check_accessor(
         &self,
         acc: &gltf::Accessor,
         what: &str,
@@ -136,12 +136,27 @@ impl Builder<'_> {
         Ok(())
     }
 
-    /// Converts one primitive; `None` when it is skipped (not triangles, no positions).
+    /// Converts one primitive and adds its mesh to the output; `None` when
+    /// it is skipped (not triangles, no positions).
     pub(super) fn primitive(
         &mut self,
         mesh: &gltf::Mesh,
         prim: &gltf::Primitive,
     ) -> Result<Option<ConvertedPrimitive>> {
+        let Some((m, material)) = self.read_primitive(mesh, prim)? else {
+            return Ok(None);
+        };
+        self.out.meshes.push(m);
+        Ok(Some((self.out.meshes.len() - 1, material)))
+    }
+
+    /// Reads one primitive into a mesh (not yet added) and its material;
+    /// `None` when it is skipped (not triangles, no positions).
+    pub(super) fn read_primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+    ) -> Result<Option<(Mesh, Option<usize>)>> {
         let loc = format!("meshes[{}].primitives[{}]", mesh.index(), prim.index());
         let mode = prim.mode();
         if matches!(
@@ -166,6 +181,42 @@ impl Builder<'_> {
         ];
         const SIGNED: &[DataType] = &[DataType::F32, DataType::I8, DataType::I16];
         self.check_accessor(&pos_acc, "POSITION", &[Dimensions::Vec3], QUANTIZED)?;
+        let name = format!(
+            "{}:{}#{}",
+            self.path
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            mesh.name().unwrap_or("mesh"),
+            prim.index()
+        );
+        if let Some(ext) = self.draco_extension(mesh, prim) {
+            // The accessors give the counts (checked against the budget);
+            // the geometry is in the Draco stream.
+            let max_faces = match prim.indices() {
+                Some(acc) => {
+                    self.check_accessor(
+                        &acc,
+                        "indices",
+                        &[Dimensions::Scalar],
+                        &[DataType::U8, DataType::U16, DataType::U32],
+                    )?;
+                    acc.count() / 3
+                }
+                None => pos_acc.count() / 3,
+            };
+            let mut m = Mesh {
+                name,
+                ..Mesh::default()
+            };
+            let slots = UvSlots::of(&self.json, prim.material().index());
+            self.decode_draco(&mut m, &ext, &loc, slots, pos_acc.count(), max_faces)?;
+            let material = match prim.material().index() {
+                Some(i) => Some(self.material(i)?),
+                None => None,
+            };
+            return Ok(Some((m, material)));
+        }
         let buffers = self.buffers;
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
         let positions: Vec<Vec3> = match read_f32::<3>(&pos_acc, buffers) {
@@ -188,15 +239,7 @@ impl Builder<'_> {
             ));
         }
         let mut m = Mesh {
-            name: format!(
-                "{}:{}#{}",
-                self.path
-                    .file_name()
-                    .map(|f| f.to_string_lossy().into_owned())
-                    .unwrap_or_default(),
-                mesh.name().unwrap_or("mesh"),
-                prim.index()
-            ),
+            name,
             positions,
             ..Mesh::default()
         };
@@ -225,12 +268,22 @@ impl Builder<'_> {
                 }
             }
         }
-        // The one uv set the material's textures use (chiaro meshes carry one).
-        let set = prim.material().index().map_or(0, |_| {
-            // Mixed sets are warned about once, by `unsupported_features`.
-            uv_set(&prim.material()).0
-        });
-        if let Some(acc) = prim.get(&gltf::Semantic::TexCoords(set)) {
+        // The texCoord sets the material's textures read: the first into
+        // `uvs`, a second into `uvs1` (textures name their slot).
+        let slots = UvSlots::of(&self.json, prim.material().index());
+        let wanted = [Some(slots.primary), slots.secondary];
+        for (slot, set) in wanted.into_iter().enumerate() {
+            let Some(set) = set else {
+                continue;
+            };
+            let Some(acc) = prim.get(&gltf::Semantic::TexCoords(set)) else {
+                if set != 0 {
+                    self.note(format!(
+                        "{loc}: the material uses TEXCOORD_{set}, which is missing"
+                    ));
+                }
+                continue;
+            };
             self.check_accessor(
                 &acc,
                 &format!("TEXCOORD_{set}"),
@@ -240,13 +293,13 @@ impl Builder<'_> {
             if let Some(v) = read_f32::<2>(&acc, buffers) {
                 let v: Vec<Vec2> = v.into_iter().map(Vec2::from).collect();
                 if v.len() == n && v.iter().all(|x| x.is_finite()) {
-                    m.uvs = v;
+                    if slot == 0 {
+                        m.uvs = v;
+                    } else {
+                        m.uvs1 = v;
+                    }
                 }
             }
-        } else if set != 0 {
-            self.note(format!(
-                "{loc}: the material uses TEXCOORD_{set}, which is missing"
-            ));
         }
         if let Some(acc) = prim.get(&gltf::Semantic::Colors(0)) {
             self.check_accessor(
@@ -315,8 +368,7 @@ impl Builder<'_> {
             Some(i) => Some(self.material(i)?),
             None => None,
         };
-        self.out.meshes.push(m);
-        Ok(Some((self.out.meshes.len() - 1, material)))
+        Ok(Some((m, material)))
     }
 }
 

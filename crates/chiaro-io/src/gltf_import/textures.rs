@@ -8,7 +8,8 @@ use chiaro_core::scene::{Filter, ImageTexture, Texture, TextureId, UvTransform, 
 
 impl Builder<'_> {
     /// The texture of a `textureInfo` (base colour, metallic-roughness,
-    /// emissive), with its sampler and `KHR_texture_transform`.
+    /// emissive, ...) of the material being converted, with its sampler,
+    /// `KHR_texture_transform` and uv set.
     pub(super) fn info_texture(
         &mut self,
         info: &gltf::texture::Info,
@@ -19,13 +20,56 @@ impl Builder<'_> {
             rotation: t.rotation(),
             scale: Vec2::from(t.scale()),
         });
-        self.texture_info(info.texture(), transform.unwrap_or_default(), srgb)
+        let set = info
+            .texture_transform()
+            .and_then(|t| t.tex_coord())
+            .unwrap_or(info.tex_coord());
+        let slot = self.uv_slot(set);
+        self.texture_ref(info.texture(), transform.unwrap_or_default(), slot, srgb)
     }
 
-    pub(super) fn texture_info(
+    /// The texture of the normal or occlusion texture at JSON pointer `at`
+    /// (`/materials/3/normalTexture`): the gltf crate gives these no
+    /// `KHR_texture_transform`, so it is read from the JSON, as the others'.
+    pub(super) fn slot_texture(
+        &mut self,
+        tex: gltf::Texture,
+        tex_coord: u32,
+        at: &str,
+        srgb: bool,
+    ) -> Option<TextureId> {
+        let (transform, set) = self
+            .json
+            .pointer(at)
+            .map_or((UvTransform::default(), None), json_texture_transform);
+        let slot = self.uv_slot(set.unwrap_or(tex_coord));
+        self.texture_ref(tex, transform, slot, srgb)
+    }
+
+    /// The uv slot (0: the mesh's `uvs`, 1: its `uvs1`) of texCoord `set`
+    /// under the current material's [`UvSlots`]; a set beyond its two is
+    /// warned about once and reads the first.
+    fn uv_slot(&mut self, set: u32) -> u8 {
+        match self.uv_slots.slot(set) {
+            Some(s) => s,
+            None => {
+                self.note(format!(
+                    "a material's textures use more than two texCoord sets: \
+                     those on TEXCOORD_{set} read TEXCOORD_{}",
+                    self.uv_slots.primary
+                ));
+                0
+            }
+        }
+    }
+
+    /// The texture of image `tex` seen through `transform` on uv slot
+    /// `uv_set`, decoded once per distinct reference.
+    pub(super) fn texture_ref(
         &mut self,
         tex: gltf::Texture,
         transform: UvTransform,
+        uv_set: u8,
         srgb: bool,
     ) -> Option<TextureId> {
         let image = tex.source();
@@ -38,7 +82,7 @@ impl Builder<'_> {
             transform.scale.y,
         ]
         .map(f32::to_bits);
-        let key = (image.index(), srgb, sampler.index(), tb);
+        let key = (image.index(), srgb, sampler.index(), tb, uv_set);
         if let Some(t) = self.texture_map.get(&key) {
             return *t;
         }
@@ -74,6 +118,7 @@ impl Builder<'_> {
                 img.mag_filter = mag_filter;
                 img.min_filter = min_filter;
                 img.mip_filter = mip_filter;
+                img.uv_set = uv_set;
                 if transform.offset.is_finite()
                     && transform.rotation.is_finite()
                     && transform.scale.is_finite()
@@ -145,5 +190,95 @@ impl Builder<'_> {
         };
         crate::images::load_texture_bytes_within(&bytes, &source, srgb, self.budget)
             .map_err(|e| e.to_string())
+    }
+}
+
+/// The `KHR_texture_transform` of a texture reference's JSON (`info`):
+/// its offset, rotation and scale (defaults where absent or not numbers)
+/// and its `texCoord` override.
+pub(super) fn json_texture_transform(info: &serde_json::Value) -> (UvTransform, Option<u32>) {
+    let Some(t) = info.pointer("/extensions/KHR_texture_transform") else {
+        return (UvTransform::default(), None);
+    };
+    let num = |v: &serde_json::Value| v.as_f64().map(|x| x as f32);
+    let pair = |key: &str, default: Vec2| match t.get(key).and_then(|v| v.as_array()) {
+        Some(a) if a.len() == 2 => match (num(&a[0]), num(&a[1])) {
+            (Some(x), Some(y)) => Vec2::new(x, y),
+            _ => default,
+        },
+        _ => default,
+    };
+    let transform = UvTransform {
+        offset: pair("offset", Vec2::ZERO),
+        rotation: t.get("rotation").and_then(num).unwrap_or(0.0),
+        scale: pair("scale", Vec2::ONE),
+    };
+    let set = t
+        .get("texCoord")
+        .and_then(serde_json::Value::as_u64)
+        .map(|s| u32::try_from(s).unwrap_or(u32::MAX));
+    (transform, set)
+}
+
+/// The texCoord sets the textures of a material (`material`, its JSON)
+/// read, each reference's `KHR_texture_transform` override first: every
+/// object under a key ending in `Texture` with an `index` is a texture
+/// reference, so extensions' textures count too.
+pub(super) fn texture_sets(material: &serde_json::Value, out: &mut Vec<u32>) {
+    use serde_json::Value;
+    match material {
+        Value::Object(map) => {
+            for (k, child) in map {
+                if k.ends_with("Texture") && child.get("index").is_some() {
+                    let base = child
+                        .get("texCoord")
+                        .and_then(Value::as_u64)
+                        .map_or(0, |s| u32::try_from(s).unwrap_or(u32::MAX));
+                    out.push(json_texture_transform(child).1.unwrap_or(base));
+                }
+                texture_sets(child, out);
+            }
+        }
+        Value::Array(items) => items.iter().for_each(|c| texture_sets(c, out)),
+        _ => {}
+    }
+}
+
+/// Where a material's texCoord sets go on a chiaro mesh: the smallest set
+/// its textures read becomes the mesh's `uvs` (slot 0), the next its
+/// `uvs1` (slot 1); a material with one set needs no second.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(super) struct UvSlots {
+    /// The set read into `uvs`.
+    pub primary: u32,
+    /// The set read into `uvs1`, when the material reads two.
+    pub secondary: Option<u32>,
+}
+
+impl UvSlots {
+    /// The slots of material `index` of the document `json` (set 0 alone
+    /// for none or a missing material).
+    pub(super) fn of(json: &serde_json::Value, index: Option<usize>) -> Self {
+        let mut sets = Vec::new();
+        if let Some(m) = index.and_then(|i| json.pointer(&format!("/materials/{i}"))) {
+            texture_sets(m, &mut sets);
+        }
+        sets.sort_unstable();
+        sets.dedup();
+        Self {
+            primary: sets.first().copied().unwrap_or(0),
+            secondary: sets.get(1).copied(),
+        }
+    }
+
+    /// The slot of texCoord `set`, `None` for a set beyond the two.
+    pub(super) fn slot(self, set: u32) -> Option<u8> {
+        if set == self.primary {
+            Some(0)
+        } else if Some(set) == self.secondary {
+            Some(1)
+        } else {
+            None
+        }
     }
 }

@@ -9,7 +9,7 @@ use chiaro_core::prepared::SurfaceHit;
 use chiaro_core::scene::MaterialId;
 use chiaro_core::scene::{Material, ShadeMode};
 use chiaro_core::shading::FactoredLight;
-use glam::{Vec2, Vec3, Vec3A, Vec4};
+use glam::{Mat2, Vec2, Vec3, Vec3A, Vec4};
 
 /// Barycentrics `(u, v)` of vertices 1 and 2 where the ray `o + t d` meets the
 /// plane of the triangle (Moller and Trumbore 1997, without the inside test):
@@ -324,11 +324,18 @@ impl<'a> Ctx<'a, '_> {
         } else {
             (Vec2::ZERO, Vec3::ZERO, Vec4::ZERO)
         };
+        let (uv1, uv1_from_uv) = if textured {
+            ps.second_uv([i0, i1, i2], u, v, uv)
+        } else {
+            (Vec2::ZERO, Mat2::IDENTITY)
+        };
         SurfaceHit {
             p: (td.p[0] * w + td.p[1] * u + td.p[2] * v).into(),
             ng: ng.into(),
             ns: ns.into(),
             uv,
+            uv1,
+            uv1_from_uv,
             p_object,
             tangent,
             color: color.into(),

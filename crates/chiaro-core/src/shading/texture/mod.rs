@@ -42,21 +42,32 @@ pub struct TexCoord {
     pub duv_dy: Vec2,
     /// Object-space point (solid textures).
     pub p_object: Vec3,
+    /// The second texture-coordinate set (image textures with `uv_set` 1).
+    pub uv1: Vec2,
+    /// d(uv1)/dx per pixel.
+    pub duv1_dx: Vec2,
+    /// d(uv1)/dy per pixel.
+    pub duv1_dy: Vec2,
 }
 
-/// Evaluates texture `t` at `tc` as linear RGBA: image textures (their uv
-/// transform applied) through the mip-map `mip` when given, with the image's
+/// Evaluates texture `t` at `tc` as linear RGBA: image textures (at the
+/// uv set they name, their uv transform applied) through the mip-map `mip` when given, with the image's
 /// filters, else its magnification filter on the base image;
 /// procedural textures give their colour with alpha 1.
 pub fn eval_texture(t: &Texture, mip: Option<&MipMap>, tc: &TexCoord) -> Vec4 {
     match t {
         Texture::Image(img) => {
             let tr = &img.uv_transform;
+            // The one place a texture's uv set is chosen, for every technique.
+            let (uv, dx, dy) = match img.uv_set {
+                1 => (tc.uv1, tc.duv1_dx, tc.duv1_dy),
+                _ => (tc.uv, tc.duv_dx, tc.duv_dy),
+            };
             let (uv, dx, dy) = if tr.is_identity() {
-                (tc.uv, tc.duv_dx, tc.duv_dy)
+                (uv, dx, dy)
             } else {
                 let l = tr.linear();
-                (tr.apply(tc.uv), l * tc.duv_dx, l * tc.duv_dy)
+                (tr.apply(uv), l * dx, l * dy)
             };
             match mip {
                 Some(m) => m.sample_footprint(uv, dx, dy),
