@@ -127,6 +127,7 @@ impl SurfaceMaterial {
             ks: Vec3::ZERO,
             kr: Vec3::ZERO,
             ks_ambient: Vec3::ZERO,
+            clearcoat: 0.0,
             ..self
         }
     }

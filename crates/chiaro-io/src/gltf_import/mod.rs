@@ -52,6 +52,7 @@
 
 mod buffers;
 mod extensions;
+mod layers;
 mod materials;
 mod nodes;
 mod primitives;
@@ -71,8 +72,12 @@ use std::path::Path;
 /// Extensions chiaro reads: a file may require them.
 const SUPPORTED: &[&str] = &[
     "KHR_lights_punctual",
+    "KHR_materials_clearcoat",
     "KHR_materials_emissive_strength",
+    "KHR_materials_ior",
+    "KHR_materials_transmission",
     "KHR_materials_unlit",
+    "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
 ];
@@ -268,9 +273,12 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
     } else {
         bytes.to_vec()
     };
-    let warnings = serde_json::from_slice::<serde_json::Value>(&json_bytes)
-        .map(|json| unsupported_features(&json, path))
+    let json = serde_json::from_slice::<serde_json::Value>(&json_bytes).ok();
+    let warnings = json
+        .as_ref()
+        .map(|json| unsupported_features(json, path))
         .unwrap_or_default();
+    let material_extensions = layers::material_extensions(json.as_ref());
 
     let buffers = load_buffers(doc, base, gltf.blob.clone(), path, budget)?;
     let mut b = Builder {
@@ -285,6 +293,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         noted: BTreeSet::new(),
         budget,
         decoded_bytes: std::cell::Cell::new(0),
+        material_extensions,
     };
     b.out.warnings = warnings;
     // The default scene, else the first, else every root node.
@@ -360,6 +369,9 @@ struct Builder<'a> {
     budget: MemoryBudget,
     /// Bytes the accessors checked so far decode to.
     decoded_bytes: std::cell::Cell<u64>,
+    /// Each material's `extensions` object (JSON null where it has none):
+    /// the layers `layers.rs` reads.
+    material_extensions: Vec<serde_json::Value>,
 }
 
 impl Builder<'_> {
