@@ -253,7 +253,6 @@ fn present(
                 && m.is_transparent()
                 && m.model == chiaro_core::scene::ReflectanceModel::TorranceSparrow
                 && m.roughness >= chiaro_core::shading::dielectric::MIN_ROUGH_ALPHA
-                && m.ior != 1.0
         })),
         Feature::Highlights => named(objects.with(|m| {
             m.specular.max_element() > 0.0

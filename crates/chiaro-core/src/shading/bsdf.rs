@@ -87,8 +87,8 @@ pub struct Lobes {
     /// material without specular lobe.
     pub lambert_weight: Vec3,
     /// True when the transmission lobe is the rough dielectric (a Fresnel
-    /// dielectric of Torrance-Sparrow roughness at least [`MIN_ROUGH_ALPHA`]
-    /// and an ior other than 1), a non-delta lobe.
+    /// dielectric of Torrance-Sparrow roughness at least [`MIN_ROUGH_ALPHA`];
+    /// at ior 1 a thin wall), a non-delta lobe.
     pub rough: bool,
     /// `wt / total` when `rough`, else 0: the rough lobe's share of the
     /// non-delta mixture.
@@ -135,8 +135,7 @@ impl Lobes {
         let rough = fresnel
             && t > 0.0
             && m.model == ReflectanceModel::TorranceSparrow
-            && m.roughness >= MIN_ROUGH_ALPHA
-            && valid_ior(m.ior) != 1.0;
+            && m.roughness >= MIN_ROUGH_ALPHA;
         Self {
             rough,
             p_transmission: if rough && total > 0.0 {
@@ -1073,6 +1072,15 @@ mod tests {
                 front,
             ));
         }
+        // A thin wall: the same from either side.
+        v.push((
+            "ggx thin wall alpha=0.3".into(),
+            SurfaceMaterial {
+                ior: 1.0,
+                ..rough_glass(0.0, 1.0, 0.3, Distribution::Ggx)
+            },
+            true,
+        ));
         v
     }
 
@@ -1090,7 +1098,7 @@ mod tests {
 
     #[test]
     fn rough_dielectric_is_chosen_only_when_rough() {
-        // Smooth glass, Phong glass (the shipped scenes' kind), ior 1 and
+        // Smooth glass, Phong glass (the shipped scenes' kind) and
         // non-Fresnel transmission keep the delta lobe.
         let rough = rough_glass(0.0, 1.0, 0.3, Distribution::Ggx);
         assert!(Bsdf::new(rough, true).lobes.rough);
@@ -1105,8 +1113,9 @@ mod tests {
             ..rough
         };
         assert!(!Bsdf::new(phong_glass, true).lobes.rough);
+        // A thin wall (ior 1) is rough too.
         let thin = SurfaceMaterial { ior: 1.0, ..rough };
-        assert!(!Bsdf::new(thin, true).lobes.rough);
+        assert!(Bsdf::new(thin, true).lobes.rough);
     }
 
     #[test]
@@ -1221,5 +1230,15 @@ mod tests {
             checked += u32::from(t1 > 0.0);
         }
         assert!(checked > 500, "{checked} refracting pairs");
+        // A thin wall is symmetric through it.
+        let thin = Bsdf::new(SurfaceMaterial { ior: 1.0, ..m }, true);
+        for _ in 0..500 {
+            let a = dir(85.0 * uniform(&mut rng), 6.3 * uniform(&mut rng));
+            let b = dir(85.0 * uniform(&mut rng), 6.3 * uniform(&mut rng));
+            let below = Vec3::new(b.x, b.y, -b.z);
+            let t1 = thin.eval(Vec3::Z, a, below).x / b.z;
+            let t2 = thin.eval(-Vec3::Z, below, a).x / a.z;
+            assert!((t1 - t2).abs() <= 1e-4 * t1.max(t2) + 1e-6, "{t1} vs {t2}");
+        }
     }
 }

@@ -11,6 +11,12 @@
 //! microfacet, refraction `(1 - F) kt`; the refracted radiance is not scaled
 //! by `1 / eta^2`, as in chiaro's smooth glass ([`super::bsdf::delta_split`]),
 //! so that the rough lobe tends to the delta one as the roughness goes to 0.
+//!
+//! At `eta = 1` the interface is a thin wall (glTF transmission without a
+//! volume): nothing is reflected, and the transmitted lobe is the
+//! microfacet reflection lobe mirrored through the surface's plane (glTF
+//! `KHR_materials_transmission`, "thin-walled"), so light passes unbent on
+//! average and blurred by the roughness.
 
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::microfacet;
@@ -36,11 +42,24 @@ fn half_vector(n: Vec3, wo: Vec3, wi: Vec3, eta: f32) -> Option<(Vec3, bool)> {
         return None;
     }
     let reflected = cos_i > 0.0;
-    let h = if reflected { wo + wi } else { wo + eta * wi };
+    let h = if reflected {
+        wo + wi
+    } else if eta == 1.0 {
+        // A thin wall: the mirror image of `wi` through the surface's plane.
+        wo + wi - 2.0 * cos_i * n
+    } else {
+        wo + eta * wi
+    };
     let h = h.try_normalize()?;
     let h = if n.dot(h) < 0.0 { -h } else { h };
-    // Both directions on the sides of the microfacet their normal cosines say.
-    if h.dot(wo) <= 0.0 || h.dot(wi) * cos_i <= 0.0 {
+    // Both directions on the sides of the microfacet their normal cosines
+    // say (for a thin wall, the mirror image of `wi`).
+    let i_h = if eta == 1.0 && !reflected {
+        h.dot(wi - 2.0 * cos_i * n)
+    } else {
+        h.dot(wi) * cos_i.signum()
+    };
+    if h.dot(wo) <= 0.0 || i_h <= 0.0 {
         return None;
     }
     Some((h, reflected))
@@ -71,6 +90,10 @@ pub fn rough_dielectric_eval(
     let f = fresnel_dielectric(o_h, 1.0, eta);
     if reflected {
         return Vec3::splat(f * d * g / (4.0 * cos_o));
+    }
+    if eta == 1.0 {
+        // A thin wall (F = 0): the reflection lobe, mirrored.
+        return kt * (d * g / (4.0 * cos_o));
     }
     let denom = i_h + o_h / eta;
     let value = (1.0 - f) * d * g * (i_h * o_h).abs() / (cos_o * denom * denom);
@@ -104,6 +127,9 @@ pub fn rough_dielectric_pdf(
     if reflected {
         return f * pdf_h / (4.0 * o_h);
     }
+    if eta == 1.0 {
+        return pdf_h / (4.0 * o_h);
+    }
     let denom = i_h + o_h / eta;
     let pdf = (1.0 - f) * pdf_h * i_h.abs() / (denom * denom);
     if pdf.is_finite() { pdf } else { 0.0 }
@@ -135,6 +161,10 @@ pub fn sample_rough_dielectric(
     let reflects = f >= 1.0 || (f > 0.0 && u_fresnel() < f);
     let wi = if reflects {
         reflect(wo, h)
+    } else if eta == 1.0 {
+        // A thin wall: the reflected direction mirrored through the plane.
+        let r = reflect(wo, h);
+        r - 2.0 * n.dot(r) * n
     } else {
         refract(wo, h, 1.0 / eta)?
     };

@@ -11,8 +11,9 @@
 //! - With a volume of `thicknessFactor > 0` the surface bounds a medium of
 //!   index `ior` (`KHR_materials_ior`, default 1.5) absorbing by Beer's law,
 //!   `absorption = -ln(attenuationColor) / attenuationDistance` per unit
-//!   length; without one it is thin-walled: light passes unbent (ior 1),
-//!   reflected by the specular lobe.
+//!   length; without one it is thin-walled: light passes unbent (ior 1;
+//!   blurred by a rough surface, `shading::dielectric`), reflected by the
+//!   specular lobe.
 //! - Clear coat: `clearcoatFactor` x R of `clearcoatTexture`, roughness
 //!   `clearcoatRoughnessFactor` x G of `clearcoatRoughnessTexture`.
 //!
@@ -130,12 +131,6 @@ impl Builder<'_> {
         } else {
             // Thin-walled: no bending, no medium.
             mat.ior = 1.0;
-            if mat.roughness >= chiaro_core::shading::dielectric::MIN_ROUGH_ALPHA {
-                self.note(
-                    "KHR_materials_transmission without KHR_materials_volume is thin-walled: \
-                     its rough transmission is drawn unblurred",
-                );
-            }
         }
         mat.fresnel = true;
         mat.gltf_transmission = Some(Transmission { factor, texture });
