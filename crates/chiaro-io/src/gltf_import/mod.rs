@@ -39,6 +39,10 @@
 //! the min/mag/mip filters; `KHR_texture_transform` is applied to the base
 //! colour, metallic-roughness and emissive textures; the mesh carries the
 //! one `TEXCOORD_n` set its material's textures use.
+//! `KHR_materials_transmission`, `_volume`, `_ior` and `_clearcoat` become
+//! chiaro's glass (Fresnel dielectric, rough when the base is, Beer
+//! absorption inside a volume, thin-walled without one) and clear coat
+//! (`layers.rs`).
 //!
 //! # Lights
 //!
