@@ -301,11 +301,12 @@ impl Bsdf {
             Some(pick) => pick,
             None => u_lobe * total,
         };
-        // The relative index across the surface from the side of `wo`.
-        let eta = if front {
-            valid_ior(m.ior)
-        } else {
-            1.0 / valid_ior(m.ior)
+        // The relative index across the surface from the side of `wo` (read
+        // by the rough dielectric only).
+        let eta = match (lobes.rough, front) {
+            (false, _) => 1.0,
+            (true, true) => valid_ior(m.ior),
+            (true, false) => 1.0 / valid_ior(m.ior),
         };
         if pick < wd + ws {
             // A non-delta lobe: sample one, weight by the mixture pdf.
