@@ -7,10 +7,12 @@ use crate::geometry::normals::{tangents, vertex_normals};
 use crate::geometry::tessellation::{FIXED_SEGMENTS, Tessellation};
 use crate::geometry::{Aabb, Ray, face_normal, primitives};
 use crate::scene::TextureId;
+use crate::scene::Transmission;
 use crate::scene::{
     AlphaMode, AreaShape, Geometry, Light, Material, MaterialId, MetallicRoughness, Scene, Texture,
 };
 use crate::shading::SurfaceMaterial;
+use crate::shading::brdf::clearcoat_alpha;
 use crate::shading::texture::{
     MipMap, PrefilteredEnvironment, TexCoord, bump_normal, eval_height, eval_texture,
     normal_map_normal, uv_surface_gradient,
@@ -538,7 +540,9 @@ impl<'s> PreparedScene<'s> {
         self.scene.environment.as_ref()?;
         // Built outside the lock, as the mip-maps are.
         if self.prefiltered.get().is_none() {
-            let _ = self.prefiltered.set(PrefilteredEnvironment::new(self.scene));
+            let _ = self
+                .prefiltered
+                .set(PrefilteredEnvironment::new(self.scene));
         }
         self.prefiltered.get()?.as_ref()
     }
@@ -615,6 +619,17 @@ impl<'s> PreparedScene<'s> {
                     mr.metallic * metallic,
                     mr.roughness * rough,
                 );
+                // Transmission: part of the diffuse colour becomes glass.
+                if let Some(tr) = m.gltf_transmission {
+                    let t = tr.texture.map_or(1.0, |t| self.eval_texture(t, &tc).x);
+                    (sm.kd, sm.ks, sm.kt) = Transmission::split(
+                        sm.kd,
+                        sm.ks,
+                        mr.metallic * metallic,
+                        tr.factor * t,
+                        m.ior,
+                    );
+                }
                 // Uniform light reflects off the specular lobe too (about
                 // F0 of it): metals are not black under ambient light.
                 sm.ks_ambient = sm.ks;
@@ -624,6 +639,14 @@ impl<'s> PreparedScene<'s> {
                 if let Some(t) = texture {
                     sm.kd *= t;
                 }
+            }
+        }
+        if let Some(c) = m.clearcoat {
+            if let Some(t) = c.texture {
+                sm.clearcoat *= self.eval_texture(t, &tc).x.clamp(0.0, 1.0);
+            }
+            if let Some(t) = c.roughness_texture {
+                sm.clearcoat_alpha = clearcoat_alpha(c.roughness * self.eval_texture(t, &tc).y);
             }
         }
         if let Some(o) = m.occlusion {

@@ -38,7 +38,13 @@ pub enum Feature {
     /// Alpha-masked shadow casters under `shadows` = volume, object or
     /// scanline (polygon shadows that do not cut texels).
     AlphaMaskShadows,
+    /// Rough glass: a Fresnel dielectric whose Torrance-Sparrow roughness
+    /// blurs what it reflects and transmits (`shading::dielectric`).
+    RoughTransmission,
 }
+
+/// What the Whitted-style tracers show of rough glass.
+pub const ROUGH_AS_SMOOTH: &str = "the blur of rough glass: it reflects and refracts along the smooth (mirror and Snell) directions";
 
 /// One technique described by the renderer that draws it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -14,7 +14,7 @@ use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::Film;
 use chiaro_core::scene::{RenderSettings, Scene, Technique};
-use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature};
+use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature, ROUGH_AS_SMOOTH};
 use chiaro_ray::whitted::Tracer;
 use std::f32::consts::PI;
 
@@ -68,5 +68,6 @@ pub const DESCRIPTION: Description = Description {
             "ambient lights: interreflection is computed instead",
         ),
         (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
+        (Feature::RoughTransmission, ROUGH_AS_SMOOTH),
     ],
 };

@@ -248,6 +248,12 @@ fn present(
             m.is_transparent() && m.ior != 1.0
         })),
         Feature::Transparency => named(objects.with(transparent)),
+        Feature::RoughTransmission => named(objects.with(|m| {
+            m.fresnel
+                && m.is_transparent()
+                && m.model == chiaro_core::scene::ReflectanceModel::TorranceSparrow
+                && m.roughness >= chiaro_core::shading::dielectric::MIN_ROUGH_ALPHA
+        })),
         Feature::Highlights => named(objects.with(|m| {
             m.specular.max_element() > 0.0
         })),

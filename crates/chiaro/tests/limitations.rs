@@ -232,3 +232,28 @@ fn a_scene_that_nothing_lights_is_said_to_render_black() {
         loaded.warnings
     );
 }
+
+#[test]
+fn rough_glass_is_drawn_smooth_by_whitted_and_blurred_by_path() {
+    let rough = DARK.replace(
+        "diffuse = [0.5, 0.5, 0.5]",
+        "diffuse = [0, 0, 0]\ntransmit = [1, 1, 1]\nfresnel = true\nmodel = \"torrance-sparrow\"\nroughness = 0.3",
+    );
+    let s = chiaro::io::load_scene_str(&rough, Path::new("."), "rough.toml")
+        .expect("loads")
+        .scene;
+    for t in [Technique::Whitted, Technique::Hybrid] {
+        let names = named(&s, t, Feature::RoughTransmission).map(|v| v.len());
+        assert_eq!(names, Some(1), "{}", t.name());
+    }
+    assert_eq!(named(&s, Technique::Path, Feature::RoughTransmission), None);
+    // Smooth glass is no limitation.
+    let smooth = rough.replace("roughness = 0.3", "roughness = 0.001");
+    let s = chiaro::io::load_scene_str(&smooth, Path::new("."), "smooth.toml")
+        .expect("loads")
+        .scene;
+    assert_eq!(
+        named(&s, Technique::Whitted, Feature::RoughTransmission),
+        None
+    );
+}

@@ -106,6 +106,74 @@ impl MetallicRoughness {
     }
 }
 
+/// glTF `KHR_materials_transmission` of a metallic-roughness material: the
+/// fraction of the dielectric part (`1 - metallic`) that is a Fresnel
+/// dielectric tinted by the base colour instead of Lambertian.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Transmission {
+    /// `transmissionFactor` in `[0, 1]`.
+    pub factor: f32,
+    /// `transmissionTexture` (linear; R multiplies the factor).
+    pub texture: Option<TextureId>,
+}
+
+impl Transmission {
+    /// The coefficients `(kd, ks, kt)` of a point whose metallic-roughness
+    /// coefficients are `kd`, `ks` (F0), with metallic `metallic` and
+    /// transmission `t` (factor times texture), for a material of index of
+    /// refraction `ior`: the fraction `t` of the diffuse colour becomes the
+    /// transmission colour `kt` (glTF: the base colour tints the
+    /// transmitted light). Unless the surface is thin-walled (ior 1, which
+    /// neither bends nor reflects), the Fresnel dielectric then reflects
+    /// that fraction's share of the specular lobe, `0.04 (1 - metallic) t`,
+    /// which is taken off `ks`.
+    pub fn split(kd: Vec3, ks: Vec3, metallic: f32, t: f32, ior: f32) -> (Vec3, Vec3, Vec3) {
+        let t = if t.is_finite() {
+            t.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let metallic = if metallic.is_finite() {
+            metallic.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let ks = if ior == 1.0 {
+            ks
+        } else {
+            (ks - Vec3::splat(0.04 * (1.0 - metallic) * t)).max(Vec3::ZERO)
+        };
+        (kd * (1.0 - t), ks, kd * t)
+    }
+}
+
+/// A clear coat (glTF `KHR_materials_clearcoat`): a smooth or rough
+/// dielectric layer of index 1.5 over the material, reflecting a fraction
+/// `factor F` of the light and passing the rest to the base.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Clearcoat {
+    /// `clearcoatFactor`: the layer's coverage in `[0, 1]`.
+    pub factor: f32,
+    /// `clearcoatRoughnessFactor`: perceptual roughness (alpha is its square).
+    pub roughness: f32,
+    /// `clearcoatTexture` (linear; R multiplies the factor).
+    pub texture: Option<TextureId>,
+    /// `clearcoatRoughnessTexture` (linear; G multiplies the roughness).
+    pub roughness_texture: Option<TextureId>,
+}
+
+impl Default for Clearcoat {
+    fn default() -> Self {
+        Self {
+            factor: 1.0,
+            roughness: 0.0,
+            texture: None,
+            roughness_texture: None,
+        }
+    }
+}
+
 /// An ambient-occlusion texture (glTF `occlusionTexture`): its R channel
 /// scales the ambient term, `1 + strength (R - 1)`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -249,6 +317,11 @@ pub struct Material {
     pub alpha: f32,
     /// How alpha is used.
     pub alpha_mode: AlphaMode,
+    /// glTF transmission: splits a metallic-roughness material's diffuse
+    /// colour into diffuse and Fresnel-dielectric transmission per point.
+    pub gltf_transmission: Option<Transmission>,
+    /// A clear coat over every other lobe.
+    pub clearcoat: Option<Clearcoat>,
 }
 
 impl Default for Material {
@@ -279,6 +352,8 @@ impl Default for Material {
             occlusion: None,
             alpha: 1.0,
             alpha_mode: AlphaMode::Opaque,
+            gltf_transmission: None,
+            clearcoat: None,
         }
     }
 }
@@ -306,6 +381,10 @@ impl Material {
                 .metallic_roughness
                 .is_some_and(|m| m.texture.is_some() || m.metallic > 0.0)
             || self.occlusion.is_some()
+            || self.gltf_transmission.is_some_and(|t| t.texture.is_some())
+            || self
+                .clearcoat
+                .is_some_and(|c| c.texture.is_some() || c.roughness_texture.is_some())
     }
 
     /// True if the surface emits light.

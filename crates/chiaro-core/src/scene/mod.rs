@@ -16,8 +16,8 @@ mod validate;
 pub use camera::{Camera, NamedCamera, PixelRays};
 pub use light::{AreaShape, Attenuation, Flap, Light, SpotLight};
 pub use material::{
-    AlphaMode, Bump, Distribution, Facing, Material, MetallicRoughness, Occlusion,
-    ReflectanceModel, Sidedness, TransparencyMode,
+    AlphaMode, Bump, Clearcoat, Distribution, Facing, Material, MetallicRoughness, Occlusion,
+    ReflectanceModel, Sidedness, Transmission, TransparencyMode,
 };
 pub use mesh::{Geometry, Mesh, Object, Transform};
 pub use settings::{

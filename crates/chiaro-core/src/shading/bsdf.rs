@@ -10,17 +10,27 @@
 //! Whitted tracer uses with both branches and [`Bsdf::sample`] stochastically.
 //! Directions follow the module's conventions: `wo`, `wi` point away from
 //! the surface, `n` is the unit shading normal on the side of `wo`.
+//!
+//! A Fresnel dielectric with a Torrance-Sparrow roughness of at least
+//! [`MIN_ROUGH_ALPHA`] has a rough transmission lobe instead of the delta
+//! one ([`super::dielectric`]): non-delta, so [`Bsdf::eval`] and
+//! [`Bsdf::pdf`] see it on both sides of the surface, for the side the
+//! layer was made for ([`Bsdf::seen_from`]).
 
 use super::brdf::{SurfaceMaterial, eval_brdf_cos};
+use super::dielectric::{
+    MIN_ROUGH_ALPHA, rough_dielectric_eval, rough_dielectric_pdf, sample_microfacet_normal,
+    sample_rough_dielectric,
+};
 use super::fresnel::{fresnel_dielectric, reflect, refract};
 use super::microfacet;
 use crate::geometry::Frame;
 use crate::sampling::{
     cosine_hemisphere_pdf, phong_lobe_pdf, sample_cosine_hemisphere, sample_phong_lobe,
 };
-use crate::scene::{Distribution, ReflectanceModel};
+use crate::scene::Distribution;
+use crate::scene::ReflectanceModel;
 use glam::{Vec2, Vec3};
-use std::f32::consts::PI;
 
 /// Rec. 709 luminance of a linear RGB colour: the lobe selection weight.
 #[inline]
@@ -76,7 +86,23 @@ pub struct Lobes {
     /// `kd / p_diffuse`: the throughput weight of a diffuse sample of a
     /// material without specular lobe.
     pub lambert_weight: Vec3,
+    /// True when the transmission lobe is the rough dielectric (a Fresnel
+    /// dielectric of Torrance-Sparrow roughness at least [`MIN_ROUGH_ALPHA`];
+    /// at ior 1 a thin wall), a non-delta lobe.
+    pub rough: bool,
+    /// `wt / total` when `rough`, else 0: the rough lobe's share of the
+    /// non-delta mixture.
+    pub p_transmission: f32,
+    /// The clear coat's share of the lobe choice (its selection weight,
+    /// [`COAT_SELECTION`] times the coat's weight, over `total`); 0 without
+    /// a coat. The coat's interval of `[0, total)` is the last.
+    pub p_coat: f32,
 }
+
+/// Selection weight of a clear coat of weight 1: about its reflectance
+/// averaged over the hemisphere and grazing views, so that its sharp
+/// highlight is sampled without starving the base.
+pub const COAT_SELECTION: f32 = 0.25;
 
 impl Lobes {
     /// The lobe choice of `m` (`fresnel`: the material's Fresnel flag).
@@ -89,9 +115,14 @@ impl Lobes {
         };
         let weights = [luminance(m.kd), luminance(m.ks), r, t];
         let [wd, ws, wr, wt] = weights;
-        let total = wd + ws + wr + wt;
+        let wc = if m.clearcoat > 0.0 {
+            COAT_SELECTION * m.clearcoat
+        } else {
+            0.0
+        };
+        let total = wd + ws + wr + wt + wc;
         // (With `total > 0`, a lone non-zero weight is the positive one.)
-        let single = weights.iter().filter(|&&w| w != 0.0).count() == 1;
+        let single = wc == 0.0 && weights.iter().filter(|&&w| w != 0.0).count() == 1;
         let single = match weights.iter().position(|&w| w > 0.0) {
             Some(k) if single => Some(weights[..k].iter().sum::<f32>() + 0.5 * weights[k]),
             _ => None,
@@ -101,7 +132,18 @@ impl Lobes {
         } else {
             (0.0, 0.0)
         };
+        let rough = fresnel
+            && t > 0.0
+            && m.model == ReflectanceModel::TorranceSparrow
+            && m.roughness >= MIN_ROUGH_ALPHA;
         Self {
+            rough,
+            p_transmission: if rough && total > 0.0 {
+                wt / total
+            } else {
+                0.0
+            },
+            p_coat: if total > 0.0 { wc / total } else { 0.0 },
             weights,
             total,
             p_diffuse,
@@ -123,6 +165,11 @@ pub struct Bsdf {
     pub fresnel: bool,
     /// The lobe choice.
     pub lobes: Lobes,
+    /// The relative index of refraction across the surface seen from the
+    /// side the layer is evaluated for ([`Self::seen_from`]): `ior` from
+    /// outside (the default), `1 / ior` from inside. Read by the rough
+    /// dielectric lobe's [`Self::eval`] and [`Self::pdf`] only.
+    pub eta: f32,
 }
 
 impl Bsdf {
@@ -130,8 +177,20 @@ impl Bsdf {
     pub fn new(m: SurfaceMaterial, fresnel: bool) -> Self {
         Self {
             lobes: Lobes::new(&m, fresnel),
+            eta: valid_ior(m.ior),
             m,
             fresnel,
+        }
+    }
+
+    /// The layer as seen from outside (`front`) or from inside the surface:
+    /// [`Self::eta`] is `ior` or `1 / ior`.
+    #[inline]
+    pub fn seen_from(self, front: bool) -> Self {
+        let ior = valid_ior(self.m.ior);
+        Self {
+            eta: if front { ior } else { 1.0 / ior },
+            ..self
         }
     }
 
@@ -150,29 +209,60 @@ impl Bsdf {
         self.lobes.single.is_none()
     }
 
-    /// `f(wo, wi) cos_theta_i` of the non-delta lobes (1/sr):
-    /// [`eval_brdf_cos`]. Delta lobes contribute nothing to any given `wi`.
+    /// `f(wo, wi) |cos_theta_i|` of the non-delta lobes (1/sr):
+    /// [`eval_brdf_cos`], plus the rough dielectric's reflection and
+    /// refraction (for the side of [`Self::eta`]). Delta lobes contribute
+    /// nothing to any given `wi`.
     #[inline]
     pub fn eval(&self, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
-        eval_brdf_cos(&self.m, n, wo, wi)
+        self.eval_eta(n, wo, wi, self.eta)
+    }
+
+    /// [`Self::eval`] across a relative index `eta`.
+    #[inline]
+    fn eval_eta(&self, n: Vec3, wo: Vec3, wi: Vec3, eta: f32) -> Vec3 {
+        let f = eval_brdf_cos(&self.m, n, wo, wi);
+        if !self.lobes.rough {
+            return f;
+        }
+        let m = &self.m;
+        f + rough_dielectric_eval(m.distribution, m.roughness, eta, m.kt, n, wo, wi)
     }
 
     /// Solid-angle pdf (1/sr) with which [`Self::sample`] returns `wi`
     /// through its non-delta lobes (the probability of choosing a lobe
-    /// times its pdf); 0 below the surface. For MIS.
+    /// times its pdf); 0 below the surface unless the rough dielectric
+    /// refracts there (for the side of [`Self::eta`]). For MIS.
     #[inline]
     pub fn pdf(&self, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+        self.pdf_eta(n, wo, wi, self.eta)
+    }
+
+    /// [`Self::pdf`] across a relative index `eta`.
+    #[inline]
+    fn pdf_eta(&self, n: Vec3, wo: Vec3, wi: Vec3, eta: f32) -> f32 {
         let lobes = &self.lobes;
         if lobes.total <= 0.0 {
             return 0.0;
         }
+        let rough = || {
+            let m = &self.m;
+            lobes.p_transmission * rough_dielectric_pdf(m.distribution, m.roughness, eta, n, wo, wi)
+        };
         let cos_i = n.dot(wi);
         if cos_i <= 0.0 {
-            return 0.0;
+            return if lobes.rough { rough() } else { 0.0 };
         }
         let mut pdf = lobes.p_diffuse * cosine_hemisphere_pdf(cos_i);
         if lobes.weights[1] > 0.0 {
             pdf += lobes.p_glossy * glossy_pdf(&self.m, n, wo, wi);
+        }
+        if lobes.rough {
+            pdf += rough();
+        }
+        if lobes.p_coat > 0.0 {
+            pdf += lobes.p_coat
+                * half_vector_pdf(Distribution::Ggx, self.m.clearcoat_alpha, n, wo, wi);
         }
         pdf
     }
@@ -211,6 +301,13 @@ impl Bsdf {
             Some(pick) => pick,
             None => u_lobe * total,
         };
+        // The relative index across the surface from the side of `wo` (read
+        // by the rough dielectric only).
+        let eta = match (lobes.rough, front) {
+            (false, _) => 1.0,
+            (true, true) => valid_ior(m.ior),
+            (true, false) => 1.0 / valid_ior(m.ior),
+        };
         if pick < wd + ws {
             // A non-delta lobe: sample one, weight by the mixture pdf.
             let frame = Frame::from_normal(n);
@@ -222,7 +319,7 @@ impl Bsdf {
             if n.dot(wi) <= 0.0 || ng.dot(wi) <= 0.0 {
                 return None;
             }
-            if !lobes.specular {
+            if !lobes.specular && !lobes.rough && lobes.p_coat == 0.0 {
                 // Lambert alone: f cos / pdf = (kd cos / pi) / (p_d cos / pi).
                 let p_d = lobes.p_diffuse;
                 return Some(BsdfSample {
@@ -232,14 +329,37 @@ impl Bsdf {
                     delta: false,
                 });
             }
-            let pdf = self.pdf(n, wo, wi);
+            let pdf = self.pdf_eta(n, wo, wi, eta);
             if pdf <= 0.0 {
                 return None;
             }
-            let f_cos = eval_brdf_cos(m, n, wo, wi);
+            let f_cos = self.eval_eta(n, wo, wi, eta);
             return Some(BsdfSample {
                 wi,
                 weight: f_cos / pdf,
+                pdf,
+                delta: false,
+            });
+        }
+        if lobes.p_coat > 0.0 && pick >= wd + ws + wr + wt {
+            // The clear coat: a GGX reflection, weighted by the mixture.
+            let frame = Frame::from_normal(n);
+            let h = frame.to_world(sample_microfacet_normal(
+                Distribution::Ggx,
+                m.clearcoat_alpha,
+                u,
+            ));
+            let wi = reflect(wo, h);
+            if n.dot(wi) <= 0.0 || ng.dot(wi) <= 0.0 {
+                return None;
+            }
+            let pdf = self.pdf_eta(n, wo, wi, eta);
+            if pdf <= 0.0 {
+                return None;
+            }
+            return Some(BsdfSample {
+                wi,
+                weight: self.eval_eta(n, wo, wi, eta) / pdf,
                 pdf,
                 delta: false,
             });
@@ -253,6 +373,24 @@ impl Bsdf {
                 weight: m.kr / p_r,
                 pdf: 0.0,
                 delta: true,
+            });
+        }
+        if lobes.rough {
+            // The rough dielectric: its direction, weighted by the mixture.
+            let wi =
+                sample_rough_dielectric(m.distribution, m.roughness, eta, n, wo, u, u_fresnel)?;
+            if n.dot(wi) * ng.dot(wi) <= 0.0 {
+                return None;
+            }
+            let pdf = self.pdf_eta(n, wo, wi, eta);
+            if pdf <= 0.0 {
+                return None;
+            }
+            return Some(BsdfSample {
+                wi,
+                weight: self.eval_eta(n, wo, wi, eta) / pdf,
+                pdf,
+                delta: false,
             });
         }
         // Transmission: one branch of the split Whitted traces both of.
@@ -394,17 +532,18 @@ fn glossy_pdf(m: &SurfaceMaterial, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
     }
 }
 
-/// Samples a microfacet normal about +z with density `D(h) cos_theta_h`
-/// (Walter et al. 2007, eqs. 28, 35).
-fn sample_microfacet_normal(dist: Distribution, alpha: f32, u: Vec2) -> Vec3 {
-    let tan2 = match dist {
-        Distribution::Ggx => alpha * alpha * u.x / (1.0 - u.x).max(1e-7),
-        Distribution::Beckmann => -alpha * alpha * (1.0 - u.x).max(1e-7).ln(),
+/// Solid-angle pdf (1/sr) of reflecting `wo` about a microfacet normal drawn
+/// from `D(h) cos_theta_h`: `D(h) cos_theta_h / (4 wo.h)` (Walter et al.
+/// 2007, eq. 14); 0 below the surface.
+fn half_vector_pdf(dist: Distribution, alpha: f32, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+    let Some(h) = (wo + wi).try_normalize() else {
+        return 0.0;
     };
-    let cos_t = 1.0 / (1.0 + tan2).sqrt();
-    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-    let phi = 2.0 * PI * u.y;
-    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+    let (cos_h, o_h) = (n.dot(h), wo.dot(h));
+    if cos_h <= 0.0 || o_h <= 0.0 || n.dot(wi) <= 0.0 {
+        return 0.0;
+    }
+    microfacet::d(dist, cos_h, alpha) * cos_h / (4.0 * o_h)
 }
 
 #[cfg(test)]
@@ -414,6 +553,7 @@ mod tests {
     //! `pdf`, and a white-furnace test of each lobe's albedo.
     use super::*;
     use crate::sampling::{pixel_rng, uniform, uniform2};
+    use std::f32::consts::PI;
 
     /// Bins in `cos_theta` over `[-1, 1]` (even: a boundary at the horizon)
     /// and in `phi`.
@@ -482,7 +622,27 @@ mod tests {
             "lambert+beckmann".into(),
             microfacet(0.3, 0.5, Distribution::Beckmann, 0.5),
         ));
+        // Clear coats over Lambert and over a glossy base.
+        for (c, a) in [(1.0, 0.1), (0.6, 0.4)] {
+            v.push((
+                format!("lambert+coat {c} alpha={a}"),
+                coated(material(0.7, 0.0, ReflectanceModel::Phong), c, a),
+            ));
+        }
+        v.push((
+            "lambert+ggx+coat".into(),
+            coated(microfacet(0.3, 0.5, Distribution::Ggx, 0.4), 0.8, 0.1),
+        ));
         v
+    }
+
+    /// `m` under a clear coat of weight `c` and GGX alpha `alpha`.
+    fn coated(m: SurfaceMaterial, c: f32, alpha: f32) -> SurfaceMaterial {
+        SurfaceMaterial {
+            clearcoat: c,
+            clearcoat_alpha: alpha,
+            ..m
+        }
     }
 
     /// A unit direction at `theta` degrees from +z.
@@ -876,6 +1036,210 @@ mod tests {
             assert!((t + wo).length() < 1e-6, "ior {ior}: {t}");
             assert_eq!(split.reflect_weight, Vec3::ZERO);
             assert_eq!(split.refract_weight, Vec3::ONE);
+        }
+    }
+
+    /// A rough glass (Fresnel dielectric, Torrance-Sparrow roughness
+    /// `alpha`), with a Lambertian share `kd`.
+    fn rough_glass(kd: f32, kt: f32, alpha: f32, dist: Distribution) -> SurfaceMaterial {
+        SurfaceMaterial {
+            kt: Vec3::splat(kt),
+            ior: 1.5,
+            roughness: alpha,
+            distribution: dist,
+            ..material(kd, 0.0, ReflectanceModel::TorranceSparrow)
+        }
+    }
+
+    /// The rough glasses of the tests, with the side they are seen from.
+    fn rough_glasses() -> Vec<(String, SurfaceMaterial, bool)> {
+        let mut v = Vec::new();
+        for front in [true, false] {
+            for a in [0.1, 0.2, 0.6] {
+                v.push((
+                    format!("ggx glass alpha={a} front={front}"),
+                    rough_glass(0.0, 1.0, a, Distribution::Ggx),
+                    front,
+                ));
+            }
+            v.push((
+                format!("beckmann glass alpha=0.3 front={front}"),
+                rough_glass(0.0, 0.8, 0.3, Distribution::Beckmann),
+                front,
+            ));
+            v.push((
+                format!("lambert+ggx glass front={front}"),
+                rough_glass(0.3, 0.7, 0.25, Distribution::Ggx),
+                front,
+            ));
+        }
+        // A thin wall: the same from either side.
+        v.push((
+            "ggx thin wall alpha=0.3".into(),
+            SurfaceMaterial {
+                ior: 1.0,
+                ..rough_glass(0.0, 1.0, 0.3, Distribution::Ggx)
+            },
+            true,
+        ));
+        v
+    }
+
+    /// One sample of `bsdf` for `wo` about `n = ng = +z`, from `front`.
+    fn sample_side(
+        bsdf: &Bsdf,
+        wo: Vec3,
+        front: bool,
+        rng: &mut crate::sampling::Rng,
+    ) -> Option<BsdfSample> {
+        let u_lobe = uniform(rng);
+        let u = uniform2(rng);
+        bsdf.sample(Vec3::Z, Vec3::Z, wo, front, u_lobe, u, || uniform(rng))
+    }
+
+    #[test]
+    fn rough_dielectric_is_chosen_only_when_rough() {
+        // Smooth glass, Phong glass (the shipped scenes' kind) and
+        // non-Fresnel transmission keep the delta lobe.
+        let rough = rough_glass(0.0, 1.0, 0.3, Distribution::Ggx);
+        assert!(Bsdf::new(rough, true).lobes.rough);
+        assert!(!Bsdf::new(rough, false).lobes.rough);
+        let smooth = SurfaceMaterial {
+            roughness: 0.5 * MIN_ROUGH_ALPHA,
+            ..rough
+        };
+        assert!(!Bsdf::new(smooth, true).lobes.rough);
+        let phong_glass = SurfaceMaterial {
+            model: ReflectanceModel::Phong,
+            ..rough
+        };
+        assert!(!Bsdf::new(phong_glass, true).lobes.rough);
+        // A thin wall (ior 1) is rough too.
+        let thin = SurfaceMaterial { ior: 1.0, ..rough };
+        assert!(Bsdf::new(thin, true).lobes.rough);
+    }
+
+    #[test]
+    fn rough_dielectric_samples_its_pdf_chi_square() {
+        let glasses = rough_glasses();
+        let tests = glasses.len() * WO_THETAS.len();
+        let threshold = 1.0 - (1.0 - ALPHA).powf(1.0 / tests as f64);
+        let mut failures = Vec::new();
+        for (k, (name, m, front)) in glasses.iter().enumerate() {
+            let bsdf = Bsdf::new(*m, true).seen_from(*front);
+            for (j, theta) in WO_THETAS.iter().enumerate() {
+                let wo = dir(*theta, 0.3);
+                let mut rng = pixel_rng(13, k as u32, j as u32, 0);
+                let p = chi2_p_value(
+                    CHI2_SAMPLES,
+                    || sample_side(&bsdf, wo, *front, &mut rng).map(|s| s.wi),
+                    |wi| bsdf.pdf(Vec3::Z, wo, wi),
+                );
+                match p {
+                    Ok(p) if p >= threshold => {}
+                    other => failures.push(format!("{name}, theta_o {theta}: {other:?}")),
+                }
+            }
+        }
+        assert!(failures.is_empty(), "below {threshold:.2e}: {failures:#?}");
+    }
+
+    /// `integral eval dwi` over the sphere by the midpoint rule in
+    /// `(theta, phi)` (in which a lobe at a pole is resolved), `2k x k` cells.
+    fn sphere_albedo(bsdf: &Bsdf, wo: Vec3, k: u32) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        let (dt, dp) = (PI / (2 * k) as f32, 2.0 * PI / k as f32);
+        for i in 0..2 * k {
+            let theta = (i as f32 + 0.5) * dt;
+            let (s, c) = theta.sin_cos();
+            for j in 0..k {
+                let phi = (j as f32 + 0.5) * dp;
+                let wi = Vec3::new(s * phi.cos(), s * phi.sin(), c);
+                sum += bsdf.eval(Vec3::Z, wo, wi) * s;
+            }
+        }
+        sum * (dt * dp)
+    }
+
+    #[test]
+    fn rough_dielectric_white_furnace_and_eval_pdf_agree() {
+        // E[weight] (= E[f cos / pdf]) equals the integral of eval, and
+        // neither exceeds 1: the lobe loses energy to masking, never gains.
+        for (k, (name, m, front)) in rough_glasses().iter().enumerate() {
+            let bsdf = Bsdf::new(*m, true).seen_from(*front);
+            for theta in [0.0, 30.0, 60.0, 80.0] {
+                let wo = dir(theta, 0.9);
+                let mut rng = pixel_rng(29, k as u32, theta as u32, 0);
+                let n = 100_000;
+                let (mut s, mut s2) = (Vec3::ZERO, Vec3::ZERO);
+                for _ in 0..n {
+                    let w = sample_side(&bsdf, wo, *front, &mut rng).map_or(Vec3::ZERO, |s| {
+                        assert!(!s.delta && s.pdf > 0.0, "{name}: {s:?}");
+                        s.weight
+                    });
+                    s += w;
+                    s2 += w * w;
+                }
+                let mean = s / n as f32;
+                let se = ((s2 / n as f32 - mean * mean).max(Vec3::ZERO) / n as f32).powf(0.5);
+                let albedo = sphere_albedo(&bsdf, wo, 700);
+                // (The quadrature of a narrow lobe is coarse: 1 % slack.)
+                let err = (mean - albedo).abs().max_element();
+                assert!(
+                    err <= 4.0 * se.max_element() + 1e-2 * albedo.max_element() + 2e-3,
+                    "{name}, theta_o {theta}: E[weight] {mean} against integral {albedo} (se {se})"
+                );
+                // (Lobes add: Lambert over glass that reflects all of a
+                // grazing `wo` inside, by total internal reflection, exceeds 1.)
+                if m.kd == Vec3::ZERO {
+                    assert!(mean.max_element() <= 1.0 + 1e-2, "{name} {theta}: {mean}");
+                }
+                // Clear glass seen head-on from outside keeps nearly all.
+                if *front && m.kt == Vec3::ONE && theta == 0.0 && m.roughness <= 0.2 {
+                    assert!(mean.x > 0.9, "{name}: {mean}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn rough_dielectric_is_reciprocal() {
+        // Reflection: f(wo, wi) = f(wi, wo). Refraction from outside (index
+        // 1) into glass (eta): f(wo, wi) = eta^2 f(wi, wo) seen from inside,
+        // the radiance BTDF's eta_i^2 f(wo, wi) = eta_o^2 f(wi, wo) without
+        // its 1 / eta^2 (see the dielectric module).
+        let m = rough_glass(0.0, 1.0, 0.3, Distribution::Ggx);
+        let outside = Bsdf::new(m, true).seen_from(true);
+        let inside = Bsdf::new(m, true).seen_from(false);
+        let mut rng = pixel_rng(31, 0, 0, 0);
+        let mut checked = 0;
+        for _ in 0..2000 {
+            let a = dir(85.0 * uniform(&mut rng), 6.3 * uniform(&mut rng));
+            let b = dir(85.0 * uniform(&mut rng), 6.3 * uniform(&mut rng));
+            // f = eval / |cos_i|.
+            let f =
+                |bsdf: &Bsdf, n: Vec3, wo: Vec3, wi: Vec3| bsdf.eval(n, wo, wi).x / n.dot(wi).abs();
+            let (r1, r2) = (f(&outside, Vec3::Z, a, b), f(&outside, Vec3::Z, b, a));
+            assert!((r1 - r2).abs() <= 1e-4 * r1.max(r2) + 1e-6, "{r1} vs {r2}");
+            let below = Vec3::new(b.x, b.y, -b.z);
+            let t1 = f(&outside, Vec3::Z, a, below);
+            let t2 = f(&inside, -Vec3::Z, below, a);
+            assert!(
+                (t1 - 2.25 * t2).abs() <= 1e-3 * t1.max(2.25 * t2) + 1e-6,
+                "{a} {below}: {t1} vs 2.25 x {t2}"
+            );
+            checked += u32::from(t1 > 0.0);
+        }
+        assert!(checked > 500, "{checked} refracting pairs");
+        // A thin wall is symmetric through it.
+        let thin = Bsdf::new(SurfaceMaterial { ior: 1.0, ..m }, true);
+        for _ in 0..500 {
+            let a = dir(85.0 * uniform(&mut rng), 6.3 * uniform(&mut rng));
+            let b = dir(85.0 * uniform(&mut rng), 6.3 * uniform(&mut rng));
+            let below = Vec3::new(b.x, b.y, -b.z);
+            let t1 = thin.eval(Vec3::Z, a, below).x / b.z;
+            let t2 = thin.eval(-Vec3::Z, below, a).x / a.z;
+            assert!((t1 - t2).abs() <= 1e-4 * t1.max(t2) + 1e-6, "{t1} vs {t2}");
         }
     }
 }

@@ -21,6 +21,7 @@
 
 pub mod brdf;
 pub mod bsdf;
+pub mod dielectric;
 pub mod fresnel;
 pub mod light_set;
 pub mod lights;
@@ -302,6 +303,13 @@ impl<const SPLIT: bool> Terms for Coloured<SPLIT> {
         if has_specular {
             f += spec;
         }
+        // The clear coat over both (`eval_brdf_cos`).
+        let (f, spec) = if m.clearcoat > 0.0 {
+            let (a, coat) = brdf::clearcoat_parts(m, sp.n, sp.wo, s.wi, cos_i);
+            (f * a + Vec3::splat(coat), spec * a + Vec3::splat(coat))
+        } else {
+            (f, spec)
+        };
         self.0[0] += PI * f * s.intensity * v;
         if SPLIT {
             // eval_brdf_cos with kd = 0 is `spec` (zero without specular).
@@ -361,8 +369,16 @@ impl Terms for FactoredLight {
         v: Vec3,
     ) {
         let light = s.intensity * v;
-        self.diffuse += PI * (std::f32::consts::FRAC_1_PI * cos_i) * light;
-        let spec = brdf::specular_cos_factored(m, sp.n, sp.wo, s.wi, cos_i);
+        let mut spec = brdf::specular_cos_factored(m, sp.n, sp.wo, s.wi, cos_i);
+        let mut diffuse = std::f32::consts::FRAC_1_PI * cos_i;
+        if m.clearcoat > 0.0 {
+            // The clear coat attenuates both parts and adds its colourless lobe.
+            let (a, coat) = brdf::clearcoat_parts(m, sp.n, sp.wo, s.wi, cos_i);
+            diffuse *= a;
+            spec.scale *= a;
+            spec.offset = spec.offset * a + coat;
+        }
+        self.diffuse += PI * diffuse * light;
         self.specular += PI * spec.scale * light;
         self.specular_offset += PI * spec.offset * light;
     }

@@ -106,6 +106,8 @@ impl Builder<'_> {
             mat.ior = 1.0;
             mat.transparency = TransparencyMode::Interpolated;
         }
+        // KHR_materials_transmission, _volume, _ior and _clearcoat.
+        self.material_layers(index, &mut mat);
         if gm.unlit() {
             // KHR_materials_unlit: the base colour is emitted, nothing reflected.
             mat.emission = base_rgb;

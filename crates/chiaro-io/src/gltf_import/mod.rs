@@ -43,6 +43,10 @@
 //! the min/mag/mip filters; `KHR_texture_transform` (and its `texCoord`
 //! override) is applied to every texture slot, normal and occlusion
 //! included.
+//! `KHR_materials_transmission`, `_volume`, `_ior` and `_clearcoat` become
+//! chiaro's glass (Fresnel dielectric, rough when the base is, Beer
+//! absorption inside a volume, thin-walled without one) and clear coat
+//! (`layers.rs`).
 //!
 //! # Lights
 //!
@@ -59,6 +63,7 @@ mod draco;
 mod extensions;
 #[cfg(test)]
 mod geometry_tests;
+mod layers;
 mod materials;
 mod nodes;
 mod primitives;
@@ -80,8 +85,12 @@ use std::path::Path;
 const SUPPORTED: &[&str] = &[
     "KHR_draco_mesh_compression",
     "KHR_lights_punctual",
+    "KHR_materials_clearcoat",
     "KHR_materials_emissive_strength",
+    "KHR_materials_ior",
+    "KHR_materials_transmission",
     "KHR_materials_unlit",
+    "KHR_materials_volume",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
 ];
@@ -284,6 +293,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         }
     }
     let warnings = unsupported_features(&json, path);
+    let material_extensions = layers::material_extensions(Some(&json));
 
     let buffers = load_buffers(doc, base, gltf.blob.clone(), path, budget)?;
     let node_world = rest_world_matrices(doc);
@@ -302,6 +312,7 @@ fn read(bytes: &[u8], base: Option<&Path>, path: &Path, budget: MemoryBudget) ->
         uv_slots: textures::UvSlots::default(),
         budget,
         decoded_bytes: std::cell::Cell::new(0),
+        material_extensions,
     };
     b.out.warnings = warnings;
     // The default scene, else the first, else every root node.
@@ -460,6 +471,9 @@ struct Builder<'a> {
     budget: MemoryBudget,
     /// Bytes the accessors checked so far decode to.
     decoded_bytes: std::cell::Cell<u64>,
+    /// Each material's `extensions` object (JSON null where it has none):
+    /// the layers `layers.rs` reads.
+    material_extensions: Vec<serde_json::Value>,
 }
 
 impl Builder<'_> {

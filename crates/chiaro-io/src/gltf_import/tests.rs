@@ -42,7 +42,7 @@ const SCENE: &str = r#"{
 fn unsupported_features_are_one_warning_each_with_a_json_pointer() {
     let json: serde_json::Value = serde_json::from_str(
         r#"{
-              "extensionsUsed": ["KHR_materials_clearcoat", "KHR_texture_transform", "EXT_foo"],
+              "extensionsUsed": ["KHR_materials_anisotropy", "KHR_texture_transform", "EXT_foo"],
               "scene": 1,
               "scenes": [{"nodes": []}, {"nodes": [0]}],
               "nodes": [{"mesh": 0, "skin": 0, "weights": [0.5]}],
@@ -51,8 +51,8 @@ fn unsupported_features_are_one_warning_each_with_a_json_pointer() {
               "cameras": [{"type": "orthographic"}],
               "materials": [
                 {"name": "a"},
-                {"extensions": {"KHR_materials_clearcoat": {}}},
-                {"extensions": {"KHR_materials_clearcoat": {}, "KHR_materials_sheen": {}},
+                {"extensions": {"KHR_materials_anisotropy": {}}},
+                {"extensions": {"KHR_materials_anisotropy": {}, "KHR_materials_sheen": {}},
                  "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
                    "metallicRoughnessTexture": {"index": 0, "texCoord": 1}}}
               ],
@@ -65,8 +65,8 @@ fn unsupported_features_are_one_warning_each_with_a_json_pointer() {
     let w = unsupported_features(&json, Path::new("m.gltf"));
     let has = |s: &str| w.iter().filter(|x| x.contains(s)).count();
     for expected in [
-        "m.gltf: extension KHR_materials_clearcoat is not supported and is ignored: \
-             at /materials/1/extensions/KHR_materials_clearcoat (and 2 more)",
+        "m.gltf: extension KHR_materials_anisotropy is not supported and is ignored: \
+             at /materials/1/extensions/KHR_materials_anisotropy (and 2 more)",
         "m.gltf: extension KHR_materials_sheen is not supported and is ignored: \
              at /materials/2/extensions/KHR_materials_sheen",
         "m.gltf: extension EXT_foo is not supported and is ignored: at /extensionsUsed/2",
@@ -93,22 +93,22 @@ fn an_unsupported_material_extension_is_warned_about_with_its_path() {
     let file = SCENE
         .replace(
             r#""extensionsUsed": ["KHR_lights_punctual"],"#,
-            r#""extensionsUsed": ["KHR_lights_punctual", "KHR_materials_clearcoat"],"#,
+            r#""extensionsUsed": ["KHR_lights_punctual", "KHR_materials_anisotropy"],"#,
         )
         .replace(
             r#""doubleSided": true}"#,
-            r#""doubleSided": true, "extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 1}}}"#,
+            r#""doubleSided": true, "extensions": {"KHR_materials_anisotropy": {"clearcoatFactor": 1}}}"#,
         );
     let imp = load_gltf_slice(file.as_bytes(), None, Path::new("s.gltf")).expect("loads");
     let w: Vec<_> = imp
         .warnings
         .iter()
-        .filter(|w| w.contains("KHR_materials_clearcoat"))
+        .filter(|w| w.contains("KHR_materials_anisotropy"))
         .collect();
     assert_eq!(w.len(), 1, "{:#?}", imp.warnings);
     assert!(
         w[0].starts_with("s.gltf: ")
-            && w[0].contains("at /materials/0/extensions/KHR_materials_clearcoat"),
+            && w[0].contains("at /materials/0/extensions/KHR_materials_anisotropy"),
         "{}",
         w[0]
     );

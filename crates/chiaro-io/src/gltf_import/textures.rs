@@ -49,7 +49,7 @@ impl Builder<'_> {
     /// The uv slot (0: the mesh's `uvs`, 1: its `uvs1`) of texCoord `set`
     /// under the current material's [`UvSlots`]; a set beyond its two is
     /// warned about once and reads the first.
-    fn uv_slot(&mut self, set: u32) -> u8 {
+    pub(super) fn uv_slot(&mut self, set: u32) -> u8 {
         match self.uv_slots.slot(set) {
             Some(s) => s,
             None => {

@@ -74,6 +74,7 @@ struct TriInfo {
 
 /// A material's parameters and the constants derived from them: per
 /// material for the untextured case, per hit point otherwise.
+#[derive(Clone, Copy)]
 pub(super) struct MaterialInfo {
     /// The parameters and their lobe choice.
     pub(super) bsdf: Bsdf,
@@ -96,6 +97,9 @@ pub(super) struct MaterialInfo {
     pub(super) dark: bool,
     /// A glTF BLEND material: its transmission is a straight pass-through.
     pub(super) blend: bool,
+    /// Beer's absorption coefficient inside a transmissive material (per
+    /// scene unit; zero for the rest).
+    pub(super) absorption: Vec3,
 }
 
 impl MaterialInfo {
@@ -112,13 +116,22 @@ impl MaterialInfo {
                 && lobes.p_diffuse == 1.0
                 && lobes.lambert_weight == surface.kd
                 && m.sidedness != Sidedness::OneSided,
-            dark: surface.kd == Vec3::ZERO && !lobes.specular,
+            // (The rough dielectric reflects light samples in front of it.)
+            dark: surface.kd == Vec3::ZERO
+                && !lobes.specular
+                && !lobes.rough
+                && lobes.p_coat == 0.0,
             emissive: surface.emission.max_element() > 0.0,
             bsdf,
             emission_two_sided: m.emission_two_sided,
             sidedness: m.sidedness,
             textured: m.is_textured() || m.bump.is_some() || m.normal_map.is_some(),
             blend: m.alpha_mode == AlphaMode::Blend,
+            absorption: if surface.kt.max_element() > 0.0 {
+                m.absorption.max(Vec3::ZERO)
+            } else {
+                Vec3::ZERO
+            },
         }
     }
 }
@@ -455,6 +468,11 @@ impl<'a, 's> PathTracer<'a, 's> {
             }
             let m = &info.bsdf.m;
             let cos_o = v.ng.dot(wo);
+            // Beer's law along a segment inside an absorbing medium (the
+            // ray met the inside of its surface), as the Whitted tracer does.
+            if cos_o < 0.0 && info.absorption.max_element() > 0.0 {
+                beta *= (-info.absorption * (t * ray.dir.length())).exp();
+            }
             // Emission seen along the path (one-sided unless two-sided).
             if info.emissive && (info.emission_two_sided || cos_o > 0.0) {
                 let w = if prev_pdf == 0.0 {
@@ -474,6 +492,18 @@ impl<'a, 's> PathTracer<'a, 's> {
             // (A multiplication by the side's sign: the same values, no branch.)
             let side = if front { 1.0 } else { -1.0 };
             let (n, ng) = (v.ns * side, v.ng * side);
+            // A rough dielectric is evaluated across the interface from the
+            // side of `wo` (ior or 1 / ior).
+            let inside;
+            let info = if !front && info.bsdf.lobes.rough {
+                inside = MaterialInfo {
+                    bsdf: info.bsdf.seen_from(false),
+                    ..*info
+                };
+                &inside
+            } else {
+                info
+            };
             let last = depth + 1 >= self.max_depth;
             // Next-event estimation.
             l += beta * self.direct(v.p, info, n, ng, wo, !last, rng, rays);
@@ -494,7 +524,13 @@ impl<'a, 's> PathTracer<'a, 's> {
                 break;
             }
             if !pass {
-                prev_pdf = if s.delta { 0.0 } else { s.pdf };
+                // (Next-event estimation samples no light behind the surface,
+                // so what a rough refraction finds is not weighted against it.)
+                prev_pdf = if s.delta || ng.dot(s.wi) < 0.0 {
+                    0.0
+                } else {
+                    s.pdf
+                };
                 prev_p = v.p;
             }
             ray = Ray::new(offset_ray_origin(v.p, v.ng, s.wi), s.wi);

@@ -49,7 +49,6 @@ impl PathTracer<'_, '_> {
             let ss = self.prepared.shading_surface(&ray, &hit, None);
             let surf = ss.hit;
             let mat = self.prepared.material(surf.material);
-            let bsdf = Bsdf::new(ss.material, mat.fresnel);
             let wo = -ray.dir.normalize();
             if depth == 0 && first.is_none() {
                 first = Some((hit.t * ray.dir.length(), ss.ns));
@@ -57,6 +56,12 @@ impl PathTracer<'_, '_> {
             // Emission found by the path, MIS-weighted against next-event
             // estimation when the light could have been sampled.
             let cos_o = surf.ng.dot(wo);
+            // The layer seen from the side of `wo` (a rough dielectric's eta).
+            let bsdf = Bsdf::new(ss.material, mat.fresnel).seen_from(cos_o >= 0.0);
+            // Beer's law inside an absorbing transmissive medium.
+            if cos_o < 0.0 && bsdf.m.kt.max_element() > 0.0 {
+                beta *= (-mat.absorption.max(Vec3::ZERO) * (hit.t * ray.dir.length())).exp();
+            }
             let le = bsdf.m.emission;
             if le.max_element() > 0.0 && (mat.emission_two_sided || cos_o > 0.0) {
                 let light_pdf = (prev_pdf > 0.0)
@@ -101,7 +106,12 @@ impl PathTracer<'_, '_> {
                 break;
             }
             if !pass {
-                prev_pdf = if s.delta { 0.0 } else { s.pdf };
+                // (Light behind the surface is not sampled by next-event estimation.)
+                prev_pdf = if s.delta || ng.dot(s.wi) < 0.0 {
+                    0.0
+                } else {
+                    s.pdf
+                };
                 prev_p = surf.p;
             }
             ray = Ray::new(offset_ray_origin(surf.p, surf.ng, s.wi), s.wi);

@@ -50,7 +50,7 @@ use chiaro_core::shading::{
     delta_split, depth_cue, group_jitter, sanitize, shade_local,
 };
 use chiaro_core::shadow::ShadowCasters;
-use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature};
+use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature, ROUGH_AS_SMOOTH};
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -172,7 +172,10 @@ pub const DESCRIPTION: Description = Description {
     title: "Whitted",
     method: "recursive ray tracing: shadow rays, mirror reflection, refraction with total internal reflection, soft shadows from area lights, adaptive anti-aliasing",
     shows: "direct light with shadow rays (soft from area lights), highlights, mirror reflection, refraction, textures and normal maps; ambient light for the rest",
-    cannot_show: &[(Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED)],
+    cannot_show: &[
+        (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
+        (Feature::RoughTransmission, ROUGH_AS_SMOOTH),
+    ],
 };
 
 /// The Whitted ray tracer over one prepared scene: the context's flattened

@@ -21,7 +21,7 @@ use crate::geometry::Frame;
 use crate::scene::{Distribution, ReflectanceModel, Scene, Texture};
 use crate::shading::brdf::SurfaceMaterial;
 use crate::shading::bsdf::Bsdf;
-use crate::shading::fresnel::reflect;
+use crate::shading::fresnel::{fresnel_dielectric, reflect};
 use crate::shading::microfacet;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -464,9 +464,10 @@ pub fn environment_diffuse(table: &PrefilteredEnvironment, kd: Vec3, n: Vec3) ->
 /// The environment reflected by the specular lobe of `m` at a point with
 /// unit normal `n` seen from the unit direction `wo`: the split sum
 /// `prefiltered(reflect(wo, n), alpha) * albedo` (see
-/// [`specular_lobe_albedo`]). Zero without a specular lobe or when `wo` is
-/// below the surface. The one glossy environment term of the scan
-/// converter and Whitted.
+/// [`specular_lobe_albedo`]), under the clear coat if any (which attenuates
+/// it by `1 - c F(cos_o)` and adds its own split sum, F0 = 0.04). Zero
+/// without a specular lobe or coat, or when `wo` is below the surface. The
+/// one glossy environment term of the scan converter and Whitted.
 pub fn environment_specular(
     table: &PrefilteredEnvironment,
     scene: &Scene,
@@ -474,7 +475,8 @@ pub fn environment_specular(
     n: Vec3,
     wo: Vec3,
 ) -> Vec3 {
-    if !m.has_specular() {
+    let coat = m.clearcoat > 0.0;
+    if !m.has_specular() && !coat {
         return Vec3::ZERO;
     }
     let cos_o = n.dot(wo);
@@ -482,8 +484,21 @@ pub fn environment_specular(
     if cos_o.is_nan() || cos_o <= 0.0 {
         return Vec3::ZERO;
     }
-    let (alpha, albedo) = specular_lobe_albedo(m, cos_o);
-    table.radiance(scene, reflect(wo, n), alpha) * albedo
+    let r = reflect(wo, n);
+    let base = if m.has_specular() {
+        let (alpha, albedo) = specular_lobe_albedo(m, cos_o);
+        table.radiance(scene, r, alpha) * albedo
+    } else {
+        Vec3::ZERO
+    };
+    if !coat {
+        return base;
+    }
+    let alpha = m.clearcoat_alpha;
+    let (scale, bias) = specular_albedo_scale_bias(Distribution::Ggx, cos_o, alpha);
+    let attenuation =
+        1.0 - m.clearcoat * fresnel_dielectric(cos_o, 1.0, crate::shading::brdf::CLEARCOAT_IOR);
+    base * attenuation + table.radiance(scene, r, alpha) * (m.clearcoat * (0.04 * scale + bias))
 }
 
 #[cfg(test)]
