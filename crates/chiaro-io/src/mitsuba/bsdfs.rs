@@ -158,7 +158,10 @@ impl Builder<'_> {
                     .value(&p, "specular_reflectance", Vec3::ONE)?
                     .constant_or(Vec3::ONE);
                 m.diffuse = Vec3::ZERO;
-                m.conductor = Some(ComplexIor { eta, k });
+                // Mitsuba's ideal mirror `none` (eta 0, k 1) reflects 1 at
+                // every angle: chiaro's plain kr.
+                m.conductor =
+                    ((eta, k) != (Vec3::ZERO, Vec3::ONE)).then_some(ComplexIor { eta, k });
                 if ty == "conductor" {
                     m.reflect = tint;
                 } else {
