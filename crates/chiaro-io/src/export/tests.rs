@@ -77,8 +77,8 @@ smooth = false
 name = "lamp"
 primitive = "quad"
 corner = [-0.5, 2, -0.5]
-edge_u = [0, 0, 1]
-edge_v = [1, 0, 0]
+edge_u = [1, 0, 0]
+edge_v = [0, 0, 1]
 material = "light"
 smooth = false
 [[object]]
