@@ -213,19 +213,30 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
             let Some(Texture::Image(img)) = scene.textures.get(env.texture.index()) else {
                 return Err(refuse(out, "environment".into(), "its map is not an image"));
             };
-            let file = Path::new(&img.source);
-            if file.is_file() {
-                let file = std::fs::canonicalize(file).unwrap_or_else(|_| file.to_path_buf());
+            if img.width > 1 || img.height > 1 {
+                let path = companion(out, "-env.exr");
+                let name = path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let bytes = mitsuba_rows(img).map_err(|m| {
+                    refuse(
+                        out,
+                        "environment".into(),
+                        format!("its map cannot be written: {m}"),
+                    )
+                })?;
+                files.companions.push((path, bytes));
                 // Mitsuba puts -z at u = 0, chiaro at u = 0.5: half a turn more.
                 let _ = writeln!(
                     x,
                     "    <emitter type=\"envmap\"><string name=\"filename\" value=\"{}\"/>{}<transform name=\"to_world\"><rotate y=\"1\" angle=\"{}\"/></transform></emitter>",
-                    esc(&file.to_string_lossy()),
+                    esc(&name),
                     float("scale", env.intensity),
                     num(env.rotate_y_degrees - 180.0)
                 );
-            } else if img.width == 1 && img.height == 1 && !img.texels.is_empty() {
-                let t = img.texels[0];
+            } else if !img.texels.is_empty() || img.texels8.is_some() {
+                let t = img.texel_at(0);
                 let _ = writeln!(
                     x,
                     "    <emitter type=\"constant\">{}</emitter>",
@@ -395,4 +406,51 @@ fn bitmap_xml(name: &str, b: &Bitmap) -> String {
             WrapMode::Clamp => "clamp",
         }
     )
+}
+
+/// The lat-long map `img` as an RGB OpenEXR for Mitsuba's `envmap`, which
+/// places row j at v = j / (H - 1) (its rows span the poles) where chiaro
+/// places it at (j + 0.5) / H: 2H + 1 rows at v = j / 2H, each chiaro's
+/// bilinear lookup in v there (rows wrapped, columns kept; both place
+/// column i at u = (i + 0.5) / W). Mitsuba's linear interpolation between
+/// these rows is then chiaro's lookup exactly, as its knots are every
+/// other row.
+fn mitsuba_rows(img: &chiaro_core::scene::ImageTexture) -> std::result::Result<Vec<u8>, String> {
+    use exr::prelude::*;
+    let (w, h) = (img.width as usize, img.height as usize);
+    if w == 0 || h == 0 || img.texel_count() < w * h {
+        return Err("the image is empty".into());
+    }
+    let rows = 2 * h + 1;
+    let mut rgb = [Vec::new(), Vec::new(), Vec::new()];
+    for j in 0..rows {
+        let y = j as f64 / (2 * h) as f64 * h as f64 - 0.5;
+        let y0 = y.floor();
+        let f = (y - y0) as f32;
+        let r0 = (y0 as i64).rem_euclid(h as i64) as usize;
+        let r1 = (y0 as i64 + 1).rem_euclid(h as i64) as usize;
+        for i in 0..w {
+            let a = img.texel_at(r0 * w + i);
+            let b = img.texel_at(r1 * w + i);
+            for c in 0..3 {
+                rgb[c].push((1.0 - f) * a[c] + f * b[c]);
+            }
+        }
+    }
+    let [r, g, b] = rgb;
+    let ch = |name: &str, v: Vec<f32>| AnyChannel::new(name, FlatSamples::F32(v));
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> =
+        vec![ch("R", r), ch("G", g), ch("B", b)].into();
+    let layer = Layer::new(
+        (w, rows),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels),
+    );
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|e| format!("cannot encode the OpenEXR image: {e}"))?;
+    Ok(bytes.into_inner())
 }
