@@ -262,8 +262,11 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
         }
         None => {}
     }
-    // Shapes.
+    // Shapes: one PLY file per mesh, smoothing and material, shared by
+    // every object that places it.
     let mut n_mesh = 0usize;
+    let mut written: std::collections::HashMap<(usize, bool, u32, usize, usize), String> =
+        std::collections::HashMap::new();
     for ((i, o), parts) in scene.objects.iter().enumerate().zip(meshes) {
         let world = o.transform.world_from_object();
         let shape_tail = |m: usize| -> String {
@@ -287,14 +290,29 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
                     shape_tail(o.material.index())
                 );
             }
-            Geometry::Mesh(_) => {
-                for (m, mesh) in parts {
-                    let path = companion(out, &format!("-mesh-{n_mesh}.ply"));
-                    n_mesh += 1;
-                    let name = path
-                        .file_name()
-                        .map(|n| n.to_string_lossy().into_owned())
-                        .unwrap_or_default();
+            Geometry::Mesh(id) => {
+                for (part, (m, mesh)) in parts.into_iter().enumerate() {
+                    let key = (
+                        id.index(),
+                        o.smooth,
+                        o.crease_angle_degrees.to_bits(),
+                        o.material.index(),
+                        part,
+                    );
+                    let name = match written.get(&key) {
+                        Some(name) => name.clone(),
+                        None => {
+                            let path = companion(out, &format!("-mesh-{n_mesh}.ply"));
+                            n_mesh += 1;
+                            let name = path
+                                .file_name()
+                                .map(|n| n.to_string_lossy().into_owned())
+                                .unwrap_or_default();
+                            files.companions.push((path, ply_bytes(&mesh)));
+                            written.insert(key, name.clone());
+                            name
+                        }
+                    };
                     let face_normals = if mesh.normals.is_empty() {
                         "<boolean name=\"face_normals\" value=\"true\"/>"
                     } else {
@@ -307,7 +325,6 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
                         matrix(world),
                         shape_tail(m)
                     );
-                    files.companions.push((path, ply_bytes(&mesh)));
                 }
             }
         }

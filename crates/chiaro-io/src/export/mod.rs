@@ -7,7 +7,7 @@
 //! meshes (PLY files beside the output for Mitsuba, inline for pbrt),
 //! analytic spheres, point, directional and hard-edged spot lights,
 //! emissive surfaces, a lat-long environment (Mitsuba), and the materials
-//! this module's [`Surface`] lists. Anything else is refused with an error
+//! this module's `Surface` lists. Anything else is refused with an error
 //! naming the scene object and the feature; the few approximations a peer
 //! comparison can live with (a diffuse base under a glossy coat, a
 //! mip-mapped texture, a soft spot edge) are written with a warning. The

@@ -156,7 +156,8 @@ fn mitsuba_export_reads_back_as_the_scene() {
     let scene = toml(SCENE);
     let out = dir.join("box.xml");
     let done = export(&scene, Format::Mitsuba, &out).expect("exports");
-    // Two flat quads and the box as PLY files, the XML last.
+    // The quad (one mesh for the floor and the lamp, a file per material)
+    // and the box as PLY files, the XML last.
     assert_eq!(done.files.len(), 4, "{:?}", done.files);
     assert_eq!(done.files.last(), Some(&out));
     assert!(done.warnings.is_empty(), "{:?}", done.warnings);
