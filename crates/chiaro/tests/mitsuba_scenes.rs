@@ -12,7 +12,8 @@ use chiaro_testkit::stats::mitsuba_z_test;
 use std::path::{Path, PathBuf};
 
 /// Each scene file, its reference's stem, and whether it passes the
-/// z-test (the infinite mirrors' edge pixels, cause not yet found, and the
+/// z-test (the infinite mirrors' directly seen environment, read without
+/// Mitsuba's row convention, and the
 /// texture scene's Gaussian filter do not).
 const SCENES: [(&str, &str, bool); 7] = [
     (
