@@ -54,7 +54,8 @@ def seeds():
         out.append((".toml", p.read_bytes()))
     corpus = ROOT / "fuzz" / "corpus"
     for target, suffix in [("obj_mtl", ".obj"), ("ply", ".ply"), ("gltf", None),
-                           ("techniques", None), ("mitsuba_xml", ".xml")]:
+                           ("techniques", None), ("mitsuba_xml", ".xml"),
+                           ("pbrt", ".pbrt")]:
         for p in sorted((corpus / target).glob("*")):
             data = p.read_bytes()
             if len(data) > 64 << 10:

@@ -24,13 +24,14 @@ const EXAMPLES: &str = "Examples:
   chiaro info scenes/cornell-box.toml
   chiaro info --system
   chiaro render scene.xml -D spp=64 -o mitsuba.exr
+  chiaro render scenes/cornell-box.pbrt --technique path -o pbrt.png
   chiaro export scenes/cornell-box.toml --to mitsuba -o cbox.xml
   chiaro compare scenes/cornell-box.toml --techniques phong,whitted --reference path:64 -o sheet.png --report report.json";
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Render a scene (.toml, .xml (Mitsuba 3), .obj, .ply, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
+    /// Render a scene (.toml, .xml (Mitsuba 3), .pbrt (pbrt-v4/v3), .obj, .ply, .gltf, .glb) to an image (.png, .exr, .hdr, .ppm).
     Render(RenderArgs),
     /// Serve a web viewer for SCENE: techniques side by side, orbit camera,
     /// difference images (loopback only unless --host is given).

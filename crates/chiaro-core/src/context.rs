@@ -7,6 +7,13 @@
 //! Settings are validated here and nowhere else ([`RenderSettings::validate`]
 //! with [`Scene::validate_with`]); a technique takes what the context holds
 //! as given.
+//!
+//! The camera is the context's ([`RenderContext::camera`]: the scene's
+//! unless [`RenderContext::with_camera`] moves it), so that an interactive
+//! front renders frame after frame of one scene, and a [`FrameCache`] keeps
+//! what does not depend on the camera (the prepared scenes, their
+//! accelerators, mip-maps and prefiltered environment, the radiosity
+//! solution) from one frame's context to the next.
 
 use crate::accel::Accelerator;
 use crate::budget::{Estimate, bytes_of};
@@ -17,11 +24,12 @@ use crate::geometry::tessellation::{FIXED_SEGMENTS, ProjectedView, Tessellation}
 use crate::prepared::{PrepareOptions, PreparedScene, sphere_in_world};
 use crate::progress::Progress;
 use crate::scene::{
-    Geometry, Issue, RenderSettings, Scene, Severity, ShadowMethod, Technique, Texture,
+    Camera, Geometry, Issue, RadiositySettings, RenderSettings, Scene, Severity, ShadowMethod,
+    Technique, Texture,
 };
 use crate::technique::Description;
 use std::any::Any;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 /// Statistics of one render.
@@ -71,6 +79,53 @@ pub type AccelBuilder<'f> = dyn Fn(&PreparedScene<'_>) -> Box<dyn Accelerator> +
 /// shared by the contexts [`RenderContext::with_settings`] derives.
 type SolutionSlot = Arc<OnceLock<Arc<dyn Any + Send + Sync>>>;
 
+/// A prepared scene's slot, shared by the contexts of one scene that
+/// prepare it alike (a [`FrameCache`], [`RenderContext::with_settings`]).
+type PreparedSlot<'a> = Arc<OnceLock<PreparedScene<'a>>>;
+
+/// An accelerator's slot, shared as its prepared scene's.
+type AccelSlot = Arc<OnceLock<Box<dyn Accelerator>>>;
+
+/// What a technique derives from a prepared scene alone (neither the
+/// camera nor the settings: the scan converter's shadow-ray BVH, which
+/// objects are closed), one value per type, kept and shared with the
+/// prepared scene ([`RenderContext::tessellated_derived`]).
+#[derive(Default)]
+pub struct Derived(Mutex<Vec<Arc<dyn Any + Send + Sync>>>);
+
+impl std::fmt::Debug for Derived {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Derived").finish_non_exhaustive()
+    }
+}
+
+impl Derived {
+    /// The value of type `T` kept, else `build()`'s, kept from now on.
+    /// `build` runs outside the lock (it may use rayon; see
+    /// [`init_outside`]); two threads may both build, one value is kept.
+    pub fn get_or_build<T: Any + Send + Sync>(&self, build: impl FnOnce() -> T) -> Arc<T> {
+        if let Some(v) = self.find::<T>() {
+            return v;
+        }
+        let built = Arc::new(build());
+        let mut all = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(v) = all.iter().find_map(|v| Arc::clone(v).downcast::<T>().ok()) {
+            return v;
+        }
+        all.push(Arc::clone(&built) as Arc<dyn Any + Send + Sync>);
+        built
+    }
+
+    fn find<T: Any + Send + Sync>(&self) -> Option<Arc<T>> {
+        let all = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        all.iter().find_map(|v| Arc::clone(v).downcast::<T>().ok())
+    }
+}
+
+/// The tessellated prepared scene's slots: the scene, its accelerator and
+/// what techniques derive from it.
+type TessellatedSlots<'a> = (PreparedSlot<'a>, AccelSlot, Arc<Derived>);
+
 /// One render's validated inputs and the state every technique shares,
 /// prepared lazily: the flattened scene with analytic spheres (ray tracers)
 /// or tessellated spheres (scan conversion, radiosity), each with its ray
@@ -78,14 +133,98 @@ type SolutionSlot = Arc<OnceLock<Arc<dyn Any + Send + Sync>>>;
 pub struct RenderContext<'a> {
     scene: &'a Scene,
     settings: RenderSettings,
+    camera: Camera,
     progress: &'a dyn Progress,
     start: Instant,
     make_accel: &'a AccelBuilder<'a>,
-    analytic: OnceLock<PreparedScene<'a>>,
-    analytic_accel: OnceLock<Box<dyn Accelerator>>,
-    tessellated: OnceLock<PreparedScene<'a>>,
-    tessellated_accel: OnceLock<Box<dyn Accelerator>>,
+    /// Whether `make_accel` is the default builder (the accelerators a
+    /// [`FrameCache`] keeps are the default's).
+    default_accel: bool,
+    analytic: PreparedSlot<'a>,
+    analytic_accel: AccelSlot,
+    tessellated: PreparedSlot<'a>,
+    tessellated_accel: AccelSlot,
+    tessellated_derived: Arc<Derived>,
     solution: SolutionSlot,
+}
+
+/// What the contexts of one scene build that does not depend on the camera,
+/// kept from one frame's context to the next ([`RenderContext::with_cache`]),
+/// each piece with what it depends on: the flattened scene with analytic
+/// spheres and its accelerator (the scene alone), the one with tessellated
+/// spheres and its accelerator (the spheres' segment counts, which follow
+/// the view for the scan converter), and the radiosity solution (the
+/// radiosity settings). The prepared scenes carry their texture mip-maps and
+/// prefiltered environment. A context of another scene (not the same
+/// object) starts the cache afresh; the scene cannot change while the cache
+/// borrows it.
+#[derive(Default)]
+pub struct FrameCache<'a> {
+    scene: Option<&'a Scene>,
+    analytic: Option<((), (PreparedSlot<'a>, AccelSlot))>,
+    tessellated: Option<(Vec<u32>, TessellatedSlots<'a>)>,
+    solution: Option<(RadiositySettings, SolutionSlot)>,
+    misses: u64,
+}
+
+impl std::fmt::Debug for FrameCache<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FrameCache")
+            .field("analytic", &self.analytic.is_some())
+            .field("tessellated", &self.tessellated.as_ref().map(|(k, _)| k))
+            .field("solution", &self.solution.is_some())
+            .field("misses", &self.misses)
+            .finish()
+    }
+}
+
+impl<'a> FrameCache<'a> {
+    /// An empty cache (as [`Default`]).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// How many times a context found a piece missing or built for other
+    /// inputs and started it afresh (the first frame's pieces included).
+    pub fn misses(&self) -> u64 {
+        self.misses
+    }
+
+    /// Whether the cache holds a radiosity solution solved with `radiosity`.
+    pub fn holds_solution(&self, radiosity: &RadiositySettings) -> bool {
+        self.solution
+            .as_ref()
+            .is_some_and(|(k, slot)| k == radiosity && slot.get().is_some())
+    }
+
+    /// The slot kept under `key` in `entry`, or a fresh one kept from now on.
+    fn slot<K: PartialEq, T: Default + Clone>(
+        entry: &mut Option<(K, T)>,
+        key: K,
+        misses: &mut u64,
+    ) -> T {
+        match entry {
+            Some((k, slot)) if *k == key => slot.clone(),
+            _ => {
+                *misses += 1;
+                let slot = T::default();
+                *entry = Some((key, slot.clone()));
+                slot
+            }
+        }
+    }
+}
+
+/// `cell`'s value, computed by `build` outside the lock when the cell is
+/// empty: the builds use rayon, and a rayon worker blocked in
+/// `OnceLock::get_or_init` while another thread's build waits on the jobs
+/// queued behind it deadlocks. Two threads may both build; one value is kept.
+fn init_outside<T>(cell: &OnceLock<T>, build: impl FnOnce() -> T) -> &T {
+    if let Some(v) = cell.get() {
+        return v;
+    }
+    let v = build();
+    cell.get_or_init(|| v)
 }
 
 impl std::fmt::Debug for RenderContext<'_> {
@@ -129,21 +268,26 @@ impl<'a> RenderContext<'a> {
         Ok(Self {
             scene,
             settings: settings.clone(),
+            camera: scene.camera,
             progress,
             start: Instant::now(),
             make_accel: &crate::accel::instanced::build_accelerator,
-            analytic: OnceLock::new(),
-            analytic_accel: OnceLock::new(),
-            tessellated: OnceLock::new(),
-            tessellated_accel: OnceLock::new(),
+            default_accel: true,
+            analytic: PreparedSlot::default(),
+            analytic_accel: AccelSlot::default(),
+            tessellated: PreparedSlot::default(),
+            tessellated_accel: AccelSlot::default(),
+            tessellated_derived: Arc::default(),
             solution: SolutionSlot::default(),
         })
     }
 
     /// The same context with `settings` changed by `f` (validated again),
     /// for a render that derives its settings from another's (one sample
-    /// per pixel before a post filter). Both share the solution while `f`
-    /// leaves `settings.radiosity` as it is.
+    /// per pixel before a post filter). Both share the camera and the
+    /// analytic prepared scene; the tessellated one while the spheres'
+    /// segments stay, the solution while `f` leaves `settings.radiosity` as
+    /// it is.
     ///
     /// # Errors
     /// As [`Self::new`].
@@ -151,11 +295,80 @@ impl<'a> RenderContext<'a> {
         let mut settings = self.settings.clone();
         f(&mut settings);
         let mut ctx = Self::new(self.scene, &settings, self.progress)?;
+        ctx.camera = self.camera;
         ctx.make_accel = self.make_accel;
+        ctx.default_accel = self.default_accel;
+        ctx.analytic = Arc::clone(&self.analytic);
+        ctx.analytic_accel = Arc::clone(&self.analytic_accel);
+        if ctx.sphere_segments() == self.sphere_segments() {
+            ctx.tessellated = Arc::clone(&self.tessellated);
+            ctx.tessellated_accel = Arc::clone(&self.tessellated_accel);
+            ctx.tessellated_derived = Arc::clone(&self.tessellated_derived);
+        }
         if settings.radiosity == self.settings.radiosity {
             ctx.solution = Arc::clone(&self.solution);
         }
         Ok(ctx)
+    }
+
+    /// The context seen through `camera` instead of the scene's (a frame of
+    /// an interactive session: only the view moves). Call it before
+    /// [`Self::with_cache`], whose tessellated scene follows the camera.
+    pub fn with_camera(mut self, camera: Camera) -> Self {
+        if camera != self.camera {
+            self.camera = camera;
+            self.tessellated = PreparedSlot::default();
+            self.tessellated_accel = AccelSlot::default();
+            self.tessellated_derived = Arc::default();
+        }
+        self
+    }
+
+    /// The context taking from `cache` what an earlier context of the same
+    /// scene built that this one would build alike, and leaving in it what
+    /// this one builds ([`FrameCache`]). Pictures are those of a context
+    /// without a cache, bit for bit.
+    pub fn with_cache(mut self, cache: &mut FrameCache<'a>) -> Self {
+        if !cache.scene.is_some_and(|s| std::ptr::eq(s, self.scene)) {
+            let misses = cache.misses;
+            *cache = FrameCache {
+                scene: Some(self.scene),
+                misses,
+                ..FrameCache::default()
+            };
+        }
+        let misses = &mut cache.misses;
+        if self.default_accel {
+            (self.analytic, self.analytic_accel) =
+                FrameCache::slot(&mut cache.analytic, (), misses);
+            (
+                self.tessellated,
+                self.tessellated_accel,
+                self.tessellated_derived,
+            ) = FrameCache::slot(&mut cache.tessellated, self.sphere_segments(), misses);
+        }
+        if self.settings.technique.solves_radiosity() && self.solution.get().is_none() {
+            self.solution =
+                FrameCache::slot(&mut cache.solution, self.settings.radiosity.clone(), misses);
+        }
+        self
+    }
+
+    /// The segments of each sphere of the scene as [`Self::tessellated`]
+    /// cuts it: what that prepared scene depends on besides the scene.
+    fn sphere_segments(&self) -> Vec<u32> {
+        let t = tessellation_from(&self.camera, &self.settings);
+        self.scene
+            .objects
+            .iter()
+            .filter_map(|obj| match obj.geometry {
+                Geometry::Sphere { radius } => {
+                    let (center, r) = sphere_in_world(obj.transform.world_from_object(), radius);
+                    Some(t.sphere_segments(center, r))
+                }
+                Geometry::Mesh(_) => None,
+            })
+            .collect()
     }
 
     /// The context with a view-independent solution given rather than
@@ -199,6 +412,9 @@ impl<'a> RenderContext<'a> {
     /// brute-force list in tests).
     pub fn with_accelerator(mut self, make: &'a AccelBuilder<'a>) -> Self {
         self.make_accel = make;
+        self.default_accel = false;
+        self.analytic_accel = AccelSlot::default();
+        self.tessellated_accel = AccelSlot::default();
         self
     }
 
@@ -212,6 +428,12 @@ impl<'a> RenderContext<'a> {
         &self.settings
     }
 
+    /// The camera: the scene's, or the one given to [`Self::with_camera`].
+    /// Techniques read the view from here, never from the scene.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
     /// Progress, warnings and cancellation.
     pub fn progress(&self) -> &'a dyn Progress {
         self.progress
@@ -219,7 +441,7 @@ impl<'a> RenderContext<'a> {
 
     /// The scene flattened for the ray tracers: spheres stay analytic.
     pub fn analytic(&self) -> &PreparedScene<'a> {
-        self.analytic.get_or_init(|| {
+        init_outside(&self.analytic, || {
             PreparedScene::new(
                 self.scene,
                 PrepareOptions {
@@ -232,20 +454,18 @@ impl<'a> RenderContext<'a> {
 
     /// The ray accelerator over [`Self::analytic`].
     pub fn analytic_accel(&self) -> &dyn Accelerator {
-        self.analytic_accel
-            .get_or_init(|| (self.make_accel)(self.analytic()))
-            .as_ref()
+        init_outside(&self.analytic_accel, || (self.make_accel)(self.analytic())).as_ref()
     }
 
     /// The scene flattened for scan conversion and radiosity: spheres
     /// tessellated as the technique asks ([`tessellation`]).
     pub fn tessellated(&self) -> &PreparedScene<'a> {
-        self.tessellated.get_or_init(|| {
+        init_outside(&self.tessellated, || {
             PreparedScene::new(
                 self.scene,
                 PrepareOptions {
                     analytic_spheres: false,
-                    tessellation: tessellation(self.scene, &self.settings),
+                    tessellation: tessellation_from(&self.camera, &self.settings),
                 },
             )
         })
@@ -253,9 +473,16 @@ impl<'a> RenderContext<'a> {
 
     /// The ray accelerator over [`Self::tessellated`].
     pub fn tessellated_accel(&self) -> &dyn Accelerator {
-        self.tessellated_accel
-            .get_or_init(|| (self.make_accel)(self.tessellated()))
-            .as_ref()
+        init_outside(&self.tessellated_accel, || {
+            (self.make_accel)(self.tessellated())
+        })
+        .as_ref()
+    }
+
+    /// What techniques derive from [`Self::tessellated`] alone, kept with
+    /// it (in a [`FrameCache`] too).
+    pub fn tessellated_derived(&self) -> &Derived {
+        &self.tessellated_derived
     }
 
     /// Whether the progress asks to stop.
@@ -279,10 +506,15 @@ impl<'a> RenderContext<'a> {
 /// must not depend on the view), the scan converter by each primitive's
 /// projected size in the camera's image.
 pub fn tessellation(scene: &Scene, settings: &RenderSettings) -> Tessellation {
+    tessellation_from(&scene.camera, settings)
+}
+
+/// [`tessellation`] seen from `camera` rather than the scene's.
+fn tessellation_from(camera: &Camera, settings: &RenderSettings) -> Tessellation {
     if settings.technique.solves_radiosity() {
         Tessellation::Fixed(FIXED_SEGMENTS)
     } else {
-        Tessellation::Projected(ProjectedView::new(&scene.camera, settings.height))
+        Tessellation::Projected(ProjectedView::new(camera, settings.height))
     }
 }
 

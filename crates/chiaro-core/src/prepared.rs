@@ -455,19 +455,22 @@ impl<'s> PreparedScene<'s> {
     /// missing texture). All pyramids are built, in parallel, on the first call.
     pub fn mip_map(&self, t: TextureId) -> Option<&MipMap> {
         use rayon::prelude::*;
-        self.mip_maps
-            .get_or_init(|| {
-                self.scene
-                    .textures
-                    .par_iter()
-                    .map(|t| match t {
-                        Texture::Image(img) => Some(MipMap::new(img)),
-                        Texture::Procedural(_) => None,
-                    })
-                    .collect()
-            })
-            .get(t.index())
-            .and_then(Option::as_ref)
+        // Built outside the lock: a rayon worker blocked in `get_or_init`
+        // while this thread waits on that worker's pool would deadlock.
+        if self.mip_maps.get().is_none() {
+            let built = self
+                .scene
+                .textures
+                .par_iter()
+                .map(|t| match t {
+                    Texture::Image(img) => Some(MipMap::new(img)),
+                    Texture::Procedural(_) => None,
+                })
+                .collect();
+            // A thread that finished first has set the same pyramids.
+            let _ = self.mip_maps.set(built);
+        }
+        self.mip_maps.get()?.get(t.index()).and_then(Option::as_ref)
     }
 
     /// The environment map prefiltered for glossy reflection by the local
@@ -475,9 +478,11 @@ impl<'s> PreparedScene<'s> {
     /// without an environment map.
     pub fn prefiltered_environment(&self) -> Option<&PrefilteredEnvironment> {
         self.scene.environment.as_ref()?;
-        self.prefiltered
-            .get_or_init(|| PrefilteredEnvironment::new(self.scene))
-            .as_ref()
+        // Built outside the lock, as the mip-maps are.
+        if self.prefiltered.get().is_none() {
+            let _ = self.prefiltered.set(PrefilteredEnvironment::new(self.scene));
+        }
+        self.prefiltered.get()?.as_ref()
     }
 
     /// Evaluates texture `t` at `tc` (linear RGBA), trilinear through its

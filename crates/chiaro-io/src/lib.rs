@@ -7,6 +7,8 @@
 //! - [`ply`]: Stanford PLY (ASCII and binary) through ply-rs-bw.
 //! - [`mitsuba`]: Mitsuba 3 XML scenes (`.xml`) through roxmltree, mapped
 //!   onto the same `Scene` (docs/import-mitsuba.md).
+//! - [`pbrt`]: pbrt-v4 (and pbrt-v3) scenes (`.pbrt`), mapped onto the same
+//!   `Scene` (docs/import-pbrt.md).
 //! - [`images`]: decoding image textures (PNG, JPEG, HDR, EXR) to linear texels.
 //! - [`output`]: writing films (PNG 8/16-bit, OpenEXR with depth and normal,
 //!   Radiance HDR, PPM, palette PNG), always through a temporary file and a rename.
@@ -32,6 +34,7 @@ pub mod images;
 pub mod mitsuba;
 pub mod obj;
 pub mod output;
+pub mod pbrt;
 pub mod plain;
 pub mod ply;
 pub mod scene_toml;
@@ -74,7 +77,8 @@ pub(crate) fn lowercase_extension(path: &Path) -> String {
 
 /// Reads a scene file, choosing the reader by extension (case-insensitive):
 /// `.toml` (the chiaro scene format, see [`scene_toml`]), `.xml` (Mitsuba
-/// 3, see [`mitsuba`]), `.obj` (with its `.mtl`), `.gltf`, `.glb` or `.ply`.
+/// 3, see [`mitsuba`]), `.pbrt` (pbrt-v4 or v3, see [`pbrt`]), `.obj` (with
+/// its `.mtl`), `.gltf`, `.glb` or `.ply`.
 ///
 /// A mesh file read this way becomes a whole scene: its first camera (or one
 /// framing it from its front, `framing::frame_scene`), its lights (or the
@@ -127,12 +131,13 @@ pub fn load_scene_with(path: &Path, options: &LoadOptions) -> Result<Loaded> {
             scene_toml::parse_scene(&text, base, path)
         }
         "xml" => mitsuba::load(path, options),
+        "pbrt" => pbrt::load(path),
         _ => match load_mesh_file(path) {
             Some(imported) => whole_scene(imported?, path),
             None => Err(IoError::format(
                 path,
                 format!(
-                    "unknown scene file extension {ext:?}: expected .toml, .xml (Mitsuba 3), .obj, .gltf, .glb or .ply"
+                    "unknown scene file extension {ext:?}: expected .toml, .xml (Mitsuba 3), .pbrt, .obj, .gltf, .glb or .ply"
                 ),
             )),
         },

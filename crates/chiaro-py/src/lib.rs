@@ -39,7 +39,7 @@ pub(crate) fn warn_all(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
     Ok(())
 }
 
-/// Reads a scene file (`.toml`, `.xml` (Mitsuba 3), `.obj`, `.gltf`,
+/// Reads a scene file (`.toml`, `.xml` (Mitsuba 3), `.pbrt`, `.obj`, `.gltf`,
 /// `.glb`, `.ply`); `defines` gives a Mitsuba scene's `$name` parameters
 /// (as the CLI's `-D name=value`). Loader warnings become `UserWarning`s;
 /// errors raise `SceneError` carrying `path`, `line` and `column`, or

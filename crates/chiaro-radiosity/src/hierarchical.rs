@@ -13,6 +13,7 @@
 //! linearly with the number of leaves, instead of quadratically.
 
 use crate::direct::point_light_direct;
+use crate::environment::node_mean;
 use crate::formfactor::facing;
 use crate::mesh::{Element, ElementMesh, barycentric, material_at};
 use crate::ray_cast::{PairRule, Visibility, pair};
@@ -41,6 +42,9 @@ struct Tree<'a, 's> {
     ps: &'a PreparedScene<'s>,
     mesh: &'a ElementMesh,
     lights: &'a [Light],
+    /// Each element's reflected environment light (empty without a map),
+    /// averaged over a node's elements for the node's emission.
+    env: &'a [Vec3],
     vis: Option<&'a Visibility<'a>>,
     rule: PairRule,
     tol: f32,
@@ -64,10 +68,13 @@ impl Tree<'_, '_> {
         let (u, v) = barycentric(&s.p, c);
         let (rho, le) = material_at(self.ps, s, u, v);
         let el = Element::new(p, s.n, rho, le, [0; 3], source);
-        let direct = match self.vis {
+        let mut direct = match self.vis {
             Some(vis) => point_light_direct(&el, self.lights, vis),
             None => Vec3::ZERO,
         };
+        if !self.env.is_empty() {
+            direct += node_mean(self.mesh, self.env, source, &p, depth);
+        }
         self.el.push(el);
         self.e.push(le + direct);
         self.b.push(le + direct);
@@ -270,12 +277,14 @@ impl Tree<'_, '_> {
 
 /// Solves by hierarchical radiosity and returns the radiance of every
 /// element of `mesh` (whose subdivisions must be powers of two) and the
-/// statistics. `e_elem` is each element's emitted plus point-light direct
-/// radiance: an element smaller than its leaf gets `E_elem + rho * incident(leaf)`.
+/// statistics. `e_elem` is each element's emitted plus direct radiance
+/// (point lights and `env`, the environment's part, empty without a map):
+/// an element smaller than its leaf gets `E_elem + rho * incident(leaf)`.
 pub(crate) fn solve(
     ps: &PreparedScene<'_>,
     mesh: &ElementMesh,
     e_elem: &[Vec3],
+    env: &[Vec3],
     vis: Option<&Visibility<'_>>,
     rule: PairRule,
     tol_geom: f32,
@@ -287,6 +296,7 @@ pub(crate) fn solve(
         ps,
         mesh,
         lights: &ps.scene.lights,
+        env,
         vis,
         rule,
         tol: tol_geom,
@@ -329,7 +339,16 @@ pub(crate) fn solve(
     // (BENCHMARKS.md, "Radiosity").
     t.eps = (0.01 * tolerance * max_e).max(f32::MIN_POSITIVE);
     let roots = t.roots.clone();
+    // Every pair of roots is linked first (quadratic in the source
+    // triangles): say so, and poll for cancellation between receivers.
+    progress.message(&format!(
+        "hierarchical: linking {} source triangles pairwise",
+        roots.len()
+    ));
     for &p in &roots {
+        if progress.cancelled() {
+            return Err(CoreError::Cancelled);
+        }
         for &q in &roots {
             if p != q {
                 t.refine(p, q);

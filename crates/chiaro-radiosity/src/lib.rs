@@ -26,6 +26,11 @@
 //!   element gets `rho * f_att * Ip * spot * cos_theta * V` (the reflected
 //!   radiance of irradiance `pi Ip f_att cos / d^2`) added to `E`, with shadow
 //!   rays. Ambient lights are ignored.
+//! - The environment map is a distant emitter gathered the same way
+//!   (`environment.rs`): each element gets `rho / pi` times its irradiance
+//!   `int L_env V cos dw` from the map, estimated with stratified,
+//!   visibility-tested rays of fixed seeds, added to `E`. The scene's plain
+//!   `background` colour lights nothing.
 //! - Elements are one-sided: light leaves the front (the side of the
 //!   counter-clockwise normal), and only the front gathers. A two-sided
 //!   surface (the default, `Sidedness::TwoSided`) is solved as one-sided
@@ -52,6 +57,7 @@
 
 pub mod analytic;
 mod direct;
+mod environment;
 pub mod formfactor;
 pub mod gathering;
 pub mod hemicube;
@@ -131,7 +137,7 @@ pub const DESCRIPTION: Description = Description {
     technique: Technique::Radiosity,
     title: "radiosity",
     method: "elements, with patches grouped from fine input triangles to shoot from; hemicube / ray-cast / analytic form factors, Jacobi, Gauss-Seidel, progressive and hierarchical solvers; the view-independent solution drawn with Gouraud interpolation",
-    shows: "diffuse interreflection and colour bleeding, soft shadows, textures (the texture times the patches' light)",
+    shows: "diffuse interreflection and colour bleeding, soft shadows, textures (the texture times the patches' light), the environment map's light with its occlusion",
     cannot_show: &[
         (
             Feature::Mirrors,
@@ -153,7 +159,6 @@ pub const DESCRIPTION: Description = Description {
             Feature::AmbientLight,
             "ambient lights: interreflection is computed instead",
         ),
-        (Feature::EnvironmentLight, "light from the environment map"),
         (Feature::DepthCue, "depth cueing"),
         (
             Feature::AlphaMask,
@@ -236,7 +241,7 @@ impl EmitterGroup {
 const DIRECT_PAIR_BUDGET: usize = 20_000_000;
 
 /// Reflected radiance at each element due to *direct* light: point-like
-/// lights (`point_direct`) plus every emissive source triangle, gathered
+/// lights and the environment map (`point_direct`) plus every emissive source triangle, gathered
 /// with ray-cast form factors (16 visibility rays per receiver point), or,
 /// for a group of several emitters, their unoccluded form factors (the
 /// group's point-to-disc form factor when it is far from the receiver)
@@ -397,9 +402,30 @@ pub(crate) fn solve_with(
         cfg.solver.name(),
         cfg.formfactor.name()
     ));
-    let point_direct: Vec<Vec3> = par_map(n, progress, |i| {
+    let mut point_direct: Vec<Vec3> = par_map(n, progress, |i| {
         point_light_direct(&mesh.elements[i], &scene.lights, &vis)
     })?;
+    // The environment map's light, gathered with visibility, joins the
+    // point lights' as the elements' first gather (none without a map).
+    let env_direct = match environment::EnvironmentSource::new(scene, n) {
+        Some(env) => {
+            progress.begin("radiosity environment", 1);
+            progress.message(&format!(
+                "radiosity: gathering the environment, {} + {} directions an element",
+                env.directions(),
+                env.directions()
+            ));
+            let d = par_map(n, progress, |i| {
+                env.reflected(&mesh.elements[i], i as u64, &vis)
+            })?;
+            progress.advance(1);
+            for (p, d) in point_direct.iter_mut().zip(&d) {
+                *p += *d;
+            }
+            d
+        }
+        None => Vec::new(),
+    };
     let e: Vec<Vec3> = mesh
         .elements
         .iter()
@@ -512,8 +538,18 @@ pub(crate) fn solve_with(
                     Some(&vis),
                 ),
             };
-            let (l, hs) =
-                hierarchical::solve(ps, &mesh, &e, v, rule, tol, stop, max_iter, progress)?;
+            let (l, hs) = hierarchical::solve(
+                ps,
+                &mesh,
+                &e,
+                &env_direct,
+                v,
+                rule,
+                tol,
+                stop,
+                max_iter,
+                progress,
+            )?;
             (stats.nodes, stats.leaves, stats.links) = (hs.nodes, hs.leaves, hs.links);
             (l, hs.iterations, hs.unshot, hs.stop, None)
         }
@@ -667,7 +703,7 @@ pub(crate) fn render_solution(
     if progress.cancelled() {
         return Err(CoreError::Cancelled);
     }
-    let cam = &scene.camera;
+    let cam = ctx.camera();
     let clip_from_world = cam.projection_matrix(w as f32 / h as f32) * cam.view_matrix();
     let normals: Vec<Vec3> = solution
         .elements
@@ -855,5 +891,7 @@ pub(crate) fn surface(ps: &PreparedScene<'_>, t: u32, u: f32, v: f32) -> (Vec3, 
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_environment;
 #[cfg(test)]
 mod tests_hostile;

@@ -132,8 +132,9 @@ fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
 }
 
 /// The fingerprint of what a solution depends on: meshes, objects,
-/// materials, lights (their serde form) and the patch size. Textures are
-/// not hashed (only their ids, through the materials).
+/// materials, lights, the environment when there is one (their serde form)
+/// and the patch size. Textures are not hashed (only their ids, through the
+/// materials and the environment).
 pub fn fingerprint(scene: &Scene, patch_size: f32) -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
     let parts = [
@@ -144,6 +145,10 @@ pub fn fingerprint(scene: &Scene, patch_size: f32) -> u64 {
     ];
     for p in parts {
         h = fnv1a(&p.unwrap_or_default(), h);
+    }
+    // Only with a map, so a scene without one keeps its fingerprint.
+    if let Some(env) = &scene.environment {
+        h = fnv1a(&serde_json::to_vec(env).unwrap_or_default(), h);
     }
     fnv1a(&patch_size.to_le_bytes(), h)
 }

@@ -2,6 +2,7 @@
 //! Gouraud or Phong shading (by `settings.technique`) of the context's
 //! tessellated scene.
 
+use crate::pipeline::Frame;
 use crate::{RasterOptions, RasterWork, render_work};
 use chiaro_core::budget::{Estimate, bytes_of};
 use chiaro_core::context::{RenderContext, RenderStats, Renderer};
@@ -57,7 +58,11 @@ impl ScanConversion {
         let mode = Self::mode(ctx)?;
         render_work(
             ctx.tessellated(),
-            ctx.settings(),
+            Frame {
+                settings: ctx.settings(),
+                camera: ctx.camera(),
+                derived: ctx.tessellated_derived(),
+            },
             mode,
             &self.options,
             ctx.progress(),
@@ -206,7 +211,13 @@ pub(crate) mod test_support {
     ) -> Result<Film> {
         let mut film = Film::new(settings.width, settings.height);
         let work = RasterWork::default();
-        render_work(ps, settings, mode, options, progress, &mut film, &work)?;
+        let derived = chiaro_core::context::Derived::default();
+        let frame = Frame {
+            settings,
+            camera: &ps.scene.camera,
+            derived: &derived,
+        };
+        render_work(ps, frame, mode, options, progress, &mut film, &work)?;
         Ok(film)
     }
 

@@ -74,7 +74,7 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
     let prepared = ctx.analytic();
     let accel = ctx.analytic_accel();
     progress.advance(1);
-    let cam = &scene.camera;
+    let cam = ctx.camera();
     let eye_light = [
         Light::Point {
             position: cam.eye,

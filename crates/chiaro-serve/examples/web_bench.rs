@@ -10,6 +10,13 @@
 //! as the page asks: frames per second of the drafts (one sample per pixel
 //! and per area light), against full-quality frames, and the time to the
 //! quick pass and to full quality of a refining render once it stops.
+//!
+//! `... -- [frames] drafts SCENE [TECHNIQUE...]`: any scene file, orbited
+//! as the page does while the mouse drags (half the scene's resolution, one
+//! sample per pixel and per light, one request in flight): drafts per
+//! second of each technique (default: phong and preview), with the median
+//! and slowest frame. The first frame after the connection opens (it builds
+//! what the session keeps) is timed apart.
 
 use chiaro::Vec3;
 use chiaro::scene::{Attenuation, Light, Material, Scene};
@@ -195,6 +202,62 @@ fn orbit_bench(scene: Scene, frames: usize) {
     );
 }
 
+/// Milliseconds of each of `frames` orbiting drafts of `views` at
+/// `w`x`h`, one request in flight (the page's pace while dragging).
+fn draft_times(ws: &mut Ws, w: u32, h: u32, views: &Value, frames: usize) -> Vec<f64> {
+    (0..frames)
+        .map(|i| {
+            let req = json!({"type": "render", "id": 10 + i, "width": w, "height": h,
+                "orbit": {"yaw": i as f32 * 0.05, "pitch": (i % 7) as f32 * 0.02, "zoom": 1.0},
+                "views": views});
+            round_trip(ws, &req).1
+        })
+        .collect()
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn drafts_bench(path: &Path, techniques: &[String], frames: usize) {
+    let scene = chiaro::io::load_scene(path).expect("scene").scene;
+    let (w, h) = (
+        (scene.render.width / 2).max(8),
+        (scene.render.height / 2).max(8),
+    );
+    let tris = scene.triangle_count();
+    let name = path
+        .file_stem()
+        .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+    let addr = serve_on_a_free_port(scene, &name);
+    println!(
+        "| scene | technique | drafts | first draft | median draft | slowest | drafts per second |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    for technique in techniques {
+        // A connection of its own per technique, as a page opened anew.
+        let (mut ws, _) = tungstenite::connect(format!("ws://{addr}/ws")).expect("connect");
+        let views = json!([{"technique": technique, "samples": 1, "light_samples": 1}]);
+        let first = draft_times(&mut ws, w, h, &views, 1)[0];
+        let t = Instant::now();
+        let mut ms = draft_times(&mut ws, w, h, &views, frames);
+        let fps = frames as f64 / t.elapsed().as_secs_f64();
+        let slowest = ms.iter().copied().fold(0.0, f64::max);
+        let med = median(&mut ms);
+        println!(
+            "| {name} ({tris} triangles) | {technique} | {frames} at {w}x{h} | {first:.0} ms | {med:.1} ms | {slowest:.0} ms | {fps:.2} |"
+        );
+    }
+}
+
 fn main() {
     let frames = std::env::args()
         .nth(1)
@@ -202,6 +265,19 @@ fn main() {
         .unwrap_or(20);
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-box.toml");
     let cornell = chiaro::io::load_scene(&root).expect("cornell box").scene;
+    if std::env::args().nth(2).as_deref() == Some("drafts") {
+        let args: Vec<String> = std::env::args().skip(3).collect();
+        let Some(path) = args.first() else {
+            eprintln!("usage: web_bench FRAMES drafts SCENE [TECHNIQUE...]");
+            std::process::exit(2);
+        };
+        let mut techniques = args[1..].to_vec();
+        if techniques.is_empty() {
+            techniques = vec!["phong".into(), "preview".into()];
+        }
+        drafts_bench(Path::new(path), &techniques, frames);
+        return;
+    }
     if std::env::args().nth(2).as_deref() == Some("orbit") {
         orbit_bench(cornell, frames);
         return;

@@ -52,12 +52,13 @@ pub mod tev;
 pub use protocol::Limits;
 
 use chiaro::Scene;
+use chiaro::scene::ReflectanceModel;
 use std::collections::HashMap;
 use std::io::{Read, Write};
 use std::net::{IpAddr, Ipv4Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::path::Path;
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -259,6 +260,11 @@ pub(crate) struct State {
     next_id: AtomicU64,
     /// Times a WebSocket session woke up (see [`ServerHandle::session_wakeups`]).
     pub(crate) session_wakeups: AtomicU64,
+    /// The scene with each illumination model replacing every material's
+    /// (a view's `model`), made when a page first asks for it and kept for
+    /// the server's life, so that sessions keep what they prepare from it
+    /// between frames ([`chiaro::FrameCache`]).
+    models: [OnceLock<Scene>; 3],
 }
 
 /// A registered connection; dropping it unregisters it.
@@ -284,6 +290,20 @@ impl Drop for ConnGuard {
 }
 
 impl State {
+    /// The scene a view with illumination model `model` renders (`None`:
+    /// the scene's own models).
+    pub(crate) fn scene_with(&self, model: Option<ReflectanceModel>) -> &Scene {
+        let Some(m) = model else {
+            return &self.scene;
+        };
+        let i = match m {
+            ReflectanceModel::Phong => 0,
+            ReflectanceModel::Blinn => 1,
+            ReflectanceModel::TorranceSparrow => 2,
+        };
+        self.models[i].get_or_init(|| protocol::with_model(&self.scene, m))
+    }
+
     /// Registers a new connection from `addr`, shedding the oldest waiting
     /// connection (from the same address when that address is at its cap)
     /// if a cap is reached. `None` when every candidate is busy.
@@ -410,6 +430,7 @@ impl Server {
                 conns: Mutex::new(HashMap::new()),
                 next_id: AtomicU64::new(0),
                 session_wakeups: AtomicU64::new(0),
+                models: Default::default(),
             }),
         })
     }

@@ -148,8 +148,11 @@ pub enum Request {
 pub struct Job {
     /// The request id.
     pub id: u64,
-    /// The scene per view (the camera moved, materials overridden).
-    pub scenes: Vec<Scene>,
+    /// The camera of every view: the scene's, orbited.
+    pub camera: chiaro::scene::Camera,
+    /// The illumination model per view that replaces every material's
+    /// ([`with_model`]); `None` keeps the scene's.
+    pub models: Vec<Option<ReflectanceModel>>,
     /// The settings per view.
     pub settings: Vec<RenderSettings>,
     /// Send bands as they complete.
@@ -266,7 +269,7 @@ pub fn make_job(
         ));
     }
     let camera = orbit_camera(&scene.camera, orbit)?;
-    let mut scenes = Vec::new();
+    let mut models = Vec::new();
     let mut settings = Vec::new();
     for v in views {
         let technique = Technique::from_name(&v.technique).ok_or_else(|| {
@@ -297,25 +300,36 @@ pub fn make_job(
                 &v.transparency,
             )?);
         }
-        let mut sc = scene.clone();
-        sc.camera = camera;
-        if v.model != "scene" {
-            let m = parse_named::<ReflectanceModel>("illumination model", &v.model)?;
-            for mat in &mut sc.materials {
-                mat.model = m;
-            }
-        }
+        let model = if v.model == "scene" {
+            None
+        } else {
+            Some(parse_named::<ReflectanceModel>(
+                "illumination model",
+                &v.model,
+            )?)
+        };
         chiaro::check_settings(&s).map_err(settings_message)?;
-        scenes.push(sc);
+        models.push(model);
         settings.push(s);
     }
     Ok(Job {
         id,
-        scenes,
+        camera,
+        models,
         settings,
         progressive,
         refine,
     })
+}
+
+/// `scene` with `model` as every material's illumination model (a view's
+/// `model` other than `scene`).
+pub fn with_model(scene: &Scene, model: ReflectanceModel) -> Scene {
+    let mut s = scene.clone();
+    for m in &mut s.materials {
+        m.model = model;
+    }
+    s
 }
 
 /// The settings errors of [`chiaro::check_settings`] for the page: each
@@ -550,6 +564,7 @@ mod tests {
             ..View::default()
         }];
         let j = job(&scene, &Limits::default(), 8, 8, &v).expect("valid");
+        assert_eq!(j.models, [Some(ReflectanceModel::Blinn)]);
         assert_eq!(j.settings[0].shadows, ShadowMethod::Map);
         assert_eq!(
             j.settings[0].transparency,

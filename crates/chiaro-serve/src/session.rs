@@ -1,20 +1,23 @@
 //! One WebSocket connection: a reader thread that forwards the page's
 //! bytes, a render worker that renders the latest request (cancelling the
 //! one before it), and the session loop that owns the WebSocket and sleeps
-//! on one channel fed by both until there is something to do.
+//! on one channel fed by both until there is something to do. The worker
+//! renders every frame through [`chiaro::render_frame`] with a
+//! [`FrameCache`] per scene it shows, so that orbiting redoes only what the
+//! camera changes.
 
 use crate::protocol::{FrameHeader, Job, Request, draft_settings, encode_frame, make_job};
 use crate::tev::render_in_bands;
 use crate::{ConnGuard, Phase, State};
-use chiaro::RadiositySolution;
 use chiaro::io::output::{ImageFormat, OutputOptions, encode_film};
-use chiaro::{Film, Progress, RenderSettings, Scene, Technique};
+use chiaro::scene::{Camera, ReflectanceModel};
+use chiaro::{Film, FrameCache, Progress, RenderSettings, Scene, Technique};
 use chiaro_tools::metrics;
 use serde_json::json;
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, channel, sync_channel};
 use std::time::Instant;
 use tungstenite::protocol::frame::CloseFrame;
@@ -41,21 +44,30 @@ pub(crate) fn info_json(state: &State) -> String {
     .to_string()
 }
 
-/// A render's progress: cancelled when a newer request arrives or the
-/// connection closes.
-struct JobProgress(Arc<AtomicBool>);
+/// The worker's progress, one for the connection's life (the frame caches
+/// borrow it): the running job is cancelled once the session has counted a
+/// newer request (or the connection's end) in `latest` than the job's own
+/// number, `current`.
+struct JobProgress {
+    latest: Arc<AtomicU64>,
+    current: AtomicU64,
+}
 
 impl Progress for JobProgress {
     fn begin(&self, _stage: &str, _total: u64) {}
     fn advance(&self, _n: u64) {}
     fn cancelled(&self) -> bool {
-        self.0.load(Ordering::Relaxed)
+        self.latest.load(Ordering::Relaxed) != self.current.load(Ordering::Relaxed)
     }
 }
 
 enum Command {
-    Render(Job, Arc<AtomicBool>),
-    Save { view: usize, format: String },
+    /// A job and its number in the session's count of requests.
+    Render(Job, u64),
+    Save {
+        view: usize,
+        format: String,
+    },
 }
 
 /// What wakes the session loop.
@@ -132,17 +144,17 @@ struct Session<'a> {
     state: &'a State,
     conn: &'a ConnGuard,
     commands: std::sync::mpsc::Sender<Command>,
-    /// The running render's cancel flag.
-    current: Option<Arc<AtomicBool>>,
+    /// Counts render requests and the connection's end: a job whose number
+    /// is behind it is cancelled ([`JobProgress`]).
+    latest: Arc<AtomicU64>,
     /// Commands sent to the worker and not yet finished.
     pending: usize,
 }
 
 impl Session<'_> {
-    fn cancel_current(&mut self) {
-        if let Some(flag) = self.current.take() {
-            flag.store(true, Ordering::Relaxed);
-        }
+    /// Cancels the running job; returns the number of the next one.
+    fn cancel_current(&mut self) -> u64 {
+        self.latest.fetch_add(1, Ordering::Relaxed) + 1
     }
 
     fn command(&mut self, c: Command) -> bool {
@@ -178,10 +190,8 @@ impl Session<'_> {
                     &views,
                 ) {
                     Ok(job) => {
-                        self.cancel_current();
-                        let flag = Arc::new(AtomicBool::new(false));
-                        self.current = Some(Arc::clone(&flag));
-                        self.command(Command::Render(job, flag))
+                        let number = self.cancel_current();
+                        self.command(Command::Render(job, number))
                     }
                     Err(message) => {
                         error(ws, json!({"type": "error", "id": id, "message": message}))
@@ -217,9 +227,11 @@ pub(crate) fn run(stream: TcpStream, state: Arc<State>, conn: &ConnGuard) {
         .spawn(move || reader(read_half, &net_events));
     let (cmd_tx, cmd_rx) = channel::<Command>();
     let worker_state = Arc::clone(&state);
+    let latest = Arc::new(AtomicU64::new(0));
+    let worker_latest = Arc::clone(&latest);
     let spawned_worker = std::thread::Builder::new()
         .name("chiaro-serve-render".into())
-        .spawn(move || worker(&worker_state, &cmd_rx, &events));
+        .spawn(move || worker(&worker_state, &cmd_rx, &events, worker_latest));
     if spawned_reader.is_err() || spawned_worker.is_err() {
         let _ = closer.shutdown(Shutdown::Both);
         return;
@@ -237,7 +249,7 @@ pub(crate) fn run(stream: TcpStream, state: Arc<State>, conn: &ConnGuard) {
         state: &state,
         conn,
         commands: cmd_tx,
-        current: None,
+        latest,
         pending: 0,
     };
     conn.set_phase(Phase::Idle);
@@ -317,9 +329,66 @@ struct Finished {
     films: [Option<(Film, chiaro::RenderSettings)>; 2],
 }
 
-fn worker(state: &State, rx: &Receiver<Command>, out: &SyncSender<Event>) {
+/// What the worker keeps between jobs: a frame cache per scene the last
+/// job showed (the scene's own, or with a view's illumination model), and
+/// the radiosity solutions solved on this connection (reported in `done`).
+struct Frames<'w> {
+    caches: Vec<(Option<ReflectanceModel>, FrameCache<'w>)>,
+    solves: u64,
+}
+
+impl<'w> Frames<'w> {
+    /// Keeps the caches of the scenes `job` shows, dropping the others.
+    fn keep_for(&mut self, job: &Job) {
+        self.caches.retain(|(m, _)| job.models.contains(m));
+        for m in &job.models {
+            if !self.caches.iter().any(|(k, _)| k == m) {
+                self.caches.push((*m, FrameCache::new()));
+            }
+        }
+    }
+
+    /// [`chiaro::render_frame`] of `scene` (with illumination model
+    /// `model`) through the cache of that scene, counting the radiosity
+    /// solves.
+    fn render(
+        &mut self,
+        model: Option<ReflectanceModel>,
+        scene: &'w Scene,
+        settings: &RenderSettings,
+        camera: &Camera,
+        progress: &'w dyn Progress,
+    ) -> Result<(Film, chiaro::RenderStats), chiaro::Error> {
+        let i = match self.caches.iter().position(|(k, _)| *k == model) {
+            Some(i) => i,
+            None => {
+                self.caches.push((model, FrameCache::new()));
+                self.caches.len() - 1
+            }
+        };
+        let cache = &mut self.caches[i].1;
+        let had = cache.holds_solution(&settings.radiosity);
+        let result = chiaro::render_frame(scene, settings, camera, progress, cache);
+        if settings.technique.solves_radiosity()
+            && !had
+            && cache.holds_solution(&settings.radiosity)
+        {
+            self.solves += 1;
+        }
+        result
+    }
+}
+
+fn worker(state: &State, rx: &Receiver<Command>, out: &SyncSender<Event>, latest: Arc<AtomicU64>) {
+    let progress = JobProgress {
+        latest,
+        current: AtomicU64::new(0),
+    };
     let mut finished = Finished::default();
-    let mut solutions = SolutionCache::default();
+    let mut frames = Frames {
+        caches: Vec::new(),
+        solves: 0,
+    };
     while let Ok(first) = rx.recv() {
         // Only the newest render matters; saves are answered in order.
         let mut pending = vec![first];
@@ -332,8 +401,10 @@ fn worker(state: &State, rx: &Receiver<Command>, out: &SyncSender<Event>) {
             .rposition(|c| matches!(c, Command::Render(..)));
         for (i, cmd) in pending.into_iter().enumerate() {
             let ok = match cmd {
-                Command::Render(job, flag) if Some(i) == last_render => {
-                    render_job(&job, &flag, out, &mut finished, &mut solutions)
+                Command::Render(job, number) if Some(i) == last_render => {
+                    progress.current.store(number, Ordering::Relaxed);
+                    frames.keep_for(&job);
+                    render_job(state, &job, &progress, out, &mut finished, &mut frames)
                 }
                 Command::Render(..) => true,
                 Command::Save { view, format } => save(state, &finished, view, &format, out),
@@ -387,59 +458,20 @@ impl From<chiaro::Error> for Stop {
     }
 }
 
-/// The radiosity solution last solved on this connection, keyed by what it
-/// depends on (the scene's geometry, materials and lights, and the
-/// radiosity settings; not the camera), so that orbiting a radiosity or
-/// hybrid render does not solve again.
-#[derive(Default)]
-struct SolutionCache {
-    cached: Option<((u64, String), Arc<RadiositySolution>)>,
-    /// Solutions solved on this connection (reported in `done`).
-    solves: u64,
-}
-
-impl SolutionCache {
-    /// [`chiaro::render_with_stats`], giving the render context the cached
-    /// solution for the techniques that solve radiosity, and keeping the
-    /// context's solution for the next frame.
-    fn render(
-        &mut self,
-        scene: &Scene,
-        settings: &RenderSettings,
-        progress: &dyn Progress,
-    ) -> Result<(Film, chiaro::RenderStats), chiaro::Error> {
-        if !settings.technique.solves_radiosity() {
-            return chiaro::render_with_stats(scene, settings, progress);
-        }
-        let key = (
-            chiaro::radiosity_fingerprint(scene, 0.0),
-            serde_json::to_string(&settings.radiosity).unwrap_or_default(),
-        );
-        let mut ctx = chiaro::RenderContext::new(scene, settings, progress)?;
-        match self.cached.take() {
-            Some((k, solution)) if k == key => ctx = ctx.with_solution(solution),
-            _ => self.solves += 1,
-        }
-        let result = chiaro::render_with(&ctx, chiaro::renderer(settings.technique));
-        if let Some(solution) = ctx.solved::<RadiositySolution>() {
-            self.cached = Some((key, solution));
-        }
-        result
-    }
-}
-
 /// Renders one view, sending its picture (in bands when `progressive` and
 /// the technique supports it).
-fn render_view(
+fn render_view<'w>(
+    state: &'w State,
     job: &Job,
     view: usize,
-    scene: &Scene,
     settings: &RenderSettings,
     progressive: bool,
-    progress: &dyn Progress,
+    progress: &'w dyn Progress,
     out: &SyncSender<Event>,
-    solutions: &mut SolutionCache,
+    frames: &mut Frames<'w>,
 ) -> Result<(Film, chiaro::RenderStats), Stop> {
+    let model = job.models.get(view).copied().flatten();
+    let scene = state.scene_with(model);
     let start = Instant::now();
     let opts = png_opts(settings);
     let mut first_band = true;
@@ -474,10 +506,11 @@ fn render_view(
             .ok_or(Stop::Closed)
     };
     let solves = matches!(settings.technique, Technique::Radiosity | Technique::Hybrid);
+    let mut render = |s: &RenderSettings| frames.render(model, scene, s, &job.camera, progress);
     if progressive && !solves {
-        render_in_bands(scene, settings, progress, &mut send_band)
+        render_in_bands(scene, settings, render, &mut send_band)
     } else {
-        let (film, stats) = solutions.render(scene, settings, progress)?;
+        let (film, stats) = render(settings)?;
         send_band(&film, 0, film.height)?;
         Ok((film, stats))
     }
@@ -486,14 +519,14 @@ fn render_view(
 /// Renders every view of `job`, sending bands, `done` messages and, for two
 /// views, the difference image and metrics; with `refine`, a quick draft
 /// pass of every view first. Returns false when the connection has gone.
-fn render_job(
+fn render_job<'w>(
+    state: &'w State,
     job: &Job,
-    flag: &Arc<AtomicBool>,
+    progress: &'w JobProgress,
     out: &SyncSender<Event>,
     finished: &mut Finished,
-    solutions: &mut SolutionCache,
+    frames: &mut Frames<'w>,
 ) -> bool {
-    let progress = JobProgress(Arc::clone(flag));
     let draft: Vec<RenderSettings> = job.settings.iter().map(draft_settings).collect();
     let passes: Vec<&[RenderSettings]> = if job.refine && draft != job.settings {
         vec![&draft, &job.settings]
@@ -511,18 +544,18 @@ fn render_job(
             return false;
         }
         let mut films = Vec::new();
-        for (view, (scene, settings)) in job.scenes.iter().zip(pass.iter()).enumerate() {
+        for (view, settings) in pass.iter().enumerate() {
             let start = Instant::now();
             let progressive = job.progressive && last;
             match render_view(
+                state,
                 job,
                 view,
-                scene,
                 settings,
                 progressive,
-                &progress,
+                progress,
                 out,
-                solutions,
+                frames,
             ) {
                 Ok((film, stats)) => {
                     if last {
@@ -535,7 +568,7 @@ fn render_job(
                             "ms": start.elapsed().as_secs_f64() * 1e3,
                             "render_ms": stats.elapsed.as_secs_f64() * 1e3,
                             "rays": stats.rays, "triangles": stats.triangles,
-                            "radiosity_solves": solutions.solves,
+                            "radiosity_solves": frames.solves,
                         });
                         if !text(out, m) {
                             return false;
@@ -556,7 +589,7 @@ fn render_job(
                     );
                 }
             }
-            if flag.load(Ordering::Relaxed) {
+            if progress.cancelled() {
                 return true;
             }
         }

@@ -324,7 +324,8 @@ pub fn band_height(height: u32) -> u32 {
     height.div_ceil(8).max(8)
 }
 
-/// Renders `scene` with `settings` in horizontal bands (through
+/// Renders `scene` with `settings` by `render` (a whole render, given the
+/// settings of each band) in horizontal bands (through
 /// [`RenderSettings::crop`], where the technique supports it), calling
 /// `on_band(film, y0, y1)` after each band with the film so far; returns the
 /// whole film (identical to a plain render) and the summed statistics.
@@ -337,14 +338,14 @@ pub fn band_height(height: u32) -> u32 {
 pub(crate) fn render_in_bands<E: From<chiaro::Error>>(
     scene: &Scene,
     settings: &RenderSettings,
-    progress: &dyn Progress,
+    mut render: impl FnMut(&RenderSettings) -> chiaro::Result<(Film, chiaro::RenderStats)>,
     mut on_band: impl FnMut(&Film, u32, u32) -> Result<(), E>,
 ) -> Result<(Film, chiaro::RenderStats), E> {
     if !supports_crop(settings.technique)
         || settings.crop.is_some()
         || scene.triangle_count() > BAND_TRIANGLE_LIMIT
     {
-        let (film, stats) = chiaro::render_with_stats(scene, settings, progress)?;
+        let (film, stats) = render(settings)?;
         on_band(&film, 0, film.height)?;
         return Ok((film, stats));
     }
@@ -356,7 +357,7 @@ pub(crate) fn render_in_bands<E: From<chiaro::Error>>(
         let y1 = (y0 + step).min(settings.height);
         let mut band = settings.clone();
         band.crop = Some([0, y0, settings.width, y1]);
-        let (film, stats) = chiaro::render_with_stats(scene, &band, progress)?;
+        let (film, stats) = render(&band)?;
         copy_rows(&film, &mut full, y0, y1);
         total.elapsed += stats.elapsed;
         total.rays += stats.rays;
@@ -398,9 +399,12 @@ pub fn render_to_tev(
 ) -> Result<(Film, chiaro::RenderStats), TevError> {
     let mut client = TevClient::connect(addr)?;
     client.create_image(name, settings.width, settings.height, &RGB)?;
-    render_in_bands(scene, settings, progress, |film, y0, y1| {
-        client.send_rows(name, film, y0, y1)
-    })
+    render_in_bands(
+        scene,
+        settings,
+        |s| chiaro::render_with_stats(scene, s, progress),
+        |film, y0, y1| client.send_rows(name, film, y0, y1),
+    )
 }
 
 #[cfg(test)]

@@ -7,8 +7,10 @@
 //! [`render`] and [`render_with_stats`] do both; [`render_with`] renders a
 //! context a front built itself (one given a saved radiosity solution with
 //! [`RenderContext::with_solution`], or whose solution it then saves with
-//! [`radiosity_solution`] and [`save_solution`]); [`settings::apply_override`]
-//! is `--set key=value`.
+//! [`radiosity_solution`] and [`save_solution`]); [`render_frame`] renders
+//! one frame of an interactive session through the same path, keeping what
+//! does not depend on the camera in a [`FrameCache`] for the next frame;
+//! [`settings::apply_override`] is `--set key=value`.
 //!
 //! ```
 //! use chiaro::scene::{Scene, Material, Object, Geometry, Technique};
@@ -39,7 +41,7 @@ pub use chiaro_io as io;
 pub use limitations::{Limitation, limitations};
 
 pub use chiaro_core::budget::Estimate;
-pub use chiaro_core::context::{RenderContext, RenderStats, Renderer};
+pub use chiaro_core::context::{FrameCache, RenderContext, RenderStats, Renderer};
 pub use chiaro_core::scene::Issue;
 pub use chiaro_core::technique::Description;
 pub use chiaro_radiosity::{RadiositySolution, SolveStats, fingerprint as radiosity_fingerprint};
@@ -144,6 +146,26 @@ pub fn render_with_stats(
     progress: &dyn Progress,
 ) -> Result<(Film, RenderStats)> {
     let ctx = RenderContext::new(scene, settings, progress)?;
+    render_with(&ctx, renderer(settings.technique))
+}
+
+/// One frame of an interactive session: `scene` seen through `camera`,
+/// rendered as [`render_with_stats`] renders it, taking from `cache` what an
+/// earlier frame of the same scene built that does not depend on the camera
+/// (prepared scenes, accelerators, mip-maps, the prefiltered environment,
+/// the radiosity solution; see [`FrameCache`]) and leaving there what this
+/// one builds. The picture is that of [`render_with_stats`] of the scene
+/// with its camera replaced, bit for bit.
+pub fn render_frame<'a>(
+    scene: &'a Scene,
+    settings: &RenderSettings,
+    camera: &scene::Camera,
+    progress: &'a dyn Progress,
+    cache: &mut FrameCache<'a>,
+) -> Result<(Film, RenderStats)> {
+    let ctx = RenderContext::new(scene, settings, progress)?
+        .with_camera(*camera)
+        .with_cache(cache);
     render_with(&ctx, renderer(settings.technique))
 }
 

@@ -930,7 +930,7 @@ fn rule_radiosity_matches_path(m: &mut Matrix, case: &Case, ids: &Ids) {
             && mat.reflect == Vec3::ZERO
             && mat.texture.is_none()
             && mat.normal_map.is_none()
-    }) && case.scene.environment.is_none();
+    });
     if !diffuse {
         m.not_applicable(rule, &case.name, "radiosity, path", "not a diffuse scene");
         return;

@@ -1,14 +1,16 @@
 //! The fidelity suite (ARCHITECTURE.md, "Fidelity suite"): every Khronos
-//! sample model and asset-generator file in the shared assets is rendered
-//! small with phong and path and compared with its expected image or
-//! screenshot by the hue-palette agreement described there. The expected
+//! sample model and asset-generator file, Mitsuba's Cornell box, the McGuire
+//! OBJ scenes and the common test meshes in the shared assets are rendered
+//! small with path, phong and flat and compared with their expected image
+//! or screenshot (files without one: the path render) by the hue-palette
+//! agreement described there. The expected
 //! outcome of every (file, technique) is a row of `tests/data/fidelity.tsv`;
 //! an outcome that differs from its row in either direction fails.
 //!
 //! `CHIARO_FIDELITY_TABLE=write` rewrites the table from this run (keeping
 //! the hand-written reasons of rows whose outcome did not change);
-//! `CHIARO_FIDELITY_SHEETS=DIR` writes contact sheets (phong | path |
-//! expected, one row a file) into DIR.
+//! `CHIARO_FIDELITY_SHEETS=DIR` writes contact sheets (path | phong | flat
+//! | expected, one row a file) into DIR.
 
 use chiaro::scene::{Camera, Technique};
 use chiaro::{NoProgress, Scene, Vec3};
@@ -30,6 +32,9 @@ fn size() -> u32 {
 /// Path tracer samples per pixel: enough for the palette, not for noise-free
 /// pictures.
 const PATH_SPP: u32 = 8;
+/// Samples per pixel of a path render that is the expected image of the
+/// other techniques (files without a picture of their own).
+const OWN_PATH_SPP: u32 = 32;
 /// The palette agreement at or above which a render passes (see
 /// ARCHITECTURE.md for why this value).
 const PASS: f32 = 0.6;
@@ -39,12 +44,28 @@ const GENERATOR_FOV_DEGREES: f32 = 45.836_624;
 
 const TABLE: &str = "tests/data/fidelity.tsv";
 
+/// What a file's renders are compared with.
+#[derive(Debug, Clone, PartialEq)]
+enum Compare {
+    /// Nothing to compare with.
+    Nothing,
+    /// An author's screenshot: another camera, so palettes are compared as
+    /// a whole.
+    Screenshot(PathBuf),
+    /// An expected image made with the camera we render with: compared cell
+    /// by cell.
+    SameCamera(PathBuf),
+    /// No image of the author's (OBJ and PLY files): the path tracer's own
+    /// render is the expected image of the other techniques, cell by cell.
+    OwnPath,
+}
+
 /// One file of the suite.
 struct Entry {
     /// Stable name: the path below the shared assets folder.
     id: String,
     path: PathBuf,
-    reference: Option<PathBuf>,
+    compare: Compare,
     /// The generator's own camera position (looking at the origin, +y up);
     /// `None`: the file's camera or automatic framing.
     camera: Option<Vec3>,
@@ -79,7 +100,9 @@ fn entries(root: &Path) -> Vec<Entry> {
             v.push(Entry {
                 id: rel(root, &folder.join(file)),
                 path: folder.join(file),
-                reference: m["sampleImageName"].as_str().map(|s| folder.join(s)),
+                compare: m["sampleImageName"]
+                    .as_str()
+                    .map_or(Compare::Nothing, |s| Compare::SameCamera(folder.join(s))),
                 camera,
                 must_refuse: min_version_above_2_0(&folder.join(file)),
             });
@@ -100,7 +123,9 @@ fn entries(root: &Path) -> Vec<Entry> {
                     v.push(Entry {
                         id: rel(root, &file),
                         path: file,
-                        reference: reference.clone(),
+                        compare: reference
+                            .clone()
+                            .map_or(Compare::Nothing, Compare::Screenshot),
                         camera: None,
                         must_refuse: None,
                     });
@@ -108,7 +133,44 @@ fn entries(root: &Path) -> Vec<Entry> {
             }
         }
     }
+    // Mitsuba's Cornell box, whose documentation render uses the scene's
+    // own camera.
+    let cbox = root.join("cornell-box");
+    let xml = cbox.join("mitsuba3-cbox/cbox-rgb.xml");
+    if xml.is_file() {
+        v.push(Entry {
+            id: rel(root, &xml),
+            path: xml,
+            compare: Compare::SameCamera(cbox.join("mitsuba3-docs-renders/variants_cbox_rgb.jpg")),
+            camera: None,
+            must_refuse: None,
+        });
+    }
+    // OBJ and PLY scenes and meshes, which come with no picture.
+    for folder in [
+        "mcguire-archive/CornellBox",
+        "mcguire-archive/LostEmpire",
+        "common-3d-test-models",
+    ] {
+        for file in sorted_files(&root.join(folder)) {
+            if matches!(ext(&file).as_str(), "obj" | "ply") && !is_obj_fragment(&file) {
+                v.push(Entry {
+                    id: rel(root, &file),
+                    path: file,
+                    compare: Compare::OwnPath,
+                    camera: None,
+                    must_refuse: None,
+                });
+            }
+        }
+    }
     v
+}
+
+/// An OBJ file that is a piece of another scene rather than a scene (the
+/// McGuire archive's `water.obj` is the water surface of CornellBox-Water).
+fn is_obj_fragment(p: &Path) -> bool {
+    p.file_name().is_some_and(|n| n == "water.obj")
 }
 
 fn ext(p: &Path) -> String {
@@ -432,7 +494,7 @@ fn load(e: &Entry) -> Result<Scene, String> {
             }
         }
         // Reframe for the square image unless the file chose its camera.
-        None if scene.cameras.is_empty() => {
+        None if scene.cameras.is_empty() && !matches!(e.compare, Compare::SameCamera(_)) => {
             scene.camera = frame_scene(&scene, UpAxis::Y, 1.0, None).camera;
         }
         None => {}
@@ -440,60 +502,60 @@ fn load(e: &Entry) -> Result<Scene, String> {
     Ok(scene)
 }
 
-fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Rendered {
+/// A render's sRGB pixels and its foreground (pixels that hit something).
+struct Pixels {
+    srgb: Vec<[u8; 3]>,
+    fg: Vec<bool>,
+}
+
+/// Renders `e` with `tech`; `Err` is the outcome of a file that cannot be
+/// rendered.
+fn render(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Result<Pixels, Rendered> {
     let scene = match scene {
         Ok(s) => s,
-        Err(err) => {
-            return Rendered {
-                outcome: Outcome::Unsupported,
-                score: None,
-                error: err.clone(),
-                ours: None,
-            };
-        }
+        Err(err) => return Err(Rendered::without_picture(Outcome::Unsupported, err.clone())),
     };
     if let Some(v) = &e.must_refuse {
-        return Rendered {
-            outcome: Outcome::KnownWrong,
-            score: None,
-            error: format!("loads, though it requires glTF {v} (asset.minVersion)"),
-            ours: None,
-        };
+        return Err(Rendered::without_picture(
+            Outcome::KnownWrong,
+            format!("loads, though it requires glTF {v} (asset.minVersion)"),
+        ));
     }
     let mut s = scene.render.clone();
     s.technique = tech;
-    s.samples = if tech == Technique::Path { PATH_SPP } else { 1 };
-    s.path.max_depth = s.path.max_depth.min(6);
-    let film = match chiaro::render(scene, &s, &NoProgress) {
-        Ok(f) => f,
-        Err(err) => {
-            return Rendered {
-                outcome: Outcome::Unsupported,
-                score: None,
-                error: err.to_string(),
-                ours: None,
-            };
-        }
+    s.samples = match tech {
+        // The path render that the other techniques are judged by.
+        Technique::Path if e.compare == Compare::OwnPath => OWN_PATH_SPP,
+        Technique::Path => PATH_SPP,
+        _ => 1,
     };
+    s.path.max_depth = s.path.max_depth.min(6);
+    let film = chiaro::render(scene, &s, &NoProgress)
+        .map_err(|err| Rendered::without_picture(Outcome::Unsupported, err.to_string()))?;
     assert!(
         film.color.iter().all(|c| c.is_finite()),
         "{} ({}): a non-finite pixel",
         e.id,
         tech.name()
     );
-    let ours = to_srgb8(&film, s.tonemap, s.exposure);
-    let fg: Vec<bool> = film.depth.iter().map(|d| d.is_finite()).collect();
-    let Some(reference) = &e.reference else {
+    Ok(Pixels {
+        srgb: to_srgb8(&film, s.tonemap, s.exposure),
+        fg: film.depth.iter().map(|d| d.is_finite()).collect(),
+    })
+}
+
+/// The outcome of a render against its expected image (`None`: there is
+/// none).
+fn judge(ours: Pixels, expected: Option<&[[u8; 3]]>, same_camera: bool) -> Rendered {
+    let Some(reference) = expected else {
         return Rendered {
             outcome: Outcome::NoReference,
             score: None,
             error: String::new(),
-            ours: Some(ours),
+            ours: Some(ours.srgb),
         };
     };
-    let reference =
-        reference_pixels(reference, size(), size()).expect("the reference image decodes");
-    let m = measure(&ours, &fg, &reference, e.camera.is_some());
+    let m = measure(&ours.srgb, &ours.fg, reference, same_camera);
     let sc = m.agreement;
     Rendered {
         outcome: if sc >= PASS && m.presence.is_none() {
@@ -503,7 +565,18 @@ fn run(e: &Entry, scene: &Result<Scene, String>, tech: Technique) -> Rendered {
         },
         score: Some(sc),
         error: m.presence.unwrap_or_default(),
-        ours: Some(ours),
+        ours: Some(ours.srgb),
+    }
+}
+
+impl Rendered {
+    fn without_picture(outcome: Outcome, error: String) -> Self {
+        Self {
+            outcome,
+            score: None,
+            error,
+            ours: None,
+        }
     }
 }
 
@@ -542,7 +615,7 @@ fn read_table(path: &Path) -> Table {
 }
 
 #[test]
-fn khronos_files_render_as_their_expected_images() {
+fn shared_models_render_as_their_expected_images() {
     let Some(root) = chiaro_testkit::shared_assets() else {
         return;
     };
@@ -550,7 +623,8 @@ fn khronos_files_render_as_their_expected_images() {
     let expected = read_table(&table_path);
     let write = std::env::var("CHIARO_FIDELITY_TABLE").is_ok_and(|v| v == "write");
     let sheets = std::env::var_os("CHIARO_FIDELITY_SHEETS").map(PathBuf::from);
-    let techs = [Technique::Phong, Technique::Path];
+    // Path first: it is the expected image of files without one.
+    let techs = [Technique::Path, Technique::Phong, Technique::Flat];
 
     let mut rows = String::from(
         "# Fidelity suite: expected outcome per file and technique (crates/chiaro/tests/fidelity.rs).\n\
@@ -569,8 +643,23 @@ fn khronos_files_render_as_their_expected_images() {
     for e in &all {
         let scene = load(e);
         let mut pics = Vec::new();
+        let mut file_rows = Vec::new();
+        let mut expected_image = match &e.compare {
+            Compare::Screenshot(p) | Compare::SameCamera(p) => {
+                Some(reference_pixels(p, size(), size()).expect("the reference image decodes"))
+            }
+            Compare::OwnPath | Compare::Nothing => None,
+        };
+        let same_camera = !matches!(e.compare, Compare::Screenshot(_));
         for &tech in &techs {
-            let r = run(e, &scene, tech);
+            let r = match render(e, &scene, tech) {
+                Ok(ours) if tech == Technique::Path && e.compare == Compare::OwnPath => {
+                    expected_image = Some(ours.srgb.clone());
+                    judge(ours, None, same_camera)
+                }
+                Ok(ours) => judge(ours, expected_image.as_deref(), same_camera),
+                Err(r) => r,
+            };
             let key = (e.id.clone(), tech.name().to_string());
             let (want, recorded, reason) =
                 expected
@@ -618,21 +707,26 @@ fn khronos_files_render_as_their_expected_images() {
             } else {
                 String::new()
             };
-            let _ = writeln!(
-                rows,
-                "{}\t{}\t{}\t{figure}\t{reason}",
-                e.id,
-                tech.name(),
-                r.outcome.name()
-            );
+            file_rows.push((
+                tech,
+                format!(
+                    "{}\t{}\t{}\t{figure}\t{reason}\n",
+                    e.id,
+                    tech.name(),
+                    r.outcome.name()
+                ),
+            ));
             pics.push(r.ours);
         }
+        // The table lists phong, path, flat (the order it had before flat).
+        file_rows.sort_by_key(|(t, _)| {
+            [Technique::Phong, Technique::Path, Technique::Flat]
+                .iter()
+                .position(|x| x == t)
+        });
+        rows.extend(file_rows.into_iter().map(|(_, line)| line));
         if sheets.is_some() {
-            let reference = e
-                .reference
-                .as_ref()
-                .and_then(|p| reference_pixels(p, size(), size()).ok());
-            pics.push(reference);
+            pics.push(expected_image);
             sheet_rows.push((e.id.clone(), pics));
         }
     }
@@ -670,11 +764,11 @@ fn khronos_files_render_as_their_expected_images() {
     );
 }
 
-/// One row of a contact sheet: the file and its pictures (phong, path,
-/// expected), `None` where there is none.
+/// One row of a contact sheet: the file and its pictures (path, phong,
+/// flat, expected), `None` where there is none.
 type SheetRow = (String, Vec<Option<Vec<[u8; 3]>>>);
 
-/// Contact sheets of 12 files each: phong | path | expected per row, grey
+/// Contact sheets of 12 files each: path | phong | flat | expected per row, grey
 /// where a picture is missing; the index of each row's file goes to
 /// `sheets.txt` beside them.
 fn write_sheets(dir: &Path, rows: &[SheetRow]) {
@@ -683,7 +777,8 @@ fn write_sheets(dir: &Path, rows: &[SheetRow]) {
     let gap = 2;
     let mut index = String::new();
     for (page, chunk) in rows.chunks(12).enumerate() {
-        let w = 3 * s + 4 * gap;
+        let columns = chunk.iter().map(|r| r.1.len()).max().unwrap_or(0) as u32;
+        let w = columns * s + (columns + 1) * gap;
         let h = chunk.len() as u32 * (s + gap) + gap;
         let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([40, 40, 40]));
         for (r, (id, pics)) in chunk.iter().enumerate() {

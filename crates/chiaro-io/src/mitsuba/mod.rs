@@ -85,6 +85,8 @@ fn build(doc: &Document, path: &Path) -> Result<Loaded> {
                 b.integrator(el)?;
             }
             "shape" => b.shape(el, chiaro_core::Mat4::IDENTITY)?,
+            // An area emitter with an id is declared for a shape's `<ref>`.
+            "emitter" if el.attr("id").is_some() && el.attr("type") == Some("area") => {}
             "emitter" => b.emitter(el)?,
             // Declared for `<ref>`; built where they are referenced.
             "bsdf" | "texture" => b.check_plugin(el)?,

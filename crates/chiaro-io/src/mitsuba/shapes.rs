@@ -13,7 +13,7 @@ use chiaro_core::{Mat4, Vec2, Vec3};
 use std::f32::consts::TAU;
 
 /// Segments around a meshed disk or cylinder.
-const SEGMENTS: u32 = 64;
+pub const SEGMENTS: u32 = 64;
 
 impl Builder<'_> {
     /// A `<shape>` placed with `world_from_parent` (identity at top level,
@@ -66,17 +66,22 @@ impl Builder<'_> {
             _ => {}
         }
         let m = parent * p.transform("to_world")?;
+        // A `<ref>` names the BSDF or an area emitter declared at the top.
+        let (mut emitter_refs, mut bsdf_refs) = (Vec::new(), Vec::new());
+        for r in p.children("ref") {
+            if self.lookup(r)?.tag == "emitter" {
+                emitter_refs.push(self.lookup(r)?);
+            } else {
+                bsdf_refs.push(r);
+            }
+        }
         // The BSDF: nested, referenced, or Mitsuba's default diffuse 0.5.
-        let bsdf_el = p
-            .children("bsdf")
-            .into_iter()
-            .chain(p.children("ref"))
-            .next();
+        let bsdf_el = p.children("bsdf").into_iter().chain(bsdf_refs).next();
         let (mut material, built) = match bsdf_el {
             Some(b) => self.material_of(b)?,
             None => self.default_material(),
         };
-        if let Some(e) = p.children("emitter").first() {
+        if let Some(e) = p.children("emitter").into_iter().chain(emitter_refs).next() {
             let l = self.area_radiance(e)?;
             let mut em: Material = self.scene.materials[material.index()].clone();
             em.emission = l;

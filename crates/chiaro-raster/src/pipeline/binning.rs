@@ -106,9 +106,11 @@ pub(crate) fn crop_windows(settings: &RenderSettings, spp: u32) -> (Rect, Rect, 
 
 /// Step 2: setup and binning over fixed chunks of triangles (deterministic
 /// order), into the tiles that meet the crop window: per chunk, the bins.
+/// `hidden[o]`: no camera ray reaches the back faces of object `o` (empty
+/// unless `cull_backfaces`).
 pub(crate) fn bin_triangles(
     ps: &PreparedScene<'_>,
-    settings: &RenderSettings,
+    hidden: &[bool],
     verts: &[ScreenVertex],
     binner: &Binner,
     vp_cull: &Viewport,
@@ -123,13 +125,6 @@ pub(crate) fn bin_triangles(
         // The backs the ray techniques' camera rays skip too (`Sidedness::Culled`).
         .map(|m| !m.sidedness.eye_sees_back())
         .collect();
-    // `cull_backfaces`: also the backs no camera ray reaches (a speed option).
-    let hidden = if settings.cull_backfaces {
-        let aspect = settings.width.max(1) as f32 / settings.height.max(1) as f32;
-        super::closed::hidden_backs(ps, &scene.camera, aspect)
-    } else {
-        Vec::new()
-    };
     let nt = ps.triangles.len();
     let chunk = nt.div_ceil(256).max(4096);
     if crop.x0 >= crop.x1 || crop.y0 >= crop.y1 {

@@ -10,15 +10,17 @@ use chiaro_core::scene::{AlphaMode, Camera};
 use glam::Vec3;
 use std::collections::HashMap;
 
-/// Per object of `ps.scene`: true when the eye of `camera` (with image
-/// aspect `aspect`, width over height) cannot see any of its back faces.
-/// That holds when the object's triangles form a closed surface (each edge,
-/// keyed by its end positions to a millionth of the object's size, used
-/// once in each direction), wound
-/// outwards (positive signed volume), every material opaque (no
-/// transmission, no alpha), and the eye and the near plane's rectangle
-/// outside its bounding box.
-pub(crate) fn hidden_backs(ps: &PreparedScene<'_>, camera: &Camera, aspect: f32) -> Vec<bool> {
+/// Per object of a prepared scene: the bounds of its triangles when they
+/// form a closed surface (each edge, keyed by its end positions to a
+/// millionth of the object's size, used once in each direction), wound
+/// outwards (positive signed volume), with every material opaque (no
+/// transmission, no alpha); `None` otherwise. What [`hidden_backs`] tests
+/// the eye against; it depends on the prepared scene alone, so a render
+/// context keeps it between frames.
+pub(crate) struct ClosedObjects(Vec<Option<(Vec3, Vec3)>>);
+
+/// The [`ClosedObjects`] of `ps`.
+pub(crate) fn closed_objects(ps: &PreparedScene<'_>) -> ClosedObjects {
     let n = ps.scene.objects.len();
     // The triangles of each object.
     let mut tris: Vec<Vec<u32>> = vec![Vec::new(); n];
@@ -27,37 +29,60 @@ pub(crate) fn hidden_backs(ps: &PreparedScene<'_>, camera: &Camera, aspect: f32)
             v.push(t as u32);
         }
     }
+    ClosedObjects(
+        tris.iter()
+            .map(|ts| {
+                if ts.is_empty() {
+                    None
+                } else {
+                    closed_opaque_bounds(ps, ts)
+                }
+            })
+            .collect(),
+    )
+}
+
+/// Per object of `closed`: true when the eye of `camera` (with image
+/// aspect `aspect`, width over height) cannot see any of its back faces.
+/// That holds when the object is closed, outward-wound and opaque
+/// ([`ClosedObjects`]) and the eye and the near plane's rectangle lie
+/// outside its bounding box.
+pub(crate) fn hidden_backs(closed: &ClosedObjects, camera: &Camera, aspect: f32) -> Vec<bool> {
     // Every point of the near plane's rectangle lies within this distance
     // of the eye.
     let tan = (camera.fov_y_degrees.to_radians() * 0.5).tan();
     let reach = camera.near * (1.0 + tan * tan * (1.0 + aspect * aspect)).sqrt();
-    tris.iter()
-        .map(|ts| !ts.is_empty() && closed_opaque_outside(ps, ts, camera.eye, reach))
+    closed
+        .0
+        .iter()
+        .map(|b| b.is_some_and(|(lo, hi)| outside(lo, hi, camera.eye, reach)))
         .collect()
 }
 
-fn closed_opaque_outside(ps: &PreparedScene<'_>, ts: &[u32], eye: Vec3, reach: f32) -> bool {
+/// Whether the eye and the near plane (within `reach` of it) lie outside
+/// the box `lo..hi`, with a margin for rounding; false for NaN bounds.
+fn outside(lo: Vec3, hi: Vec3, eye: Vec3, reach: f32) -> bool {
+    let outside = (lo - eye).max(eye - hi).max(Vec3::ZERO).length();
+    outside > reach * 1.01 + 1e-4 * (hi - lo).max_element()
+}
+
+/// The bounds of triangles `ts` when they are opaque and closed and
+/// outward-wound, see [`ClosedObjects`].
+fn closed_opaque_bounds(ps: &PreparedScene<'_>, ts: &[u32]) -> Option<(Vec3, Vec3)> {
     let opaque = |t: u32| {
         let m = ps.material(ps.tri_material[t as usize]);
         m.transmit == Vec3::ZERO && m.alpha_mode == AlphaMode::Opaque && m.alpha >= 1.0
     };
     if !ts.iter().all(|&t| opaque(t)) {
-        return false;
+        return None;
     }
     let corners = |t: u32| ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
-    // The eye and the near plane outside the bounds (with a margin for rounding).
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     for &t in ts {
         for p in corners(t) {
             lo = lo.min(p);
             hi = hi.max(p);
         }
-    }
-    let outside = (lo - eye).max(eye - hi).max(Vec3::ZERO).length();
-    let clear = outside > reach * 1.01 + 1e-4 * (hi - lo).max_element();
-    if !clear {
-        // (NaN bounds land here too.)
-        return false;
     }
     // Closed and consistently wound: each directed edge once, and its reverse.
     // Positions within a millionth of the object's size are one vertex (a
@@ -82,7 +107,7 @@ fn closed_opaque_outside(ps: &PreparedScene<'_>, ts: &[u32], eye: Vec3, reach: f
         }
     }
     // Each undirected edge counted once forwards (1) and once backwards (256).
-    volume > 0.0 && edges.values().all(|&c| c == 1 + (1 << 8))
+    (volume > 0.0 && edges.values().all(|&c| c == 1 + (1 << 8))).then_some((lo, hi))
 }
 
 #[cfg(test)]
@@ -120,7 +145,7 @@ mod tests {
 
     fn hidden(s: &Scene) -> bool {
         let ps = PreparedScene::new(s, PrepareOptions::default());
-        hidden_backs(&ps, &s.camera, 4.0 / 3.0)[0]
+        hidden_backs(&closed_objects(&ps), &s.camera, 4.0 / 3.0)[0]
     }
 
     #[test]
@@ -143,7 +168,7 @@ mod tests {
         let s = chiaro_testkit::scenes::white_sphere();
         let ps = PreparedScene::new(&s, PrepareOptions::default());
         assert!(!ps.triangles.is_empty());
-        assert!(hidden_backs(&ps, &s.camera, 1.0)[0]);
+        assert!(hidden_backs(&closed_objects(&ps), &s.camera, 1.0)[0]);
     }
 
     #[test]

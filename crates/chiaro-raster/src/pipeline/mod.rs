@@ -87,11 +87,12 @@ use crate::shadows::volumes::bin_volumes;
 #[cfg(test)]
 pub(crate) use crate::technique::test_support::*;
 use chiaro_core::accel::alpha::Coverage;
+use chiaro_core::context::Derived;
 use chiaro_core::error::CoreError;
 use chiaro_core::film::{Film, tiles};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::progress::Progress;
-use chiaro_core::scene::{RenderSettings, ShadeMode};
+use chiaro_core::scene::{Camera, RenderSettings, ShadeMode};
 use chiaro_core::shading::EmitterGroup;
 use std::sync::atomic::AtomicU64;
 
@@ -122,19 +123,35 @@ pub struct RasterOptions {
     pub volume_counting: VolumeCounting,
 }
 
+/// What one frame of the scan converter sees the scene with: the validated
+/// settings and the camera (the render context's, not the scene's).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Frame<'f> {
+    pub(crate) settings: &'f RenderSettings,
+    pub(crate) camera: &'f Camera,
+    /// What the frame derives from the prepared scene alone, kept between
+    /// frames by the render context.
+    pub(crate) derived: &'f Derived,
+}
+
 /// Scan converts the prepared scene (spheres tessellated) with the default
 /// shading `mode` into `film` (see [`crate::ScanConversion::render_into`]),
 /// counting the work into `work`. The settings were validated by the
 /// render context.
 pub(crate) fn render_work(
     ps: &PreparedScene<'_>,
-    settings: &RenderSettings,
+    frame: Frame<'_>,
     mode: ShadeMode,
     options: &RasterOptions,
     progress: &dyn Progress,
     film: &mut Film,
     work: &RasterWork,
 ) -> Result<(), CoreError> {
+    let Frame {
+        settings,
+        camera,
+        derived,
+    } = frame;
     let n = settings.width as usize * settings.height as usize;
     if film.width != settings.width
         || film.height != settings.height
@@ -143,14 +160,13 @@ pub(crate) fn render_work(
         *film = Film::new(settings.width, settings.height);
     }
     progress.begin("shadows", 1);
-    let mut shadows = Shadows::new(ps, settings, progress)?;
+    let mut shadows = Shadows::new(ps, frame, progress)?;
     progress.advance(1);
     let scene = ps.scene;
     let (w, h) = (settings.width, settings.height);
     let spp = settings.samples.clamp(1, 64);
     let offsets = sample_offsets(spp);
-    let cam = &scene.camera;
-    let clip_from_world = cam.projection_matrix(w as f32 / h as f32) * cam.view_matrix();
+    let clip_from_world = camera.projection_matrix(w as f32 / h as f32) * camera.view_matrix();
 
     // 1. Vertex: the scene's vertices to clip space, snapped and keyed.
     progress.begin("vertex", 1);
@@ -163,6 +179,13 @@ pub(crate) fn render_work(
     // 2. Binning: setup of the screen triangles, binned to the tiles that
     // meet the crop window; the shadow-volume polygons likewise.
     let (out_crop, crop, tent) = binning::crop_windows(settings, spp);
+    // `cull_backfaces`: also the backs no camera ray reaches (a speed option).
+    let hidden = if settings.cull_backfaces {
+        let closed = derived.get_or_build(|| closed::closed_objects(ps));
+        closed::hidden_backs(&closed, camera, w.max(1) as f32 / h.max(1) as f32)
+    } else {
+        Vec::new()
+    };
     let binner = Binner {
         crop,
         tiles_x,
@@ -171,7 +194,7 @@ pub(crate) fn render_work(
     progress.begin("setup", 1);
     let chunks = binning::bin_triangles(
         ps,
-        settings,
+        &hidden,
         &verts,
         &binner,
         &vp_cull,
@@ -188,7 +211,7 @@ pub(crate) fn render_work(
     // MASK: a fragment of a masked triangle whose alpha (at the sample's
     // point of the triangle) is below the cutoff is discarded.
     let coverage = Coverage::new(ps);
-    let sample_rays = Rays::new(scene, w, h);
+    let sample_rays = Rays::new(camera, w, h);
     let (vol_bins, nl) = bin_volumes(
         &mut shadows,
         ps,
@@ -227,7 +250,7 @@ pub(crate) fn render_work(
     // 4. Shading: Gouraud's vertex lighting of the visible triangles (flat
     // polygons are lit with their `TriData`), then every visible sample.
     let emitters = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
-    let ctx = Ctx::new(ps, settings, mode, &emitters, shadows, class);
+    let ctx = Ctx::new(ps, frame, mode, &emitters, shadows, class);
     progress.begin("poly", 1);
     let poly = poly_shading(&ctx, &vis);
     progress.advance(1);

@@ -5,6 +5,7 @@
 //! [`crate::gouraud`] and [`crate::phong`].
 
 use crate::gouraud::PolyShading;
+use crate::pipeline::Frame;
 use crate::pipeline::NONE;
 use crate::pipeline::triangles::TriData;
 use crate::pipeline::vertex::Rays;
@@ -700,12 +701,17 @@ impl<'a, 's> Ctx<'a, 's> {
     /// drawn.
     pub(crate) fn new(
         ps: &'a PreparedScene<'s>,
-        settings: &'a RenderSettings,
+        frame: Frame<'a>,
         mode: ShadeMode,
         emitters: &'a Option<EmitterGroup>,
         shadows: Shadows,
         class: Vec<Class>,
     ) -> Self {
+        let Frame {
+            settings,
+            camera,
+            derived,
+        } = frame;
         let scene = ps.scene;
         let (w, h) = (settings.width, settings.height);
         let object_mode: Vec<ShadeMode> = scene
@@ -716,11 +722,11 @@ impl<'a, 's> Ctx<'a, 's> {
         let group_rays = (emitters.is_some()
             && !matches!(shadows, Shadows::None | Shadows::Ray(_))
             || matches!(&shadows, Shadows::Volume(v) if v.by_ray.contains(&true)))
-        .then(|| RayShadows::new(ps));
+        .then(|| RayShadows::kept(ps, derived));
         Ctx {
             ps,
             settings,
-            rays: Rays::new(scene, w, h),
+            rays: Rays::new(camera, w, h),
             lighting: LocalLighting {
                 lights: &ps.lights,
                 area_samples: settings.light_samples.max(1),

@@ -459,7 +459,7 @@ fn environment_is_background_and_reflection() {
     });
     let st = settings(Technique::Phong, 24, 24);
     let plain = render(&s, &st, &NoProgress).expect("render");
-    let rays = Rays::new(&s, 24, 24);
+    let rays = Rays::new(&s.camera, 24, 24);
     for (i, d) in plain.depth.iter().enumerate() {
         if !d.is_finite() {
             let dir = rays.dir((i % 24) as f32 + 0.5, (i / 24) as f32 + 0.5);
@@ -624,7 +624,7 @@ fn test_ctx<'a, 's>(
     Ctx {
         ps,
         settings: st,
-        rays: Rays::new(s, st.width, st.height),
+        rays: Rays::new(&s.camera, st.width, st.height),
         lighting: LocalLighting {
             lights: &ps.lights,
             area_samples: 1,
@@ -859,7 +859,13 @@ fn rendering_into_a_used_film_gives_the_fresh_picture() {
         let opts = RasterOptions::default();
         let fresh = render_prepared_with(&ps, &st, mode, &opts, &NoProgress).expect("fresh");
         let work = RasterWork::default();
-        render_work(&ps, &st, mode, &opts, &NoProgress, &mut film, &work).expect("into");
+        let derived = chiaro_core::context::Derived::default();
+        let frame = Frame {
+            settings: &st,
+            camera: &ps.scene.camera,
+            derived: &derived,
+        };
+        render_work(&ps, frame, mode, &opts, &NoProgress, &mut film, &work).expect("into");
         assert!(film == fresh, "{technique:?} {crop:?}");
     }
 }

@@ -8,7 +8,7 @@ use glam::Mat4;
 use rayon::prelude::*;
 
 use crate::pipeline::exact;
-use chiaro_core::scene::Scene;
+use chiaro_core::scene::Camera;
 use glam::{Vec3, Vec3A};
 
 /// A vertex of the scene on the screen, when it is inside the clip volume
@@ -37,8 +37,7 @@ pub(crate) struct Rays {
 }
 
 impl Rays {
-    pub(crate) fn new(scene: &Scene, width: u32, height: u32) -> Self {
-        let cam = &scene.camera;
+    pub(crate) fn new(cam: &Camera, width: u32, height: u32) -> Self {
         let f = cam.frame();
         Self {
             eye: cam.eye,

@@ -40,6 +40,7 @@ pub mod volumes;
 #[cfg(test)]
 mod tests;
 
+use crate::pipeline::Frame;
 use crate::shadows::maps::ShadowMaps;
 use crate::shadows::rays::RayShadows;
 use crate::shadows::volumes::VolumeShadows;
@@ -264,9 +265,14 @@ impl Shadows {
     /// `progress.warning`.
     pub(crate) fn new(
         ps: &PreparedScene<'_>,
-        settings: &RenderSettings,
+        frame: Frame<'_>,
         progress: &dyn chiaro_core::progress::Progress,
     ) -> Result<Self, chiaro_core::error::CoreError> {
+        let Frame {
+            settings,
+            camera,
+            derived,
+        } = frame;
         let group = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
         if let Some(w) = group_warning(settings.shadows, group.as_ref()) {
             progress.warning(&w);
@@ -274,7 +280,7 @@ impl Shadows {
         let exact = exact_lights(ps, group.as_ref());
         Ok(match settings.shadows {
             ShadowMethod::None => Shadows::None,
-            ShadowMethod::Ray => Shadows::Ray(RayShadows::new(ps)),
+            ShadowMethod::Ray => Shadows::Ray(RayShadows::kept(ps, derived)),
             ShadowMethod::Map => {
                 let maps = ShadowMaps::new(
                     ps,
@@ -294,22 +300,22 @@ impl Shadows {
             ShadowMethod::Volume => Shadows::Volume(VolumeShadows {
                 slot: vec![None; ps.lights.len()],
                 by_ray: vec![false; ps.lights.len()],
-                transparent: RayShadows::transparent_only(ps),
+                transparent: RayShadows::transparent_only(ps, derived),
             }),
             ShadowMethod::Object => Shadows::Object {
                 lights: object_shadows_per_light(ps, &exact)?,
-                transparent: RayShadows::transparent_only(ps),
+                transparent: RayShadows::transparent_only(ps, derived),
             },
             ShadowMethod::Scanline => Shadows::Scanline {
                 lines: crate::shadows::scanline::scanline_visibility_per_light(
                     ps,
-                    &ps.scene.camera,
+                    camera,
                     settings.width,
                     settings.height,
                     &exact,
                 )?,
                 fallback: scanline_fallbacks(ps, settings)?,
-                transparent: RayShadows::transparent_only(ps),
+                transparent: RayShadows::transparent_only(ps, derived),
             },
         })
     }

@@ -144,7 +144,7 @@ pub enum Kernel {
 /// estimation (`env_sampling`) or reached by BSDF sampling alone (the
 /// tests' baseline for its variance). Returns the film and the rays traced.
 fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> Result<(Film, u64)> {
-    let (scene, settings, progress) = (ctx.scene(), ctx.settings(), ctx.progress());
+    let (settings, progress) = (ctx.settings(), ctx.progress());
     progress.begin("prepare", 1);
     let prepared = ctx.analytic();
     let accel = ctx.analytic_accel();
@@ -156,7 +156,7 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
     let rays = AtomicU64::new(0);
     let (w, h) = (settings.width, settings.height);
     let spp = settings.samples.max(1);
-    let cam = &scene.camera;
+    let cam = ctx.camera();
     // The camera's rays, its frame and field of view computed once.
     let pixel_rays = cam.pixel_rays(w, h);
     let film = render_tiles(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {

@@ -196,6 +196,8 @@ pub struct Tracer<'s> {
     centre_light_samples: bool,
     /// The camera's ray directions at the settings' image size.
     pixel_rays: PixelRays,
+    /// The camera's eye (the context's camera).
+    eye: Vec3,
 }
 
 impl std::fmt::Debug for Tracer<'_> {
@@ -225,10 +227,10 @@ impl<'s> Tracer<'s> {
             casters,
             emitters,
             centre_light_samples: settings.aa != AaMode::Adaptive && settings.samples <= 1,
-            pixel_rays: prepared
-                .scene
-                .camera
+            pixel_rays: ctx
+                .camera()
                 .pixel_rays(settings.width.max(1), settings.height.max(1)),
+            eye: ctx.camera().eye,
         }
     }
 
@@ -400,7 +402,7 @@ impl<'s> Tracer<'s> {
     pub fn trace_camera(&self, film: Vec2, rng: Rng, rays: &mut u64) -> PrimarySample {
         let scene = self.prepared.scene;
         let pr = &self.pixel_rays;
-        let ray = Ray::new(scene.camera.eye, pr.direction(film.x, film.y));
+        let ray = Ray::new(self.eye, pr.direction(film.x, film.y));
         // The rays through the neighbouring pixels, for texture filtering.
         let differentials = (!scene.textures.is_empty()).then(|| RayDifferentials {
             origin: ray.origin,
