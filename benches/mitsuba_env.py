@@ -1,97 +1,43 @@
 #!/usr/bin/env python3
 """Mitsuba 3 vs chiaro's path tracer on an environment-lit glossy scene
-(benches/env_spheres.toml, built here identically in Mitsuba).
+(benches/env_spheres.toml; Mitsuba's scene is that file through
+`chiaro export`, benches/chiaro_export.py).
 
-usage: mitsuba_env.py render VARIANT SPP SEED OUT.npy [REPEATS] [--raw-map]
+usage: mitsuba_env.py render VARIANT SPP SEED OUT.npy [REPEATS]
        mitsuba_env.py compare REF.npy IMG.npy [IMG.npy ...]
 
-`render` renders the scene with VARIANT (scalar_rgb | llvm_ad_rgb), path
-tracer with max_depth 8 (chiaro's 7 scattering vertices), Russian roulette
-from depth 5, box pixel filter, and writes the image as .npy (float32,
-H x W x 3, linear RGB). `compare` prints, for each image against REF, the
-relative difference of the whole image's mean per channel and of the mean
-of each region (background, floor, the three spheres: fixed pixel boxes at
-256x192), and the RMSE.
+`render` exports benches/env_spheres.toml to Mitsuba XML with `chiaro
+export` (build chiaro-cli in release first, or set $CHIARO) and renders it
+with VARIANT (scalar_rgb | llvm_ad_rgb), path tracer with max_depth 8
+(chiaro's 7 scattering vertices), Russian roulette from depth 5, box pixel
+filter, and writes the image as .npy (float32, H x W x 3, linear RGB).
+`compare` prints, for each image against REF, the relative difference of
+the whole image's mean per channel and of the mean of each region
+(background, floor, the three spheres: fixed pixel boxes at 256x192), and
+the RMSE.
 
-The same scene: chiaro's lat-long lookup puts -z at u = 0.5, Mitsuba's
-`envmap` puts -z at u = 0, so Mitsuba's map is turned 180 degrees about
-+y. Both place texel column i at u = (i + 0.5) / W, but Mitsuba places
-row j at v = j / (H - 1) (rows span the poles) where chiaro places it at
-(j + 0.5) / H: given the file itself, Mitsuba's rows are 128/127 taller
-and its lamps about 0.8 % brighter. So Mitsuba gets the map resampled to
+What the exporter does for this scene: chiaro's lat-long lookup puts -z at
+u = 0.5, Mitsuba's `envmap` puts -z at u = 0, so Mitsuba's map is turned
+180 degrees about +y. Both place texel column i at u = (i + 0.5) / W, but
+Mitsuba places row j at v = j / (H - 1) (rows span the poles) where chiaro
+places it at (j + 0.5) / H, so the exporter writes the map resampled to
 2H + 1 rows at v = j / 2H, each row chiaro's bilinear lookup there (its
 knots are every other row, so Mitsuba's linear interpolation between the
-rows is chiaro's lookup exactly; `--raw-map` passes the file instead). chiaro's quad (corner, edge_u, edge_v) facing +y is Mitsuba's
-`rectangle` ([-1, 1]^2 facing +z) scaled by 4 and turned -90 degrees about
-x. The metals: chiaro's Torrance-Sparrow with F0 = 1 (Schlick's Fresnel is
-then 1) and alpha = roughness, Mitsuba's `roughconductor` with
-`material = "none"` (Fresnel 1), GGX, separable Smith masking in both.
+rows is chiaro's lookup exactly). The floor is a PLY mesh of chiaro's quad.
+The metals: chiaro's Torrance-Sparrow with F0 = 1 (Schlick's Fresnel is
+then 1) and alpha = roughness, Mitsuba's `roughconductor` with eta 0, k 1
+(Mitsuba's `none`, Fresnel 1), GGX, separable Smith masking in both.
 """
 import os
 import sys
 import time
 import numpy as np
 
+import chiaro_export
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-HDR = os.path.join(HERE, "..", "crates", "chiaro-io", "assets", "studio_small_03_256x128.hdr")
+SCENE = os.path.join(HERE, "env_spheres.toml")
 W, H = 256, 192
-RAW_MAP = "--raw-map" in sys.argv
-if RAW_MAP:
-    sys.argv.remove("--raw-map")
-
-
-def chiaro_rows(mi):
-    """The HDR as chiaro looks it up, resampled to 2H + 1 rows at
-    v = j / 2H for Mitsuba's row convention: chiaro's bilinear lookup in v
-    (y = v H - 0.5, rows wrapped by the image's repeat mode), columns kept."""
-    src = np.array(mi.Bitmap(HDR).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, False))
-    h = src.shape[0]
-    out = []
-    for j in range(2 * h + 1):
-        y = j / (2 * h) * h - 0.5
-        y0 = int(np.floor(y))
-        f = y - y0
-        out.append((1 - f) * src[y0 % h] + f * src[(y0 + 1) % h])
-    return mi.Bitmap(np.ascontiguousarray(np.array(out, dtype=np.float32)))
-
-
-def scene_dict(mi, spp):
-    T = mi.ScalarTransform4f
-    white_metal = lambda alpha: {
-        "type": "roughconductor",
-        "material": "none",
-        "distribution": "ggx",
-        "alpha": alpha,
-    }
-    return {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 8, "rr_depth": 5},
-        "sensor": {
-            "type": "perspective",
-            "fov": 40.0,
-            "fov_axis": "y",
-            "to_world": T().look_at(origin=[0, 1.6, 4.5], target=[0, 0.5, 0], up=[0, 1, 0]),
-            "sampler": {"type": "independent", "sample_count": spp},
-            "film": {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"}},
-        },
-        "env": {
-            "type": "envmap",
-            **({"filename": HDR} if RAW_MAP else {"bitmap": chiaro_rows(mi)}),
-            "scale": 1.0,
-            "to_world": T().rotate([0, 1, 0], 180),
-        },
-        "floor": {
-            "type": "rectangle",
-            "to_world": T().rotate([1, 0, 0], -90).scale([4, 4, 1]),
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.5, 0.5]}},
-        },
-        "matte": {
-            "type": "sphere", "center": [-1.2, 0.5, 0], "radius": 0.5,
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.3, 0.2]}},
-        },
-        "rough": {"type": "sphere", "center": [0, 0.5, 0], "radius": 0.5, "bsdf": white_metal(0.3)},
-        "glossy": {"type": "sphere", "center": [1.2, 0.5, 0], "radius": 0.5, "bsdf": white_metal(0.1)},
-    }
 
 
 def render(variant, spp, seed, out, repeats):
@@ -99,7 +45,9 @@ def render(variant, spp, seed, out, repeats):
     import drjit as dr
 
     mi.set_variant(variant)
-    scene = mi.load_dict(scene_dict(mi, spp))
+    # The scene chiaro renders, through `chiaro export` (the sample count
+    # is the render call's).
+    scene = chiaro_export.load(mi, SCENE)
     img = None
     for i in range(repeats):
         t0 = time.perf_counter()

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Mitsuba 3 vs chiaro's path tracer on a glass-and-mirror Cornell box
-(benches/glass_cbox.toml, built here identically in Mitsuba).
+(benches/glass_cbox.toml; Mitsuba's scene is that file through
+`chiaro export`, benches/chiaro_export.py).
 
 usage: mitsuba_glass.py scene OUT.toml
        mitsuba_glass.py render VARIANT SPP SEED OUT.npy [REPEATS] [--no-glass] [--no-mirror] [--no-point]
@@ -20,7 +21,9 @@ vertices), Russian roulette from depth 5, box pixel filter, 256x256.
 
 `scene` writes chiaro's scene file: scenes/mitsuba-cbox.toml (the walls,
 camera and emitter verbatim) without its boxes, plus the spheres and the
-point light below. `render` renders with VARIANT (scalar_rgb |
+point light below. `render` exports benches/glass_cbox.toml to Mitsuba
+XML with `chiaro export` (build chiaro-cli in release first, or set
+$CHIARO) and renders it with VARIANT (scalar_rgb |
 llvm_ad_rgb), prints `render[i]=SECONDS s  M Msamples/s` per repeat (the
 render call only, as mi.render + dr.eval + sync) and writes the last image
 as .npy (float32, H x W x 3, linear RGB); the --no-* flags drop one part
@@ -33,13 +36,15 @@ The point light's caustic under the glass sphere (light -> glass -> glass
 unidirectional path tracer samples it, and both miss it alike. The
 ceiling emitter's caustic is found by BSDF sampling in both.
 """
-import math
 import os
 import sys
 import time
 import numpy as np
 
+import chiaro_export
+
 HERE = os.path.dirname(os.path.abspath(__file__))
+SCENE = os.path.join(HERE, "glass_cbox.toml")
 CBOX = os.path.join(HERE, "..", "scenes", "mitsuba-cbox.toml")
 W = H = 256
 MITSUBA_DEPTH = 64  # path segments; chiaro's max_depth is one less
@@ -107,33 +112,16 @@ def chiaro_scene(out):
         f.write(text)
 
 
-def scene_dict(mi, spp):
-    d = mi.cornell_box()
-    del d["small-box"], d["large-box"]
-    d["integrator"] = {"type": "path", "max_depth": MITSUBA_DEPTH, "rr_depth": RR_DEPTH}
-    d["sensor"]["sampler"]["sample_count"] = spp
-    d["sensor"]["film"]["rfilter"] = {"type": "box"}
-    if not FLAGS["--no-glass"]:
-        d["glass-sphere"] = {
-            "type": "sphere", "center": GLASS[0], "radius": GLASS[1],
-            "bsdf": {"type": "dielectric", "int_ior": IOR, "ext_ior": 1.0},
-        }
-    if not FLAGS["--no-mirror"]:
-        d["mirror-sphere"] = {
-            "type": "sphere", "center": MIRROR[0], "radius": MIRROR[1],
-            "bsdf": {"type": "conductor", "material": "none"},
-        }
-    if not FLAGS["--no-point"]:
-        d["point-light"] = {"type": "point", "position": POINT, "intensity": math.pi * POINT_IP}
-    return d
-
-
 def render(variant, spp, seed, out, repeats):
     import mitsuba as mi
     import drjit as dr
 
     mi.set_variant(variant)
-    scene = mi.load_dict(scene_dict(mi, spp))
+    # The scene chiaro renders, through `chiaro export` (the sample count
+    # is the render call's).
+    drop = [name for flag, name in (("--no-glass", "glass-sphere"), ("--no-mirror", "mirror-sphere"),
+                                     ("--no-point", "point")) if FLAGS[flag]]
+    scene = chiaro_export.load(mi, SCENE, drop)
     img = None
     for i in range(repeats):
         t0 = time.perf_counter()

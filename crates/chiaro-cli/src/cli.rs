@@ -25,6 +25,7 @@ const EXAMPLES: &str = "Examples:
   chiaro info --system
   chiaro render scene.xml -D spp=64 -o mitsuba.exr
   chiaro render scenes/cornell-box.pbrt --technique path -o pbrt.png
+  chiaro export scenes/cornell-box.toml --to mitsuba -o cbox.xml
   chiaro compare scenes/cornell-box.toml --techniques phong,whitted --reference path:64 -o sheet.png --report report.json";
 
 /// The subcommands.
@@ -64,6 +65,22 @@ pub enum Command {
     /// Render a scene with several techniques and measure each against a
     /// reference: writes a contact sheet, prints a Markdown table.
     Compare(CompareArgs),
+    /// Write a scene for another renderer (Mitsuba 3 XML, meshes as PLY
+    /// files beside it; or pbrt-v4): what maps exactly, refusing the rest.
+    Export {
+        /// The scene file.
+        scene: PathBuf,
+        /// `mitsuba` or `pbrt` (default: from the output's extension,
+        /// .xml or .pbrt).
+        #[arg(long)]
+        to: Option<String>,
+        /// The scene file to write.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// A Mitsuba scene parameter of the input (`-D spp=64`).
+        #[arg(short = 'D', value_name = "NAME=VALUE")]
+        define: Vec<String>,
+    },
 }
 
 /// Palette output modes (8-bit indexed PNG).

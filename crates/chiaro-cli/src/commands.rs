@@ -330,6 +330,35 @@ pub fn info_system() {
 }
 
 /// `chiaro info`.
+/// `chiaro export`: writes `path`'s scene as `to` (or the format
+/// `output`'s extension names), prints the files written and every
+/// approximation; a refusal names the object and feature, writing nothing.
+pub fn export(path: &Path, to: Option<&str>, output: &Path, defines: &[String]) -> Result<()> {
+    use chiaro::io::export::Format;
+    let format: Format = match to {
+        Some(t) => t.parse().map_err(|e: String| anyhow!(e))?,
+        None => match output.extension().and_then(|e| e.to_str()) {
+            Some(e) if e.eq_ignore_ascii_case("xml") => Format::Mitsuba,
+            Some(e) if e.eq_ignore_ascii_case("pbrt") => Format::Pbrt,
+            _ => {
+                return Err(anyhow!(
+                    "{}: give --to mitsuba or --to pbrt (the extension is neither .xml nor .pbrt)",
+                    output.display()
+                ));
+            }
+        },
+    };
+    let scene = load(path, defines)?;
+    let done = chiaro::io::export::export(&scene, format, output)?;
+    for w in &done.warnings {
+        eprintln!("warning: {w}");
+    }
+    for f in &done.files {
+        println!("wrote {}", f.display());
+    }
+    Ok(())
+}
+
 pub fn info(path: &Path, defines: &[String]) -> Result<()> {
     let options = chiaro::io::LoadOptions::from_defines(defines).map_err(|e| anyhow!(e))?;
     let loaded = chiaro::io::load_scene_with(path, &options)?;

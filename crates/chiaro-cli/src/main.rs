@@ -53,6 +53,12 @@ fn main() -> ExitCode {
                 .map_err(anyhow::Error::from)
             }),
         cli::Command::Compare(c) => commands::compare(c),
+        cli::Command::Export {
+            scene,
+            to,
+            output,
+            define,
+        } => commands::export(&scene, to.as_deref(), &output, &define),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -27,6 +27,7 @@
 //!   merged into a [`Scene`] by [`Imported::merge_into`].
 
 pub mod error;
+pub mod export;
 pub mod files;
 pub mod gltf_import;
 pub mod images;

@@ -239,7 +239,10 @@ fn bsdfs_map_onto_the_material() {
     let mat = |i: usize| &s.materials[s.objects[i].material.index()];
     let gold = mat(0);
     assert_eq!(gold.diffuse, Vec3::ZERO);
-    assert!(gold.reflect.x > gold.reflect.z && gold.reflect.x < 1.0);
+    // The mirror's Fresnel is the conductor's, from gold's RGB eta and k.
+    assert_eq!(gold.reflect, Vec3::ONE);
+    let au = gold.conductor.expect("a conductor");
+    assert!(au.eta.x < au.eta.z && au.k.x > au.k.z, "{au:?}");
     let glass = mat(1);
     assert!(glass.fresnel && glass.ior == 1.5 && glass.transmit == Vec3::ONE);
     // Mitsuba's BSDFs are one-sided; `twosided` and the dielectrics are not.
@@ -250,13 +253,14 @@ fn bsdfs_map_onto_the_material() {
     let rough = mat(3);
     assert_eq!(rough.roughness, 0.2);
     assert_eq!(rough.specular, Vec3::ONE);
-    // The approximate ones said so, naming their line.
-    let conductor = loaded
-        .warnings
-        .iter()
-        .find(|w| w.contains("<bsdf \"conductor\">"))
-        .expect("a conductor warning");
-    assert!(conductor.starts_with("t.xml:"), "{conductor}");
+    // Mitsuba's default conductor `none` is the ideal mirror: chiaro's plain ks.
+    assert!(rough.conductor.is_none());
+    // The conductors map exactly (ggx): no warning.
+    assert!(
+        !loaded.warnings.iter().any(|w| w.contains("conductor")),
+        "{:?}",
+        loaded.warnings
+    );
 }
 
 #[test]

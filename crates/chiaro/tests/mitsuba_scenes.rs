@@ -11,9 +11,10 @@ use chiaro::progress::NoProgress;
 use chiaro_testkit::stats::mitsuba_z_test;
 use std::path::{Path, PathBuf};
 
-/// Each scene file, its reference's stem, and whether its mapping is exact
-/// (the infinite mirrors' conductor Fresnel and the texture scene's
-/// Gaussian filter are approximate).
+/// Each scene file, its reference's stem, and whether it passes the
+/// z-test (the infinite mirrors' directly seen environment, read without
+/// Mitsuba's row convention, and the
+/// texture scene's Gaussian filter do not).
 const SCENES: [(&str, &str, bool); 7] = [
     (
         "floating_sphere/test_directional_direct.xml",

@@ -256,6 +256,18 @@ impl Sidedness {
     }
 }
 
+/// A conductor's complex index of refraction `eta + i k` per RGB channel,
+/// relative to the outside medium: its Fresnel reflectance
+/// ([`crate::shading::fresnel_conductor`]) replaces the fixed mirror weight
+/// and Schlick's Fresnel (see [`Material::conductor`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ComplexIor {
+    /// Real part, the refractive index.
+    pub eta: Vec3,
+    /// Imaginary part, the extinction coefficient.
+    pub k: Vec3,
+}
+
 /// A surface material. Colours are linear RGB.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -322,6 +334,12 @@ pub struct Material {
     pub gltf_transmission: Option<Transmission>,
     /// A clear coat over every other lobe.
     pub clearcoat: Option<Clearcoat>,
+    /// A conductor's complex IOR: when set, the mirror weight is
+    /// `kr F(cos_o)` and the Torrance-Sparrow lobe's Fresnel is
+    /// `ks F(wi . h)` with F the conductor's Fresnel reflectance, so `kr`
+    /// and `ks` are tints (Mitsuba's `specular_reflectance`) instead of the
+    /// fixed weight and Schlick's F0.
+    pub conductor: Option<ComplexIor>,
 }
 
 impl Default for Material {
@@ -354,6 +372,7 @@ impl Default for Material {
             alpha_mode: AlphaMode::Opaque,
             gltf_transmission: None,
             clearcoat: None,
+            conductor: None,
         }
     }
 }

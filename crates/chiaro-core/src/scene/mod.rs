@@ -15,6 +15,7 @@ mod validate;
 
 pub use camera::{Camera, NamedCamera, PixelRays};
 pub use light::{AreaShape, Attenuation, Flap, Light, SpotLight};
+pub use material::ComplexIor;
 pub use material::{
     AlphaMode, Bump, Clearcoat, Distribution, Facing, Material, MetallicRoughness, Occlusion,
     ReflectanceModel, Sidedness, Transmission, TransparencyMode,

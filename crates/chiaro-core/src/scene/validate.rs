@@ -249,6 +249,10 @@ impl Scene {
             c.non_negative(&format!("{p}.transmit"), m.transmit);
             c.non_negative(&format!("{p}.emission"), m.emission);
             c.non_negative(&format!("{p}.absorption"), m.absorption);
+            if let Some(ior) = m.conductor {
+                c.non_negative(&format!("{p}.conductor.eta"), ior.eta);
+                c.non_negative(&format!("{p}.conductor.k"), ior.k);
+            }
             if !(m.shininess.is_finite() && m.shininess >= 0.0) {
                 c.error(
                     format!("{p}.shininess"),

@@ -1,9 +1,13 @@
 //! The BRDF of the local illumination model: Lambert plus one specular lobe
 //! (Phong, Blinn-Phong or Torrance-Sparrow microfacets).
 
-use super::fresnel::{fresnel_dielectric, fresnel_schlick, reflect, schlick_weight};
+use super::fresnel::{
+    fresnel_conductor, fresnel_dielectric, fresnel_schlick, reflect, schlick_weight,
+};
 use super::microfacet;
-use crate::scene::{Distribution, Material, MetallicRoughness, ReflectanceModel, Transmission};
+use crate::scene::{
+    ComplexIor, Distribution, Material, MetallicRoughness, ReflectanceModel, Transmission,
+};
 use glam::Vec3;
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -43,6 +47,9 @@ pub struct SurfaceMaterial {
     pub clearcoat: f32,
     /// The clear coat's GGX alpha (its perceptual roughness squared).
     pub clearcoat_alpha: f32,
+    /// A conductor's complex IOR: `kr` and `ks` are then tints of its
+    /// Fresnel reflectance ([`Material::conductor`]).
+    pub conductor: Option<ComplexIor>,
 }
 
 impl Default for SurfaceMaterial {
@@ -73,6 +80,7 @@ impl SurfaceMaterial {
             },
             clearcoat: m.clearcoat.map_or(0.0, |c| clean_unit(c.factor, 0.0)),
             clearcoat_alpha: m.clearcoat.map_or(1.0, |c| clearcoat_alpha(c.roughness)),
+            conductor: m.conductor,
         }
     }
 
@@ -136,6 +144,25 @@ impl SurfaceMaterial {
     #[inline]
     pub fn has_specular(&self) -> bool {
         self.ks.max_element() > 0.0
+    }
+
+    /// The ideal mirror's reflectance for a viewer at `cos_o = n . wo`:
+    /// [`mirror_reflectance`] of `kr`.
+    #[inline]
+    pub fn mirror_weight(&self, cos_o: f32) -> Vec3 {
+        mirror_reflectance(self.kr, self.conductor, cos_o)
+    }
+}
+
+/// The ideal mirror's reflectance at `cos_o = n . wo`: the fixed weight
+/// `kr`, or for a conductor `kr` times its Fresnel reflectance
+/// ([`fresnel_conductor`]). The one mirror rule of every technique (the
+/// ray tracers' mirror rays, the scan converter's reflection map).
+#[inline]
+pub fn mirror_reflectance(kr: Vec3, conductor: Option<ComplexIor>, cos_o: f32) -> Vec3 {
+    match conductor {
+        None => kr,
+        Some(c) => kr * fresnel_conductor(cos_o, c.eta, c.k),
     }
 }
 
@@ -245,7 +272,10 @@ pub fn specular_cos(m: &SurfaceMaterial, n: Vec3, wo: Vec3, wi: Vec3, cos_i: f32
     match colourless_lobe(m, n, wo, wi, cos_i) {
         None => Vec3::ZERO,
         Some((value, None)) => m.ks * value,
-        Some((value, Some(cos_d))) => fresnel_schlick(m.ks, cos_d) * value,
+        Some((value, Some(cos_d))) => match m.conductor {
+            None => fresnel_schlick(m.ks, cos_d) * value,
+            Some(c) => m.ks * fresnel_conductor(cos_d, c.eta, c.k) * value,
+        },
     }
 }
 
@@ -262,17 +292,22 @@ pub fn specular_cos_factored(
     wi: Vec3,
     cos_i: f32,
 ) -> SpecularFactors {
-    match colourless_lobe(m, n, wo, wi, cos_i) {
-        None => SpecularFactors::default(),
-        Some((value, None)) => SpecularFactors {
-            scale: value,
+    match (colourless_lobe(m, n, wo, wi, cos_i), m.conductor) {
+        (None, _) => SpecularFactors::default(),
+        (Some((value, None)), _) => SpecularFactors {
+            scale: Vec3::splat(value),
+            offset: 0.0,
+        },
+        // A conductor: F = ks F_c, linear in ks.
+        (Some((value, Some(cos_d))), Some(c)) => SpecularFactors {
+            scale: fresnel_conductor(cos_d, c.eta, c.k) * value,
             offset: 0.0,
         },
         // Schlick: F = F0 (1 - w) + w.
-        Some((value, Some(cos_d))) => {
+        (Some((value, Some(cos_d))), None) => {
             let w = schlick_weight(cos_d);
             SpecularFactors {
-                scale: (1.0 - w) * value,
+                scale: Vec3::splat((1.0 - w) * value),
                 offset: w * value,
             }
         }
@@ -283,8 +318,9 @@ pub fn specular_cos_factored(
 /// does not depend on it ([`specular_cos_factored`]), in 1/sr.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SpecularFactors {
-    /// Multiplies `ks` (the lobe times `1 - w` of Schlick's Fresnel).
-    pub scale: f32,
+    /// Multiplies `ks` (the lobe times `1 - w` of Schlick's Fresnel, or
+    /// times a conductor's Fresnel reflectance per channel).
+    pub scale: Vec3,
     /// Added whatever `ks` is (Schlick's white grazing reflection `w`
     /// times the lobe; zero for the Phong and Blinn lobes).
     pub offset: f32,
@@ -462,7 +498,15 @@ mod tests {
             ReflectanceModel::Blinn,
             ReflectanceModel::TorranceSparrow,
         ];
-        for model in models {
+        let gold = ComplexIor {
+            eta: Vec3::new(0.14, 0.37, 1.44),
+            k: Vec3::new(3.98, 2.39, 1.6),
+        };
+        for (model, conductor) in models
+            .into_iter()
+            .map(|m| (m, None))
+            .chain([(ReflectanceModel::TorranceSparrow, Some(gold))])
+        {
             for _ in 0..2000 {
                 let mut unit = || {
                     Vec3::new(next(), next(), next())
@@ -475,6 +519,7 @@ mod tests {
                     model,
                     shininess: 12.0,
                     roughness: 0.2,
+                    conductor,
                     ..SurfaceMaterial::default()
                 };
                 let cos_i = Vec3::Y.dot(wi);
@@ -489,7 +534,7 @@ mod tests {
                     (got - want).abs().max_element() <= tol,
                     "{model:?}: {got} vs {want}"
                 );
-                if model != ReflectanceModel::TorranceSparrow {
+                if model != ReflectanceModel::TorranceSparrow || conductor.is_some() {
                     assert_eq!(f.offset, 0.0);
                 }
             }
@@ -537,6 +582,46 @@ mod tests {
             let albedo = albedo_estimate(&white, Vec3::Z, wo, 400).x;
             assert!(albedo <= 1.01, "theta {theta}: {albedo}");
         }
+    }
+
+    #[test]
+    fn conductor_fresnel_replaces_schlick_and_the_fixed_mirror() {
+        let ior = ComplexIor {
+            eta: Vec3::splat(0.789),
+            k: Vec3::splat(6.15),
+        };
+        let plain = SurfaceMaterial {
+            kd: Vec3::ZERO,
+            ks: Vec3::new(1.0, 0.8, 0.6),
+            kr: Vec3::new(1.0, 0.9, 0.5),
+            model: ReflectanceModel::TorranceSparrow,
+            roughness: 0.3,
+            ..SurfaceMaterial::default()
+        };
+        let metal = SurfaceMaterial {
+            conductor: Some(ior),
+            ..plain
+        };
+        // Mirror: kr unchanged without a conductor, kr F_c(cos_o) with one.
+        for cos_o in [1.0, 0.5, 0.1] {
+            assert_eq!(plain.mirror_weight(cos_o), plain.kr);
+            let f = fresnel_conductor(cos_o, ior.eta, ior.k);
+            assert_eq!(metal.mirror_weight(cos_o), plain.kr * f);
+        }
+        // Glossy: ks F_c(wi . h) in place of Schlick's F(ks, wi . h).
+        let wo = Vec3::new(0.6, 0.8, 0.0);
+        let wi = Vec3::new(-0.3, 0.5, 0.2).normalize();
+        let h = (wo + wi).normalize();
+        let cos_i = Vec3::Y.dot(wi);
+        let schlick = specular_cos(&plain, Vec3::Y, wo, wi, cos_i);
+        let cond = specular_cos(&metal, Vec3::Y, wo, wi, cos_i);
+        let ratio = cond / schlick;
+        let want = plain.ks * fresnel_conductor(wi.dot(h), ior.eta, ior.k)
+            / fresnel_schlick(plain.ks, wi.dot(h));
+        assert!(
+            (ratio - want).abs().max_element() < 1e-5,
+            "{ratio} vs {want}"
+        );
     }
 
     #[test]

@@ -367,10 +367,10 @@ impl Bsdf {
         let p_r = wr / total;
         let p_t = wt / total;
         if pick < wd + ws + wr {
-            // Fixed-weight mirror.
+            // The mirror: kr, or kr times a conductor's Fresnel.
             return Some(BsdfSample {
                 wi: reflect(wo, n),
-                weight: m.kr / p_r,
+                weight: m.mirror_weight(n.dot(wo)) / p_r,
                 pdf: 0.0,
                 delta: true,
             });
@@ -425,7 +425,8 @@ impl Bsdf {
 pub struct DeltaSplit {
     /// Mirror direction `reflect(wo, n)`.
     pub reflected: Vec3,
-    /// Its weight: `kr`, or `F` for a Fresnel dielectric; under total
+    /// Its weight: `kr` (times a conductor's Fresnel reflectance,
+    /// [`SurfaceMaterial::mirror_weight`]), or `F` for a Fresnel dielectric; under total
     /// internal reflection the transmitted weight is added.
     pub reflect_weight: Vec3,
     /// Refracted direction; `None` for an opaque surface and under total
@@ -456,7 +457,7 @@ pub fn delta_split(
     if kt.is_nan() || kt <= 0.0 {
         return DeltaSplit {
             reflected,
-            reflect_weight: m.kr,
+            reflect_weight: m.mirror_weight(n.dot(wo)),
             refracted: None,
             refract_weight: Vec3::ZERO,
             fresnel: 0.0,
@@ -470,7 +471,7 @@ pub fn delta_split(
         let f = fresnel_dielectric(cos_o, n1, n2);
         (Vec3::splat(f), (1.0 - f) * m.kt, f)
     } else {
-        (m.kr, m.kt, 0.0)
+        (m.mirror_weight(cos_o), m.kt, 0.0)
     };
     if refracted.is_none() {
         // Total internal reflection: everything is reflected.
@@ -553,6 +554,7 @@ mod tests {
     //! `pdf`, and a white-furnace test of each lobe's albedo.
     use super::*;
     use crate::sampling::{pixel_rng, uniform, uniform2};
+    use crate::scene::ComplexIor;
     use std::f32::consts::PI;
 
     /// Bins in `cos_theta` over `[-1, 1]` (even: a boundary at the horizon)
@@ -633,6 +635,13 @@ mod tests {
             "lambert+ggx+coat".into(),
             coated(microfacet(0.3, 0.5, Distribution::Ggx, 0.4), 0.8, 0.1),
         ));
+        v.push((
+            "ggx conductor".into(),
+            SurfaceMaterial {
+                conductor: Some(GOLD),
+                ..microfacet(0.0, 1.0, Distribution::Ggx, 0.3)
+            },
+        ));
         v
     }
 
@@ -642,6 +651,38 @@ mod tests {
             clearcoat: c,
             clearcoat_alpha: alpha,
             ..m
+        }
+    }
+
+    /// Gold's RGB complex IOR.
+    const GOLD: ComplexIor = ComplexIor {
+        eta: Vec3::new(0.143, 0.375, 1.442),
+        k: Vec3::new(3.983, 2.386, 1.603),
+    };
+
+    #[test]
+    fn conductor_mirror_reflects_its_fresnel() {
+        // The sampled mirror and Whitted's split both weigh kr F_c(cos_o).
+        let m = SurfaceMaterial {
+            kr: Vec3::new(1.0, 0.9, 0.8),
+            conductor: Some(GOLD),
+            ..material(0.0, 0.0, ReflectanceModel::Phong)
+        };
+        let bsdf = Bsdf::new(m, false);
+        for theta in [0.0, 45.0, 80.0, 89.0] {
+            let wo = dir(theta, 0.3);
+            let want = m.kr * super::super::fresnel::fresnel_conductor(wo.z, GOLD.eta, GOLD.k);
+            let s = bsdf
+                .sample(Vec3::Z, Vec3::Z, wo, true, 0.5, Vec2::splat(0.5), || 0.5)
+                .expect("a mirror reflects");
+            assert!(s.delta && (s.wi - reflect(wo, Vec3::Z)).length() < 1e-6);
+            assert!(
+                (s.weight - want).abs().max_element() < 1e-6,
+                "{theta}: {}",
+                s.weight
+            );
+            let split = delta_split(&m, false, Vec3::Z, wo, true);
+            assert_eq!(split.reflect_weight, want);
         }
     }
 

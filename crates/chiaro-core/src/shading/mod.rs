@@ -29,9 +29,13 @@ pub mod microfacet;
 pub mod point;
 pub mod texture;
 
-pub use brdf::{SpecularFactors, SurfaceMaterial, eval_brdf_cos, specular_cos_factored};
+pub use brdf::{
+    SpecularFactors, SurfaceMaterial, eval_brdf_cos, mirror_reflectance, specular_cos_factored,
+};
 pub use bsdf::{Bsdf, BsdfSample, DeltaSplit, delta_split, luminance};
-pub use fresnel::{fresnel_dielectric, fresnel_schlick, reflect, refract, schlick_weight};
+pub use fresnel::{
+    fresnel_conductor, fresnel_dielectric, fresnel_schlick, reflect, refract, schlick_weight,
+};
 pub use light_set::{
     AliasTable, EmitterGroup, LightPowerTable, SampleKey, environment_power, group_jitter,
     light_power,

@@ -3,10 +3,10 @@
 //!
 //! chiaro's material is one set of coefficients: Lambert `kd`, a glossy
 //! Torrance-Sparrow lobe with Schlick's Fresnel from `ks` (F0), a fixed
-//! mirror weight `kr`, and Fresnel-split glass. Mitsuba's `diffuse` and
-//! smooth `dielectric` land on it exactly; conductors keep their
-//! normal-incidence reflectance (chiaro has no complex-IOR Fresnel), and
-//! the rest are approximations, each saying so once.
+//! mirror weight `kr`, the Fresnel of a conductor's complex IOR on both
+//! (`Material::conductor`), and Fresnel-split glass. Mitsuba's `diffuse`,
+//! `conductor`, `roughconductor` and smooth `dielectric` land on it
+//! exactly; the rest are approximations, each saying so once.
 
 use super::Builder;
 use super::props::{Props, numbers};
@@ -14,8 +14,8 @@ use super::spectra;
 use super::xml::Element;
 use crate::Result;
 use chiaro_core::scene::{
-    Bump, Distribution, Filter, Material, MaterialId, Procedural, ProceduralKind, ReflectanceModel,
-    Sidedness, Texture, TextureId, UvTransform, WrapMode,
+    Bump, ComplexIor, Distribution, Filter, Material, MaterialId, Procedural, ProceduralKind,
+    ReflectanceModel, Sidedness, Texture, TextureId, UvTransform, WrapMode,
 };
 use chiaro_core::{Mat4, Vec2, Vec3};
 
@@ -151,20 +151,25 @@ impl Builder<'_> {
                 attribute = self.set_diffuse(&mut m, r);
             }
             "conductor" | "roughconductor" => {
+                // Mitsuba's F = specular_reflectance x the conductor's
+                // Fresnel: the tint goes to kr (smooth) or ks (rough).
                 let (eta, k) = self.conductor_ior(el, &p)?;
-                let f0 = spectra::conductor_f0(eta, k);
                 let tint = self
                     .value(&p, "specular_reflectance", Vec3::ONE)?
                     .constant_or(Vec3::ONE);
                 m.diffuse = Vec3::ZERO;
-                let f0 = f0 * tint;
+                // Mitsuba's ideal mirror `none` (eta 0, k 1) reflects 1 at
+                // every angle: chiaro's plain kr.
+                m.conductor =
+                    ((eta, k) != (Vec3::ZERO, Vec3::ONE)).then_some(ComplexIor { eta, k });
                 if ty == "conductor" {
-                    m.reflect = f0;
-                    self.warn(el, "approximate: mirror weight = the complex-IOR Fresnel reflectance at normal incidence (chiaro has no conductor Fresnel; grazing angles reflect less than in Mitsuba)");
+                    m.reflect = tint;
                 } else {
                     self.rough(el, &p, &mut m)?;
-                    m.specular = f0;
-                    self.warn(el, "approximate: microfacet lobe with Schlick's Fresnel from the normal-incidence reflectance of eta, k");
+                    m.specular = tint;
+                    if m.distribution == Distribution::Beckmann {
+                        self.warn(el, "approximate: Beckmann masking by Walter et al.'s rational fit of Smith's G1 (Mitsuba evaluates it exactly)");
+                    }
                 }
             }
             "dielectric" | "roughdielectric" | "thindielectric" => {

@@ -105,6 +105,17 @@ impl Builder<'_> {
             None => None,
         };
         let fov_x = fov_x_degrees(fov, &axis, focal, aspect).map_err(|m| el.loc.error(m))?;
+        // A vertical fov is chiaro's own: kept as written, not through fov_x.
+        let vertical = match axis.as_str() {
+            "y" => true,
+            "smaller" => aspect > 1.0,
+            "larger" => aspect <= 1.0,
+            _ => false,
+        };
+        let fov_y = match fov {
+            Some(f) if vertical && focal.is_none() => f,
+            _ => fov_y_from_x(fov_x, aspect),
+        };
         let near = p.float("near_clip", 0.01)?;
         let far = p.float("far_clip", 10_000.0)?;
         if !(near > 0.0 && far > near) {
@@ -124,7 +135,7 @@ impl Builder<'_> {
         }
         // The sensor's spectral response: chiaro renders RGB.
         let _ = p.string("srf")?;
-        self.set_camera(el, world_from_camera, fov_x, aspect, near, far);
+        self.set_camera(el, world_from_camera, fov_y, near, far);
         self.warn_unused(&p);
         Ok(())
     }
@@ -143,7 +154,7 @@ impl Builder<'_> {
         };
     }
 
-    fn set_camera(&mut self, el: &Element, m: Mat4, fov_x: f32, aspect: f32, near: f32, far: f32) {
+    fn set_camera(&mut self, el: &Element, m: Mat4, fov_y: f32, near: f32, far: f32) {
         let eye = m.transform_point3(Vec3::ZERO);
         let forward = m.transform_vector3(Vec3::Z);
         let up = m.transform_vector3(Vec3::Y);
@@ -164,7 +175,7 @@ impl Builder<'_> {
             eye,
             look_at: eye + forward.normalize_or(Vec3::Z),
             up: up.normalize_or(Vec3::Y),
-            fov_y_degrees: fov_y_from_x(fov_x, aspect),
+            fov_y_degrees: fov_y,
             near,
             far,
         };

@@ -138,7 +138,9 @@ pub fn ior(name: &str) -> Option<f32> {
 
 /// Reflectance at normal incidence of a conductor of complex IOR
 /// `eta + i k` (relative to the outside medium), per channel:
-/// `((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)` (Born and Wolf, section 14.2).
+/// `((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)` (Born and Wolf, section 14.2);
+/// the value of `chiaro_core::shading::fresnel_conductor` at `cos = 1`.
+/// The pbrt reader's F0 for its conductors.
 pub fn conductor_f0(eta: Vec3, k: Vec3) -> Vec3 {
     let k2 = k * k;
     let num = (eta - Vec3::ONE) * (eta - Vec3::ONE) + k2;
@@ -159,16 +161,14 @@ mod tests {
 
     #[test]
     fn normal_incidence_closed_forms() {
-        // A dielectric is a conductor with k = 0.
-        let f = conductor_f0(Vec3::splat(1.5), Vec3::ZERO);
-        assert!((f.x - dielectric_f0(1.5)).abs() < 1e-7);
+        use chiaro_core::shading::fresnel_conductor;
         assert!((dielectric_f0(1.5) - 0.04).abs() < 1e-7);
         // The ideal mirror reflects everything.
         let (eta, k) = conductor("none").expect("test input");
-        assert_eq!(conductor_f0(eta, k), Vec3::ONE);
+        assert_eq!(fresnel_conductor(1.0, eta, k), Vec3::ONE);
         // Gold is yellow: red reflects more than blue, all within (0, 1).
         let (eta, k) = conductor("Au").expect("test input");
-        let f = conductor_f0(eta, k);
+        let f = fresnel_conductor(1.0, eta, k);
         assert!(f.x > f.z && f.x < 1.0 && f.z > 0.0, "{f}");
         assert_eq!(ior("BK7"), Some(1.5046));
         assert!(conductor("Unobtainium").is_none());

@@ -1,11 +1,12 @@
 //! `[material.NAME]` and the textures they name.
 
 use super::Ctx;
-use super::raw::{Opt, RawMaterial, Sp, Splat3, TextureSpec};
+use super::raw::{Opt, RawConductor, RawMaterial, Sp, Splat3, TextureSpec};
 use crate::Result;
 use chiaro_core::Vec3;
 use chiaro_core::scene::{
-    Bump, Material, Procedural, ProceduralKind, Scene, Sidedness, Texture, TextureId, WrapMode,
+    Bump, ComplexIor, Material, Procedural, ProceduralKind, Scene, Sidedness, Texture, TextureId,
+    WrapMode,
 };
 
 impl Ctx<'_> {
@@ -49,6 +50,26 @@ impl Ctx<'_> {
                 .unwrap_or(d.emission_two_sided),
             ..d
         };
+        if let Some(c) = &m.conductor {
+            mat.conductor = Some(match c.get_ref() {
+                RawConductor::Ior(ior) => ComplexIor {
+                    eta: ior.eta.vec3(),
+                    k: ior.k.vec3(),
+                },
+                RawConductor::Named(name) => {
+                    let (eta, k) = crate::mitsuba::spectra::conductor(name).ok_or_else(|| {
+                        self.at(
+                            c.span(),
+                            format!(
+                                "unknown metal \"{name}\" (known: {})",
+                                crate::mitsuba::spectra::conductor_names().join(", ")
+                            ),
+                        )
+                    })?;
+                    ComplexIor { eta, k }
+                }
+            });
+        }
         if let Some(t) = &m.texture {
             mat.texture = Some(self.texture(scene, t, true, false)?.0);
         }

@@ -180,6 +180,46 @@ impl<'de> Deserialize<'de> for TextureSpec {
     }
 }
 
+/// A conductor's complex IOR: a metal's name (`"Au"`, Mitsuba's table) or
+/// `{ eta = [..], k = [..] }` (each a number or three).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum RawConductor {
+    /// A named metal.
+    Named(String),
+    /// Explicit `eta` and `k`.
+    Ior(RawComplexIor),
+}
+
+/// `{ eta, k }`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawComplexIor {
+    pub eta: Splat3,
+    pub k: Splat3,
+}
+
+struct ConductorVisitor;
+
+impl<'de> Visitor<'de> for ConductorVisitor {
+    type Value = RawConductor;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a metal's name (\"Au\") or a table { eta = ..., k = ... }")
+    }
+    fn visit_str<E: de::Error>(self, v: &str) -> Result<RawConductor, E> {
+        Ok(RawConductor::Named(v.to_owned()))
+    }
+    fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<RawConductor, A::Error> {
+        RawComplexIor::deserialize(de::value::MapAccessDeserializer::new(map))
+            .map(RawConductor::Ior)
+    }
+}
+
+impl<'de> Deserialize<'de> for RawConductor {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(ConductorVisitor)
+    }
+}
+
 /// The whole file.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -303,6 +343,7 @@ pub(crate) struct RawMaterial {
     pub model: Option<ReflectanceModel>,
     pub roughness: Opt<f32>,
     pub distribution: Option<Distribution>,
+    pub conductor: Opt<RawConductor>,
     pub reflect: Opt<Splat3>,
     pub transmit: Opt<Splat3>,
     pub ior: Opt<f32>,

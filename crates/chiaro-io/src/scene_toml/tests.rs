@@ -77,3 +77,39 @@ radius = 1
         assert_eq!(scene.meshes.len(), 3);
     }
 }
+
+mod conductor_tests {
+    use crate::scene_toml::parse_scene;
+    use chiaro_core::Vec3;
+    use chiaro_core::scene::ComplexIor;
+    use std::path::Path;
+
+    fn conductor_of(value: &str) -> Result<Option<ComplexIor>, String> {
+        let text = format!(
+            "[material.m]\nconductor = {value}\n[[object]]\nprimitive = \"sphere\"\nmaterial = \"m\"\n[[light]]\ntype = \"point\"\nposition = [0, 4, 0]\n"
+        );
+        parse_scene(&text, Path::new("."), Path::new("t.toml"))
+            .map(|l| l.scene.materials[0].conductor)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn conductor_by_name_or_complex_ior() {
+        let au = conductor_of("\"Au\"").expect("named metal").expect("set");
+        assert!((au.eta.x - 0.143_119).abs() < 1e-6 && (au.k.z - 1.603_215).abs() < 1e-6);
+        let c = conductor_of("{ eta = [0.2, 0.9, 1.1], k = 3 }")
+            .expect("explicit ior")
+            .expect("set");
+        assert_eq!((c.eta, c.k), (Vec3::new(0.2, 0.9, 1.1), Vec3::splat(3.0)));
+        let e = conductor_of("\"Unobtainium\"").expect_err("unknown metal");
+        assert!(e.contains("t.toml:2:") && e.contains("Au"), "{e}");
+        let e = conductor_of("{ eta = 1 }").expect_err("k missing");
+        assert!(e.contains('k'), "{e}");
+        let e = conductor_of("{ eta = -1, k = 2 }").expect_err("negative eta");
+        assert!(e.contains("eta"), "{e}");
+        assert_eq!(
+            conductor_of("{ eta = 1, k = 2 }").map(|c| c.is_some()),
+            Ok(true)
+        );
+    }
+}

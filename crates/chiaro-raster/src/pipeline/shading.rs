@@ -32,8 +32,8 @@ use chiaro_core::shading::texture::{
     background_radiance, environment_diffuse, environment_radiance, environment_specular,
 };
 use chiaro_core::shading::{
-    FactoredLight, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, reflect, sanitize,
-    shade_local, shade_local_factored, shade_local_split,
+    FactoredLight, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, mirror_reflectance,
+    reflect, sanitize, shade_local, shade_local_factored, shade_local_split,
 };
 use chiaro_core::shading::{LightSample, PointLighting, SampleKey, group_jitter};
 use glam::{Vec2, Vec3, Vec3A};
@@ -647,8 +647,10 @@ pub(crate) fn shade_sample(
         color += environment_diffuse(table, lobe.kd, n) + glossy;
         specular += glossy;
     }
-    // Reflection map: the environment in the mirror direction, weighted by kr.
+    // Reflection map: the environment in the mirror direction, weighted by
+    // kr (times a conductor's Fresnel reflectance).
     if ctx.ps.scene.environment.is_some() && kr.max_element() > 0.0 {
+        let kr = mirror_reflectance(kr, material.conductor, n.dot(wo));
         color += kr * environment_radiance(ctx.ps.scene, reflect(wo, n));
     }
     let depth = (p_a - eye_a).length();

@@ -21,7 +21,7 @@ use crate::geometry::Frame;
 use crate::scene::{Distribution, ReflectanceModel, Scene, Texture};
 use crate::shading::brdf::SurfaceMaterial;
 use crate::shading::bsdf::Bsdf;
-use crate::shading::fresnel::{fresnel_dielectric, reflect};
+use crate::shading::fresnel::{fresnel_conductor, fresnel_dielectric, reflect};
 use crate::shading::microfacet;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -439,7 +439,16 @@ pub fn specular_lobe_albedo(m: &SurfaceMaterial, cos_o: f32) -> (f32, Vec3) {
     match m.model {
         ReflectanceModel::TorranceSparrow => {
             let (scale, bias) = specular_albedo_scale_bias(m.distribution, cos_o, m.roughness);
-            (m.roughness, m.ks * scale + Vec3::splat(bias))
+            match m.conductor {
+                None => (m.roughness, m.ks * scale + Vec3::splat(bias)),
+                // A conductor: the same fit with its normal-incidence
+                // reflectance as F0 (Schlick's curve is close to a
+                // conductor's Fresnel), tinted by ks.
+                Some(c) => {
+                    let f = fresnel_conductor(1.0, c.eta, c.k);
+                    (m.roughness, m.ks * (f * scale + Vec3::splat(bias)))
+                }
+            }
         }
         ReflectanceModel::Phong => ((1.0 / (2.0 * n + 1.0)).sqrt(), m.ks * (2.0 / (n + 1.0))),
         ReflectanceModel::Blinn => (
