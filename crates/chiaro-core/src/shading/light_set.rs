@@ -406,6 +406,7 @@ mod tests {
             area_samples: samples,
             ambient: false,
             group: Some(group),
+            share: crate::shading::SampleShare::WHOLE,
         };
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
         let (mut s1, mut s2) = (0.0f64, 0.0f64);
@@ -480,6 +481,7 @@ mod tests {
                 area_samples: 64,
                 ambient: false,
                 group: None,
+                share: crate::shading::SampleShare::WHOLE,
             };
             let exact = f64::from(
                 shade_local(
@@ -512,6 +514,7 @@ mod tests {
                 area_samples: samples,
                 ambient: false,
                 group: Some(&group),
+                share: crate::shading::SampleShare::WHOLE,
             };
             let mut queries = 0u32;
             let c = shade_local(
