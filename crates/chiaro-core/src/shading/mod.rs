@@ -23,6 +23,7 @@ pub mod brdf;
 pub mod bsdf;
 pub mod fresnel;
 pub mod light_set;
+pub mod light_tree;
 pub mod lights;
 pub mod microfacet;
 pub mod point;
@@ -35,6 +36,7 @@ pub use light_set::{
     AliasTable, EmitterGroup, LightPowerTable, SampleKey, environment_power, group_jitter,
     light_power,
 };
+pub use light_tree::{LightBounds, LightSampler, LightTree};
 pub use lights::{LightSample, TriangleEmitter, TriangleSample, sample_light, sample_light_pdf};
 pub use point::PointLighting;
 
@@ -517,7 +519,7 @@ fn local_model<T: Terms>(
         let (strata, divisor) = env.share.strata(count);
         let mut sum = T::zero();
         for i in strata {
-            let (li, pick, u) = g.pick(i, count, jitter(g.range.start, i));
+            let (li, pick, u) = g.pick(sp.p, sp.ng, i, count, jitter(g.range.start, i));
             if pick <= 0.0 {
                 continue;
             }

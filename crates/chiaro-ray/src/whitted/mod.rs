@@ -220,7 +220,7 @@ impl<'s> Tracer<'s> {
         let accel = ctx.analytic_accel();
         let settings = ctx.settings();
         let casters = ShadowCasters::new(prepared);
-        let emitters = EmitterGroup::of_scene(prepared, settings.light_samples.max(1));
+        let emitters = EmitterGroup::for_render(prepared, settings);
         Self {
             prepared,
             accel,
