@@ -146,6 +146,13 @@ pub enum LightSelection {
     Tree,
 }
 
+impl LightSelection {
+    /// True for the default, [`LightSelection::Auto`].
+    pub fn is_auto(&self) -> bool {
+        *self == Self::Auto
+    }
+}
+
 /// Anti-aliasing strategy.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -415,7 +422,9 @@ pub struct RenderSettings {
     pub filter: PixelFilter,
     /// Samples per area light per shading point.
     pub light_samples: u32,
-    /// How lights are chosen among many.
+    /// How lights are chosen among many (written only when not `auto`, so
+    /// saved settings from before it read the same).
+    #[serde(skip_serializing_if = "LightSelection::is_auto")]
     pub light_selection: LightSelection,
     /// Depth cueing, off when absent.
     pub depth_cue: Option<DepthCue>,
