@@ -8,7 +8,7 @@ use crate::pipeline::triangles::TriCache;
 use crate::pipeline::visibility::{Class, TileVis};
 use crate::raster::{RasterTri, Rect, rasterize_window};
 use chiaro_core::scene::TransparencyMode;
-use chiaro_core::shading::sanitize;
+use chiaro_core::shading::{SampleShare, sanitize};
 use glam::{Vec3, Vec3A};
 
 impl TileVis {
@@ -59,9 +59,10 @@ pub(crate) fn fragment_lists(
     }
 }
 
-/// Composites the transparent fragments of sample `i` over `r` (what the
-/// sample shows behind them), back to front: BLEND coverage, interpolated
-/// (the front specular kept whole) or filtered transparency.
+/// Composites the transparent fragments of sample `i` (at film position
+/// `(sx, sy)`, its pixel's sub-sample `share`) over `r` (what the sample
+/// shows behind them), back to front: BLEND coverage, interpolated (the
+/// front specular kept whole) or filtered transparency.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(crate) fn composite<'a, 'b>(
@@ -69,8 +70,7 @@ pub(crate) fn composite<'a, 'b>(
     poly: &PolyShading,
     tv: &'b TileVis,
     i: usize,
-    sx: f32,
-    sy: f32,
+    (sx, sy, share): (f32, f32, SampleShare),
     dir: Vec3A,
     r: &mut SampleResult,
     cache: &mut TriCache<'a>,
@@ -84,7 +84,17 @@ pub(crate) fn composite<'a, 'b>(
         let interpolated = ctx.class.get(ctx.ps.tri_material[t as usize].index())
             == Some(&Class::Blend(TransparencyMode::Interpolated));
         let td = ctx.tri_data(t, cache, poly);
-        let front = shade_sample(ctx, poly, td, sx, sy, dir, counts_of(n + f), interpolated);
+        let front = shade_sample(
+            ctx,
+            poly,
+            td,
+            sx,
+            sy,
+            dir,
+            counts_of(n + f),
+            interpolated,
+            share,
+        );
         let behind = sanitize(r.color);
         r.color = if let Some(kt) = front.coverage_kt {
             // BLEND: I = alpha I_surface + (1 - alpha) I_behind, the

@@ -57,6 +57,7 @@ pub(crate) fn shade(
                 },
                 &sp,
                 counts,
+                at.share,
             ),
         };
         let lobe = prefiltered.map(|_| SurfaceMaterial {
@@ -97,7 +98,7 @@ pub(crate) fn shade(
     let (sx, sy) = (at.film.x, at.film.y);
     let pixel = (sx.fract() == 0.5 && sy.fract() == 0.5 && sx >= 0.0 && sy >= 0.0)
         .then_some((sx as u32, sy as u32));
-    let c = ctx.illuminate(t, pixel, &sm, &sp, counts);
+    let c = ctx.illuminate(t, pixel, &sm, &sp, counts, at.share);
     let mut specular = Vec3::ZERO;
     if want_specular {
         let diffuse_only = SurfaceMaterial {
@@ -105,7 +106,7 @@ pub(crate) fn shade(
             emission: Vec3::ZERO,
             ..sm
         };
-        specular = c - ctx.illuminate(t, pixel, &diffuse_only, &sp, counts);
+        specular = c - ctx.illuminate(t, pixel, &diffuse_only, &sp, counts, at.share);
     }
     Lit {
         color: c,

@@ -92,6 +92,7 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
         area_samples: 1,
         ambient: true,
         group: None,
+        share: chiaro_core::shading::SampleShare::WHOLE,
     };
     let (w, h) = (settings.width, settings.height);
     let pixel_rays = cam.pixel_rays(w, h);

@@ -21,6 +21,7 @@ pub fn known_keys() -> Vec<String> {
         transparency: Some(TransparencyMode::Filtered),
         depth_cue: Some(DepthCue::default()),
         memory_limit: Some(chiaro_core::budget::ByteSize(1)),
+        light_selection: chiaro_core::scene::LightSelection::Tree,
         ..RenderSettings::default()
     };
     let mut keys = Vec::new();

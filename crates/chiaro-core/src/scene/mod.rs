@@ -22,10 +22,10 @@ pub use material::{
 };
 pub use mesh::{Geometry, Mesh, Object, Transform};
 pub use settings::{
-    AaMode, DepthCue, FormFactorMethod, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MAX_RASTER_SAMPLES,
-    MAX_SAMPLES, PathSettings, PixelFilter, RadiositySettings, RadiositySolver, RenderSettings,
-    SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings, ShadowMethod, Technique, ToneMap,
-    WhittedSettings,
+    AaMode, DepthCue, FormFactorMethod, LightSelection, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE,
+    MAX_RASTER_SAMPLES, MAX_SAMPLES, PathSettings, PixelFilter, RadiositySettings, RadiositySolver,
+    RenderSettings, SHADOW_MAP_RESOLUTIONS, ShadeMode, ShadowMapSettings, ShadowMethod, Technique,
+    ToneMap, WhittedSettings,
 };
 pub use texture::{
     Encoding8, Environment, Filter, ImageTexture, Procedural, ProceduralKind, Texels8, Texture,

@@ -129,6 +129,30 @@ pub enum ShadowMethod {
     Scanline,
 }
 
+/// How a technique chooses among many lights (the path tracer's light per
+/// next-event estimate, an emissive mesh's triangles in the local model).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum LightSelection {
+    /// The hierarchy where there are more than
+    /// `shading::light_tree::AUTO_TREE_LIGHTS` lights to choose from, else
+    /// power.
+    #[default]
+    Auto,
+    /// In proportion to each light's power.
+    Power,
+    /// By the light hierarchy: power, distance and orientation as seen from
+    /// the shading point (Conty Estevez and Kulla 2018).
+    Tree,
+}
+
+impl LightSelection {
+    /// True for the default, [`LightSelection::Auto`].
+    pub fn is_auto(&self) -> bool {
+        *self == Self::Auto
+    }
+}
+
 /// Anti-aliasing strategy.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -398,6 +422,10 @@ pub struct RenderSettings {
     pub filter: PixelFilter,
     /// Samples per area light per shading point.
     pub light_samples: u32,
+    /// How lights are chosen among many (written only when not `auto`, so
+    /// saved settings from before it read the same).
+    #[serde(skip_serializing_if = "LightSelection::is_auto")]
+    pub light_selection: LightSelection,
     /// Depth cueing, off when absent.
     pub depth_cue: Option<DepthCue>,
     /// Tone mapping for 8-bit output.
@@ -441,6 +469,7 @@ impl Default for RenderSettings {
             aa: AaMode::Supersample,
             filter: PixelFilter::Box,
             light_samples: 16,
+            light_selection: LightSelection::Auto,
             depth_cue: None,
             tonemap: ToneMap::Clamp,
             exposure: 0.0,

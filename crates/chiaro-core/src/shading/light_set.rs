@@ -4,7 +4,8 @@
 //! any size.
 
 use super::bsdf::luminance;
-use crate::scene::Light;
+use super::light_tree::{AUTO_TREE_LIGHTS, LightBounds, LightTree};
+use crate::scene::{Light, LightSelection, RenderSettings};
 use std::f32::consts::PI;
 use std::ops::Range;
 
@@ -216,12 +217,15 @@ impl AliasTable {
 
 /// The emissive triangles of a scene (a range of consecutive lights, each an
 /// `AreaShape::Triangle` area light) sampled as one light: each sample picks
-/// a triangle by power with the alias table.
+/// a triangle by power with the alias table, or by the light hierarchy as
+/// seen from the shading point ([`Self::with_selection`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct EmitterGroup {
     /// The group's lights (indices into the light list).
     pub range: Range<usize>,
     table: AliasTable,
+    /// The hierarchy over the group's lights, when picks use it.
+    tree: Option<LightTree>,
 }
 
 impl EmitterGroup {
@@ -240,7 +244,45 @@ impl EmitterGroup {
         // The group's relative powers do not depend on the scene radius.
         let weights: Vec<f32> = group.iter().map(|l| light_power(l, 1.0)).collect();
         let table = AliasTable::new(&weights)?;
-        Some(Self { range, table })
+        Some(Self {
+            range,
+            table,
+            tree: None,
+        })
+    }
+
+    /// The group picking by `selection`: by the hierarchy over `lights[range]`
+    /// for `Tree`, and for `Auto` over more than [`AUTO_TREE_LIGHTS`]
+    /// lights; by power otherwise.
+    pub fn with_selection(mut self, lights: &[Light], selection: LightSelection) -> Self {
+        let n = self.range.len();
+        let use_tree = match selection {
+            LightSelection::Power => false,
+            LightSelection::Tree => true,
+            LightSelection::Auto => n > AUTO_TREE_LIGHTS,
+        };
+        self.tree = use_tree
+            .then(|| {
+                let bounds: Vec<Option<LightBounds>> = lights
+                    .get(self.range.clone())
+                    .unwrap_or_default()
+                    .iter()
+                    .map(|l| LightBounds::of_light(l, 1.0))
+                    .collect();
+                LightTree::new(&bounds)
+            })
+            .flatten();
+        self
+    }
+
+    /// The group a render with `settings` samples: [`Self::of_scene`] with
+    /// its `light_samples`, picking by its `light_selection`.
+    pub fn for_render(
+        ps: &crate::prepared::PreparedScene<'_>,
+        settings: &RenderSettings,
+    ) -> Option<Self> {
+        Self::of_scene(ps, settings.light_samples.max(1))
+            .map(|g| g.with_selection(&ps.lights, settings.light_selection))
     }
 
     /// The group of `ps`'s emissive-triangle lights, see [`Self::new`].
@@ -254,13 +296,25 @@ impl EmitterGroup {
         area_samples.max(1)
     }
 
-    /// Picks a light of the group for sample `i` of `count` with the jitter
-    /// `j` in `[0,1)^2`: returns the light's index in the light list, its
-    /// pick probability and the 2D number to sample a point on it.
+    /// Picks a light of the group for sample `i` of `count` at the point
+    /// `p` of unit normal `n` with the jitter `j` in `[0,1)^2`: returns the
+    /// light's index in the light list, its pick probability and the 2D
+    /// number to sample a point on it.
     #[inline]
-    pub fn pick(&self, i: u32, count: u32, j: glam::Vec2) -> (usize, f32, glam::Vec2) {
+    pub fn pick(
+        &self,
+        p: glam::Vec3,
+        n: glam::Vec3,
+        i: u32,
+        count: u32,
+        j: glam::Vec2,
+    ) -> (usize, f32, glam::Vec2) {
         // Stratified in the pick: sample i takes the i-th of `count` strata.
         let t = ((i as f32 + j.x) / count.max(1) as f32).min(1.0 - f32::EPSILON / 2.0);
+        if let Some(tree) = &self.tree {
+            let (k, pmf, rest) = tree.sample(p, n, t);
+            return (self.range.start + k, pmf, glam::Vec2::new(rest, j.y));
+        }
         let (k, rest) = self.table.sample(t);
         (
             self.range.start + k,
@@ -269,12 +323,16 @@ impl EmitterGroup {
         )
     }
 
-    /// The pick probability of light `li` (zero outside the group).
-    pub fn pick_probability(&self, li: usize) -> f32 {
-        if self.range.contains(&li) {
-            self.table.pmf(li - self.range.start)
-        } else {
-            0.0
+    /// The pick probability of light `li` at the point `p` of normal `n`
+    /// (zero outside the group).
+    pub fn pick_probability(&self, p: glam::Vec3, n: glam::Vec3, li: usize) -> f32 {
+        if !self.range.contains(&li) {
+            return 0.0;
+        }
+        let k = li - self.range.start;
+        match &self.tree {
+            Some(tree) => tree.pmf(p, n, k),
+            None => self.table.pmf(k),
         }
     }
 
@@ -406,6 +464,7 @@ mod tests {
             area_samples: samples,
             ambient: false,
             group: Some(group),
+            share: crate::shading::SampleShare::WHOLE,
         };
         let mut state = 0x9e37_79b9_7f4a_7c15u64;
         let (mut s1, mut s2) = (0.0f64, 0.0f64);
@@ -480,6 +539,7 @@ mod tests {
                 area_samples: 64,
                 ambient: false,
                 group: None,
+                share: crate::shading::SampleShare::WHOLE,
             };
             let exact = f64::from(
                 shade_local(
@@ -512,6 +572,7 @@ mod tests {
                 area_samples: samples,
                 ambient: false,
                 group: Some(&group),
+                share: crate::shading::SampleShare::WHOLE,
             };
             let mut queries = 0u32;
             let c = shade_local(
@@ -539,7 +600,10 @@ mod tests {
         let g = EmitterGroup::new(&lights, 0..lights.len(), 16).expect("a group");
         let picks = |key: SampleKey| -> Vec<usize> {
             (0..16)
-                .map(|i| g.pick(i, 16, group_jitter(7, key, i)).0)
+                .map(|i| {
+                    g.pick(Vec3::ZERO, Vec3::Y, i, 16, group_jitter(7, key, i))
+                        .0
+                })
                 .collect()
         };
         let a = picks(SampleKey::Pixel(10, 20));

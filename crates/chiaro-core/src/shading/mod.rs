@@ -24,6 +24,7 @@ pub mod bsdf;
 pub mod dielectric;
 pub mod fresnel;
 pub mod light_set;
+pub mod light_tree;
 pub mod lights;
 pub mod microfacet;
 pub mod point;
@@ -40,6 +41,7 @@ pub use light_set::{
     AliasTable, EmitterGroup, LightPowerTable, SampleKey, environment_power, group_jitter,
     light_power,
 };
+pub use light_tree::{LightBounds, LightSampler, LightTree};
 pub use lights::{LightSample, TriangleEmitter, TriangleSample, sample_light, sample_light_pdf};
 pub use point::PointLighting;
 
@@ -103,12 +105,17 @@ pub fn ambient_light(lights: &[Light]) -> Vec3 {
 pub fn samples_for_light(light: &Light, area_samples: u32) -> u32 {
     match light {
         Light::Ambient { .. } => 0,
-        Light::Area { .. } => {
-            let k = (area_samples.max(1) as f32).sqrt().round().max(1.0) as u32;
-            k * k
-        }
+        Light::Area { .. } => area_sample_count(area_samples),
         _ => 1,
     }
+}
+
+/// The samples every area light gets for the `light_samples` setting
+/// `area_samples`: rounded to a square `k x k` (at least 1).
+#[inline]
+fn area_sample_count(area_samples: u32) -> u32 {
+    let k = (area_samples.max(1) as f32).sqrt().round().max(1.0) as u32;
+    k * k
 }
 
 /// The stratified 2D sample `i` of `count` (a square number) jittered by `jitter`
@@ -121,6 +128,65 @@ pub fn stratum(i: u32, count: u32, jitter: Vec2) -> Vec2 {
         (sx as f32 + jitter.x) / k as f32,
         (sy as f32 + jitter.y) / k as f32,
     )
+}
+
+/// Which sub-sample of its pixel a shading point is: a pixel of `of`
+/// sub-samples spreads each light's stratified samples over them (sub-sample
+/// `index` takes its share of the strata, [`SampleShare::strata`]) instead
+/// of giving every sub-sample the whole set, so supersampling does not
+/// multiply the light samples and the pixel still sees the full pattern.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SampleShare {
+    /// The sub-sample, in `0..of`.
+    pub index: u32,
+    /// The pixel's number of sub-samples (at least 1).
+    pub of: u32,
+}
+
+impl SampleShare {
+    /// A shading point that takes every light sample (one sample per pixel,
+    /// a vertex, a polygon centre).
+    pub const WHOLE: Self = Self { index: 0, of: 1 };
+
+    /// Sub-sample `index` of `of` (`of` at least 1, `index` taken modulo it).
+    pub fn new(index: u32, of: u32) -> Self {
+        let of = of.max(1);
+        Self {
+            index: index % of,
+            of,
+        }
+    }
+
+    /// The samples of a light's `count`-sample pattern this sub-sample
+    /// takes, and what their sum is divided by. With `n = of >= 2`:
+    /// for `count >= n` sub-sample `s` takes samples `[ceil(s k / n),
+    /// ceil((s + 1) k / n))` and divides by `k / n`; for `count < n` it
+    /// takes sample `floor(s k / n)`, shared by `c` sub-samples, and divides
+    /// by `k c / n`. Either way the mean over the pixel's sub-samples weighs
+    /// every sample `1 / k`, as one point taking the whole pattern does.
+    /// The whole share returns `(0..count, count)`.
+    #[inline]
+    pub fn strata(self, count: u32) -> (std::ops::Range<u32>, f32) {
+        let (s, n, k) = (
+            u64::from(self.index),
+            u64::from(self.of.max(1)),
+            u64::from(count),
+        );
+        if n == 1 || k == 0 {
+            return (0..count, count.max(1) as f32);
+        }
+        let ceil_div = |a: u64, b: u64| a.div_ceil(b) as u32;
+        if k >= n {
+            let (lo, hi) = (ceil_div(s * k, n), ceil_div((s + 1) * k, n));
+            (lo..hi, k as f32 / n as f32)
+        } else {
+            let i = s * k / n;
+            // The sub-samples s' with floor(s' k / n) = i.
+            let c = ceil_div((i + 1) * n, k) - ceil_div(i * n, k);
+            let i = i as u32;
+            (i..i + 1, (k * u64::from(c)) as f32 / n as f32)
+        }
+    }
 }
 
 /// Everything [`shade_local`] needs besides the surface.
@@ -137,6 +203,9 @@ pub struct LocalLighting<'a> {
     /// samples chosen by power, not `area_samples` per triangle); `None`:
     /// every light on its own.
     pub group: Option<&'a EmitterGroup>,
+    /// The share of each light's samples this point takes
+    /// ([`SampleShare::WHOLE`] but for a pixel's sub-samples).
+    pub share: SampleShare,
 }
 
 /// The local illumination model at one point: emission (if facing the
@@ -234,7 +303,8 @@ impl FactoredLight {
 
 /// What [`local_model`] sums: the model's terms in one form. `sample` adds
 /// one light sample in front of the surface with visibility `v`;
-/// `add_mean` adds a light's `sum` over `count` samples divided by `count`.
+/// `add_mean` adds a light's `sum` over its samples divided by `divisor`
+/// (their count, or [`SampleShare::strata`]'s divisor).
 trait Terms: Copy {
     fn start(m: &SurfaceMaterial) -> Self;
     fn zero() -> Self;
@@ -250,7 +320,7 @@ trait Terms: Copy {
         s: &LightSample,
         v: Vec3,
     );
-    fn add_mean(&mut self, sum: Self, count: u32);
+    fn add_mean(&mut self, sum: Self, divisor: f32);
 }
 
 /// `[total, rest]` of [`shade_local`] and [`shade_local_split`]: `rest`
@@ -322,17 +392,17 @@ impl<const SPLIT: bool> Terms for Coloured<SPLIT> {
     }
 
     #[inline(always)]
-    fn add_mean(&mut self, sum: Self, count: u32) {
-        if count == 1 {
+    fn add_mean(&mut self, sum: Self, divisor: f32) {
+        if divisor == 1.0 {
             // `x / 1.0 == x` exactly: skip the divisions.
             self.0[0] += sum.0[0];
             if SPLIT {
                 self.0[1] += sum.0[1];
             }
         } else {
-            self.0[0] += sum.0[0] / count as f32;
+            self.0[0] += sum.0[0] / divisor;
             if SPLIT {
-                self.0[1] += sum.0[1] / count as f32;
+                self.0[1] += sum.0[1] / divisor;
             }
         }
     }
@@ -388,8 +458,8 @@ impl Terms for FactoredLight {
     }
 
     #[inline(always)]
-    fn add_mean(&mut self, sum: Self, count: u32) {
-        let k = 1.0 / count as f32;
+    fn add_mean(&mut self, sum: Self, divisor: f32) {
+        let k = 1.0 / divisor;
         self.diffuse += sum.diffuse * k;
         self.ambient += sum.ambient * k;
         self.specular += sum.specular * k;
@@ -436,16 +506,23 @@ fn local_model<T: Terms>(
         }
         sum.sample(m, sp, has_specular, cos_i, s, v);
     };
+    // Every area light has the same pattern, every other light one sample:
+    // their shares, found once per point.
+    let area_count = area_sample_count(env.area_samples);
+    let (area_share, single_share) = (env.share.strata(area_count), env.share.strata(1));
     for (li, light) in singles {
-        if let Light::Ambient { .. } = light {
-            if env.ambient {
-                out.ambient(m, light.power_rgb());
+        let (count, (strata, divisor)) = match light {
+            Light::Ambient { .. } => {
+                if env.ambient {
+                    out.ambient(m, light.power_rgb());
+                }
+                continue;
             }
-            continue;
-        }
-        let count = samples_for_light(light, env.area_samples);
+            Light::Area { .. } => (area_count, area_share.clone()),
+            _ => (1, single_share.clone()),
+        };
         let mut sum = T::zero();
-        for i in 0..count {
+        for i in strata {
             let j = jitter(li, i);
             // A single sample is its stratum's jitter itself (stratum(0, 1, j) == j).
             let u = if count == 1 { j } else { stratum(i, count, j) };
@@ -453,15 +530,16 @@ fn local_model<T: Terms>(
                 add(&mut sum, li, &s);
             }
         }
-        out.add_mean(sum, count);
+        out.add_mean(sum, divisor);
     }
     if let Some(g) = group {
         // Each sample picks a light by power and is weighted by 1 / (pick
         // probability): the mean estimates the sum over the group's lights.
         let count = EmitterGroup::samples(env.area_samples);
+        let (strata, divisor) = env.share.strata(count);
         let mut sum = T::zero();
-        for i in 0..count {
-            let (li, pick, u) = g.pick(i, count, jitter(g.range.start, i));
+        for i in strata {
+            let (li, pick, u) = g.pick(sp.p, sp.ng, i, count, jitter(g.range.start, i));
             if pick <= 0.0 {
                 continue;
             }
@@ -470,7 +548,7 @@ fn local_model<T: Terms>(
                 add(&mut sum, li, &s);
             }
         }
-        out.add_mean(sum, count);
+        out.add_mean(sum, divisor);
     }
     out
 }
@@ -535,6 +613,7 @@ mod tests {
                 area_samples: 1,
                 ambient: true,
                 group: None,
+                share: SampleShare::WHOLE,
             };
             let c = shade_local(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
             // f_att Ip kd cos = (1/4) * 4 * 0.5 * cos
@@ -565,6 +644,7 @@ mod tests {
             area_samples: 1,
             ambient: true,
             group: None,
+            share: SampleShare::WHOLE,
         };
         let c = shade_local(&m, &sp, &env, |_, _| Vec2::splat(0.5), |_, _| Vec3::ONE);
         assert!((c - Vec3::new(0.05, 0.1, 0.0)).length() < 1e-6);
@@ -636,6 +716,7 @@ mod tests {
             area_samples: 4,
             ambient: true,
             group: None,
+            share: SampleShare::WHOLE,
         };
         for (k, model) in MODELS.into_iter().enumerate() {
             for ks in [0.0f32, 0.6] {
@@ -682,6 +763,7 @@ mod tests {
             area_samples: 4,
             ambient: true,
             group: None,
+            share: SampleShare::WHOLE,
         };
         let jitter = |_: usize, _: u32| Vec2::splat(0.5);
         let n = Vec3::new(0.1, 1.0, 0.2).normalize();
@@ -727,6 +809,80 @@ mod tests {
                 );
                 assert!(want.min_element() > 0.0);
             }
+        }
+    }
+
+    #[test]
+    fn shares_weigh_every_sample_once_over_the_pixel() {
+        // For any pattern size k and sub-sample count n, the mean over the
+        // n shares of (1 / divisor) per sample taken weighs each of the k
+        // samples 1 / k, and every share takes at least one sample.
+        for k in [1u32, 4, 9, 16, 25, 64] {
+            for n in [1u32, 2, 3, 4, 5, 7, 16, 64, 100] {
+                let mut weight = vec![0.0f64; k as usize];
+                for s in 0..n {
+                    let (strata, divisor) = SampleShare::new(s, n).strata(k);
+                    assert!(!strata.is_empty() && strata.end <= k, "{k} {n} {s}");
+                    for i in strata {
+                        weight[i as usize] += 1.0 / (f64::from(n) * f64::from(divisor));
+                    }
+                }
+                for (i, w) in weight.iter().enumerate() {
+                    assert!((w * f64::from(k) - 1.0).abs() < 1e-5, "{k} {n} {i}: {w}");
+                }
+            }
+        }
+        assert_eq!(SampleShare::WHOLE.strata(16), (0..16, 16.0));
+        assert_eq!(SampleShare::new(5, 3), SampleShare { index: 2, of: 3 });
+    }
+
+    #[test]
+    fn shared_samples_average_to_the_whole_pattern() {
+        // One point lit by every kind of light, shaded as each of n
+        // sub-samples: the mean equals the point shaded with every sample,
+        // and a share asks for visibility of its samples only.
+        let lights = every_light(Vec3::ONE);
+        let whole = LocalLighting {
+            lights: &lights,
+            area_samples: 16,
+            ambient: true,
+            group: None,
+            share: SampleShare::WHOLE,
+        };
+        let m = SurfaceMaterial {
+            kd: Vec3::new(0.7, 0.3, 0.2),
+            ks: Vec3::splat(0.4),
+            shininess: 20.0,
+            ..SurfaceMaterial::default()
+        };
+        let sp = ShadingPoint {
+            p: Vec3::new(0.2, 0.0, -0.1),
+            n: Vec3::Y,
+            ng: Vec3::Y,
+            wo: Vec3::new(0.3, 1.0, 0.4).normalize(),
+        };
+        let jitter = |_: usize, i: u32| Vec2::new(0.3 + 0.02 * i as f32, 0.6);
+        let want = shade_local(&m, &sp, &whole, jitter, part_shadow);
+        for n in [2u32, 3, 16, 64] {
+            let mut mean = Vec3::ZERO;
+            let mut asked = 0u32;
+            for s in 0..n {
+                let env = LocalLighting {
+                    share: SampleShare::new(s, n),
+                    ..whole
+                };
+                mean += shade_local(&m, &sp, &env, jitter, |li, smp| {
+                    asked += u32::from(li == 3);
+                    part_shadow(li, smp)
+                });
+            }
+            mean /= n as f32;
+            assert!(
+                (mean - want).abs().max_element() < 1e-5 * want.max_element(),
+                "{n}: {mean} vs {want}"
+            );
+            // The area light's 16 samples, spread: max(16, n) asked in all.
+            assert_eq!(asked, n.max(16), "{n}");
         }
     }
 

@@ -248,6 +248,7 @@ mod tests {
                     area_samples: 4,
                     ambient,
                     group: None,
+                    share: crate::shading::SampleShare::WHOLE,
                 };
                 for _ in 0..500 {
                     let n = unit(&mut rng);

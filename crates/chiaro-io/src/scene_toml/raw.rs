@@ -253,6 +253,7 @@ pub(crate) struct RawRender {
     pub aa: Option<AaMode>,
     pub filter: Option<PixelFilter>,
     pub light_samples: Option<u32>,
+    pub light_selection: Option<chiaro_core::scene::LightSelection>,
     pub depth_cue: Option<RawDepthCue>,
     pub tonemap: Option<ToneMap>,
     pub exposure: Option<f32>,

@@ -31,6 +31,7 @@ impl Ctx<'_> {
             aa,
             filter,
             light_samples,
+            light_selection,
             tonemap,
             exposure,
             cull_backfaces,

@@ -249,7 +249,7 @@ pub(crate) fn render_work(
 
     // 4. Shading: Gouraud's vertex lighting of the visible triangles (flat
     // polygons are lit with their `TriData`), then every visible sample.
-    let emitters = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
+    let emitters = EmitterGroup::for_render(ps, settings);
     let ctx = Ctx::new(ps, frame, mode, &emitters, shadows, class);
     progress.begin("poly", 1);
     let poly = poly_shading(&ctx, &vis);

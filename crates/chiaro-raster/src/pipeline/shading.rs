@@ -35,7 +35,7 @@ use chiaro_core::shading::{
     FactoredLight, LocalLighting, ShadingPoint, SurfaceMaterial, depth_cue, mirror_reflectance,
     reflect, sanitize, shade_local, shade_local_factored, shade_local_split,
 };
-use chiaro_core::shading::{LightSample, PointLighting, SampleKey, group_jitter};
+use chiaro_core::shading::{LightSample, PointLighting, SampleKey, SampleShare, group_jitter};
 use glam::{Vec2, Vec3, Vec3A};
 use std::cell::Cell;
 
@@ -116,7 +116,8 @@ impl Ctx<'_, '_> {
 
     /// `shade_local` with area lights sampled at the strata centres and the
     /// visibility of the shadow method; `counts` are the shadow-volume
-    /// counts of this sample, one per light (absent: no volume shadows).
+    /// counts of this sample, one per light (absent: no volume shadows);
+    /// `share` the part of each light's samples this sub-sample takes.
     #[inline]
     pub(crate) fn illuminate(
         &self,
@@ -125,6 +126,7 @@ impl Ctx<'_, '_> {
         m: &SurfaceMaterial,
         sp: &ShadingPoint,
         counts: Option<&[i32]>,
+        share: SampleShare,
     ) -> Vec3 {
         let mut owned = None;
         let m = self.frame_material(m, &mut owned);
@@ -135,19 +137,23 @@ impl Ctx<'_, '_> {
             Some((x, y)) => SampleKey::Pixel(x, y),
             None => SampleKey::Point(sp.p),
         };
+        let lighting = LocalLighting {
+            share,
+            ..self.lighting
+        };
         if matches!(self.shadows, Shadows::None) {
             // Every light sample is visible: closures the compiler inlines.
             return shade_local(
                 m,
                 sp,
-                &self.lighting,
+                &lighting,
                 |li, i| self.jitter(key, li, i),
                 |_, _| Vec3::ONE,
             );
         }
         let current = Cell::new(0u32);
         let (jitter, visibility) = self.sampling(tri, key, pixel, sp, counts, &current);
-        shade_local(m, sp, &self.lighting, jitter, visibility)
+        shade_local(m, sp, &lighting, jitter, visibility)
     }
 
     /// The jitter and visibility of the light samples at `sp` on triangle
@@ -366,7 +372,8 @@ pub(crate) fn shade_tile<'a>(
                     lean_sample(ctx, td, dir)
                 } else {
                     let (sx, sy) = (sample_x(px, o), sample_y(py, o));
-                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(pi), false)
+                    let whole = SampleShare::WHOLE;
+                    shade_sample(ctx, poly, td, sx, sy, dir, counts_of(pi), false, whole)
                 };
                 out.color[pi] = sanitize(r.color);
                 if r.depth < f32::INFINITY {
@@ -389,6 +396,8 @@ pub(crate) fn shade_tile<'a>(
                 let dir = Rays::dir_from(column, row);
                 let i = pi * spp + s;
                 let id = tv.ids[i];
+                // The pixel's light samples are spread over its sub-samples.
+                let share = SampleShare::new(s as u32, spp as u32);
                 let mut r = if id == NONE {
                     SampleResult {
                         color: if env_background {
@@ -406,11 +415,12 @@ pub(crate) fn shade_tile<'a>(
                     if td.lean {
                         lean_sample(ctx, td, dir)
                     } else {
-                        shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false)
+                        shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false, share)
                     }
                 };
                 // Transparent fragments, composited back to front.
-                composite(ctx, poly, tv, i, sx, sy, dir, &mut r, cache, counts_of);
+                let at = (sx, sy, share);
+                composite(ctx, poly, tv, i, at, dir, &mut r, cache, counts_of);
                 let c = sanitize(r.color);
                 if keep_samples {
                     kept[i] = c;
@@ -484,6 +494,9 @@ pub(crate) struct SampleAt {
     pub(crate) sign: f32,
     /// Film position of the sample.
     pub(crate) film: Vec2,
+    /// Which of its pixel's sub-samples it is, for the light samples it
+    /// takes.
+    pub(crate) share: SampleShare,
 }
 
 impl Ctx<'_, '_> {
@@ -564,7 +577,8 @@ pub(crate) struct Lit {
 /// Shades the sample at film position `(sx, sy)` (direction `dir`) where
 /// triangle `t` is visible, by the triangle's shading mode. `counts` are the
 /// point's shadow-volume counts per light; with `want_specular` the result
-/// also holds its non-diffuse part.
+/// also holds its non-diffuse part; `share` is the sample's place among its
+/// pixel's sub-samples.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn shade_sample(
     ctx: &Ctx<'_, '_>,
@@ -575,6 +589,7 @@ pub(crate) fn shade_sample(
     dir: Vec3A,
     counts: Option<&[i32]>,
     want_specular: bool,
+    share: SampleShare,
 ) -> SampleResult {
     let ps = ctx.ps;
     let eye = ctx.rays.eye;
@@ -622,6 +637,7 @@ pub(crate) fn shade_sample(
         wo,
         sign: if flip { -1.0 } else { 1.0 },
         film: Vec2::new(sx, sy),
+        share,
     };
     // The method's own step.
     let Lit {
@@ -732,6 +748,7 @@ impl<'a, 's> Ctx<'a, 's> {
                 area_samples: settings.light_samples.max(1),
                 ambient: true,
                 group: emitters.as_ref(),
+                share: SampleShare::WHOLE,
             },
             group_rays,
             one_mode: object_mode

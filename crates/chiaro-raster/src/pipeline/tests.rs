@@ -123,6 +123,7 @@ fn ray_cast(ps: &PreparedScene<'_>, w: u32, h: u32) -> Vec<Option<(u32, Vec3)>> 
         area_samples: 16,
         ambient: true,
         group: None,
+        share: chiaro_core::shading::SampleShare::WHOLE,
     };
     let mut out = Vec::new();
     for y in 0..h {
@@ -234,6 +235,7 @@ fn flat_is_constant_per_polygon_and_gouraud_interpolates_vertex_colours() {
         area_samples: 1,
         ambient: true,
         group: None,
+        share: chiaro_core::shading::SampleShare::WHOLE,
     };
     let vertex = |p: Vec3| {
         let sp = ShadingPoint {
@@ -630,6 +632,7 @@ fn test_ctx<'a, 's>(
             area_samples: 1,
             ambient: true,
             group: None,
+            share: chiaro_core::shading::SampleShare::WHOLE,
         },
         object_mode: vec![mode; s.objects.len()],
         shadows: Shadows::None,
@@ -721,7 +724,8 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
                     let (sx, sy) = (next() * w as f32, next() * h as f32);
                     let dir = Rays::dir_from(ctx.rays.column(sx), ctx.rays.row(sy));
                     let a = lean_sample(&ctx, &td, dir);
-                    let b = shade_sample(&ctx, &poly, &td, sx, sy, dir, None, false);
+                    let share = chiaro_core::shading::SampleShare::WHOLE;
+                    let b = shade_sample(&ctx, &poly, &td, sx, sy, dir, None, false, share);
                     let bits = |v: Vec3| v.to_array().map(f32::to_bits);
                     assert_eq!(bits(a.color), bits(b.color), "{mode:?} {model:?} t {t}");
                     assert_eq!(a.depth.to_bits(), b.depth.to_bits());

@@ -9,7 +9,7 @@ use chiaro_core::prepared::PreparedScene;
 use chiaro_core::sampling::{SobolSampler, power_heuristic};
 use chiaro_core::scene::{AlphaMode, AreaShape, Facing, Light, RenderSettings, Sidedness};
 use chiaro_core::shading::texture::EnvironmentLight;
-use chiaro_core::shading::{Bsdf, BsdfSample, LightPowerTable, SurfaceMaterial, TriangleEmitter};
+use chiaro_core::shading::{Bsdf, BsdfSample, LightSampler, SurfaceMaterial, TriangleEmitter};
 use chiaro_core::shadow::ShadowCasters;
 use glam::Vec3;
 
@@ -22,8 +22,9 @@ pub(super) struct PathTracer<'a, 's> {
     /// The environment map as a light: light number `lights.len()`, after
     /// `lights` (`None` without a map, or when it is black).
     pub(super) env: Option<EnvironmentLight<'s>>,
-    /// Selection of `lights` and then `env` by power.
-    pub(super) light_table: LightPowerTable,
+    /// Selection of `lights` and then `env`: by power, or by the light
+    /// hierarchy as seen from the shading point.
+    pub(super) light_sampler: LightSampler,
     /// Sampling data of each light in `lights` that is an emissive triangle
     /// (`None` for the others, sampled through `sample_light`, and for the
     /// environment).
@@ -163,6 +164,9 @@ pub(super) struct PathState {
     pub(super) prev_pdf: f32,
     /// The previous vertex (the camera for a camera ray).
     pub(super) prev_p: Vec3,
+    /// Its geometric normal on the side it was left from (zero at the
+    /// camera), for the light choice's probability there.
+    pub(super) prev_n: Vec3,
 }
 
 impl PathState {
@@ -174,6 +178,7 @@ impl PathState {
             l: Vec3::ZERO,
             prev_pdf: 0.0,
             prev_p: ray.origin,
+            prev_n: Vec3::ZERO,
         }
     }
 }
@@ -190,15 +195,17 @@ impl<'a, 's> PathTracer<'a, 's> {
             .iter()
             .filter(|l| !matches!(l, Light::Ambient { .. }))
             .collect();
-        // Select lights in proportion to a rough power estimate.
+        // Select lights in proportion to a rough power estimate, or by
+        // the hierarchy.
         let scene_radius = 0.5 * prepared.bounds.diagonal().max(1e-3);
         let env = env_sampling
             .then(|| EnvironmentLight::new(prepared.scene))
             .flatten();
-        let light_table = LightPowerTable::of_lights(
+        let light_sampler = LightSampler::new(
             &lights,
             scene_radius,
             env.as_ref().map(|e| e.mean_luminance()),
+            settings.light_selection,
         );
         let mut tri_lights: Vec<Option<TriangleEmitter>> = lights
             .iter()
@@ -287,7 +294,8 @@ impl<'a, 's> PathTracer<'a, 's> {
                     .is_some_and(|info| !info.textured && m.metallic_roughness.is_none())
             })
             .collect();
-        let select_lights = if tri_lights.len() <= lanes::SELECT_LIGHTS {
+        let by_power = light_sampler.power_table().is_some();
+        let select_lights = if by_power && tri_lights.len() <= lanes::SELECT_LIGHTS {
             // (`None` if any light is not a triangle.)
             let all: Option<Vec<TriangleEmitter>> = tri_lights.iter().copied().collect();
             all.unwrap_or_default()
@@ -299,7 +307,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             accel,
             lights,
             env,
-            light_table,
+            light_sampler,
             tri_lights,
             select_lights,
             triangle_light,
@@ -417,6 +425,7 @@ impl<'a, 's> PathTracer<'a, 's> {
             mut l,
             mut prev_pdf,
             mut prev_p,
+            mut prev_n,
         } = state;
         let mut first = None;
         let mut owned;
@@ -478,7 +487,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 let w = if prev_pdf == 0.0 {
                     1.0
                 } else {
-                    self.emitter_mis_weight(prim, prev_p, &v, wo, prev_pdf)
+                    self.emitter_mis_weight(prim, (prev_p, prev_n), &v, wo, prev_pdf)
                 };
                 l += beta * m.emission * w;
             }
@@ -532,6 +541,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                     s.pdf
                 };
                 prev_p = v.p;
+                prev_n = ng;
             }
             ray = Ray::new(offset_ray_origin(v.p, v.ng, s.wi), s.wi);
             // Russian roulette.
@@ -566,7 +576,9 @@ impl<'a, 's> PathTracer<'a, 's> {
             let l = chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0);
             match &self.env {
                 Some(env) if depth > 0 && prev_pdf > 0.0 => {
-                    let light_pdf = self.light_pick_pdf(self.lights.len()) * env.pdf(ray.dir);
+                    // (The environment's choice does not depend on the point.)
+                    let pick = self.light_pick_pdf(ray.origin, Vec3::ZERO, self.lights.len());
+                    let light_pdf = pick * env.pdf(ray.dir);
                     l * power_heuristic(prev_pdf, light_pdf)
                 }
                 _ => l,

@@ -211,6 +211,7 @@ impl PathTracer<'_, '_> {
         let mut l = V3::default();
         let mut prev_pdf: F = [0.0; LANES];
         let mut prev_p = V3::default();
+        let mut prev_n = V3::default();
         // Pairs drawn so far (the same for every live lane).
         let mut dim = 0u32;
         let jitter = rng.lanes_2d(dim, &rev);
@@ -234,7 +235,7 @@ impl PathTracer<'_, '_> {
             if alive.iter().filter(|&&a| a).count() <= SCALAR_TAIL {
                 for i in set_lanes(&alive) {
                     let ray = Ray::new(org.get(i), dir.get(i));
-                    let path = (&beta, &l, &prev_pdf, &prev_p);
+                    let path = (&beta, &l, &prev_pdf, (&prev_p, &prev_n));
                     let (li, fh) =
                         self.hand_off(i, ray, None, depth, path, (first, dim), rng, rays);
                     out[i] = li;
@@ -268,7 +269,7 @@ impl PathTracer<'_, '_> {
                     .filter(|(_, m)| m.lambert)
                 else {
                     // The scalar loop from this vertex, at this pair.
-                    let path = (&beta, &l, &prev_pdf, &prev_p);
+                    let path = (&beta, &l, &prev_pdf, (&prev_p, &prev_n));
                     let pair = (first, dim);
                     let (li, fh) = self.hand_off(i, ray, Some(hit), depth, path, pair, rng, rays);
                     out[i] = li;
@@ -287,7 +288,8 @@ impl PathTracer<'_, '_> {
                         let w = if prev_pdf[i] == 0.0 {
                             1.0
                         } else {
-                            self.emitter_mis_weight(prim, prev_p.get(i), &v, wo, prev_pdf[i])
+                            let from = (prev_p.get(i), prev_n.get(i));
+                            self.emitter_mis_weight(prim, from, &v, wo, prev_pdf[i])
                         };
                         l.set(i, l.get(i) + beta.get(i) * m.bsdf.m.emission * w);
                     }
@@ -370,6 +372,7 @@ impl PathTracer<'_, '_> {
                 prev_pdf[i] = cosine_hemisphere_pdf(cos_i);
                 let p = vx.p.get(i);
                 prev_p.set(i, p);
+                prev_n.set(i, vx.ngs.get(i));
                 org.set(i, offset_ray_origin(p, vx.ng.get(i), Vec3::from_array(wi)));
                 dir.put(i, wi);
                 q[i] = max_element(b).min(0.95);
@@ -408,7 +411,7 @@ impl PathTracer<'_, '_> {
         ray: Ray,
         traced: Option<Hit>,
         depth: u32,
-        (beta, l, prev_pdf, prev_p): (&V3, &V3, &F, &V3),
+        (beta, l, prev_pdf, (prev_p, prev_n)): (&V3, &V3, &F, (&V3, &V3)),
         (first, dim): (u32, u32),
         rng: &mut SobolSampler,
         rays: &mut u64,
@@ -420,35 +423,57 @@ impl PathTracer<'_, '_> {
             l: l.get(i),
             prev_pdf: prev_pdf[i],
             prev_p: prev_p.get(i),
+            prev_n: prev_n.get(i),
         };
         rng.set_sample(first + i as u32);
         rng.skip(dim);
         self.radiance_from(state, traced, rng, rays)
     }
 
-    /// [`PathTracer::pick_light`] of each lane's `u` (`None` without
-    /// lights): for a few lights the count of CDF entries at or below `u`,
+    /// [`PathTracer::pick_light`] of each lane's `u` at its vertex
+    /// (`None` without lights): the lights and their probabilities, light
+    /// [`NO_PICK`] where the hierarchy finds none for the lane. By power,
+    /// for a few lights the count of CDF entries at or below `u`,
     /// lane-parallel and without branches (the same index: the CDF is
     /// sorted, so the entries at or below `u` are the prefix that
-    /// `partition_point` finds); for many, the binary search per lane.
+    /// `partition_point` finds); for many, the binary search per lane. By
+    /// the hierarchy, its walk per lane in `shade`, at the point and
+    /// geometric normal the scalar loop gives it.
     #[inline(always)]
-    pub(super) fn pick_lights(&self, u: &F) -> Option<[u32; LANES]> {
+    pub(super) fn pick_lights(
+        &self,
+        u: &F,
+        vx: &Vertices,
+        shade: &[bool; LANES],
+    ) -> Option<([u32; LANES], F)> {
         /// Lights up to which counting beats the search.
         const FEW: usize = 16;
-        let (cdf, n) = (self.light_table.cdf(), self.light_count());
+        let n = self.light_count();
         if n == 0 {
             return None;
         }
-        if n > FEW {
-            return Some(u.map(|u| self.pick_light(u).unwrap_or(0) as u32));
-        }
-        let mut count = [0u32; LANES];
-        for &c in cdf.iter() {
-            for i in 0..LANES {
-                count[i] += (c <= u[i]) as u32;
+        let Some(table) = self.light_sampler.power_table() else {
+            let mut picked = [NO_PICK; LANES];
+            let mut pmf = [0.0; LANES];
+            for i in set_lanes(shade) {
+                if let Some((li, pk)) = self.pick_light(vx.p.get(i), vx.ngs.get(i), u[i]) {
+                    (picked[i], pmf[i]) = (li as u32, pk);
+                }
             }
-        }
-        Some(count.map(|k| k.min(n as u32 - 1)))
+            return Some((picked, pmf));
+        };
+        let picked = if n > FEW {
+            u.map(|u| table.pick(u).unwrap_or(0) as u32)
+        } else {
+            let mut count = [0u32; LANES];
+            for &c in table.cdf().iter() {
+                for i in 0..LANES {
+                    count[i] += (c <= u[i]) as u32;
+                }
+            }
+            count.map(|k| k.min(n as u32 - 1))
+        };
+        Some((picked, picked.map(|li| table.pmf(li as usize))))
     }
 
     /// [`PathTracer::direct`] for the lanes in `shade`, its contribution
@@ -480,12 +505,13 @@ impl PathTracer<'_, '_> {
         // Gather the chosen lights (lanes not gathered keep stale values,
         // computed on and then masked off).
         let mut ok = [false; LANES];
-        let picked = self.pick_lights(&u_pick);
-        if let Some(p) = picked.filter(|_| !self.select_lights.is_empty()) {
+        let picked = self.pick_lights(&u_pick, vx, shade);
+        if let Some((p, _)) = picked.filter(|_| !self.select_lights.is_empty()) {
             // Every light an emissive triangle: light 0 everywhere, then
-            // each other light selected into the lanes that picked it.
+            // each other light selected into the lanes that picked it (by
+            // power: the probability is the light's).
             ok = *shade;
-            let pick = |j: usize| self.light_pick_pdf(j);
+            let pick = |j: usize| self.light_pick_pdf(Vec3::ZERO, Vec3::ZERO, j);
             let (first, rest) = self.select_lights.split_first().expect("lights");
             *lt = LightLanes::splat(first, pick(0));
             for (j, tl) in rest.iter().enumerate().map(|(j, tl)| (j + 1, tl)) {
@@ -494,21 +520,24 @@ impl PathTracer<'_, '_> {
             }
         } else {
             for i in set_lanes(shade) {
-                let Some(li) = picked.map(|p| p[i] as usize) else {
+                let Some((li, pk)) = picked.map(|(p, pmf)| (p[i] as usize, pmf[i])) else {
                     break;
                 };
+                if li == NO_PICK as usize {
+                    continue;
+                }
                 let Some(tl) = &self.tri_lights[li] else {
                     // Not an emissive triangle: the scalar loop's code.
                     if let Some(m) = info[i] {
                         let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
                         let u = Vec2::new(u[0][i], u[1][i]);
-                        let c = self.direct_from(li, vx.p.get(i), m, n, ng, wo, mis, u, rays);
+                        let c = self.direct_from((li, pk), vx.p.get(i), m, n, ng, wo, mis, u, rays);
                         l.set(i, l.get(i) + beta.get(i) * c);
                     }
                     continue;
                 };
                 ok[i] = true;
-                lt.set(i, tl, self.light_pick_pdf(li));
+                lt.set(i, tl, pk);
             }
         }
         // The path's next pair, drawn here: independent work while the
@@ -620,10 +649,13 @@ fn set_lanes(m: &[bool; LANES]) -> impl Iterator<Item = usize> + use<> {
     })
 }
 
+/// [`PathTracer::pick_lights`]'s light of a lane given none.
+const NO_PICK: u32 = u32::MAX;
+
 /// The lanes' current vertices, as [`PathTracer::radiance_lanes`] shades
 /// them.
 #[derive(Default)]
-struct Vertices {
+pub(super) struct Vertices {
     p: V3,
     /// Geometric normal (front side).
     ng: V3,
@@ -632,4 +664,17 @@ struct Vertices {
     n: V3,
     ngs: V3,
     kd: V3,
+}
+
+#[cfg(test)]
+impl Vertices {
+    /// Vertices at `p` with viewer-side geometric normals `ngs`.
+    pub(super) fn at(p: [Vec3; LANES], ngs: [Vec3; LANES]) -> Self {
+        let mut v = Self::default();
+        for i in 0..LANES {
+            v.p.set(i, p[i]);
+            v.ngs.set(i, ngs[i]);
+        }
+        v
+    }
 }

@@ -13,23 +13,25 @@ use std::f32::consts::PI;
 pub(super) const NO_LIGHT: u32 = u32::MAX;
 
 impl PathTracer<'_, '_> {
+    /// The probability of choosing light `i` at the point `p` of normal `n`.
     #[inline]
-    pub(super) fn light_pick_pdf(&self, i: usize) -> f32 {
-        self.light_table.pmf(i)
+    pub(super) fn light_pick_pdf(&self, p: Vec3, n: Vec3, i: usize) -> f32 {
+        self.light_sampler.pmf(p, n, i)
     }
 
-    /// The light for the number `u`: an index into `lights`, or
-    /// `lights.len()` for the environment.
+    /// The light for the number `u` at the point `p` of normal `n`: an
+    /// index into `lights`, or `lights.len()` for the environment, and the
+    /// probability of the choice.
     #[inline]
-    pub(super) fn pick_light(&self, u: f32) -> Option<usize> {
-        self.light_table.pick(u)
+    pub(super) fn pick_light(&self, p: Vec3, n: Vec3, u: f32) -> Option<(usize, f32)> {
+        self.light_sampler.sample(p, n, u)
     }
 
     /// The number of lights next-event estimation chooses from (the
     /// environment included).
     #[inline]
     pub(super) fn light_count(&self) -> usize {
-        self.light_table.len()
+        self.light_sampler.len()
     }
 
     /// What reaches the far end of shadow ray `ray`: `None` when it is
@@ -51,11 +53,12 @@ impl PathTracer<'_, '_> {
         }
     }
 
-    /// MIS weight of emission found by BSDF sampling from `from` with pdf `bsdf_pdf`.
+    /// MIS weight of emission found by BSDF sampling from `from` (its
+    /// point and normal) with pdf `bsdf_pdf`.
     pub(super) fn emitter_mis_weight(
         &self,
         prim: u32,
-        from: Vec3,
+        (from, from_n): (Vec3, Vec3),
         surf: &Vertex,
         wo: Vec3,
         bsdf_pdf: f32,
@@ -71,7 +74,7 @@ impl PathTracer<'_, '_> {
         if cos_l <= 0.0 {
             return 1.0;
         }
-        let light_pdf = self.light_pick_pdf(li as usize) * d2 / (cos_l * tl.area);
+        let light_pdf = self.light_pick_pdf(from, from_n, li as usize) * d2 / (cos_l * tl.area);
         power_heuristic(bsdf_pdf, light_pdf)
     }
 
@@ -100,19 +103,19 @@ impl PathTracer<'_, '_> {
             0.0
         };
         let u = rng.next_2d();
-        let Some(li) = self.pick_light(u_pick) else {
+        let Some((li, pick)) = self.pick_light(p, ng, u_pick) else {
             return Vec3::ZERO;
         };
-        self.direct_from(li, p, info, n, ng, wo, mis, u, rays)
+        self.direct_from((li, pick), p, info, n, ng, wo, mis, u, rays)
     }
 
-    /// [`Self::direct`] with the light chosen (`li`) and its sample's
-    /// numbers drawn (`u`).
+    /// [`Self::direct`] with the light chosen (`li`, with probability
+    /// `pick`) and its sample's numbers drawn (`u`).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(super) fn direct_from(
         &self,
-        li: usize,
+        (li, pick): (usize, f32),
         p: Vec3,
         info: &MaterialInfo,
         n: Vec3,
@@ -122,7 +125,6 @@ impl PathTracer<'_, '_> {
         u: Vec2,
         rays: &mut u64,
     ) -> Vec3 {
-        let pick = self.light_pick_pdf(li);
         // (A dark material, a mirror or glass: `eval` would be zero for
         // any light sample, found before any shadow ray.)
         if pick <= 0.0 || info.dark {

@@ -28,7 +28,7 @@ impl PathTracer<'_, '_> {
         let (mut l, mut beta) = (Vec3::ZERO, Vec3::ONE);
         let mut first = None;
         // The previous bounce's solid-angle pdf (0: camera or delta) and point.
-        let (mut prev_pdf, mut prev_p) = (0.0f32, ray.origin);
+        let (mut prev_pdf, mut prev_p, mut prev_n) = (0.0f32, ray.origin, Vec3::ZERO);
         // A straight pass through a BLEND surface is not a bounce: `depth`
         // and the MIS state of the vertex before it stay.
         let (mut depth, mut passes) = (0, 0u32);
@@ -71,7 +71,7 @@ impl PathTracer<'_, '_> {
                     .and_then(|&li| {
                         let li = li as usize;
                         sample_light_pdf(self.lights[li], prev_p, surf.p)
-                            .map(|pdf| pdf * self.light_pick_pdf(li))
+                            .map(|pdf| pdf * self.light_pick_pdf(prev_p, prev_n, li))
                     });
                 let w = light_pdf.map_or(1.0, |lp| power_heuristic(prev_pdf, lp));
                 l += beta * le * w;
@@ -113,6 +113,7 @@ impl PathTracer<'_, '_> {
                     s.pdf
                 };
                 prev_p = surf.p;
+                prev_n = ng;
             }
             ray = Ray::new(offset_ray_origin(surf.p, surf.ng, s.wi), s.wi);
             // Russian roulette.
@@ -149,10 +150,9 @@ impl PathTracer<'_, '_> {
         rays: &mut u64,
     ) -> Vec3 {
         let (u_pick, u) = (uniform(rng), uniform2(rng));
-        let Some(li) = self.pick_light(u_pick) else {
+        let Some((li, pick)) = self.pick_light(p, ng, u_pick) else {
             return Vec3::ZERO;
         };
-        let pick = self.light_pick_pdf(li);
         let Some(&light) = self.lights.get(li) else {
             // The environment (the light after `lights`).
             return self.direct_env(pick, p, bsdf, n, ng, wo, mis, u, rays);

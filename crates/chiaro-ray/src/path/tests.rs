@@ -8,12 +8,13 @@ use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{
-    AreaShape, Geometry, Light, Material, Object, Scene, Technique, Transform,
+    AreaShape, Geometry, Light, LightSelection, Material, Object, Scene, Technique, Transform,
 };
 use chiaro_testkit::scenes::{
     add_object, camera, point_light, repo_scene, set_environment, shipped,
 };
 use chiaro_testkit::stats;
+use lanes::Vertices;
 use std::f32::consts::PI;
 
 fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
@@ -572,28 +573,42 @@ fn environment_sampling_cuts_the_variance_of_a_small_bright_spot() {
 
 #[test]
 fn lanes_pick_the_lights_the_scalar_pick_does() {
-    // Counting CDF entries (up to 16 lights) and the binary search
-    // (more) against `pick_light`, at and beside every CDF entry.
-    for k in [1usize, 2, 3, 16, 17, 40] {
-        let mut s = mitsuba_cbox(4);
-        for j in 0..k {
-            s.lights
-                .push(point_light(Vec3::new(0.0, 0.5, 0.0), 1.0 + (j % 5) as f32));
-        }
-        let prepared = PreparedScene::new(&s, PrepareOptions::default());
-        let accel = SceneBvh::new(&prepared);
-        let tracer = PathTracer::new(&prepared, &accel, &s.render, true);
-        let mut us = vec![0.0, 0.5, 0.999_999_94, 1.0];
-        for &c in tracer.light_table.cdf() {
-            us.extend([c.next_down(), c, c.next_up()]);
-        }
-        for chunk in us.chunks(LANES) {
-            let mut u = [0.0; LANES];
-            u[..chunk.len()].copy_from_slice(chunk);
-            let lanes = tracer.pick_lights(&u).expect("lights");
-            for i in 0..LANES {
-                let want = tracer.pick_light(u[i]).expect("lights") as u32;
-                assert_eq!(lanes[i], want, "{k} lights, u = {}", u[i]);
+    // By power: counting CDF entries (up to 16 lights) and the binary
+    // search (more) against `pick_light`, at and beside every CDF entry.
+    // By the hierarchy: its walk per lane at each lane's own point.
+    for selection in [LightSelection::Power, LightSelection::Tree] {
+        for k in [1usize, 2, 3, 16, 17, 40] {
+            let mut s = mitsuba_cbox(4);
+            s.render.light_selection = selection;
+            for j in 0..k {
+                let at = Vec3::new(0.1 * (j % 7) as f32 - 0.3, 0.5, 0.05 * j as f32 - 0.5);
+                s.lights.push(point_light(at, 1.0 + (j % 5) as f32));
+            }
+            let prepared = PreparedScene::new(&s, PrepareOptions::default());
+            let accel = SceneBvh::new(&prepared);
+            let tracer = PathTracer::new(&prepared, &accel, &s.render, true);
+            let mut us = vec![0.0, 0.5, 0.999_999_94, 1.0];
+            if let Some(t) = tracer.light_sampler.power_table() {
+                for &c in t.cdf() {
+                    us.extend([c.next_down(), c, c.next_up()]);
+                }
+            } else {
+                us.extend((0..40).map(|j| (j as f32 + 0.5) / 40.0));
+            }
+            let ps: [Vec3; LANES] =
+                std::array::from_fn(|i| Vec3::new(0.1 * i as f32 - 0.8, -0.9, 0.05 * i as f32));
+            let ns: [Vec3; LANES] =
+                std::array::from_fn(|i| Vec3::new(0.05 * i as f32, 1.0, 0.0).normalize());
+            let vx = Vertices::at(ps, ns);
+            for chunk in us.chunks(LANES) {
+                let mut u = [0.0; LANES];
+                u[..chunk.len()].copy_from_slice(chunk);
+                let (lanes, pmf) = tracer.pick_lights(&u, &vx, &[true; LANES]).expect("lights");
+                for i in 0..LANES {
+                    let (want, pk) = tracer.pick_light(ps[i], ns[i], u[i]).expect("lights");
+                    assert_eq!(lanes[i], want as u32, "{k} lights, u = {}", u[i]);
+                    assert_eq!(pmf[i].to_bits(), pk.to_bits());
+                }
             }
         }
     }
@@ -870,4 +885,92 @@ fn rough_glass_sphere_under_a_white_environment_keeps_its_light() {
             );
         }
     }
+}
+
+/// Mitsuba's box with its emitter replaced by `k x k` cells of two small
+/// triangles each under the ceiling, tilted by cell so that they face
+/// different ways and (facing down or up) some light nothing below.
+fn many_emitters(size: u32, k: u32) -> Scene {
+    let mut s = mitsuba_cbox(size);
+    let (mut positions, mut indices) = (Vec::new(), Vec::new());
+    for j in 0..k {
+        for i in 0..k {
+            let (x, z) = (
+                -0.8 + 1.6 * i as f32 / k as f32,
+                -0.8 + 1.6 * j as f32 / k as f32,
+            );
+            let w = 1.2 / k as f32;
+            let tilt = 0.3 * ((i + 2 * j) % 5) as f32 - 0.6;
+            let base = positions.len() as u32;
+            positions.extend([
+                Vec3::new(x, 0.97, z),
+                Vec3::new(x + w, 0.97 + tilt * w, z),
+                Vec3::new(x, 0.97, z + w),
+                Vec3::new(x + w, 0.97 + tilt * w, z + w),
+            ]);
+            // Facing down, but every seventh cell facing up.
+            if (i + j * k) % 7 == 3 {
+                indices.extend([[base, base + 2, base + 1], [base + 1, base + 2, base + 3]]);
+            } else {
+                indices.extend([[base, base + 1, base + 2], [base + 1, base + 3, base + 2]]);
+            }
+        }
+    }
+    replace_emitter(&mut s, positions, indices);
+    s
+}
+
+#[test]
+fn lock_step_kernel_with_the_light_hierarchy() {
+    // 128 triangle lights chosen by the hierarchy (and, forced, 5), with
+    // and without an environment beside them.
+    for (k, env) in [(8u32, false), (8, true)] {
+        let mut s = many_emitters(12, k);
+        s.render.samples = 9;
+        if env {
+            let map = spot_map(16, 8, (3, 2), 50.0);
+            set_environment(&mut s, map, 1.0, 0.0, false);
+        }
+        let prepared = PreparedScene::new(&s, PrepareOptions::default());
+        let accel = bvh(&prepared);
+        let tracer = PathTracer::new(&prepared, accel.as_ref(), &s.render, true);
+        assert!(tracer.light_sampler.power_table().is_none(), "auto: a tree");
+        assert!(tracer.select_lights.is_empty());
+        assert_kernels_agree(&s, &format!("{k}x{k} cells, environment {env}"));
+    }
+    let mut s = mitsuba_cbox(12);
+    s.render.samples = 9;
+    s.render.light_selection = LightSelection::Tree;
+    assert_kernels_agree(&s, "the box's light by a forced tree");
+}
+
+#[test]
+fn the_hierarchy_renders_what_power_sampling_renders() {
+    // The same box under 200 tilted triangle lights, by power and by the
+    // hierarchy: the per-pixel difference's mean is zero within four
+    // standard errors (of a difference small against the image).
+    let mut s = many_emitters(16, 10);
+    s.render.samples = 64;
+    s.render.path.max_depth = 3;
+    let mut films = Vec::new();
+    for selection in [LightSelection::Power, LightSelection::Tree] {
+        s.render.light_selection = selection;
+        let (film, _) =
+            render_with_kernel(&s, &s.render, &NoProgress, &bvh, Kernel::Lanes).expect("renders");
+        films.push(film);
+    }
+    let d: Vec<f64> = films[0]
+        .color
+        .iter()
+        .zip(&films[1].color)
+        .map(|(a, b)| f64::from(b.x - a.x))
+        .collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let se = (var / n).sqrt();
+    let level = films[0].color.iter().map(|c| f64::from(c.x)).sum::<f64>() / n;
+    eprintln!("tree - power: {mean} +- {se} (image mean {level})");
+    assert!(mean.abs() < 4.0 * se, "{mean} +- {se}");
+    assert!(level > 0.01 && se < 0.05 * level, "{level} {se}");
 }

@@ -46,8 +46,8 @@ use chiaro_core::sampling::{Rng, pixel_rng, uniform, uniform2};
 use chiaro_core::scene::{AaMode, Facing, PixelRays, RenderSettings, ShadowMethod, Technique};
 use chiaro_core::shading::texture::{environment_diffuse, environment_specular, miss_radiance};
 use chiaro_core::shading::{
-    EmitterGroup, LightSample, LocalLighting, SampleKey, ShadingPoint, SurfaceMaterial,
-    delta_split, depth_cue, group_jitter, sanitize, shade_local,
+    EmitterGroup, LightSample, LocalLighting, SampleKey, SampleShare, ShadingPoint,
+    SurfaceMaterial, delta_split, depth_cue, group_jitter, sanitize, shade_local,
 };
 use chiaro_core::shadow::ShadowCasters;
 use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature, ROUGH_AS_SMOOTH};
@@ -80,6 +80,9 @@ pub struct TraceState {
     /// primary hit keys the emitter group's picks as the scan converter's
     /// pixel-centre samples do.
     pub pixel: Option<(u32, u32)>,
+    /// Which of its pixel's samples this is: each takes its share of every
+    /// area light's samples, so supersampling does not multiply them.
+    pub share: SampleShare,
 }
 
 impl TraceState {
@@ -89,6 +92,7 @@ impl TraceState {
             rng,
             rays: 0,
             pixel: None,
+            share: SampleShare::WHOLE,
         }
     }
 }
@@ -221,7 +225,7 @@ impl<'s> Tracer<'s> {
         let accel = ctx.analytic_accel();
         let settings = ctx.settings();
         let casters = ShadowCasters::new(prepared);
-        let emitters = EmitterGroup::of_scene(prepared, settings.light_samples.max(1));
+        let emitters = EmitterGroup::for_render(prepared, settings);
         Self {
             prepared,
             accel,
@@ -349,8 +353,11 @@ impl<'s> Tracer<'s> {
             area_samples: self.settings.light_samples.max(1),
             ambient: self.indirect.is_none(),
             group: self.emitters.as_ref(),
+            share: state.share,
         };
-        let TraceState { rng, rays, pixel } = state;
+        let TraceState {
+            rng, rays, pixel, ..
+        } = state;
         let key = match *pixel {
             Some((x, y)) if depth == 0 => SampleKey::Pixel(x, y),
             _ => SampleKey::Point(sh.p),
@@ -401,8 +408,15 @@ impl<'s> Tracer<'s> {
     }
 
     /// Traces the camera ray through film position `film` (pixels, from
-    /// the top-left corner) with the generator `rng`.
-    pub fn trace_camera(&self, film: Vec2, rng: Rng, rays: &mut u64) -> PrimarySample {
+    /// the top-left corner) with the generator `rng`, as its pixel's
+    /// sample `share`.
+    pub fn trace_camera(
+        &self,
+        film: Vec2,
+        rng: Rng,
+        share: SampleShare,
+        rays: &mut u64,
+    ) -> PrimarySample {
         let scene = self.prepared.scene;
         let pr = &self.pixel_rays;
         let ray = Ray::new(self.eye, pr.direction(film.x, film.y));
@@ -413,6 +427,7 @@ impl<'s> Tracer<'s> {
             dir_dy: pr.direction(film.x, film.y + 1.0),
         });
         let mut state = TraceState::new(rng);
+        state.share = share;
         // A pixel-centre ray names its pixel (the scan converter's rule).
         if film.x.fract() == 0.5 && film.y.fract() == 0.5 && film.x >= 0.0 && film.y >= 0.0 {
             state.pixel = Some((film.x as u32, film.y as u32));
@@ -502,7 +517,8 @@ impl<'s> Tracer<'s> {
                         )
                     };
                     let film = Vec2::new(px as f32, py as f32) + off;
-                    let ps = self.trace_camera(film, rng, &mut count.0);
+                    let share = SampleShare::new(k, n);
+                    let ps = self.trace_camera(film, rng, share, &mut count.0);
                     count.1 += 1;
                     if k == 0 {
                         tile.depth[idx] = ps.depth;
@@ -573,7 +589,8 @@ impl<'s> Tracer<'s> {
         let film = Vec2::new(fx as f32 / fine as f32, fy as f32 / fine as f32);
         let rng = pixel_rng(self.settings.seed ^ ADAPTIVE_SALT, fx, fy, 0);
         count.1 += 1;
-        self.trace_camera(film, rng, &mut count.0)
+        // Corners are shared between pixels: each takes every light sample.
+        self.trace_camera(film, rng, SampleShare::WHOLE, &mut count.0)
     }
 
     /// Mean colour of the square at fine-grid `(x0, y0)` of side `size`
