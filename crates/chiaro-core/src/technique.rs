@@ -41,7 +41,14 @@ pub enum Feature {
     /// Rough glass: a Fresnel dielectric whose Torrance-Sparrow roughness
     /// blurs what it reflects and transmits (`shading::dielectric`).
     RoughTransmission,
+    /// A clear coat (glTF `KHR_materials_clearcoat`): its reflection of
+    /// other objects.
+    ClearCoat,
 }
+
+/// What the techniques that reflect only the environment in a clear coat
+/// show of it.
+pub const COAT_REFLECTS_ENVIRONMENT: &str = "reflections of other objects in a clear coat: the coat reflects the environment map and the lights' highlights only";
 
 /// What the Whitted-style tracers show of rough glass.
 pub const ROUGH_AS_SMOOTH: &str = "the blur of rough glass: it reflects and refracts along the smooth (mirror and Snell) directions";

@@ -11,7 +11,9 @@ use chiaro_core::film::Film;
 use chiaro_core::scene::{
     Issue, MAX_RASTER_SAMPLES, RenderSettings, Scene, Severity, ShadeMode, Technique,
 };
-use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature};
+use chiaro_core::technique::{
+    COAT_REFLECTS_ENVIRONMENT, Description, ENVIRONMENT_UNOCCLUDED, Feature,
+};
 
 /// The scan-conversion techniques (flat, Gouraud, Phong).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -123,6 +125,7 @@ pub const FLAT: Description = Description {
     shows: "direct light and shadows per polygon, textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
     cannot_show: &[
         (Feature::Mirrors, NO_MIRRORS),
+        (Feature::ClearCoat, COAT_REFLECTS_ENVIRONMENT),
         (Feature::Refraction, NO_REFRACTION),
         (
             Feature::NormalMaps,
@@ -149,6 +152,7 @@ pub const GOURAUD: Description = Description {
     shows: "direct light and shadows per vertex, interpolated; textures per pixel, non-refractive transparency, environment reflection maps and the environment's light",
     cannot_show: &[
         (Feature::Mirrors, NO_MIRRORS),
+        (Feature::ClearCoat, COAT_REFLECTS_ENVIRONMENT),
         (Feature::Refraction, NO_REFRACTION),
         (
             Feature::NormalMaps,
@@ -175,6 +179,7 @@ pub const PHONG: Description = Description {
     shows: "direct light, highlights and shadows per pixel, textures, normal and bump maps, non-refractive transparency, environment reflection maps and the environment's light",
     cannot_show: &[
         (Feature::Mirrors, NO_MIRRORS),
+        (Feature::ClearCoat, COAT_REFLECTS_ENVIRONMENT),
         (Feature::Refraction, NO_REFRACTION),
         (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
         (Feature::AlphaMaskShadows, WHOLE_MASK_SHADOWS),

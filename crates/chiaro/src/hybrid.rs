@@ -14,7 +14,9 @@ use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::CoreError;
 use chiaro_core::film::Film;
 use chiaro_core::scene::{RenderSettings, Scene, Technique};
-use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature, ROUGH_AS_SMOOTH};
+use chiaro_core::technique::{
+    COAT_REFLECTS_ENVIRONMENT, Description, ENVIRONMENT_UNOCCLUDED, Feature, ROUGH_AS_SMOOTH,
+};
 use chiaro_ray::whitted::Tracer;
 use std::f32::consts::PI;
 
@@ -69,5 +71,6 @@ pub const DESCRIPTION: Description = Description {
         ),
         (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
         (Feature::RoughTransmission, ROUGH_AS_SMOOTH),
+        (Feature::ClearCoat, COAT_REFLECTS_ENVIRONMENT),
     ],
 };

@@ -254,6 +254,9 @@ fn present(
                 && m.model == chiaro_core::scene::ReflectanceModel::TorranceSparrow
                 && m.roughness >= chiaro_core::shading::dielectric::MIN_ROUGH_ALPHA
         })),
+        Feature::ClearCoat => named(objects.with(|m| {
+            m.clearcoat.is_some_and(|c| c.factor > 0.0)
+        })),
         Feature::Highlights => named(objects.with(|m| {
             m.specular.max_element() > 0.0
         })),

@@ -257,3 +257,32 @@ fn rough_glass_is_drawn_smooth_by_whitted_and_blurred_by_path() {
         None
     );
 }
+
+#[test]
+fn a_clear_coat_reflects_other_objects_only_in_path() {
+    let mut s = chiaro::io::load_scene_str(DARK, Path::new("."), "coat.toml")
+        .expect("loads")
+        .scene;
+    for m in &mut s.materials {
+        m.clearcoat = Some(chiaro::scene::Clearcoat::default());
+    }
+    for t in [
+        Technique::Flat,
+        Technique::Gouraud,
+        Technique::Phong,
+        Technique::Whitted,
+        Technique::Hybrid,
+    ] {
+        let names = named(&s, t, Feature::ClearCoat).map(|v| v.len());
+        assert_eq!(names, Some(1), "{}", t.name());
+    }
+    assert_eq!(named(&s, Technique::Path, Feature::ClearCoat), None);
+    // A coat of factor 0 is no coat.
+    for m in &mut s.materials {
+        m.clearcoat = Some(chiaro::scene::Clearcoat {
+            factor: 0.0,
+            ..Default::default()
+        });
+    }
+    assert_eq!(named(&s, Technique::Phong, Feature::ClearCoat), None);
+}

@@ -50,7 +50,9 @@ use chiaro_core::shading::{
     SurfaceMaterial, delta_split, depth_cue, group_jitter, sanitize, shade_local,
 };
 use chiaro_core::shadow::ShadowCasters;
-use chiaro_core::technique::{Description, ENVIRONMENT_UNOCCLUDED, Feature, ROUGH_AS_SMOOTH};
+use chiaro_core::technique::{
+    COAT_REFLECTS_ENVIRONMENT, Description, ENVIRONMENT_UNOCCLUDED, Feature, ROUGH_AS_SMOOTH,
+};
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -179,6 +181,7 @@ pub const DESCRIPTION: Description = Description {
     cannot_show: &[
         (Feature::EnvironmentLight, ENVIRONMENT_UNOCCLUDED),
         (Feature::RoughTransmission, ROUGH_AS_SMOOTH),
+        (Feature::ClearCoat, COAT_REFLECTS_ENVIRONMENT),
     ],
 };
 
