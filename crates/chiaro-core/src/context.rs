@@ -102,7 +102,7 @@ impl std::fmt::Debug for Derived {
 impl Derived {
     /// The value of type `T` kept, else `build()`'s, kept from now on.
     /// `build` runs outside the lock (it may use rayon; see
-    /// [`init_outside`]); two threads may both build, one value is kept.
+    /// `init_outside`); two threads may both build, one value is kept.
     pub fn get_or_build<T: Any + Send + Sync>(&self, build: impl FnOnce() -> T) -> Arc<T> {
         if let Some(v) = self.find::<T>() {
             return v;
