@@ -115,8 +115,9 @@ class Image(np.ndarray):
 
 
 def load(path: PathLike) -> Scene:
-    """Reads a scene file: ``.toml`` (chiaro's format), ``.obj`` (+ ``.mtl``),
-    ``.gltf`` or ``.glb``.
+    """Reads a scene file: ``.toml`` (chiaro's format), ``.xml`` (Mitsuba 3),
+    ``.pbrt`` (pbrt-v4, and v3 where they differ little), ``.obj``
+    (+ ``.mtl``), ``.ply``, ``.gltf`` or ``.glb``.
 
     Raises :class:`SceneError` (with ``path``, ``line``, ``column`` set, or
     ``location`` for glTF JSON paths) for a file that does not parse or a

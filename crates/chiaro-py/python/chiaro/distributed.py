@@ -288,7 +288,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         prog="python -m chiaro.distributed",
         description="Render a chiaro scene on a Ray cluster.",
     )
-    p.add_argument("scene", help="scene file (.toml, .obj, .gltf, .glb)")
+    p.add_argument("scene", help="scene file (.toml, .xml, .pbrt, .obj, .ply, .gltf, .glb)")
     p.add_argument("-o", "--output", required=True, help="output image (.png, .exr, .hdr, .ppm)")
     p.add_argument("--address", default=None,
                    help="Ray cluster address ('auto' for `ray start`); default: a local cluster")
