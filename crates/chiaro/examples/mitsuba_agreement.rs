@@ -6,7 +6,7 @@
 //! per scene (Mitsuba's scenes pass at 99.75 %).
 //!
 //! ```text
-//! CHIARO_ASSETS=../shared/assets cargo run --release -p chiaro --example mitsuba_agreement -- [--spp N] [--only NAME] [--filter box|tent]
+//! CHIARO_ASSETS=PATH/TO/ASSETS cargo run --release -p chiaro --example mitsuba_agreement -- [--spp N] [--only NAME] [--filter box|tent]
 //! ```
 //!
 //! `--spp` defaults to Mitsuba's budget, 2,000,000 / pixels. The renders

@@ -4,13 +4,12 @@
 //! beside the XML (`STEM-mesh-N.ply`).
 
 use super::{
-    Bitmap, Colour, Files, Surface, bitmap_of, bsdf_of, companion, meshes_of, num, nums, object_at,
-    ply_bytes, refuse, sphere_of,
+    Bitmap, Colour, Files, LightWords, OutLight, Surface, bitmap_of, bsdf_of, companion, light_of,
+    meshes_of, num, nums, object_at, ply_bytes, refuse, sphere_of,
 };
 use crate::Result;
-use chiaro_core::scene::{Attenuation, Distribution, Geometry, Light, Scene, Texture, WrapMode};
+use chiaro_core::scene::{Distribution, Geometry, Scene, Texture, WrapMode};
 use chiaro_core::{Mat4, Vec3};
-use std::f32::consts::PI;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -120,83 +119,54 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
         bsdfs.push(Some((id, b.emission)));
     }
     // Lights.
-    for (i, l) in scene.lights.iter().enumerate() {
-        let at = format!("lights[{i}] ({})", l.kind());
-        match l {
-            Light::Ambient { .. } => {
-                w.push(format!(
-                    "{at}: ignored: an ambient light (the path tracer ignores it too)"
-                ));
-            }
-            Light::Point {
+    let words = LightWords {
+        soft_edge: "Mitsuba's beam_width",
+        surfaces: "the peers'",
+    };
+    for i in 0..scene.lights.len() {
+        match light_of(scene, i, out, &words, w)? {
+            None => {}
+            Some(OutLight::Point {
                 position,
-                color,
                 intensity,
-                attenuation,
-            } => {
-                if *attenuation != Attenuation::InverseSquare {
-                    return Err(refuse(
-                        out,
-                        at,
-                        "attenuation other than inverse_square has no exact counterpart",
-                    ));
-                }
-                // chiaro's irradiance is pi I cos / d^2: Mitsuba's intensity is pi I.
+            }) => {
                 let _ = writeln!(
                     x,
                     "    <emitter type=\"point\"><point name=\"position\" value=\"{}\"/>{}</emitter>",
-                    nums(*position, ", "),
-                    rgb("intensity", PI * *color * *intensity)
+                    nums(position, ", "),
+                    rgb("intensity", intensity)
                 );
             }
-            Light::Directional {
+            Some(OutLight::Directional {
                 direction,
-                color,
-                intensity,
-            } => {
+                irradiance,
+            }) => {
                 let _ = writeln!(
                     x,
                     "    <emitter type=\"directional\"><vector name=\"direction\" value=\"{}\"/>{}</emitter>",
-                    nums(*direction, ", "),
-                    rgb("irradiance", PI * *color * *intensity)
+                    nums(direction, ", "),
+                    rgb("irradiance", irradiance)
                 );
             }
-            Light::Spot(s) => {
-                if s.attenuation != Attenuation::InverseSquare
-                    || s.exponent != 0.0
-                    || !s.flaps.is_empty()
-                {
-                    return Err(refuse(
-                        out,
-                        at,
-                        "a spot with Warn's exponent, flaps or a non-physical attenuation has no exact counterpart",
-                    ));
-                }
-                if s.cone_softness_degrees > 0.0 {
-                    w.push(format!("{at}: approximate: the cone's soft edge is written as Mitsuba's beam_width (its fall-off curve differs)"));
-                }
-                let d = s.direction.normalize_or(Vec3::NEG_Z);
+            Some(OutLight::Spot {
+                position,
+                direction,
+                cone_degrees,
+                softness_degrees,
+                intensity,
+            }) => {
+                let d = direction.normalize_or(Vec3::NEG_Z);
                 let up = if d.y.abs() < 0.9 { Vec3::Y } else { Vec3::X };
                 let _ = writeln!(
                     x,
                     "    <emitter type=\"spot\"><transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>{}{}{}</emitter>",
-                    nums(s.position, ", "),
-                    nums(s.position + d, ", "),
+                    nums(position, ", "),
+                    nums(position + d, ", "),
                     nums(up, ", "),
-                    float("cutoff_angle", s.cone_degrees),
-                    float(
-                        "beam_width",
-                        (s.cone_degrees - s.cone_softness_degrees).max(0.0)
-                    ),
-                    rgb("intensity", PI * s.color * s.intensity)
+                    float("cutoff_angle", cone_degrees),
+                    float("beam_width", (cone_degrees - softness_degrees).max(0.0)),
+                    rgb("intensity", intensity)
                 );
-            }
-            Light::Area { .. } => {
-                return Err(refuse(
-                    out,
-                    at,
-                    "chiaro's area lights are invisible and reached by light sampling only, the peers' are surfaces: write it as an object with an emissive material",
-                ));
             }
         }
     }

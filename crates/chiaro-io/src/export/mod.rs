@@ -22,10 +22,11 @@ use crate::output::write_atomically;
 use crate::{IoError, Result};
 use chiaro_core::geometry::normals::vertex_normals;
 use chiaro_core::scene::{
-    Distribution, Geometry, Material, Mesh, ReflectanceModel, Scene, Sidedness, Texture, TextureId,
-    WrapMode,
+    Attenuation, Distribution, Geometry, Light, Material, Mesh, ReflectanceModel, Scene, Sidedness,
+    Texture, TextureId, WrapMode,
 };
 use chiaro_core::{Mat4, Vec2, Vec3};
+use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
 
 /// The format [`export`] writes.
@@ -504,6 +505,116 @@ pub(crate) fn sphere_of(
 }
 
 /// A number as the shortest text that reads back as the same `f32`.
+/// A light as both writers write it, its radiant quantity times pi
+/// (chiaro's irradiance is `pi I cos / d^2`).
+pub(crate) enum OutLight {
+    Point {
+        position: Vec3,
+        intensity: Vec3,
+    },
+    Directional {
+        direction: Vec3,
+        irradiance: Vec3,
+    },
+    Spot {
+        position: Vec3,
+        direction: Vec3,
+        cone_degrees: f32,
+        softness_degrees: f32,
+        intensity: Vec3,
+    },
+}
+
+/// What a format calls the parts its light messages name.
+pub(crate) struct LightWords {
+    /// The parameter a spot's soft edge is written as ("pbrt's conedelta").
+    pub soft_edge: &'static str,
+    /// Whose area lights are surfaces ("pbrt's").
+    pub surfaces: &'static str,
+}
+
+/// Light `i` of `scene` as the writers write it: `None` for an ambient light
+/// (with a warning), an error for one that has no exact counterpart.
+pub(crate) fn light_of(
+    scene: &Scene,
+    i: usize,
+    out: &Path,
+    words: &LightWords,
+    w: &mut Vec<String>,
+) -> Result<Option<OutLight>> {
+    let l = &scene.lights[i];
+    let at = format!("lights[{i}] ({})", l.kind());
+    Ok(Some(match l {
+        Light::Ambient { .. } => {
+            w.push(format!(
+                "{at}: ignored: an ambient light (the path tracer ignores it too)"
+            ));
+            return Ok(None);
+        }
+        Light::Point {
+            position,
+            color,
+            intensity,
+            attenuation,
+        } => {
+            if *attenuation != Attenuation::InverseSquare {
+                return Err(refuse(
+                    out,
+                    at,
+                    "attenuation other than inverse_square has no exact counterpart",
+                ));
+            }
+            OutLight::Point {
+                position: *position,
+                intensity: PI * *color * *intensity,
+            }
+        }
+        Light::Directional {
+            direction,
+            color,
+            intensity,
+        } => OutLight::Directional {
+            direction: *direction,
+            irradiance: PI * *color * *intensity,
+        },
+        Light::Spot(s) => {
+            if s.attenuation != Attenuation::InverseSquare
+                || s.exponent != 0.0
+                || !s.flaps.is_empty()
+            {
+                return Err(refuse(
+                    out,
+                    at,
+                    "a spot with Warn's exponent, flaps or a non-physical attenuation has no exact counterpart",
+                ));
+            }
+            if s.cone_softness_degrees > 0.0 {
+                w.push(format!(
+                    "{at}: approximate: the cone's soft edge is written as {} (its fall-off curve differs)",
+                    words.soft_edge
+                ));
+            }
+            OutLight::Spot {
+                position: s.position,
+                direction: s.direction,
+                cone_degrees: s.cone_degrees,
+                softness_degrees: s.cone_softness_degrees,
+                intensity: PI * s.color * s.intensity,
+            }
+        }
+        Light::Area { .. } => {
+            return Err(refuse(
+                out,
+                at,
+                format!(
+                    "chiaro's area lights are invisible and reached by light sampling only, {} are surfaces: write it as an object with an emissive material",
+                    words.surfaces
+                ),
+            ));
+        }
+    }))
+}
+
 pub(crate) fn num(x: f32) -> String {
     format!("{x}")
 }

@@ -8,13 +8,12 @@
 //! `max_depth` does (1 = direct light).
 
 use super::{
-    Bsdf, Colour, Files, Surface, bitmap_of, bsdf_of, material_at, meshes_of, num, nums, object_at,
-    refuse, sphere_of,
+    Bsdf, Colour, Files, LightWords, OutLight, Surface, bitmap_of, bsdf_of, light_of, material_at,
+    meshes_of, num, nums, object_at, refuse, sphere_of,
 };
 use crate::Result;
-use chiaro_core::scene::{Attenuation, Distribution, Geometry, Light, Scene, Texture, WrapMode};
+use chiaro_core::scene::{Distribution, Geometry, Scene, Texture, WrapMode};
 use chiaro_core::{Mat4, Vec3};
-use std::f32::consts::PI;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -68,77 +67,52 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
         quoted(&format!("{stem}.exr"))
     );
     // Lights.
-    for (i, l) in scene.lights.iter().enumerate() {
-        let at = format!("lights[{i}] ({})", l.kind());
-        match l {
-            Light::Ambient { .. } => {
-                w.push(format!(
-                    "{at}: ignored: an ambient light (the path tracer ignores it too)"
-                ));
-            }
-            Light::Point {
+    let words = LightWords {
+        soft_edge: "pbrt's conedelta",
+        surfaces: "pbrt's",
+    };
+    for i in 0..scene.lights.len() {
+        match light_of(scene, i, out, &words, w)? {
+            None => {}
+            Some(OutLight::Point {
                 position,
-                color,
                 intensity,
-                attenuation,
-            } => {
-                if *attenuation != Attenuation::InverseSquare {
-                    return Err(refuse(
-                        out,
-                        at,
-                        "attenuation other than inverse_square has no exact counterpart",
-                    ));
-                }
+            }) => {
                 let _ = writeln!(
                     x,
                     "LightSource \"point\" \"point3 from\" [ {} ] {}",
-                    nums(*position, " "),
-                    rgb("I", PI * *color * *intensity)
+                    nums(position, " "),
+                    rgb("I", intensity)
                 );
             }
-            Light::Directional {
+            Some(OutLight::Directional {
                 direction,
-                color,
-                intensity,
-            } => {
+                irradiance,
+            }) => {
                 // pbrt's light arrives from `from` towards `to`.
                 let _ = writeln!(
                     x,
                     "LightSource \"distant\" \"point3 from\" [ {} ] \"point3 to\" [ 0 0 0 ] {}",
-                    nums(-*direction, " "),
-                    rgb("L", PI * *color * *intensity)
+                    nums(-direction, " "),
+                    rgb("L", irradiance)
                 );
             }
-            Light::Spot(s) => {
-                if s.attenuation != Attenuation::InverseSquare
-                    || s.exponent != 0.0
-                    || !s.flaps.is_empty()
-                {
-                    return Err(refuse(
-                        out,
-                        at,
-                        "a spot with Warn's exponent, flaps or a non-physical attenuation has no exact counterpart",
-                    ));
-                }
-                if s.cone_softness_degrees > 0.0 {
-                    w.push(format!("{at}: approximate: the cone's soft edge is written as pbrt's conedelta (its fall-off curve differs)"));
-                }
+            Some(OutLight::Spot {
+                position,
+                direction,
+                cone_degrees,
+                softness_degrees,
+                intensity,
+            }) => {
                 let _ = writeln!(
                     x,
                     "LightSource \"spot\" \"point3 from\" [ {} ] \"point3 to\" [ {} ] {} {} {}",
-                    nums(s.position, " "),
-                    nums(s.position + s.direction, " "),
-                    float("coneangle", s.cone_degrees),
-                    float("conedelta", s.cone_softness_degrees),
-                    rgb("I", PI * s.color * s.intensity)
+                    nums(position, " "),
+                    nums(position + direction, " "),
+                    float("coneangle", cone_degrees),
+                    float("conedelta", softness_degrees),
+                    rgb("I", intensity)
                 );
-            }
-            Light::Area { .. } => {
-                return Err(refuse(
-                    out,
-                    at,
-                    "chiaro's area lights are invisible and reached by light sampling only, pbrt's are surfaces: write it as an object with an emissive material",
-                ));
             }
         }
     }
