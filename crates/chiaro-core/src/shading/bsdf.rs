@@ -267,6 +267,21 @@ impl Bsdf {
         pdf
     }
 
+    /// A direction `wi` drawn from one of the non-delta lobes, weighted by
+    /// the whole mixture: `f cos / pdf` with the mixture's pdf.
+    fn mixture_sample(&self, n: Vec3, wo: Vec3, wi: Vec3, eta: f32) -> Option<BsdfSample> {
+        let pdf = self.pdf_eta(n, wo, wi, eta);
+        if pdf <= 0.0 {
+            return None;
+        }
+        Some(BsdfSample {
+            wi,
+            weight: self.eval_eta(n, wo, wi, eta) / pdf,
+            pdf,
+            delta: false,
+        })
+    }
+
     /// Samples an incident direction for `wo`: a lobe chosen in proportion
     /// to its weight's luminance by `u_lobe` in `[0, 1)` (not read when
     /// [`Self::needs_lobe_number`] is false), its direction from `u` in
@@ -329,17 +344,7 @@ impl Bsdf {
                     delta: false,
                 });
             }
-            let pdf = self.pdf_eta(n, wo, wi, eta);
-            if pdf <= 0.0 {
-                return None;
-            }
-            let f_cos = self.eval_eta(n, wo, wi, eta);
-            return Some(BsdfSample {
-                wi,
-                weight: f_cos / pdf,
-                pdf,
-                delta: false,
-            });
+            return self.mixture_sample(n, wo, wi, eta);
         }
         if lobes.p_coat > 0.0 && pick >= wd + ws + wr + wt {
             // The clear coat: a GGX reflection, weighted by the mixture.
@@ -353,16 +358,7 @@ impl Bsdf {
             if n.dot(wi) <= 0.0 || ng.dot(wi) <= 0.0 {
                 return None;
             }
-            let pdf = self.pdf_eta(n, wo, wi, eta);
-            if pdf <= 0.0 {
-                return None;
-            }
-            return Some(BsdfSample {
-                wi,
-                weight: self.eval_eta(n, wo, wi, eta) / pdf,
-                pdf,
-                delta: false,
-            });
+            return self.mixture_sample(n, wo, wi, eta);
         }
         let p_r = wr / total;
         let p_t = wt / total;
@@ -382,16 +378,7 @@ impl Bsdf {
             if n.dot(wi) * ng.dot(wi) <= 0.0 {
                 return None;
             }
-            let pdf = self.pdf_eta(n, wo, wi, eta);
-            if pdf <= 0.0 {
-                return None;
-            }
-            return Some(BsdfSample {
-                wi,
-                weight: self.eval_eta(n, wo, wi, eta) / pdf,
-                pdf,
-                delta: false,
-            });
+            return self.mixture_sample(n, wo, wi, eta);
         }
         // Transmission: one branch of the split Whitted traces both of.
         let split = delta_split(m, fresnel, n, wo, front);
