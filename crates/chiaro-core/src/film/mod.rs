@@ -6,6 +6,7 @@
 
 pub mod palette;
 pub mod postfilter;
+pub mod reconstruction;
 pub mod tonemap;
 
 use crate::progress::Progress;

@@ -166,8 +166,11 @@ pub enum AaMode {
     Post,
 }
 
-/// Reconstruction filter that resolves the supersamples of a pixel
-/// (scan conversion; the other techniques box-filter).
+/// Reconstruction filter that resolves the supersamples of a pixel: the
+/// weighted mean of the radiance over the film around the pixel centre
+/// (`crate::film::reconstruction`). Scan conversion weights its samples;
+/// the path tracer draws its film positions from the filter; the other
+/// techniques box-filter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum PixelFilter {
@@ -178,6 +181,10 @@ pub enum PixelFilter {
     /// of the pixel centre, in this pixel or a neighbour, weighted by
     /// `max(0, 1 - |dx|) * max(0, 1 - |dy|)` and normalised by the weight sum.
     Tent,
+    /// Mitsuba's default `gaussian`: standard deviation 0.5 pixel, cut off
+    /// at 2 pixels, `max(0, exp(-x²/2σ²) - exp(-8))` per axis (the
+    /// path tracer; scan conversion resolves it as the tent).
+    Gaussian,
 }
 
 /// Tone mapping applied when writing low-dynamic-range images.

@@ -12,7 +12,9 @@ use super::bsdfs::Value;
 use super::props::Props;
 use super::xml::Element;
 use crate::Result;
-use chiaro_core::scene::{Attenuation, Environment, ImageTexture, Light, SpotLight, Texture};
+use chiaro_core::scene::{
+    Attenuation, Environment, ImageTexture, Light, SpotLight, Texture, WrapMode,
+};
 use chiaro_core::{Mat4, Vec3};
 use std::f32::consts::PI;
 
@@ -126,7 +128,8 @@ impl Builder<'_> {
 
     /// `envmap`: a lat-long image, `scale`, and `to_world` where it turns
     /// about +y. Mitsuba puts `-z` at `u = 0`, chiaro at `u = 0.5`: a half
-    /// turn apart.
+    /// turn apart. Both put column i at `u = (i + 0.5) / W` and `+y` at
+    /// `v = 0`; the rows are resampled ([`mitsuba_envmap_rows`]).
     fn envmap(&mut self, el: &Element, p: &Props, m: Mat4) -> Result<()> {
         let name = p.string("filename")?.ok_or_else(|| {
             el.loc
@@ -136,6 +139,16 @@ impl Builder<'_> {
         let img =
             crate::images::load_texture_within(&path, false, self.scene.render.memory_budget())
                 .map_err(|e| el.loc.error(format!("envmap: {e}")))?;
+        if img.width < 2
+            || img.height < 3
+            || img.texel_count() < img.width as usize * img.height as usize
+        {
+            return Err(el.loc.error(format!(
+                "envmap: the map must be at least 2x3 texels (as Mitsuba requires), got {}x{}",
+                img.width, img.height
+            )));
+        }
+        let img = mitsuba_envmap_rows(img);
         let scale = p.float("scale", 1.0)?;
         let _ = p.named("mis_compensation");
         // A rotation about +y by `a` keeps +y and sends +z to (sin a, 0, cos a).
@@ -176,5 +189,48 @@ impl Builder<'_> {
             rotate_y_degrees: rotate,
             as_background: true,
         });
+    }
+}
+
+/// Most texels [`mitsuba_envmap_rows`] makes (16 M: 256 MiB of `f32` RGBA).
+const ENVMAP_TEXELS: usize = 1 << 24;
+
+/// Mitsuba's `envmap` in chiaro's lat-long lookup. Mitsuba places row `j`
+/// of an `H`-row map at `v = j / (H - 1)` (the first and last rows on the
+/// poles) and interpolates linearly in `v` between rows, clamped at the
+/// poles (`eval_spectrum` in `src/emitters/envmap.cpp`); chiaro places row
+/// `k` of an `H'`-row map at `v = (k + 0.5) / H'`. The result has
+/// `H' = n (H - 1)` rows, row `k` Mitsuba's value at chiaro's `v` of that
+/// row, and v clamped: chiaro's bilinear lookup then equals Mitsuba's
+/// except within half a row of each of Mitsuba's rows (where Mitsuba's
+/// interpolation bends, chiaro's cuts the corner by at most 1/(4n) of the
+/// second difference of the rows) and in the caps of half a row at the
+/// poles. `n` is 8, fewer where the map would exceed [`ENVMAP_TEXELS`].
+/// Columns are kept (both place column `i` at `u = (i + 0.5) / W`, both
+/// wrap in `u`).
+fn mitsuba_envmap_rows(img: ImageTexture) -> ImageTexture {
+    let (w, h) = (img.width as usize, img.height as usize);
+    let n = (ENVMAP_TEXELS / (w * (h - 1))).clamp(1, 8);
+    let rows = n * (h - 1);
+    let mut texels = Vec::with_capacity(w * rows);
+    for k in 0..rows {
+        // Mitsuba's row coordinate of chiaro's row k.
+        let y = (k as f64 + 0.5) / rows as f64 * (h - 1) as f64;
+        let j = (y.floor() as usize).min(h - 2);
+        let t = (y - j as f64) as f32;
+        for i in 0..w {
+            let a = img.texel_at(j * w + i);
+            let b = img.texel_at((j + 1) * w + i);
+            texels.push(std::array::from_fn(|c| (1.0 - t) * a[c] + t * b[c]));
+        }
+    }
+    ImageTexture {
+        width: img.width,
+        height: rows as u32,
+        texels,
+        texels8: None,
+        wrap: WrapMode::Repeat,
+        wrap_t: Some(WrapMode::Clamp),
+        ..img
     }
 }

@@ -221,10 +221,8 @@ impl Builder<'_> {
         let filters = p.children("rfilter");
         match filters.first() {
             Some(f) => self.rfilter(f)?,
-            None => {
-                self.scene.render.filter = PixelFilter::Tent;
-                self.warn(el, "approximate: Mitsuba's default Gaussian filter (stddev 0.5) is drawn with chiaro's tent (radius 1)");
-            }
+            // Mitsuba's default: the Gaussian of stddev 0.5.
+            None => self.scene.render.filter = PixelFilter::Gaussian,
         }
         self.warn_unused(&p);
         Ok(())
@@ -242,12 +240,14 @@ impl Builder<'_> {
                 PixelFilter::Tent
             }
             "gaussian" => {
-                let _ = p.float("stddev", 0.5)?;
-                self.warn(
-                    el,
-                    "approximate: drawn with chiaro's tent filter (radius 1)",
-                );
-                PixelFilter::Tent
+                let stddev = p.float("stddev", 0.5)?;
+                if (stddev - 0.5).abs() > 1e-6 {
+                    self.warn(
+                        el,
+                        "approximate: drawn with chiaro's Gaussian of stddev 0.5 pixel",
+                    );
+                }
+                PixelFilter::Gaussian
             }
             "mitchell" | "catmullrom" | "lanczos" => {
                 self.warn(

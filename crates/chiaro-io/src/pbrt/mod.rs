@@ -534,14 +534,20 @@ impl Builder {
                     "triangle" => {
                         self.scene.render.filter = PixelFilter::Tent;
                         let r = p.float("xradius", 2.0)?.max(p.float("yradius", 2.0)?);
-                        self.warn(loc, &what, &format!("approximate: drawn with chiaro's tent of radius 1 pixel (not {r}); the ray techniques box-filter"));
+                        if (r - 1.0).abs() > 1e-6 {
+                            self.warn(loc, &what, &format!("approximate: drawn with chiaro's tent of radius 1 pixel (not {r})"));
+                        }
                     }
                     "gaussian" | "mitchell" | "sinc" | "lanczos" => {
                         self.scene.render.filter = PixelFilter::Tent;
                         for k in ["xradius", "yradius", "sigma", "B", "C", "tau", "alpha"] {
                             p.skip(k);
                         }
-                        self.warn(loc, &what, "approximate: drawn with chiaro's tent filter (radius 1); the ray techniques box-filter");
+                        self.warn(
+                            loc,
+                            &what,
+                            "approximate: drawn with chiaro's tent filter (radius 1)",
+                        );
                     }
                     other => {
                         return Err(ty.loc.error(format!(
@@ -880,7 +886,7 @@ impl Builder {
         if !self.filter_seen {
             // pbrt's default reconstruction filter is a Gaussian.
             self.scene.render.filter = PixelFilter::Tent;
-            let message = "approximate: pbrt's default Gaussian pixel filter (no PixelFilter) is drawn with chiaro's tent (radius 1); the ray techniques box-filter";
+            let message = "approximate: pbrt's default Gaussian pixel filter (no PixelFilter) is drawn with chiaro's tent (radius 1)";
             match self.film_loc.clone() {
                 Some((loc, what)) => self.warn(&loc, &what, message),
                 None => self.warnings.push(message.to_owned()),

@@ -90,7 +90,7 @@ pub(crate) fn crop_windows(settings: &RenderSettings, spp: u32) -> (Rect, Rect, 
     // The tent filter reads the samples of the pixels around each pixel:
     // shade a one-pixel border around the crop window too, so that a pixel
     // of a crop window has its value in the full image.
-    let tent = settings.filter == PixelFilter::Tent && spp > 1;
+    let tent = matches!(settings.filter, PixelFilter::Tent | PixelFilter::Gaussian) && spp > 1;
     let crop = if tent && out_crop.x0 < out_crop.x1 && out_crop.y0 < out_crop.y1 {
         Rect {
             x0: out_crop.x0.saturating_sub(1),

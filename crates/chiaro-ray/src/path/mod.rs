@@ -19,6 +19,9 @@
 //!   lobe choice and direction, Russian roulette) from its own shuffled,
 //!   Owen-scrambled Sobol dimension pair, so they stratify every decision
 //!   jointly; each draw is still uniform, so the estimator stays unbiased.
+//! - Camera rays pass through film positions drawn from the reconstruction
+//!   filter (`settings.filter`, filter importance sampling restricted to
+//!   the film; the box filter is the uniform jitter inside the pixel).
 //!
 //! - Paths are traced sixteen samples of a pixel at a time by the lock-step
 //!   kernel in `path/lanes.rs` (vectorised where the vertices are
@@ -159,6 +162,15 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
     let cam = ctx.camera();
     // The camera's rays, its frame and field of view computed once.
     let pixel_rays = cam.pixel_rays(w, h);
+    // Film positions drawn from the reconstruction filter (the box: the
+    // uniform jitter inside the pixel).
+    let filter = settings.filter;
+    let film_pos = |px: u32, py: u32, j: Vec2| {
+        (
+            filter.sample_position(px, w, j.x),
+            filter.sample_position(py, h, j.y),
+        )
+    };
     let film = render_tiles(w, h, settings.crop_rect(), TILE, "path", progress, |rect| {
         let mut tile = TilePixels::new(rect);
         let mut count = 0u64;
@@ -172,8 +184,8 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                 if kernel == Kernel::Reference {
                     for s in 0..spp {
                         let mut rng = pixel_rng(settings.seed, px, py, s);
-                        let j = uniform2(&mut rng);
-                        let dir = pixel_rays.direction(px as f32 + j.x, py as f32 + j.y);
+                        let (x, y) = film_pos(px, py, uniform2(&mut rng));
+                        let dir = pixel_rays.direction(x, y);
                         let ray = Ray::new(cam.eye, dir);
                         let (l, fh) = tracer.reference_radiance(ray, &mut rng, &mut count);
                         sum += sanitize(l);
@@ -183,10 +195,8 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                     }
                 } else if lanes {
                     let camera = |j: Vec2| {
-                        Ray::new(
-                            cam.eye,
-                            pixel_rays.direction(px as f32 + j.x, py as f32 + j.y),
-                        )
+                        let (x, y) = film_pos(px, py, j);
+                        Ray::new(cam.eye, pixel_rays.direction(x, y))
                     };
                     for first in (0..spp).step_by(LANES) {
                         let n = ((spp - first) as usize).min(LANES);
@@ -202,8 +212,8 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                 } else {
                     for s in 0..spp {
                         rng.set_sample(s);
-                        let j = rng.next_2d();
-                        let dir = pixel_rays.direction(px as f32 + j.x, py as f32 + j.y);
+                        let (x, y) = film_pos(px, py, rng.next_2d());
+                        let dir = pixel_rays.direction(x, y);
                         let (l, fh) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
                         sum += sanitize(l);
                         if s == 0 {
