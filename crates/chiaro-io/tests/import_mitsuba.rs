@@ -266,12 +266,13 @@ fn bsdfs_map_onto_the_material() {
 #[test]
 fn envmap_turns_half_a_turn() {
     let dir = tmp_dir("mitsuba-env");
+    // Three rows, 0, 1 and 4 (Mitsuba puts them at v = 0, 0.5 and 1).
     let film = chiaro_core::film::Film {
         width: 2,
-        height: 1,
-        color: vec![Vec3::ONE; 2],
-        depth: vec![1.0; 2],
-        normal: vec![Vec3::Z; 2],
+        height: 3,
+        color: [0.0, 0.0, 1.0, 1.0, 4.0, 4.0].map(Vec3::splat).to_vec(),
+        depth: vec![1.0; 6],
+        normal: vec![Vec3::Z; 6],
     };
     chiaro_io::output::write_film(&film, &dir.join("env.exr"), &Default::default())
         .expect("test input");
@@ -283,13 +284,71 @@ fn envmap_turns_half_a_turn() {
     let s = load_str(&text, &dir, "t.xml", &LoadOptions::default())
         .expect("test input")
         .scene;
-    let env = s.environment.expect("an environment");
+    let env = s.environment.clone().expect("an environment");
     assert_eq!(env.intensity, 2.0);
     assert!(
         (env.rotate_y_degrees - 210.0).abs() < 1e-3,
         "{}",
         env.rotate_y_degrees
     );
+    // chiaro's lookup gives Mitsuba's interpolation between its rows
+    // (linear in v between v = 0, 0.5 and 1), times the scale, away from
+    // the bend at the middle row.
+    for (v, mitsuba) in [(0.25f32, 0.5f32), (0.375, 0.75), (0.625, 1.75), (0.8, 2.8)] {
+        let theta = v * PI;
+        let d = Vec3::new(theta.sin(), theta.cos(), 0.0);
+        let l = chiaro_core::shading::texture::environment_radiance(&s, d);
+        assert!(
+            (l - Vec3::splat(2.0 * mitsuba)).abs().max_element() < 1e-4,
+            "v {v}: {l}"
+        );
+    }
+    // Mitsuba refuses maps under 2x3 texels; so does the reader.
+    let film = chiaro_core::film::Film::new(2, 2);
+    chiaro_io::output::write_film(&film, &dir.join("small.exr"), &Default::default())
+        .expect("test input");
+    let text =
+        scene(r#"<emitter type="envmap"><string name="filename" value="small.exr"/></emitter>"#);
+    let e = load_str(&text, &dir, "t.xml", &LoadOptions::default()).expect_err("too small");
+    assert!(e.to_string().contains("2x3"), "{e}");
+}
+
+#[test]
+fn films_filters_and_rough_glass() {
+    // No <rfilter>: Mitsuba's Gaussian; a tent of radius 1 is chiaro's.
+    let text = r#"<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm"/></sensor>
+  <shape type="sphere"><bsdf type="roughdielectric"><float name="alpha" value="0.3"/><string name="distribution" value="ggx"/><float name="int_ior" value="1.5"/></bsdf></shape>
+  <shape type="sphere"><bsdf type="roughdielectric"/></shape></scene>"#;
+    let loaded = load(text, &[]).expect("test input");
+    let s = &loaded.scene;
+    assert_eq!(s.render.filter, PixelFilter::Gaussian);
+    let mat = |i: usize| &s.materials[s.objects[i].material.index()];
+    let glass = mat(0);
+    // Mitsuba's ext_ior defaults to air's 1.000277.
+    assert!(
+        glass.fresnel && (glass.ior - 1.5 / 1.000277).abs() < 1e-5,
+        "{glass:?}"
+    );
+    assert_eq!(
+        glass.model,
+        chiaro_core::scene::ReflectanceModel::TorranceSparrow
+    );
+    assert_eq!(glass.distribution, chiaro_core::scene::Distribution::Ggx);
+    assert_eq!((glass.roughness, glass.specular), (0.3, Vec3::ZERO));
+    // Mitsuba's defaults: Beckmann, alpha 0.1 (its masking is approximate).
+    let beckmann = mat(1);
+    assert_eq!(
+        beckmann.distribution,
+        chiaro_core::scene::Distribution::Beckmann
+    );
+    assert_eq!(beckmann.roughness, 0.1);
+    let w = loaded.warnings.join("\n");
+    assert_eq!(w.matches("Beckmann").count(), 1, "{w}");
+    assert!(!w.contains("filter") && !w.contains("smooth"), "{w}");
+    let text = r#"<scene version="3.0.0"><sensor type="perspective"><film type="hdrfilm"><rfilter type="tent"/></film></sensor></scene>"#;
+    let loaded = load(text, &[]).expect("test input");
+    assert_eq!(loaded.scene.render.filter, PixelFilter::Tent);
+    assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
 }
 
 #[test]

@@ -3,7 +3,9 @@
 //! `Include`, the mapping of lights and materials, and hostile input (an
 //! error or a scene, never a panic).
 
-use chiaro_core::scene::{Geometry, Light, PixelFilter, Scene, Sidedness, Technique};
+use chiaro_core::scene::{
+    Distribution, Geometry, Light, PixelFilter, ReflectanceModel, Scene, Sidedness, Technique,
+};
 use chiaro_core::{Mat4, Vec3};
 use chiaro_io::Loaded;
 use chiaro_io::pbrt::load_str;
@@ -178,9 +180,13 @@ Shape "sphere""#;
     assert_eq!(mat(0).name, "red");
     assert_eq!(mat(0).diffuse, Vec3::new(0.8, 0.1, 0.1));
     assert_eq!(mat(0).sidedness, Sidedness::TwoSided);
+    // Gold: a mirror with the Fresnel of its complex IOR (pbrt's named
+    // spectra reduced to RGB), yellow at normal incidence.
     let gold = mat(1);
+    let ior = gold.conductor.expect("complex IOR");
+    let f = chiaro_core::shading::fresnel_conductor(1.0, ior.eta, ior.k);
     assert!(
-        gold.reflect.x > gold.reflect.z && gold.diffuse == Vec3::ZERO,
+        f.x > f.z && gold.reflect == Vec3::ONE && gold.diffuse == Vec3::ZERO,
         "{gold:?}"
     );
     assert!(mat(2).texture.is_some());
@@ -188,10 +194,10 @@ Shape "sphere""#;
     assert!(mat(4).fresnel && (mat(4).ior - 1.33).abs() < 1e-6);
     assert!((mat(5).ior - 1.5168).abs() < 1e-4);
     assert_eq!(mat(6).reflect, Vec3::splat(0.9));
-    // The conductor and the named glass say they are approximate, naming
-    // the file, line and column of their directive.
+    // The conductor is exact (no warning); the named glass says it is
+    // approximate, naming the file, line and column of its directive.
     let w = loaded.warnings.join("\n");
-    assert!(w.contains("t.pbrt:8:1: MakeNamedMaterial \"gold\""), "{w}");
+    assert!(!w.contains("t.pbrt:8:1"), "{w}");
     assert!(
         w.contains("t.pbrt:20:1: Material \"dielectric\"") && w.contains("d-line"),
         "{w}"
@@ -201,6 +207,53 @@ Shape "sphere""#;
         .expect_err("undefined")
         .to_string();
     assert!(e.contains("t.pbrt:7:15") && e.contains("nothing"), "{e}");
+}
+
+/// Conductors get `Material::conductor`: explicit RGB eta and k, pbrt-v4's
+/// `reflectance` as eta 1 and k = 2 sqrt(r) / sqrt(1 - r) (whose Fresnel at
+/// normal incidence is r), and pbrt-v3's rough `metal` (copper by default)
+/// on the GGX lobe; rough dielectrics on the rough dielectric lobe.
+#[test]
+fn conductors_take_their_complex_ior() {
+    let body = r#"Material "conductor" "rgb eta" [0.2 0.9 1.1] "rgb k" [3.9 2.4 2.2]
+Shape "sphere"
+Material "conductor" "rgb reflectance" [0.9 0.5 0.25] "float roughness" 0.04
+Shape "sphere"
+Material "metal" "float roughness" 0.1
+Shape "sphere"
+Material "dielectric" "float eta" 1.5 "float roughness" 0.09
+Shape "sphere""#;
+    let loaded = load(&scene(body)).expect("test input");
+    let s = &loaded.scene;
+    let mat = |o: usize| &s.materials[s.objects[o].material.index()];
+    let ior = mat(0).conductor.expect("complex IOR");
+    assert_eq!(
+        (ior.eta, ior.k),
+        (Vec3::new(0.2, 0.9, 1.1), Vec3::new(3.9, 2.4, 2.2))
+    );
+    assert_eq!(mat(0).reflect, Vec3::ONE);
+    let ior = mat(1).conductor.expect("complex IOR");
+    let f = chiaro_core::shading::fresnel_conductor(1.0, ior.eta, ior.k);
+    assert!(
+        (f - Vec3::new(0.9, 0.5, 0.25)).abs().max_element() < 1e-5,
+        "{f}"
+    );
+    assert_eq!(mat(1).model, ReflectanceModel::TorranceSparrow);
+    assert_eq!(mat(1).distribution, Distribution::Ggx);
+    // pbrt-v4 remaps roughness to alpha = sqrt(roughness).
+    assert!((mat(1).roughness - 0.2).abs() < 1e-6);
+    assert_eq!(mat(1).specular, Vec3::ONE);
+    let copper = mat(2).conductor.expect("complex IOR");
+    assert!(copper.k.x > copper.k.z, "{copper:?}");
+    assert_eq!(mat(2).model, ReflectanceModel::TorranceSparrow);
+    let glass = mat(3);
+    assert!(glass.fresnel && glass.model == ReflectanceModel::TorranceSparrow);
+    assert!((glass.roughness - 0.3).abs() < 1e-6 && glass.distribution == Distribution::Ggx);
+    let w = loaded.warnings.join("\n");
+    assert!(
+        !w.contains("conductor") && !w.contains("metal") && !w.contains("dielectric"),
+        "{w}"
+    );
 }
 
 #[test]

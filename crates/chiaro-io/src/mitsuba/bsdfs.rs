@@ -5,8 +5,9 @@
 //! Torrance-Sparrow lobe with Schlick's Fresnel from `ks` (F0), a fixed
 //! mirror weight `kr`, the Fresnel of a conductor's complex IOR on both
 //! (`Material::conductor`), and Fresnel-split glass. Mitsuba's `diffuse`,
-//! `conductor`, `roughconductor` and smooth `dielectric` land on it
-//! exactly; the rest are approximations, each saying so once.
+//! `conductor`, `roughconductor`, `dielectric` and `roughdielectric` (on
+//! the rough dielectric lobe) land on it exactly; the rest are
+//! approximations, each saying so once.
 
 use super::Builder;
 use super::props::{Props, numbers};
@@ -17,6 +18,7 @@ use chiaro_core::scene::{
     Bump, ComplexIor, Distribution, Filter, Material, MaterialId, Procedural, ProceduralKind,
     ReflectanceModel, Sidedness, Texture, TextureId, UvTransform, WrapMode,
 };
+use chiaro_core::shading::dielectric::MIN_ROUGH_ALPHA;
 use chiaro_core::{Mat4, Vec2, Vec3};
 
 /// The BSDF plugins this module reads.
@@ -192,14 +194,17 @@ impl Builder<'_> {
                         m.fresnel = true;
                     }
                     "roughdielectric" => {
+                        // chiaro's rough dielectric lobe (Walter et al. 2007):
+                        // a Fresnel dielectric with a Torrance-Sparrow alpha.
                         m.ior = eta;
                         m.fresnel = true;
-                        let _ = p.named("alpha");
-                        let _ = p.named("alpha_u");
-                        let _ = p.named("alpha_v");
-                        let _ = p.string("distribution")?;
-                        let _ = p.boolean("sample_visible", true)?;
-                        self.warn(el, "approximate: drawn as a smooth dielectric (chiaro has no rough refraction)");
+                        self.rough(el, &p, &mut m)?;
+                        if m.distribution == Distribution::Beckmann {
+                            self.warn(el, "approximate: Beckmann masking by Walter et al.'s rational fit of Smith's G1 (Mitsuba evaluates it exactly)");
+                        }
+                        if m.roughness < MIN_ROUGH_ALPHA {
+                            self.warn(el, &format!("approximate: an alpha below {MIN_ROUGH_ALPHA} is drawn as a smooth dielectric"));
+                        }
                     }
                     _ => {
                         // A thin sheet: light passes unbent; reflection sums the

@@ -136,18 +136,6 @@ pub fn ior(name: &str) -> Option<f32> {
     IORS.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
 }
 
-/// Reflectance at normal incidence of a conductor of complex IOR
-/// `eta + i k` (relative to the outside medium), per channel:
-/// `((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)` (Born and Wolf, section 14.2);
-/// the value of `chiaro_core::shading::fresnel_conductor` at `cos = 1`.
-/// The pbrt reader's F0 for its conductors.
-pub fn conductor_f0(eta: Vec3, k: Vec3) -> Vec3 {
-    let k2 = k * k;
-    let num = (eta - Vec3::ONE) * (eta - Vec3::ONE) + k2;
-    let den = (eta + Vec3::ONE) * (eta + Vec3::ONE) + k2;
-    (num / den.max(Vec3::splat(1e-12))).clamp(Vec3::ZERO, Vec3::ONE)
-}
-
 /// Reflectance at normal incidence of a dielectric interface of relative
 /// IOR `eta`: `((eta - 1) / (eta + 1))^2`.
 pub fn dielectric_f0(eta: f32) -> f32 {

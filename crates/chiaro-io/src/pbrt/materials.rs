@@ -1,12 +1,13 @@
 //! `Material`/`MakeNamedMaterial` types and `Texture` classes onto
 //! chiaro's material: Lambert `kd`, a Torrance-Sparrow lobe with
-//! Schlick's Fresnel from `ks`, a fixed mirror weight `kr` and
-//! Fresnel-split glass. pbrt-v4's `diffuse`, smooth `dielectric` and a mix
-//! of two diffuse materials land on it exactly, as do pbrt-v3's `matte`,
-//! `glass` and `mirror`; conductors keep their normal-incidence reflectance
-//! (reduced from pbrt's named spectra through the Mitsuba reader's RGB
-//! tables, `mitsuba::spectra`), and the rest are approximations, each
-//! saying so once. Named spectra and blackbodies are reduced to RGB here.
+//! Schlick's Fresnel from `ks`, a fixed mirror weight `kr`, the Fresnel of
+//! a conductor's complex IOR (`Material::conductor`) and Fresnel-split
+//! glass, smooth or rough. pbrt-v4's `diffuse`, `dielectric`, `conductor`
+//! and a mix of two diffuse materials land on it exactly, as do pbrt-v3's
+//! `matte`, `glass`, `metal` and `mirror`; conductors take their RGB eta
+//! and k from pbrt's named spectra through the Mitsuba reader's table
+//! (`mitsuba::spectra`), and the rest are approximations, each saying so
+//! once. Named spectra and blackbodies are reduced to RGB here.
 
 use super::Builder;
 use super::lexer::{Lexer, Loc};
@@ -14,9 +15,10 @@ use super::params::{Params, Spectrum};
 use crate::Result;
 use crate::mitsuba::spectra;
 use chiaro_core::scene::{
-    Distribution, Filter, Material, Procedural, ProceduralKind, ReflectanceModel, Sidedness,
-    Texture, TextureId, UvTransform, WrapMode,
+    ComplexIor, Distribution, Filter, Material, Procedural, ProceduralKind, ReflectanceModel,
+    Sidedness, Texture, TextureId, UvTransform, WrapMode,
 };
+use chiaro_core::shading::dielectric::MIN_ROUGH_ALPHA;
 use chiaro_core::{Vec2, Vec3};
 
 /// The material types this module reads (pbrt-v4, then pbrt-v3 names).
@@ -513,23 +515,28 @@ impl Builder {
                 } else {
                     ""
                 };
-                let f0 = match p.spectrum("reflectance")? {
-                    Some((s, at)) if ty != "metal" => match s {
-                        Spectrum::Texture(t) => match self.texture_named(&t, &at)? {
-                            TexValue::Const(c) => c,
-                            TexValue::Map { factor, .. } => {
-                                self.warn(loc, &what, "approximate: a textured reflectance is drawn as its constant factor");
-                                factor
-                            }
-                        },
-                        other => self.constant_spectrum(other, &at, loc, &what)?,
-                    },
-                    _ => {
-                        let eta =
-                            self.ior_spectrum(p, &format!("{prefix}eta"), loc, &what, true)?;
-                        let k = self.ior_spectrum(p, &format!("{prefix}k"), loc, &what, false)?;
-                        spectra::conductor_f0(eta, k)
+                // The complex IOR: `eta` and `k` (named spectra or values),
+                // or pbrt-v4's `reflectance` r as eta = 1, k = 2 sqrt(r) /
+                // sqrt(1 - r), r clamped to 0.9999 (`ConductorMaterial`).
+                let (eta, k) = match p.spectrum("reflectance")? {
+                    Some((s, at)) if ty != "metal" => {
+                        let r = match s {
+                            Spectrum::Texture(t) => match self.texture_named(&t, &at)? {
+                                TexValue::Const(c) => c,
+                                TexValue::Map { factor, .. } => {
+                                    self.warn(loc, &what, "approximate: a textured reflectance is drawn as its constant factor");
+                                    factor
+                                }
+                            },
+                            other => self.constant_spectrum(other, &at, loc, &what)?,
+                        };
+                        let r = r.clamp(Vec3::ZERO, Vec3::splat(0.9999));
+                        (Vec3::ONE, 2.0 * r.sqrt() / (Vec3::ONE - r).sqrt())
                     }
+                    _ => (
+                        self.ior_spectrum(p, &format!("{prefix}eta"), loc, &what, true)?,
+                        self.ior_spectrum(p, &format!("{prefix}k"), loc, &what, false)?,
+                    ),
                 };
                 let alpha = self.alpha(
                     p,
@@ -540,15 +547,17 @@ impl Builder {
                     &what,
                 )?;
                 m.diffuse = Vec3::ZERO;
+                // The conductor's Fresnel on the mirror (smooth) or on the
+                // Trowbridge-Reitz (GGX) microfacet lobe; pbrt draws alpha
+                // below 1e-3 as smooth (`EffectivelySmooth`).
+                m.conductor = Some(ComplexIor { eta, k });
                 if alpha < 1e-3 {
-                    m.reflect = f0;
-                    self.warn(loc, &what, "approximate: mirror weight = the complex-IOR Fresnel reflectance at normal incidence (chiaro has no conductor Fresnel; grazing angles reflect less than in pbrt)");
+                    m.reflect = Vec3::ONE;
                 } else {
                     m.model = ReflectanceModel::TorranceSparrow;
                     m.distribution = Distribution::Ggx;
-                    m.roughness = alpha.clamp(1e-3, 1.0);
-                    m.specular = f0;
-                    self.warn(loc, &what, "approximate: microfacet lobe with Schlick's Fresnel from the normal-incidence reflectance of eta, k");
+                    m.roughness = alpha.min(1.0);
+                    m.specular = Vec3::ONE;
                 }
                 if ty == "coatedconductor" {
                     for k in [
@@ -606,8 +615,15 @@ impl Builder {
                 } else {
                     m.ior = eta;
                     m.fresnel = true;
+                    // Rough: chiaro's rough dielectric lobe with pbrt's
+                    // Trowbridge-Reitz (GGX) alpha; smooth below 1e-3.
                     if alpha >= 1e-3 {
-                        self.warn(loc, &what, "approximate: drawn as a smooth dielectric (chiaro has no rough refraction)");
+                        m.model = ReflectanceModel::TorranceSparrow;
+                        m.distribution = Distribution::Ggx;
+                        m.roughness = alpha.min(1.0);
+                        if alpha < MIN_ROUGH_ALPHA {
+                            self.warn(loc, &what, &format!("approximate: an alpha below {MIN_ROUGH_ALPHA} is drawn as a smooth dielectric"));
+                        }
                     }
                 }
             }
