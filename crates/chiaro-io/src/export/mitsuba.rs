@@ -8,7 +8,7 @@ use super::{
     meshes_of, num, nums, object_at, ply_bytes, refuse, sphere_of,
 };
 use crate::Result;
-use chiaro_core::scene::{Distribution, Geometry, Scene, Texture, WrapMode};
+use chiaro_core::scene::{Distribution, Geometry, PixelFilter, Scene, Texture, WrapMode};
 use chiaro_core::{Mat4, Vec3};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -57,7 +57,7 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
     let c = &scene.camera;
     let _ = writeln!(
         x,
-        "    <sensor type=\"perspective\">\n        <string name=\"fov_axis\" value=\"y\"/>\n        {}\n        {}\n        {}\n        <transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>\n        <sampler type=\"independent\"><integer name=\"sample_count\" value=\"{}\"/></sampler>\n        <film type=\"hdrfilm\">\n            <integer name=\"width\" value=\"{}\"/>\n            <integer name=\"height\" value=\"{}\"/>\n            <rfilter type=\"box\"/>\n        </film>\n    </sensor>",
+        "    <sensor type=\"perspective\">\n        <string name=\"fov_axis\" value=\"y\"/>\n        {}\n        {}\n        {}\n        <transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>\n        <sampler type=\"independent\"><integer name=\"sample_count\" value=\"{}\"/></sampler>\n        <film type=\"hdrfilm\">\n            <integer name=\"width\" value=\"{}\"/>\n            <integer name=\"height\" value=\"{}\"/>\n            <rfilter type=\"{}\"/>\n        </film>\n    </sensor>",
         float("fov", c.fov_y_degrees),
         float("near_clip", c.near),
         float("far_clip", c.far),
@@ -66,7 +66,13 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
         nums(c.up, ", "),
         r.samples,
         r.width,
-        r.height
+        r.height,
+        // Mitsuba's tent (radius 1) and Gaussian (stddev 0.5) are chiaro's.
+        match r.filter {
+            PixelFilter::Box => "box",
+            PixelFilter::Tent => "tent",
+            PixelFilter::Gaussian => "gaussian",
+        }
     );
     // The materials the objects use, once each.
     let mut used = vec![false; scene.materials.len()];

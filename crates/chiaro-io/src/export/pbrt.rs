@@ -12,7 +12,7 @@ use super::{
     meshes_of, num, nums, object_at, refuse, sphere_of,
 };
 use crate::Result;
-use chiaro_core::scene::{Distribution, Geometry, Scene, Texture, WrapMode};
+use chiaro_core::scene::{Distribution, Geometry, PixelFilter, Scene, Texture, WrapMode};
 use chiaro_core::{Mat4, Vec3};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -59,13 +59,25 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
         .map_or_else(|| "scene".to_owned(), |s| s.to_string_lossy().into_owned());
     let _ = writeln!(
         x,
-        "Sampler \"independent\" \"integer pixelsamples\" [ {} ]\nIntegrator \"path\" \"integer maxdepth\" [ {} ]\nFilm \"rgb\" \"integer xresolution\" [ {} ] \"integer yresolution\" [ {} ] \"string filename\" [ {} ]\nPixelFilter \"box\" \"float xradius\" [ 0.5 ] \"float yradius\" [ 0.5 ]\n\nWorldBegin\n",
+        "Sampler \"independent\" \"integer pixelsamples\" [ {} ]\nIntegrator \"path\" \"integer maxdepth\" [ {} ]\nFilm \"rgb\" \"integer xresolution\" [ {} ] \"integer yresolution\" [ {} ] \"string filename\" [ {} ]\nPixelFilter {}\n\nWorldBegin\n",
         r.samples,
         r.path.max_depth,
         r.width,
         r.height,
-        quoted(&format!("{stem}.exr"))
+        quoted(&format!("{stem}.exr")),
+        match r.filter {
+            PixelFilter::Box => "\"box\" \"float xradius\" [ 0.5 ] \"float yradius\" [ 0.5 ]",
+            PixelFilter::Tent => "\"triangle\" \"float xradius\" [ 1 ] \"float yradius\" [ 1 ]",
+            PixelFilter::Gaussian =>
+                "\"gaussian\" \"float sigma\" [ 0.5 ] \"float xradius\" [ 2 ] \"float yradius\" [ 2 ]",
+        }
     );
+    if r.filter != PixelFilter::Box {
+        w.push(
+            "[render] filter: approximate: pbrt's filter samples may fall outside the film (chiaro's do not): pixels near the border differ"
+                .to_owned(),
+        );
+    }
     // Lights.
     let words = LightWords {
         soft_edge: "pbrt's conedelta",

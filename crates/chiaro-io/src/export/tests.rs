@@ -235,6 +235,52 @@ fn mitsuba_export_reads_back_as_the_scene() {
     }
 }
 
+/// The reconstruction filter travels: Mitsuba's tent and Gaussian are
+/// chiaro's exactly; pbrt's triangle (radius 1) and Gaussian (sigma 0.5,
+/// radius 2) are too, except that pbrt's samples may leave the film (one
+/// warning each way).
+#[test]
+fn the_pixel_filter_reads_back() {
+    use chiaro_core::scene::PixelFilter;
+    let dir = tmp("filters");
+    for filter in [PixelFilter::Box, PixelFilter::Tent, PixelFilter::Gaussian] {
+        let mut scene = toml(SCENE);
+        scene.render.filter = filter;
+        let out = dir.join(format!("{filter:?}.xml"));
+        let done = export(&scene, Format::Mitsuba, &out).expect("exports");
+        assert!(done.warnings.is_empty(), "{:?}", done.warnings);
+        let back = crate::mitsuba::load(&out, &crate::LoadOptions::default()).expect("reads");
+        assert_eq!(back.scene.render.filter, filter);
+        assert!(back.warnings.is_empty(), "{:?}", back.warnings);
+        let out = dir.join(format!("{filter:?}.pbrt"));
+        let done = export(&scene, Format::Pbrt, &out).expect("exports");
+        let said = done
+            .warnings
+            .iter()
+            .filter(|w| w.contains("filter"))
+            .count();
+        assert_eq!(
+            said,
+            usize::from(filter != PixelFilter::Box),
+            "{:?}",
+            done.warnings
+        );
+        let back = crate::pbrt::load(&out).expect("reads");
+        assert_eq!(back.scene.render.filter, filter);
+        let border = back
+            .warnings
+            .iter()
+            .filter(|w| w.contains("border"))
+            .count();
+        assert_eq!(
+            border,
+            usize::from(filter != PixelFilter::Box),
+            "{:?}",
+            back.warnings
+        );
+    }
+}
+
 /// The numbers after `key` on the first line starting with `key`.
 fn numbers_after(text: &str, key: &str) -> Vec<f32> {
     let line = text

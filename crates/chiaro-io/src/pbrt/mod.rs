@@ -188,6 +188,11 @@ pub struct Builder {
     film_loc: Option<(Loc, String)>,
 }
 
+/// The warning of a tent or Gaussian `PixelFilter`: pbrt draws filter
+/// offsets around a pixel without regard to the film's edge, chiaro (as
+/// Mitsuba) only inside the film.
+const BORDER: &str = "approximate within the filter's radius of the image border (pbrt's filter samples may fall outside the film, chiaro's do not)";
+
 impl Builder {
     fn new(base: &Path) -> Self {
         let mut scene = Scene::default();
@@ -536,7 +541,18 @@ impl Builder {
                         let r = p.float("xradius", 2.0)?.max(p.float("yradius", 2.0)?);
                         if (r - 1.0).abs() > 1e-6 {
                             self.warn(loc, &what, &format!("approximate: drawn with chiaro's tent of radius 1 pixel (not {r})"));
+                        } else {
+                            self.warn(loc, &what, BORDER);
                         }
+                    }
+                    // Mitsuba's Gaussian is pbrt's of sigma 0.5 cut at 2 pixels.
+                    "gaussian"
+                        if (p.float("sigma", 0.5)? - 0.5).abs() < 1e-6
+                            && (p.float("xradius", 1.5)? - 2.0).abs() < 1e-6
+                            && (p.float("yradius", 1.5)? - 2.0).abs() < 1e-6 =>
+                    {
+                        self.scene.render.filter = PixelFilter::Gaussian;
+                        self.warn(loc, &what, BORDER);
                     }
                     "gaussian" | "mitchell" | "sinc" | "lanczos" => {
                         self.scene.render.filter = PixelFilter::Tent;
