@@ -6,7 +6,7 @@
 //! per scene (Mitsuba's scenes pass at 99.75 %).
 //!
 //! ```text
-//! CHIARO_ASSETS=PATH/TO/ASSETS cargo run --release -p chiaro --example mitsuba_agreement -- [--spp N] [--only NAME] [--filter box|tent]
+//! CHIARO_ASSETS=PATH/TO/ASSETS cargo run --release -p chiaro --example mitsuba_agreement -- [--spp N] [--only NAME] [--filter box|tent|gaussian]
 //! ```
 //!
 //! `--spp` defaults to Mitsuba's budget, 2,000,000 / pixels. The renders
@@ -78,10 +78,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let scene = loaded.scene;
         let mut settings = scene.render.clone();
         settings.technique = Technique::Path;
-        // `--filter box|tent` overrides the imported filter (to see its share).
+        // `--filter box|tent|gaussian` overrides the imported filter (to see its share).
         match flag_value(&args, "--filter").as_deref() {
             Some("box") => settings.filter = chiaro::scene::PixelFilter::Box,
             Some("tent") => settings.filter = chiaro::scene::PixelFilter::Tent,
+            Some("gaussian") => settings.filter = chiaro::scene::PixelFilter::Gaussian,
             _ => {}
         }
         settings.width = w;
