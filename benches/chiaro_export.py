@@ -53,7 +53,15 @@ def export(toml, out_dir, drop=()):
     return xml
 
 
-def load(mi, toml, drop=()):
-    """The Mitsuba scene of `toml` (see the module doc)."""
+def load(mi, toml, drop=(), edit=None):
+    """The Mitsuba scene of `toml` (see the module doc). `edit`, if given,
+    maps the exported XML's text to the text loaded (to swap a peer-only
+    setting such as the pixel filter or the sampler)."""
     with tempfile.TemporaryDirectory(prefix="chiaro-export-") as d:
-        return mi.load_file(export(toml, d, drop))
+        xml = export(toml, d, drop)
+        if edit is not None:
+            with open(xml) as f:
+                text = edit(f.read())
+            with open(xml, "w") as f:
+                f.write(text)
+        return mi.load_file(xml)

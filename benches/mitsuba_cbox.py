@@ -5,8 +5,12 @@ usage: mitsuba_cbox.py render VARIANT SPP FILTER SEED OUT.npy [REPEATS]
        mitsuba_cbox.py compare REF.npy IMG.npy [IMG.npy ...]
        mitsuba_cbox.py regions IMG.npy [IMG.npy ...]
 
-`render` renders mi.cornell_box() (256x256, path, max_depth 8; sampler from
-$MITSUBA_SAMPLER, default the scene's `independent`) with VARIANT
+`render` renders Mitsuba's own Cornell box as chiaro renders it:
+scenes/mitsuba-cbox.toml (written from mi.cornell_box() by
+mitsuba_cbox_scene.py, which mitsuba_cbox.sh checks) exported by
+`chiaro export --to mitsuba` (benches/chiaro_export.py; 256x256, path,
+max_depth 8 in Mitsuba's count; sampler from $MITSUBA_SAMPLER, default the
+export's `independent`) with VARIANT
 (scalar_rgb | llvm_ad_rgb) and pixel FILTER (box | gaussian, Mitsuba's
 default), prints `render[i]=SECONDS s  M Msamples/s` per repeat (the render
 call only, as mi.render + dr.eval + sync) and writes the last image as .npy
@@ -23,6 +27,10 @@ import os
 import sys
 import time
 import numpy as np
+
+import chiaro_export
+
+CBOX = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "mitsuba-cbox.toml")
 
 
 def llvm_avx2(dr):
@@ -47,18 +55,18 @@ def render(variant, spp, filt, seed, out, repeats):
     mi.set_variant(variant)
     if os.environ.get("MITSUBA_LLVM_AVX2") == "1" and variant.startswith("llvm"):
         llvm_avx2(dr)
-    d = mi.cornell_box()
-    d["integrator"] = {"type": "path", "max_depth": 8}
-    d["sensor"]["sampler"]["sample_count"] = spp
-    # MITSUBA_SAMPLER=multijitter|ldsampler|stratified|orthogonal replaces
-    # the scene's `independent` sampler (for comparing like with like).
     sampler = os.environ.get("MITSUBA_SAMPLER")
-    if sampler:
-        d["sensor"]["sampler"]["type"] = sampler
-    if filt != "gaussian":
-        d["sensor"]["film"]["rfilter"] = {"type": filt}
-    w, h = d["sensor"]["film"]["width"], d["sensor"]["film"]["height"]
-    scene = mi.load_dict(d)
+
+    def edit(xml):
+        # MITSUBA_SAMPLER=multijitter|ldsampler|stratified|orthogonal replaces
+        # the export's `independent` sampler (for comparing like with like);
+        # FILTER replaces its box filter (chiaro's).
+        if sampler:
+            xml = xml.replace('<sampler type="independent">', f'<sampler type="{sampler}">')
+        return xml.replace('<rfilter type="box"/>', f'<rfilter type="{filt}"/>')
+
+    scene = chiaro_export.load(mi, CBOX, edit=edit)
+    w, h = scene.sensors()[0].film().size()
     img = None
     for i in range(repeats):
         t0 = time.perf_counter()

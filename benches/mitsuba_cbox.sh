@@ -26,6 +26,8 @@ quiet=${WAIT_QUIET:-benches/wait_quiet.sh}
 profile=${CHIARO_PROFILE:-release}
 cargo build --profile "$profile" -q -p chiaro-ray --example path_bench
 bench=target/$profile/examples/path_bench
+# mitsuba_cbox.py builds Mitsuba's scene with `chiaro export` (benches/chiaro_export.py).
+cargo build --release -q -p chiaro-cli
 # The shipped scene must still be what Mitsuba's dict says.
 "$py" benches/mitsuba_cbox_scene.py "$out/scene-check.toml"
 cmp -s "$out/scene-check.toml" scenes/mitsuba-cbox.toml || {

@@ -39,6 +39,8 @@ elif [ "${BOTH:-0}" = 1 ]; then
     flags=$bench
     bench=$default
 fi
+# mitsuba_cbox.py builds Mitsuba's scene with `chiaro export` (benches/chiaro_export.py).
+cargo build --release -q -p chiaro-cli
 out=target/mitsuba-bench
 mkdir -p "$out"
 fastest() { grep -o 'render\[[0-9]*\]=[0-9.]*' "$1" | cut -d= -f2 | sort -n | head -1; }
