@@ -256,7 +256,7 @@ impl SphericalRectangle {
         let (g0, g1, g2, g3) = (angle(n0, n1), angle(n1, n2), angle(n2, n3), angle(n3, n0));
         let k = 2.0 * PI - g2 - g3;
         let solid_angle = g0 + g1 - k;
-        if !(solid_angle >= MIN_RECT_SOLID_ANGLE) {
+        if solid_angle.is_nan() || solid_angle < MIN_RECT_SOLID_ANGLE {
             return None;
         }
         Some(Self {
@@ -287,8 +287,10 @@ impl SphericalRectangle {
         let cu = (fu.signum() / (fu * fu + self.b0 * self.b0).sqrt()).clamp(-1.0, 1.0);
         let xu = if cu.abs() < 1.0 {
             (-(cu * self.z0) / (1.0 - cu * cu).sqrt()).clamp(self.x0, self.x1)
+        } else if cu > 0.0 {
+            self.x1
         } else {
-            if cu > 0.0 { self.x1 } else { self.x0 }
+            self.x0
         };
         // The y coordinate: uniform in the sine of the elevation along
         // that column.
@@ -304,7 +306,7 @@ impl SphericalRectangle {
         };
         let local = self.x * xu + self.y * yv + self.z * self.z0;
         let dist = local.length();
-        if !(dist > 0.0) {
+        if dist.is_nan() || dist <= 0.0 {
             return None;
         }
         let wi = local / dist;
@@ -616,7 +618,7 @@ mod tests {
                     let u = Vec2::new((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32);
                     let s = sample_light(&light, p, u).expect("facing the panel");
                     assert!(
-                        (s.point.y).abs() < 1e-4 && s.point.x.abs() <= 0.5 + 1e-4,
+                        s.point.y.abs() < 1e-4 && s.point.x.abs() <= 0.5 + 1e-4,
                         "{s:?}"
                     );
                     e += f64::from(PI * s.intensity.x * s.wi.y.max(0.0));
