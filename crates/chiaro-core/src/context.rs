@@ -16,7 +16,7 @@
 //! solution) from one frame's context to the next.
 
 use crate::accel::Accelerator;
-use crate::budget::{Estimate, bytes_of};
+use crate::budget::{Estimate, MemoryBudget, bytes_of};
 use crate::error::{CoreError, Result};
 use crate::film::Film;
 use crate::geometry::primitives::MeshSize;
@@ -212,6 +212,143 @@ impl<'a> FrameCache<'a> {
                 slot
             }
         }
+    }
+}
+
+/// A piece a [`FrameCache`] keeps between frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CachedPiece {
+    /// The prepared scene with analytic spheres and its accelerator
+    /// (preview, Whitted, path, hybrid's ray tracing).
+    Analytic,
+    /// The prepared scene with tessellated spheres, its accelerator and
+    /// what techniques derive from it (scan conversion, radiosity).
+    Tessellated,
+    /// The radiosity solution (radiosity, hybrid).
+    Solution,
+}
+
+impl CachedPiece {
+    /// Every piece, in the order [`FrameCache::evict_unused`] drops them.
+    pub const ALL: [Self; 3] = [Self::Solution, Self::Tessellated, Self::Analytic];
+
+    /// Whether a frame of `technique` reads this piece.
+    pub fn used_by(self, technique: Technique) -> bool {
+        use Technique as T;
+        match self {
+            Self::Analytic => matches!(technique, T::Preview | T::Whitted | T::Path | T::Hybrid),
+            Self::Tessellated => !matches!(technique, T::Preview | T::Whitted | T::Path),
+            Self::Solution => technique.solves_radiosity(),
+        }
+    }
+
+    /// The piece's name in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Analytic => "prepared scene and BVH (analytic spheres)",
+            Self::Tessellated => "prepared scene and BVH (tessellated spheres)",
+            Self::Solution => "radiosity solution",
+        }
+    }
+}
+
+/// The bytes a prepared scene and its accelerator hold, by the budget's
+/// per-triangle and per-vertex sizes (which include the BVH), with its
+/// texture mip levels as [`memory_estimate`] counts them.
+pub fn prepared_bytes(ps: &PreparedScene<'_>) -> u64 {
+    let texels: u64 = ps
+        .scene
+        .textures
+        .iter()
+        .map(|t| match t {
+            Texture::Image(i) => u64::from(i.width) * u64::from(i.height),
+            Texture::Procedural(_) => 0,
+        })
+        .sum();
+    bytes_of(
+        ps.triangles.len() as u64,
+        crate::budget::PREPARED_TRIANGLE_BYTES,
+    )
+    .saturating_add(bytes_of(
+        ps.positions.len() as u64,
+        crate::budget::PREPARED_VERTEX_BYTES,
+    ))
+    .saturating_add(bytes_of(texels, 16) / 3)
+}
+
+impl FrameCache<'_> {
+    /// The pieces built and held, each with an estimate of its bytes:
+    /// prepared scenes by [`prepared_bytes`], the solution by
+    /// `solution_bytes` (the core does not know its type; the facade
+    /// measures a radiosity solution).
+    pub fn held(
+        &self,
+        solution_bytes: impl Fn(&(dyn Any + Send + Sync)) -> u64,
+    ) -> Vec<(CachedPiece, u64)> {
+        let mut held = Vec::new();
+        let prepared = |slot: &PreparedSlot<'_>| slot.get().map(prepared_bytes);
+        if let Some(b) = self.analytic.as_ref().and_then(|(_, (p, _))| prepared(p)) {
+            held.push((CachedPiece::Analytic, b));
+        }
+        if let Some(b) = self
+            .tessellated
+            .as_ref()
+            .and_then(|(_, (p, _, _))| prepared(p))
+        {
+            held.push((CachedPiece::Tessellated, b));
+        }
+        if let Some(b) = self
+            .solution
+            .as_ref()
+            .and_then(|(_, slot)| slot.get())
+            .map(|s| solution_bytes(s.as_ref()))
+        {
+            held.push((CachedPiece::Solution, b));
+        }
+        held
+    }
+
+    /// Drops `piece` (the next frame that reads it builds it again).
+    pub fn evict(&mut self, piece: CachedPiece) {
+        match piece {
+            CachedPiece::Analytic => self.analytic = None,
+            CachedPiece::Tessellated => self.tessellated = None,
+            CachedPiece::Solution => self.solution = None,
+        }
+    }
+
+    /// Makes room for a frame of `technique` that needs `frame_bytes` of
+    /// its own within `budget`: while what the cache holds and the frame
+    /// does not read, added to `frame_bytes`, exceeds the budget, drops
+    /// those pieces (in [`CachedPiece::ALL`]'s order). Returns each piece
+    /// dropped with its bytes, for the front to say so.
+    pub fn evict_unused(
+        &mut self,
+        technique: Technique,
+        frame_bytes: u64,
+        budget: MemoryBudget,
+        solution_bytes: impl Fn(&(dyn Any + Send + Sync)) -> u64,
+    ) -> Vec<(CachedPiece, u64)> {
+        let idle: Vec<(CachedPiece, u64)> = self
+            .held(solution_bytes)
+            .into_iter()
+            .filter(|(piece, _)| !piece.used_by(technique))
+            .collect();
+        let mut total = idle
+            .iter()
+            .fold(frame_bytes, |t, (_, b)| t.saturating_add(*b));
+        let mut dropped = Vec::new();
+        for piece in CachedPiece::ALL {
+            if total <= budget.limit.0 {
+                break;
+            }
+            if let Some(&(_, b)) = idle.iter().find(|(p, _)| *p == piece) {
+                self.evict(piece);
+                total = total.saturating_sub(b);
+                dropped.push((piece, b));
+            }
+        }
+        dropped
     }
 }
 

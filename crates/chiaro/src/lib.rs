@@ -41,11 +41,12 @@ pub use chiaro_io as io;
 pub use limitations::{Limitation, limitations};
 
 pub use chiaro_core::budget::Estimate;
-pub use chiaro_core::context::{FrameCache, RenderContext, RenderStats, Renderer};
+pub use chiaro_core::context::{CachedPiece, FrameCache, RenderContext, RenderStats, Renderer};
 pub use chiaro_core::scene::Issue;
 pub use chiaro_core::technique::Description;
 pub use chiaro_radiosity::{RadiositySolution, SolveStats, fingerprint as radiosity_fingerprint};
 
+use chiaro_core::budget::ByteSize;
 use chiaro_core::error::CoreError;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::{AaMode, Severity};
@@ -113,9 +114,7 @@ pub fn description(technique: Technique) -> Option<&'static Description> {
 /// what every render allocates ([`chiaro_core::context::memory_estimate`])
 /// and what the technique adds ([`Renderer::memory`]).
 pub fn memory_estimate(scene: &Scene, settings: &RenderSettings) -> Estimate {
-    let mut e = chiaro_core::context::memory_estimate(scene, settings);
-    renderer(settings.technique).memory(scene, settings, &mut e);
-    e
+    frame_estimate(scene, settings, renderer(settings.technique))
 }
 
 /// The renderer of `technique`: the one line a new technique adds here.
@@ -163,10 +162,42 @@ pub fn render_frame<'a>(
     progress: &'a dyn Progress,
     cache: &mut FrameCache<'a>,
 ) -> Result<(Film, RenderStats)> {
-    let ctx = RenderContext::new(scene, settings, progress)?
-        .with_camera(*camera)
-        .with_cache(cache);
-    render_with(&ctx, renderer(settings.technique))
+    let ctx = RenderContext::new(scene, settings, progress)?.with_camera(*camera);
+    // What the cache holds that this frame does not read counts against
+    // the budget beside the frame's own estimate: dropped (and said) when
+    // both do not fit, before the frame allocates.
+    let technique = renderer(settings.technique);
+    let frame = frame_estimate(scene, settings, technique).total();
+    for (piece, bytes) in cache.evict_unused(
+        settings.technique,
+        frame,
+        settings.memory_budget(),
+        solution_bytes,
+    ) {
+        progress.warning(&format!(
+            "the viewer's cache dropped its {} ({}) kept from an earlier frame: with this frame's {} it would pass the memory limit {}",
+            piece.name(),
+            ByteSize(bytes),
+            ByteSize(frame),
+            settings.memory_budget().limit
+        ));
+    }
+    render_with(&ctx.with_cache(cache), technique)
+}
+
+/// The bytes a cached view-independent solution holds: a radiosity
+/// solution's display mesh (per vertex its position and three colours, 48
+/// B; per element its corners, radiance and emission, 36 B), at most one
+/// source triangle per element (corners and ids, 48 B) and the look-up
+/// tree over them (16 B); 0 for a solution of another type.
+pub fn solution_bytes(solution: &(dyn std::any::Any + Send + Sync)) -> u64 {
+    solution
+        .downcast_ref::<chiaro_radiosity::RadiositySolution>()
+        .map_or(0, |s| {
+            (s.vertex_count() as u64)
+                .saturating_mul(48)
+                .saturating_add((s.element_count() as u64).saturating_mul(36 + 48 + 16))
+        })
 }
 
 /// Renders `ctx` with `renderer` as every front does: the limitations of
@@ -215,11 +246,17 @@ fn check_context(ctx: &RenderContext<'_>, renderer: &dyn Renderer) -> Result<(),
     if !errors.is_empty() {
         return Err(CoreError::InvalidScene { issues: errors });
     }
+    frame_estimate(scene, settings, renderer)
+        .check(settings.memory_budget())
+        .map_err(CoreError::Unsupported)
+}
+
+/// What a render of `scene` with `settings` by `renderer` allocates: the
+/// shared estimate and the technique's own items.
+fn frame_estimate(scene: &Scene, settings: &RenderSettings, renderer: &dyn Renderer) -> Estimate {
     let mut estimate = chiaro_core::context::memory_estimate(scene, settings);
     renderer.memory(scene, settings, &mut estimate);
     estimate
-        .check(settings.memory_budget())
-        .map_err(CoreError::Unsupported)
 }
 
 /// World-space bounds of everything in the scene.

@@ -144,3 +144,70 @@ fn the_cache_starts_afresh_when_its_inputs_change() {
     assert!(!cache.holds_solution(&solved));
     assert!(film == fresh(&cornell, &radiosity, &cornell.camera));
 }
+
+/// Records the warnings a render gives.
+#[derive(Default)]
+struct Warnings(std::sync::Mutex<Vec<String>>);
+
+impl chiaro::Progress for Warnings {
+    fn begin(&self, _stage: &str, _total: u64) {}
+    fn advance(&self, _n: u64) {}
+    fn warning(&self, text: &str) {
+        self.0.lock().expect("lock").push(text.to_owned());
+    }
+}
+
+#[test]
+fn what_the_cache_keeps_counts_against_the_memory_budget() {
+    use chiaro::CachedPiece;
+    use chiaro::budget::ByteSize;
+    let scene = load("cornell-box.toml");
+    let cam = scene.camera;
+    let radiosity = draft(&scene, Technique::Radiosity);
+    let mut cache = FrameCache::new();
+    frame(&scene, &radiosity, &cam, &mut cache);
+    // The radiosity frame left its prepared scenes and its solution, each
+    // counted by its size.
+    let held = cache.held(chiaro::solution_bytes);
+    let pieces: Vec<CachedPiece> = held.iter().map(|(p, _)| *p).collect();
+    assert!(pieces.contains(&CachedPiece::Tessellated), "{held:?}");
+    assert!(pieces.contains(&CachedPiece::Solution), "{held:?}");
+    assert!(held.iter().all(|(_, b)| *b > 1000), "{held:?}");
+    // A path frame within a budget that holds it and what the cache keeps:
+    // nothing is dropped, and the solution stays for the next radiosity frame.
+    let mut path = draft(&scene, Technique::Path);
+    let own = chiaro::memory_estimate(&scene, &path).total();
+    let kept: u64 = held.iter().map(|(_, b)| b).sum();
+    path.memory_limit = Some(ByteSize(own + kept + (1 << 20)));
+    let warnings = Warnings::default();
+    let (film, _) = chiaro::render_frame(&scene, &path, &cam, &warnings, &mut cache).expect("fits");
+    assert!(film == fresh(&scene, &path, &cam));
+    assert!(cache.holds_solution(&radiosity.radiosity));
+    let said = warnings.0.lock().expect("lock").join("\n");
+    assert!(!said.contains("viewer's cache"), "{said}");
+    // A budget that holds the frame but not the pieces it does not read:
+    // those are dropped, said in a warning, and the picture is unchanged.
+    path.memory_limit = Some(ByteSize(own + 1));
+    let warnings = Warnings::default();
+    let (film, _) =
+        chiaro::render_frame(&scene, &path, &cam, &warnings, &mut cache).expect("fits alone");
+    assert!(film == fresh(&scene, &path, &cam));
+    assert!(!cache.holds_solution(&radiosity.radiosity));
+    let left: Vec<CachedPiece> = cache
+        .held(chiaro::solution_bytes)
+        .iter()
+        .map(|(p, _)| *p)
+        .collect();
+    assert_eq!(left, [CachedPiece::Analytic]);
+    let said = warnings.0.lock().expect("lock").join("\n");
+    assert!(
+        said.contains("the viewer's cache dropped its radiosity solution")
+            && said.contains("memory limit"),
+        "{said}"
+    );
+    // A frame that does not fit by itself is refused, naming the limit.
+    path.memory_limit = Some(ByteSize(own / 2));
+    let err = chiaro::render_frame(&scene, &path, &cam, &NoProgress, &mut cache)
+        .expect_err("over the budget");
+    assert!(err.to_string().contains("memory limit"), "{err}");
+}

@@ -20,8 +20,8 @@ pub struct LightSample {
     /// `pi * f(wo, wi) * cos_theta_i * intensity` (see [`super`]).
     /// For point-like lights `f_att * Ip * spot`; for an area-light sample the
     /// one-sample estimate `Le * cos_theta_l * A / (pi d^2)` (or
-    /// `Le * solid_angle / pi` for spheres), so averaging samples integrates
-    /// the light.
+    /// `Le * solid_angle / pi` for spheres and for rectangles sampled in
+    /// solid angle), so averaging samples integrates the light.
     pub intensity: Vec3,
     /// True for a point, spot or directional light (a delta distribution).
     pub is_delta: bool,
@@ -135,6 +135,9 @@ fn sample_area(
         } => {
             let c = edge_u.cross(edge_v);
             let area = c.length();
+            if let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p) {
+                return rect.sample(u, p, c / area, two_sided, le);
+            }
             (corner + u.x * edge_u + u.y * edge_v, c / area, area)
         }
         AreaShape::Disk {
@@ -181,6 +184,141 @@ fn sample_area(
         intensity: le * (cos_l * area / (PI * dist2)),
         is_delta: false,
     })
+}
+
+/// Rectangles seen under less solid angle than this (far away) are
+/// sampled uniformly in area: there the two samplings differ little, and
+/// the spherical one loses its precision in `f32`.
+const MIN_RECT_SOLID_ANGLE: f32 = 1e-3;
+
+/// A rectangular area light as seen from a point: the spherical rectangle
+/// it subtends, sampled uniformly in solid angle (Urena, Fajardo and King
+/// 2013, "An area-preserving parametrization for spherical rectangles").
+/// A sample's estimate is then `Le * solid_angle / pi` at most, however
+/// close the point: uniform area sampling's `Le cos A / (pi d^2)` grows
+/// without bound for points near the light (speckles on what a ceiling
+/// panel almost touches, and on what those points light).
+#[derive(Debug, Clone, Copy)]
+struct SphericalRectangle {
+    /// The local frame: `x`, `y` along the edges, `z` away from the point.
+    x: Vec3,
+    y: Vec3,
+    z: Vec3,
+    /// The rectangle's extent in that frame, seen from the point.
+    x0: f32,
+    x1: f32,
+    y0: f32,
+    y1: f32,
+    /// Its (negative) distance along `z`.
+    z0: f32,
+    b0: f32,
+    b1: f32,
+    k: f32,
+    /// The solid angle.
+    solid_angle: f32,
+}
+
+impl SphericalRectangle {
+    /// The spherical rectangle of the quad `corner + [0,1]^2 (edge_u,
+    /// edge_v)` seen from `p`; `None` when the quad is not a rectangle,
+    /// `p` lies in its plane, or it subtends less than
+    /// [`MIN_RECT_SOLID_ANGLE`] (the caller then samples it by area).
+    fn new(corner: Vec3, edge_u: Vec3, edge_v: Vec3, p: Vec3) -> Option<Self> {
+        let (ex, ey) = (edge_u.length(), edge_v.length());
+        if ex <= 0.0 || ey <= 0.0 || edge_u.dot(edge_v).abs() > 1e-4 * ex * ey {
+            return None;
+        }
+        let (x, y) = (edge_u / ex, edge_v / ey);
+        let mut z = x.cross(y);
+        let d = corner - p;
+        let mut z0 = d.dot(z);
+        if z0 > 0.0 {
+            z = -z;
+            z0 = -z0;
+        }
+        if z0 >= 0.0 {
+            return None;
+        }
+        let (x0, y0) = (d.dot(x), d.dot(y));
+        let (x1, y1) = (x0 + ex, y0 + ey);
+        let v00 = Vec3::new(x0, y0, z0);
+        let v01 = Vec3::new(x0, y1, z0);
+        let v10 = Vec3::new(x1, y0, z0);
+        let v11 = Vec3::new(x1, y1, z0);
+        // The normals of the four planes through p and an edge, and the
+        // rectangle's interior angles between them (Girard: their sum
+        // less 2 pi is the solid angle).
+        let n0 = v00.cross(v10).try_normalize()?;
+        let n1 = v10.cross(v11).try_normalize()?;
+        let n2 = v11.cross(v01).try_normalize()?;
+        let n3 = v01.cross(v00).try_normalize()?;
+        let angle = |a: Vec3, b: Vec3| (-a.dot(b)).clamp(-1.0, 1.0).acos();
+        let (g0, g1, g2, g3) = (angle(n0, n1), angle(n1, n2), angle(n2, n3), angle(n3, n0));
+        let k = 2.0 * PI - g2 - g3;
+        let solid_angle = g0 + g1 - k;
+        if solid_angle.is_nan() || solid_angle < MIN_RECT_SOLID_ANGLE {
+            return None;
+        }
+        Some(Self {
+            x,
+            y,
+            z,
+            x0,
+            x1,
+            y0,
+            y1,
+            z0,
+            b0: n0.z,
+            b1: n2.z,
+            k,
+            solid_angle,
+        })
+    }
+
+    /// The sample of `u` in `[0,1)^2`, uniform in solid angle, of the
+    /// rectangle of unit normal `nl` emitting `le` (one-sided unless
+    /// `two_sided`) seen from `p`: `None` when its back faces `p`.
+    fn sample(&self, u: Vec2, p: Vec3, nl: Vec3, two_sided: bool, le: Vec3) -> Option<LightSample> {
+        // The x coordinate: the sub-rectangle [x0, xu] covers u.x of the
+        // solid angle.
+        let au = u.x * self.solid_angle + self.k;
+        let (sin_au, cos_au) = au.sin_cos();
+        let fu = (cos_au * self.b0 - self.b1) / sin_au;
+        let cu = (fu.signum() / (fu * fu + self.b0 * self.b0).sqrt()).clamp(-1.0, 1.0);
+        let xu = if cu.abs() < 1.0 {
+            (-(cu * self.z0) / (1.0 - cu * cu).sqrt()).clamp(self.x0, self.x1)
+        } else if cu > 0.0 {
+            self.x1
+        } else {
+            self.x0
+        };
+        // The y coordinate: uniform in the sine of the elevation along
+        // that column.
+        let dd = (xu * xu + self.z0 * self.z0).sqrt();
+        let h0 = self.y0 / (dd * dd + self.y0 * self.y0).sqrt();
+        let h1 = self.y1 / (dd * dd + self.y1 * self.y1).sqrt();
+        let hv = h0 + u.y * (h1 - h0);
+        let hv2 = hv * hv;
+        let yv = if hv2 < 1.0 - 1e-6 {
+            (hv * dd / (1.0 - hv2).sqrt()).clamp(self.y0, self.y1)
+        } else {
+            self.y1
+        };
+        let local = self.x * xu + self.y * yv + self.z * self.z0;
+        let dist = local.length();
+        if dist.is_nan() || dist <= 0.0 {
+            return None;
+        }
+        let wi = local / dist;
+        facing_cosine(nl, wi, two_sided)?;
+        Some(LightSample {
+            wi,
+            distance: dist,
+            point: p + local,
+            intensity: le * (self.solid_angle / PI),
+            is_delta: false,
+        })
+    }
 }
 
 /// The cosine between an emitter's normal `n` and `-wi` (its magnitude when
@@ -269,11 +407,22 @@ impl TriangleEmitter {
 /// The solid-angle pdf with which [`sample_light`] samples the direction
 /// from `p` towards the point `q` on area light `light` (pbrt-v4's
 /// `Light::PDF_Li`); `None` for delta lights and where the light is seen
-/// edge-on. For a sphere the pdf of its uniformly sampled cone.
+/// edge-on. For a sphere the pdf of its uniformly sampled cone; for a
+/// rectangle seen under enough solid angle one over that solid angle.
 pub fn sample_light_pdf(light: &Light, p: Vec3, q: Vec3) -> Option<f32> {
     let Light::Area { shape, .. } = light else {
         return None;
     };
+    // A rectangle seen under enough solid angle is sampled in it.
+    if let AreaShape::Quad {
+        corner,
+        edge_u,
+        edge_v,
+    } = *shape
+        && let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p)
+    {
+        return Some(1.0 / rect.solid_angle);
+    }
     match *shape {
         AreaShape::Sphere { center, radius } => {
             let dc2 = (center - p).length_squared();
@@ -429,6 +578,59 @@ mod tests {
         e /= (k * k) as f32;
         let expect = PI * 2.0 * (1.0f32 / 9.0);
         assert!((e - expect).abs() < 1e-3 * expect * 10.0, "{e} vs {expect}");
+    }
+
+    /// The form factor from a small area facing a parallel rectangle of
+    /// half-sizes `a`, `b` (in units of the distance), straight under its
+    /// centre: four corner terms (Howell's catalogue, B-3).
+    fn centre_form_factor(a: f64, b: f64) -> f64 {
+        let corner = |x: f64, y: f64| {
+            let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
+            (x / sx * (y / sx).atan() + y / sy * (x / sy).atan()) / std::f64::consts::TAU
+        };
+        4.0 * corner(a, b)
+    }
+
+    #[test]
+    fn rectangle_light_samples_are_bounded_and_integrate_to_closed_form() {
+        // A 1 x 1 panel facing down, Le = 2; points straight under its
+        // centre at heights 1, 0.1 and 0.001: the mean of pi * intensity *
+        // cos is the irradiance pi Le F, and no sample exceeds what the
+        // whole hemisphere could give (Le * 2 pi / pi). Uniform area
+        // sampling gives samples up to Le A / (pi h^2) = 6e5 at h = 0.001.
+        let le = 2.0f32;
+        let light = Light::Area {
+            shape: AreaShape::Quad {
+                corner: Vec3::new(-0.5, 0.0, -0.5),
+                edge_u: Vec3::X,
+                edge_v: Vec3::Z,
+            },
+            color: Vec3::ONE,
+            intensity: le,
+            two_sided: false,
+        };
+        for h in [1.0f32, 0.1, 0.001] {
+            let p = Vec3::new(0.0, -h, 0.0);
+            let k = 128;
+            let (mut e, mut most) = (0.0f64, 0.0f32);
+            for i in 0..k {
+                for j in 0..k {
+                    let u = Vec2::new((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32);
+                    let s = sample_light(&light, p, u).expect("facing the panel");
+                    assert!(
+                        s.point.y.abs() < 1e-4 && s.point.x.abs() <= 0.5 + 1e-4,
+                        "{s:?}"
+                    );
+                    e += f64::from(PI * s.intensity.x * s.wi.y.max(0.0));
+                    most = most.max(s.intensity.x);
+                }
+            }
+            e /= f64::from(k * k);
+            let half = 0.5 / f64::from(h);
+            let expect = std::f64::consts::PI * f64::from(le) * centre_form_factor(half, half);
+            assert!((e - expect).abs() < 2e-3 * expect, "h {h}: {e} vs {expect}");
+            assert!(most <= 2.0 * le, "h {h}: a sample of {most}");
+        }
     }
 
     /// For each area shape, [`sample_light_pdf`] at a sample's point is the

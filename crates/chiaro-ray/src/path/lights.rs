@@ -4,13 +4,27 @@
 use super::integrator::{MaterialInfo, PathTracer, Vertex};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::sampling::{SobolSampler, power_heuristic};
-use chiaro_core::scene::Light;
+use chiaro_core::scene::{AreaShape, Light};
 use chiaro_core::shading::{Bsdf, LightSample, sample_light, sample_light_pdf};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// `PathTracer::triangle_light` entry of a triangle that is not a light.
 pub(super) const NO_LIGHT: u32 = u32::MAX;
+
+/// True for a light that paths can hit (an emissive triangle of the
+/// prepared scene); `Light::Area` quads, disks and spheres are reached by
+/// next-event estimation only.
+#[inline]
+fn is_geometry(light: &Light) -> bool {
+    matches!(
+        light,
+        Light::Area {
+            shape: AreaShape::Triangle { .. },
+            ..
+        }
+    )
+}
 
 impl PathTracer<'_, '_> {
     /// The probability of choosing light `i` at the point `p` of normal `n`.
@@ -203,9 +217,15 @@ impl PathTracer<'_, '_> {
             return Vec3::ZERO;
         };
         // `pi * intensity` is the light sample's `Le / pdf` (see `LightSample`).
+        // MIS only against what BSDF sampling can also find: emissive
+        // triangles are geometry, a quad, disk or sphere area light is not
+        // (module docs), so next-event estimation alone reaches it and keeps
+        // weight 1 (the weights sum to one over the strategies that can make
+        // the path, Veach 1997, section 9.2).
         let mut w = 1.0;
         if mis
             && !s.is_delta
+            && is_geometry(light)
             && let Some(light_pdf) = sample_light_pdf(light, p, s.point)
         {
             w = power_heuristic(light_pdf * pick, bsdf.pdf(n, wo, s.wi));

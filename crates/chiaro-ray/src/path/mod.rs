@@ -3,10 +3,11 @@
 //!
 //! - Next-event estimation at every vertex (one light chosen by power),
 //!   combined with BSDF sampling by multiple importance sampling (power
-//!   heuristic, Veach 1997) for area lights, emissive triangles and the
-//!   environment map (one more light, sampled by its luminance through
+//!   heuristic, Veach 1997) for emissive triangles and the environment
+//!   map (one more light, sampled by its luminance through
 //!   `texture::EnvironmentLight`); delta lights (point, spot, directional)
-//!   by next-event estimation only.
+//!   and `Light::Area` quads, disks and spheres (not geometry) by
+//!   next-event estimation only, with weight 1.
 //! - The BSDF is the shading layer's (`chiaro_core::shading::Bsdf`: the
 //!   local model's Lambert plus Phong, Blinn or Torrance-Sparrow, sampled
 //!   lobe by lobe, plus ideal mirror reflection (kr) and transmission (kt):

@@ -136,7 +136,7 @@ impl PathTracer<'_, '_> {
 
     /// One light chosen by power, one [`sample_light`] sample on it and a
     /// shadow ray: `f cos Le / pdf`, MIS-weighted against BSDF sampling
-    /// (`mis`) for area lights.
+    /// (`mis`) for emissive triangles (the lights paths can hit).
     #[allow(clippy::too_many_arguments)]
     fn reference_direct(
         &self,
