@@ -411,11 +411,14 @@ pub fn info(path: &Path, defines: &[String]) -> Result<()> {
         r.samples,
         word(&r.shadows)
     );
+    let lens = match s.camera.orthographic_half_height() {
+        None => format!("fov = {}", num(s.camera.fov_y_degrees)),
+        Some(h) => format!("orthographic, half_height = {}", num(h)),
+    };
     println!(
-        "camera     eye = {}, look_at = {}, fov = {}",
+        "camera     eye = {}, look_at = {}, {lens}",
         point(s.camera.eye),
         point(s.camera.look_at),
-        num(s.camera.fov_y_degrees)
     );
     println!("cannot show (per technique, see the README's table):");
     for t in chiaro::Technique::ALL {

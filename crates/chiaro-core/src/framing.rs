@@ -290,6 +290,22 @@ pub fn frame_scene(scene: &Scene, up: UpAxis, aspect: f32, fov_y_degrees: Option
     }
 }
 
+/// The orthographic camera that frames what the perspective `camera`
+/// frames at its target: the same eye, target and clip planes, with a film
+/// as high as the field of view is at the target's distance
+/// (`half_height = |look_at - eye| tan(fov_y / 2)`). How an orthographic
+/// scene camera keeps its projection when the scene is framed again.
+pub fn orthographic_view(camera: &Camera) -> Camera {
+    let distance = (camera.look_at - camera.eye).length();
+    let half_height = distance * (0.5 * camera.fov_y_degrees.to_radians()).tan();
+    Camera {
+        projection: crate::scene::Projection::Orthographic {
+            half_height: half_height.max(f32::MIN_POSITIVE),
+        },
+        ..*camera
+    }
+}
+
 /// The front view from [`ELEVATION_DEGREES`] above, fitted to the
 /// projected vertices.
 fn exterior_camera(
@@ -360,6 +376,7 @@ fn exterior_camera(
         fov_y_degrees: fov,
         near: (0.5 * near_depth).max(t * 1e-4),
         far: 2.0 * far_depth.max(t),
+        ..Default::default()
     }
 }
 
@@ -508,6 +525,7 @@ fn interior_camera(
         fov_y_degrees: fov_y_degrees.unwrap_or(INTERIOR_FOV),
         near: (diag * 1e-4).max(1e-6),
         far: 2.0 * diag.max(1e-3),
+        ..Default::default()
     };
     let vertical = probe(scene, eye0, &[upv]);
     let inside = Inside {

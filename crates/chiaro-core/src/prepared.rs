@@ -919,8 +919,11 @@ impl ShadingSurface {
 /// equations.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RayDifferentials {
-    /// Origin of both rays.
-    pub origin: Vec3,
+    /// Origin of the ray one pixel to the right (the eye of a perspective
+    /// camera; an orthographic camera's rays start on its film).
+    pub origin_dx: Vec3,
+    /// Origin of the ray one pixel down.
+    pub origin_dy: Vec3,
     /// Direction of the ray one pixel to the right.
     pub dir_dx: Vec3,
     /// Direction of the ray one pixel down.
@@ -938,14 +941,17 @@ impl RayDifferentials {
         let a01 = dpdu.dot(dpdv);
         let a11 = dpdv.dot(dpdv);
         let inv_det = 1.0 / (a00 * a11 - a01 * a01);
-        let solve = |dir: Vec3| {
-            let t = n.dot(p - self.origin) / n.dot(dir);
-            let dp = self.origin + dir * t - p;
+        let solve = |origin: Vec3, dir: Vec3| {
+            let t = n.dot(p - origin) / n.dot(dir);
+            let dp = origin + dir * t - p;
             let (b0, b1) = (dpdu.dot(dp), dpdv.dot(dp));
             let duv = Vec2::new(a11 * b0 - a01 * b1, a00 * b1 - a01 * b0) * inv_det;
             duv.is_finite().then_some(duv)
         };
-        match (solve(self.dir_dx), solve(self.dir_dy)) {
+        match (
+            solve(self.origin_dx, self.dir_dx),
+            solve(self.origin_dy, self.dir_dy),
+        ) {
             (Some(dx), Some(dy)) => (dx, dy),
             _ => (Vec2::ZERO, Vec2::ZERO),
         }
@@ -1024,7 +1030,8 @@ mod tests {
         // a neighbour ray tilted by e in x meets it d e further, du = d e / a.
         let (d, e, a, b) = (4.0f32, 0.01f32, 2.0f32, 0.5f32);
         let rd = RayDifferentials {
-            origin: Vec3::ZERO,
+            origin_dx: Vec3::ZERO,
+            origin_dy: Vec3::ZERO,
             dir_dx: Vec3::new(e, 0.0, -1.0),
             dir_dy: Vec3::new(0.0, -e, -1.0),
         };

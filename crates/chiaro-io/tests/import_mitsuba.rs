@@ -226,6 +226,52 @@ fn sensor_frame_and_fov() {
     assert!((s.camera.fov_y_degrees - 60.0).abs() < 1e-3);
 }
 
+/// Mitsuba's orthographic film is [-1, 1] wide along camera x and
+/// [-1/aspect, 1/aspect] high before `to_world`'s scale: a 2:1 film
+/// scaled by 3 is 6 units wide and 3 high, half-height 1.5.
+#[test]
+fn orthographic_sensor_film_from_the_scale() {
+    let ortho = |scale: &str| {
+        SENSOR
+            .replace(
+                r#"<sensor type="perspective">"#,
+                r#"<sensor type="orthographic">"#,
+            )
+            .replace(r#"<float name="fov" value="60"/>"#, "")
+            .replace(
+                r#"<transform name="to_world">"#,
+                &format!(r#"<transform name="to_world">{scale}"#),
+            )
+    };
+    let text =
+        scene(r#"<shape type="sphere"/>"#).replace(SENSOR, &ortho(r#"<scale x="3" y="3"/>"#));
+    let loaded = load(&text, &[]).expect("test input");
+    assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
+    let c = loaded.scene.camera;
+    assert_eq!(
+        c.projection,
+        chiaro_core::scene::Projection::Orthographic { half_height: 1.5 }
+    );
+    assert_eq!(c.eye, Vec3::new(0.0, 0.0, 5.0));
+    assert!((c.look_at - Vec3::new(0.0, 0.0, 4.0)).length() < 1e-6);
+    // Unscaled: Mitsuba's default [-1, 1] width, half-height 1/2 on 2:1.
+    let text = scene("").replace(SENSOR, &ortho(""));
+    let c = load(&text, &[]).expect("test input").scene.camera;
+    assert_eq!(c.orthographic_half_height(), Some(0.5));
+    // x and y scaled apart: the height is kept, with a warning.
+    let text = scene("").replace(SENSOR, &ortho(r#"<scale x="2" y="3"/>"#));
+    let loaded = load(&text, &[]).expect("test input");
+    assert_eq!(loaded.scene.camera.orthographic_half_height(), Some(1.5));
+    assert!(
+        loaded
+            .warnings
+            .iter()
+            .any(|w| w.contains("scales x and y differently")),
+        "{:?}",
+        loaded.warnings
+    );
+}
+
 #[test]
 fn bsdfs_map_onto_the_material() {
     let text = scene(
@@ -407,7 +453,7 @@ fn broken_files_name_line_and_column() {
             "unknown emitter",
         ),
         (
-            "<scene>\n  <sensor type=\"orthographic\"/>\n</scene>",
+            "<scene>\n  <sensor type=\"telecentric\"/>\n</scene>",
             "t.xml:2:3",
             "refused",
         ),

@@ -75,6 +75,36 @@ fn settings_camera_and_defaults() {
     assert_eq!(s.render.filter, PixelFilter::Box);
 }
 
+/// pbrt's orthographic screen window spans [-1, 1] along the shorter
+/// image axis by default, in camera space units; `screenwindow` sets it.
+#[test]
+fn orthographic_camera_screen_window() {
+    let ortho = |film: &str, extra: &str| {
+        format!(
+            "Scale -1 1 1\nLookAt 0 0 5 0 0 0 0 1 0\nCamera \"orthographic\" {extra}\n{film}\nPixelFilter \"box\"\nWorldBegin\n"
+        )
+    };
+    let wide = "Film \"rgb\" \"integer xresolution\" 32 \"integer yresolution\" 16";
+    let tall = "Film \"rgb\" \"integer xresolution\" 16 \"integer yresolution\" 32";
+    let half = |text: &str| {
+        let l = load(text).expect("test input");
+        (l.scene.camera.orthographic_half_height(), l.warnings)
+    };
+    assert_eq!(half(&ortho(wide, "")).0, Some(1.0));
+    // Portrait: the width spans [-1, 1], the height twice that.
+    assert_eq!(half(&ortho(tall, "")).0, Some(2.0));
+    let (h, w) = half(&ortho(wide, "\"float screenwindow\" [-4 4 -2 2]"));
+    assert_eq!(h, Some(2.0));
+    assert!(w.is_empty(), "{w:?}");
+    // A window off the axis or of another aspect: approximate, said once.
+    let (h, w) = half(&ortho(wide, "\"float screenwindow\" [-1 3 -1 1]"));
+    assert_eq!(h, Some(1.0));
+    assert!(w.iter().any(|w| w.contains("screenwindow")), "{w:?}");
+    let s = load(&ortho(wide, "")).expect("test input").scene;
+    assert!((s.camera.eye - Vec3::new(0.0, 0.0, 5.0)).length() < 1e-6);
+    assert!((s.camera.look_at - Vec3::new(0.0, 0.0, 4.0)).length() < 1e-6);
+}
+
 #[test]
 fn transform_stack_and_named_coordinate_systems() {
     let body = format!(
@@ -519,7 +549,16 @@ fn broken_files_name_line_and_column() {
             "without a matching",
         ),
         ("\"sphere\"", "t.pbrt:1:1", "expected a directive"),
-        ("Camera \"orthographic\"", "t.pbrt:1:8", "only perspective"),
+        (
+            "Camera \"spherical\"",
+            "t.pbrt:1:8",
+            "perspective and orthographic",
+        ),
+        (
+            "Camera \"orthographic\" \"float screenwindow\" [1 -1 0 1]",
+            "t.pbrt:1:",
+            "screenwindow",
+        ),
         (
             "WorldBegin\nShape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 3]",
             "t.pbrt:2:",

@@ -590,3 +590,39 @@ fn material_sidedness_and_its_older_keys() {
     assert_eq!((l, c), (2, 13), "{m}");
     assert!(m.contains("one-sided"), "{m}");
 }
+
+/// `projection = "orthographic"` with `half_height`; perspective stays the
+/// default, and the mixed-up keys are refused at their place.
+#[test]
+fn orthographic_camera_keys() {
+    let text = "[camera]\neye = [0, 0, 5]\nprojection = \"orthographic\"\nhalf_height = 2.5\n[cameras.side]\neye = [5, 0, 0]\n";
+    let s = load_scene_str(text, Path::new("."), "t.toml")
+        .expect("test input")
+        .scene;
+    assert_eq!(
+        s.camera.projection,
+        chiaro_core::scene::Projection::Orthographic { half_height: 2.5 }
+    );
+    assert_eq!(
+        s.cameras[0].camera.projection,
+        chiaro_core::scene::Projection::Perspective
+    );
+    let (l, c, m) = error_at("[camera]\nprojection = \"orthographic\"\n");
+    assert_eq!((l, c), (2, 14), "{m}");
+    assert!(m.contains("needs `half_height`"), "{m}");
+    let (l, c, m) =
+        error_at("[camera]\nprojection = \"orthographic\"\nhalf_height = 1\nfov = 30\n");
+    assert_eq!((l, c), (4, 7), "{m}");
+    assert!(m.contains("no `fov`"), "{m}");
+    let (l, _, m) = error_at("[camera]\nhalf_height = 1\n");
+    assert_eq!(l, 2, "{m}");
+    let (l, c, m) = error_at("[camera]\nprojection = \"fisheye\"\n");
+    assert_eq!((l, c), (2, 14), "{m}");
+    assert!(m.contains("unknown projection"), "{m}");
+    let (l, c, m) = error_at("[camera]\nprojection = \"orthographic\"\nhalf_height = -1\n");
+    assert_eq!((l, c), (3, 15), "{m}");
+    assert!(
+        m.starts_with("camera.half_height: expected a finite half-height > 0"),
+        "{m}"
+    );
+}

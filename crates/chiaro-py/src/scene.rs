@@ -5,7 +5,8 @@
 use crate::convert::{json_to_py, merge_props, py_to_json, toml_literal};
 use crate::errors::core_err;
 use chiaro::scene::{
-    Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, Object, Scene, Severity, Transform,
+    Camera, Geometry, Light, Material, MaterialId, Mesh, MeshId, Object, Projection, Scene,
+    Severity, Transform,
 };
 use chiaro::{Vec2, Vec3};
 use numpy::{AllowTypeChange, PyArrayLike2};
@@ -153,9 +154,12 @@ impl PyScene {
         Self::default()
     }
 
-    /// Sets the pinhole camera. `fov` is the vertical field of view in
-    /// degrees; `near`/`far` are the scan converter's clip distances.
-    #[pyo3(signature = (eye, look_at, up = None, fov = None, near = None, far = None))]
+    /// Sets the camera. `fov` is the vertical field of view in degrees of
+    /// the pinhole (perspective) camera; `half_height` (scene units) makes
+    /// it orthographic instead, with a film that high above and below
+    /// `eye`; `near`/`far` are the scan converter's clip distances.
+    #[pyo3(signature = (eye, look_at, up = None, fov = None, near = None, far = None, half_height = None))]
+    #[allow(clippy::too_many_arguments)]
     fn set_camera(
         &mut self,
         eye: &Bound<'_, PyAny>,
@@ -164,7 +168,13 @@ impl PyScene {
         fov: Option<f32>,
         near: Option<f32>,
         far: Option<f32>,
+        half_height: Option<f32>,
     ) -> PyResult<()> {
+        if fov.is_some() && half_height.is_some() {
+            return Err(PyValueError::new_err(
+                "set_camera: give fov (perspective) or half_height (orthographic), not both",
+            ));
+        }
         let d = Camera::default();
         self.inner.camera = Camera {
             eye: vec3(eye, "eye")?,
@@ -173,14 +183,20 @@ impl PyScene {
             fov_y_degrees: fov.unwrap_or(d.fov_y_degrees),
             near: near.unwrap_or(d.near),
             far: far.unwrap_or(d.far),
+            projection: match half_height {
+                Some(half_height) => Projection::Orthographic { half_height },
+                None => Projection::Perspective,
+            },
         };
         Ok(())
     }
 
-    /// The camera as a dict (`eye`, `look_at`, `up`, `fov_y_degrees`, `near`, `far`).
+    /// The camera as a dict (`eye`, `look_at`, `up`, `fov_y_degrees`, `near`,
+    /// `far`, `projection`: `"perspective"` or
+    /// `{"orthographic": {"half_height": h}}`).
     #[getter]
     fn camera<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let v = serde_json::to_value(self.inner.camera).unwrap_or(Value::Null);
+        let v = camera_json(&self.inner.camera);
         json_to_py(py, &v)
     }
 
@@ -188,7 +204,7 @@ impl PyScene {
     /// (missing keys keep their defaults).
     #[setter(camera)]
     fn set_camera_dict(&mut self, camera: &Bound<'_, PyAny>) -> PyResult<()> {
-        let d = serde_json::to_value(Camera::default()).unwrap_or(Value::Null);
+        let d = camera_json(&Camera::default());
         let merged =
             merge_props(&d, &py_to_json(camera)?, "camera").map_err(PyValueError::new_err)?;
         self.inner.camera = from_json(merged, "camera")?;
@@ -510,4 +526,15 @@ impl PyScene {
 /// A matrix from four columns.
 fn chiaro_mat4(cols: [[f32; 4]; 4]) -> chiaro_core::Mat4 {
     chiaro_core::Mat4::from_cols_array_2d(&cols)
+}
+
+/// `camera` as JSON with its `projection` always present (serde leaves
+/// out the perspective default), so the dict lists every key.
+fn camera_json(camera: &Camera) -> Value {
+    let mut v = serde_json::to_value(camera).unwrap_or(Value::Null);
+    if let Value::Object(map) = &mut v {
+        map.entry("projection")
+            .or_insert_with(|| Value::String("perspective".into()));
+    }
+    v
 }

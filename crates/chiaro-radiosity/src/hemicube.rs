@@ -109,6 +109,7 @@ impl<'a> HemicubeFormFactor<'a> {
                 fov_y_degrees: 90.0,
                 near: self.near,
                 far: self.far,
+                ..Default::default()
             };
             let clip_from_world = cam.projection_matrix(1.0) * cam.view_matrix();
             let rows = if is_top { self.res } else { self.res / 2 };

@@ -725,7 +725,7 @@ pub(crate) fn render_solution(
                 let s = surfaces.sources[e] as usize;
                 let back = || {
                     let c0 = solution.vertices[solution.elements[e][0] as usize];
-                    normals[e].dot(cam.eye - c0) < 0.0
+                    normals[e].dot(cam.toward_viewer(c0)) < 0.0
                 };
                 !(s < nt && !ps.material(ps.tri_material[s]).sidedness.eye_sees_back() && back())
             })
@@ -734,13 +734,18 @@ pub(crate) fn render_solution(
     } else {
         (Vec::new(), Vec::new())
     };
-    let buf = chiaro_raster::zbuffer::item_buffer(
+    let depth_key = chiaro_raster::raster::DepthKey::of_camera(cam);
+    let buf = chiaro_raster::zbuffer::item_buffer_with(
         clip_from_world,
         sw,
         sh,
         &solution.vertices,
         if culling { &kept } else { &solution.elements },
         &ids,
+        &chiaro_raster::zbuffer::ItemBufferOptions {
+            cull_back_faces: false,
+            depth_key,
+        },
     );
     let mut film = Film::new(w, h);
     // Only the crop window's pixels are shaded (the others stay black with
@@ -758,7 +763,8 @@ pub(crate) fn render_solution(
                         for sx in 0..ss {
                             let (px, py) = (x * ss + sx, y * ss + sy);
                             let id = buf.id[(py * sw + px) as usize];
-                            let d = pixel_rays.direction(px as f32 + 0.5, py as f32 + 0.5);
+                            let ray = pixel_rays.ray(px as f32 + 0.5, py as f32 + 0.5);
+                            let (o, d) = (ray.origin, ray.dir);
                             if id == chiaro_raster::zbuffer::NO_ITEM {
                                 col += background_radiance(scene, d);
                                 continue;
@@ -768,11 +774,11 @@ pub(crate) fn render_solution(
                             let c = solution.elements[e].map(|i| solution.vertices[i as usize]);
                             let denom = n.dot(d);
                             let t = if denom.abs() > 1e-12 {
-                                n.dot(c[0] - cam.eye) / denom
+                                n.dot(c[0] - o) / denom
                             } else {
                                 0.0
                             };
-                            let p = cam.eye + d * t;
+                            let p = o + d * t;
                             let back = n.dot(d) > 0.0;
                             col += surfaces.radiance(solution, e, &c, p, back);
                             if t.is_finite() && t < depth {

@@ -206,6 +206,7 @@ fn hundred_k_scene() -> Scene {
         fov_y_degrees: 50.0,
         near: 0.1,
         far: 100.0,
+        ..Default::default()
     };
     s
 }

@@ -11,7 +11,7 @@
 use crate::pipeline::shading::{Ctx, Lit, SampleAt, Split};
 use crate::pipeline::triangles::TriData;
 use chiaro_core::shading::{FactoredLight, ShadingPoint};
-use glam::{Vec2, Vec3, Vec3A};
+use glam::{Vec2, Vec3};
 
 impl Ctx<'_, '_> {
     /// Flat shading of the untextured triangle `td`: once, at the centroid,
@@ -45,11 +45,11 @@ impl Ctx<'_, '_> {
         let mut n = Vec3::from(td.ng);
         // flipped(t), with the cached face normal (PreparedScene::face_normal).
         if td.material.sidedness.eye_sees_back()
-            && td.ng.dot(Vec3A::from(self.rays.eye) - td.p[0]) < 0.0
+            && td.ng.dot(self.rays.toward_viewer(td.p[0])) < 0.0
         {
             n = -n;
         }
-        let wo = (self.rays.eye - p).normalize_or_zero();
+        let wo = self.rays.toward_viewer3(p).normalize_or_zero();
         ShadingPoint { p, n, ng: n, wo }
     }
 }

@@ -83,7 +83,7 @@ impl Ctx<'_, '_> {
         }
         let mut sm = *base;
         sm.kd *= self.ps.colors[v];
-        let wo = (self.rays.eye - p).normalize_or_zero();
+        let wo = self.rays.toward_viewer3(p).normalize_or_zero();
         // No triangle: point lighting has no visibility to ask about.
         self.illuminate_split(u32::MAX, &sm, &ShadingPoint { p, n, ng: n, wo })
     }
@@ -122,7 +122,7 @@ impl Ctx<'_, '_> {
             n = -n;
             ng = -ng;
         }
-        let wo = (self.rays.eye - hit.p).normalize_or_zero();
+        let wo = self.rays.toward_viewer3(hit.p).normalize_or_zero();
         let sp = ShadingPoint {
             p: hit.p,
             n,

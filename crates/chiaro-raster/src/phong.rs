@@ -135,7 +135,10 @@ pub(crate) fn lean_color(
     // exact::normalize_or_zero(eye - p): |eye - p| is `depth`, bit
     // for bit (the same squares summed in the same order).
     let rcp = 1.0 / depth;
-    let wo = if rcp.is_finite() && rcp > 0.0 {
+    let wo = if ctx.rays.ortho.is_some() {
+        // Parallel rays: the view direction is the same everywhere.
+        ctx.rays.toward_viewer(p)
+    } else if rcp.is_finite() && rcp > 0.0 {
         (eye - p) * rcp
     } else {
         Vec3A::ZERO

@@ -38,6 +38,18 @@ pub enum DepthKey {
     ZOverW,
 }
 
+impl DepthKey {
+    /// The key for `camera`'s projection: [`DepthKey::InvW`] for a
+    /// perspective camera, [`DepthKey::ZOverW`] for an orthographic one.
+    pub fn of_camera(camera: &chiaro_core::scene::Camera) -> Self {
+        if camera.orthographic_half_height().is_some() {
+            DepthKey::ZOverW
+        } else {
+            DepthKey::InvW
+        }
+    }
+}
+
 /// A triangle ready for rasterization: snapped screen vertices in
 /// counter-clockwise order *on screen with y down* (positive doubled area),
 /// per-vertex depth keys, and the id written to the item buffer.

@@ -131,9 +131,7 @@ fn render_preview(ctx: &RenderContext<'_>) -> Result<Film> {
                                 let mut rng = pixel_rng(settings.seed, px, py, s);
                                 uniform2(&mut rng)
                             };
-                            let dir =
-                                pixel_rays.direction(px as f32 + offset.x, py as f32 + offset.y);
-                            *ray = Ray::new(cam.eye, dir);
+                            *ray = pixel_rays.ray(px as f32 + offset.x, py as f32 + offset.y);
                         }
                         accel.intersect_camera_packet(&rays[..n], &mut hits[..n]);
                         for k in 0..n {

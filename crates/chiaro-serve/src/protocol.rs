@@ -220,6 +220,12 @@ pub fn orbit_camera(
     let nd = (e1 * cy + e2 * sy) * el.cos() + up * el.sin();
     let mut cam = *base;
     cam.eye = base.look_at + nd * (dist / orbit.zoom);
+    // An orthographic view zooms by its film, not by its distance.
+    if let chiaro::scene::Projection::Orthographic { half_height } = base.projection {
+        cam.projection = chiaro::scene::Projection::Orthographic {
+            half_height: half_height / orbit.zoom,
+        };
+    }
     Ok(cam)
 }
 
@@ -428,6 +434,20 @@ mod tests {
             "{:?}",
             q.eye
         );
+    }
+
+    #[test]
+    fn zoom_divides_an_orthographic_film() {
+        let base = chiaro::scene::Camera {
+            projection: chiaro::scene::Projection::Orthographic { half_height: 3.0 },
+            ..cam()
+        };
+        let orbit = Orbit {
+            zoom: 2.0,
+            ..Default::default()
+        };
+        let c = orbit_camera(&base, orbit).expect("valid");
+        assert_eq!(c.orthographic_half_height(), Some(1.5));
     }
 
     #[test]

@@ -6,10 +6,12 @@
 //! - `name` picks one of `Scene::cameras` (by name, or by index when no
 //!   camera has that name);
 //! - `up` alone (no name, eye or look-at) frames the scene again with that
-//!   axis vertical ([`chiaro_core::framing`]); with any of them it sets the
-//!   camera's up vector;
+//!   axis vertical ([`chiaro_core::framing`]; an orthographic camera stays
+//!   orthographic, framed as the perspective view is at its target); with
+//!   any of them it sets the camera's up vector;
 //! - `eye`, `look_at` and `fov` replace the camera's, the rest is kept (the
-//!   clip range grows when the scene reaches beyond `far`);
+//!   clip range grows when the scene reaches beyond `far`); `fov` makes an
+//!   orthographic camera a perspective one;
 //! - lights that a loader supplied for the old camera
 //!   ([`chiaro_io::framed_lights`]) are supplied again for the new one.
 
@@ -139,6 +141,11 @@ pub fn apply_camera(
         } else {
             let f = framing::frame_scene(scene, up, aspect, choice.fov);
             cam = f.camera;
+            // An orthographic camera stays orthographic, seeing at the
+            // target what the framed view sees there.
+            if old.orthographic_half_height().is_some() && choice.fov.is_none() {
+                cam = framing::orthographic_view(&cam);
+            }
             framed = Some(f);
         }
     }
@@ -149,7 +156,9 @@ pub fn apply_camera(
         cam.look_at = at;
     }
     if let Some(fov) = choice.fov {
+        // A field of view makes the camera a perspective one.
         cam.fov_y_degrees = fov;
+        cam.projection = chiaro_core::scene::Projection::Perspective;
     }
     check(&cam, choice)?;
     if choice.eye.is_some() || choice.look_at.is_some() {

@@ -50,6 +50,7 @@ fn scene(uv_set: u8) -> Scene {
         fov_y_degrees: 40.0,
         near: 0.01,
         far: 100.0,
+        ..Default::default()
     };
     s.render.width = 24;
     s.render.height = 24;

@@ -53,6 +53,8 @@ pub struct ProjectedView {
     eye: Vec3,
     forward: Vec3,
     focal_px: f32,
+    /// Orthographic cameras: pixels per scene unit, whatever the depth.
+    ortho_px: Option<f32>,
 }
 
 impl ProjectedView {
@@ -63,6 +65,9 @@ impl ProjectedView {
             eye: camera.eye,
             forward: camera.frame().forward,
             focal_px: 0.5 * height as f32 / tan_half.max(1e-6),
+            ortho_px: camera
+                .orthographic_half_height()
+                .map(|hh| 0.5 * height as f32 / hh.max(1e-30)),
         }
     }
 
@@ -73,6 +78,10 @@ impl ProjectedView {
     pub fn radius_px(&self, center: Vec3, radius: f32) -> f32 {
         let z = (center - self.eye).dot(self.forward);
         let r = radius.abs();
+        if let Some(px) = self.ortho_px {
+            // Parallel projection: the size on screen ignores the depth.
+            return if z < -r { 0.0 } else { px * r };
+        }
         if z < -r {
             return 0.0;
         }

@@ -13,7 +13,7 @@ mod settings;
 mod texture;
 mod validate;
 
-pub use camera::{Camera, NamedCamera, PixelRays};
+pub use camera::{Camera, NamedCamera, PixelRays, Projection};
 pub use light::{AreaShape, Attenuation, Flap, Light, SpotLight};
 pub use material::ComplexIor;
 pub use material::{

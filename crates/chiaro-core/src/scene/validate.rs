@@ -552,11 +552,23 @@ fn check_camera(c: &mut Checker, path: &str, cam: &super::Camera) {
     c.coordinate(&format!("{path}.eye"), cam.eye);
     c.coordinate(&format!("{path}.look_at"), cam.look_at);
     c.finite(&format!("{path}.up"), cam.up);
-    if !(cam.fov_y_degrees > 0.0 && cam.fov_y_degrees < 180.0) {
-        c.error(
-            format!("{path}.fov"),
-            format!("expected 0 < fov < 180 degrees, got {}", cam.fov_y_degrees),
-        );
+    match cam.projection {
+        super::Projection::Perspective => {
+            if !(cam.fov_y_degrees > 0.0 && cam.fov_y_degrees < 180.0) {
+                c.error(
+                    format!("{path}.fov"),
+                    format!("expected 0 < fov < 180 degrees, got {}", cam.fov_y_degrees),
+                );
+            }
+        }
+        super::Projection::Orthographic { half_height } => {
+            if !(half_height > 0.0 && half_height.is_finite()) {
+                c.error(
+                    format!("{path}.half_height"),
+                    format!("expected a finite half-height > 0, got {half_height}"),
+                );
+            }
+        }
     }
     if (cam.look_at - cam.eye).length_squared() == 0.0 {
         c.error(

@@ -8,7 +8,9 @@ use super::{
     meshes_of, num, nums, object_at, ply_bytes, refuse, sphere_of,
 };
 use crate::Result;
-use chiaro_core::scene::{Distribution, Geometry, PixelFilter, Scene, Texture, WrapMode};
+use chiaro_core::scene::{
+    Distribution, Geometry, PixelFilter, Projection, Scene, Texture, WrapMode,
+};
 use chiaro_core::{Mat4, Vec3};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -53,12 +55,30 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
         r.path.max_depth.saturating_add(1),
         r.path.rr_depth.saturating_add(1)
     );
-    // The camera.
+    // The camera. Mitsuba's orthographic film is [-1, 1] wide and
+    // [-1/aspect, 1/aspect] high before `to_world`'s scale.
     let c = &scene.camera;
+    let (sensor, lens, scale) = match c.projection {
+        Projection::Perspective => (
+            "perspective",
+            format!(
+                "<string name=\"fov_axis\" value=\"y\"/>\n        {}\n        ",
+                float("fov", c.fov_y_degrees)
+            ),
+            String::new(),
+        ),
+        Projection::Orthographic { half_height } => {
+            let s = num(half_height * r.width as f32 / r.height.max(1) as f32);
+            (
+                "orthographic",
+                String::new(),
+                format!("<scale x=\"{s}\" y=\"{s}\"/>"),
+            )
+        }
+    };
     let _ = writeln!(
         x,
-        "    <sensor type=\"perspective\">\n        <string name=\"fov_axis\" value=\"y\"/>\n        {}\n        {}\n        {}\n        <transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>\n        <sampler type=\"independent\"><integer name=\"sample_count\" value=\"{}\"/></sampler>\n        <film type=\"hdrfilm\">\n            <integer name=\"width\" value=\"{}\"/>\n            <integer name=\"height\" value=\"{}\"/>\n            <rfilter type=\"{}\"/>\n        </film>\n    </sensor>",
-        float("fov", c.fov_y_degrees),
+        "    <sensor type=\"{sensor}\">\n        {lens}{}\n        {}\n        <transform name=\"to_world\">{scale}<lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>\n        <sampler type=\"independent\"><integer name=\"sample_count\" value=\"{}\"/></sampler>\n        <film type=\"hdrfilm\">\n            <integer name=\"width\" value=\"{}\"/>\n            <integer name=\"height\" value=\"{}\"/>\n            <rfilter type=\"{}\"/>\n        </film>\n    </sensor>",
         float("near_clip", c.near),
         float("far_clip", c.far),
         nums(c.eye, ", "),

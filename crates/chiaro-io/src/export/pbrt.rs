@@ -12,7 +12,9 @@ use super::{
     meshes_of, num, nums, object_at, refuse, sphere_of,
 };
 use crate::Result;
-use chiaro_core::scene::{Distribution, Geometry, PixelFilter, Scene, Texture, WrapMode};
+use chiaro_core::scene::{
+    Distribution, Geometry, PixelFilter, Projection, Scene, Texture, WrapMode,
+};
 use chiaro_core::{Mat4, Vec3};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -46,13 +48,24 @@ pub(crate) fn write(scene: &Scene, out: &Path) -> Result<Files> {
     } else {
         (2.0 * ((0.5 * c.fov_y_degrees.to_radians()).tan() * aspect).atan()).to_degrees()
     };
+    // An orthographic camera's film is its screen window, in camera space
+    // (world) units.
+    let camera = match c.projection {
+        Projection::Perspective => format!("\"perspective\" {}", float("fov", fov)),
+        Projection::Orthographic { half_height: hh } => format!(
+            "\"orthographic\" \"float screenwindow\" [ {} {} {} {} ]",
+            num(-hh * aspect),
+            num(hh * aspect),
+            num(-hh),
+            num(hh)
+        ),
+    };
     let _ = writeln!(
         x,
-        "Scale -1 1 1\nLookAt {}  {}  {}\nCamera \"perspective\" {}",
+        "Scale -1 1 1\nLookAt {}  {}  {}\nCamera {camera}",
         nums(c.eye, " "),
         nums(c.look_at, " "),
         nums(c.up, " "),
-        float("fov", fov),
     );
     let stem = out
         .file_stem()

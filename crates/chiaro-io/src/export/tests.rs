@@ -378,3 +378,41 @@ fn pbrt_export_parses_back_to_the_scene() {
     assert_eq!(text.matches("AttributeBegin").count(), 6);
     assert_eq!(text.matches("AttributeEnd").count(), 6);
 }
+
+/// An orthographic camera goes out as Mitsuba's `orthographic` sensor
+/// (its film scaled by `to_world`) and pbrt's `Camera "orthographic"`
+/// (its screen window), and each reads back to the same camera.
+#[test]
+fn orthographic_camera_round_trips_through_both_formats() {
+    let dir = tmp("ortho");
+    let text = SCENE.replace(
+        "fov = 40",
+        "projection = \"orthographic\"\nhalf_height = 1.25",
+    );
+    let scene = toml(&text);
+    let want = chiaro_core::scene::Projection::Orthographic { half_height: 1.25 };
+    assert_eq!(scene.camera.projection, want);
+    let half = |c: &chiaro_core::scene::Camera| c.orthographic_half_height().expect("orthographic");
+    let out = dir.join("box.xml");
+    export(&scene, Format::Mitsuba, &out).expect("exports");
+    let back = crate::mitsuba::load(&out, &crate::LoadOptions::default()).expect("reads back");
+    assert!(back.warnings.is_empty(), "{:?}", back.warnings);
+    let c = back.scene.camera;
+    assert!((half(&c) - 1.25).abs() < 1e-5, "{c:?}");
+    assert_eq!(c.eye, scene.camera.eye);
+    assert!((c.look_at - scene.camera.look_at).length() < 1e-6);
+    assert_eq!((c.near, c.far), (scene.camera.near, scene.camera.far));
+    let out = dir.join("box.pbrt");
+    export(&scene, Format::Pbrt, &out).expect("exports");
+    let written = std::fs::read_to_string(&out).expect("written");
+    // 24 x 16: the screen window is the film, 1.5 times wider than high.
+    assert_eq!(
+        numbers_after(&written, "Camera"),
+        [-1.875, 1.875, -1.25, 1.25]
+    );
+    let back = crate::pbrt::load(&out).expect("reads back");
+    let c = back.scene.camera;
+    assert!((half(&c) - 1.25).abs() < 1e-5, "{c:?}");
+    assert!((c.eye - scene.camera.eye).length() < 1e-6);
+    assert!((c.look_at - scene.camera.look_at).length() < 1e-5);
+}

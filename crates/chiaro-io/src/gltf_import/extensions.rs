@@ -9,7 +9,7 @@ use std::path::Path;
 /// occurrence and how many more there are: extensions chiaro does not
 /// implement (wherever an `extensions` object names one, else their place
 /// in `extensionsUsed`), animations (skins are posed at rest), morph
-/// targets and weights, orthographic cameras, a light's `range`, and
+/// targets and weights, a light's `range`, and
 /// scenes other than the one loaded. (A material whose textures read more
 /// than two `texCoord` sets is warned about as its textures are read.)
 pub(super) fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec<String> {
@@ -84,14 +84,6 @@ pub(super) fn unsupported_features(json: &serde_json::Value, path: &Path) -> Vec
     for (n, node) in array("nodes").iter().enumerate() {
         if node.get("weights").is_some() {
             add(morph.into(), format!("/nodes/{n}/weights"));
-        }
-    }
-    for (c, cam) in array("cameras").iter().enumerate() {
-        if cam.get("type").and_then(Value::as_str) == Some("orthographic") {
-            add(
-                "orthographic cameras are skipped".into(),
-                format!("/cameras/{c}"),
-            );
         }
     }
     let lights = json

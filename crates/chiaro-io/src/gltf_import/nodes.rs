@@ -3,47 +3,63 @@
 
 use super::{Builder, ConvertedPrimitive};
 use crate::{ImportedObject, Result};
-use chiaro_core::scene::{Attenuation, Camera, Light, NamedCamera, SpotLight};
+use chiaro_core::scene::{Attenuation, Camera, Light, NamedCamera, Projection, SpotLight};
 use chiaro_core::{Mat4, Vec3};
 
 impl Builder<'_> {
     pub(super) fn node(&mut self, node: &gltf::Node, world: Mat4) -> Result<()> {
         if let Some(cam) = node.camera() {
-            match cam.projection() {
+            // (projection, vertical fov, near, far): an orthographic
+            // camera's `ymag` is its film's half-height (glTF 2.0, 5.13).
+            let d = Camera::default();
+            let lens = match cam.projection() {
                 gltf::camera::Projection::Perspective(p) => {
-                    let eye = world.transform_point3(Vec3::ZERO);
-                    let forward = world.transform_vector3(Vec3::NEG_Z).try_normalize();
-                    let up = world.transform_vector3(Vec3::Y).try_normalize();
                     let fov = p.yfov().to_degrees();
-                    match (forward, up) {
-                        (Some(f), Some(u)) if fov > 0.0 && fov < 180.0 && eye.is_finite() => {
-                            let near = if p.znear() > 0.0 { p.znear() } else { 0.01 };
-                            let far = p
-                                .zfar()
-                                .filter(|f| f.is_finite() && *f > near)
-                                .unwrap_or(near * 1.0e7);
-                            // Named after the camera, else its node, else its index.
-                            let name = cam
-                                .name()
-                                .or(node.name())
-                                .map_or_else(|| format!("camera{}", cam.index()), str::to_owned);
-                            self.out.cameras.push(NamedCamera {
-                                name,
-                                camera: Camera {
-                                    eye,
-                                    look_at: eye + f,
-                                    up: u,
-                                    fov_y_degrees: fov,
-                                    near,
-                                    far,
-                                },
-                            });
-                        }
-                        _ => self.note("a camera with a degenerate transform or fov was skipped"),
-                    }
+                    let near = if p.znear() > 0.0 { p.znear() } else { 0.01 };
+                    let far = p
+                        .zfar()
+                        .filter(|f| f.is_finite() && *f > near)
+                        .unwrap_or(near * 1.0e7);
+                    (fov > 0.0 && fov < 180.0).then_some((Projection::Perspective, fov, near, far))
                 }
-                // Warned about once, by `unsupported_features`.
-                gltf::camera::Projection::Orthographic(_) => {}
+                gltf::camera::Projection::Orthographic(o) => {
+                    let half_height = o.ymag().abs();
+                    let near = if o.znear() > 0.0 { o.znear() } else { 0.01 };
+                    let far = o.zfar();
+                    (half_height > 0.0 && half_height.is_finite() && far.is_finite() && far > near)
+                        .then_some((
+                            Projection::Orthographic { half_height },
+                            d.fov_y_degrees,
+                            near,
+                            far,
+                        ))
+                }
+            };
+            let eye = world.transform_point3(Vec3::ZERO);
+            let forward = world.transform_vector3(Vec3::NEG_Z).try_normalize();
+            let up = world.transform_vector3(Vec3::Y).try_normalize();
+            match (forward, up, lens) {
+                (Some(f), Some(u), Some((projection, fov, near, far))) if eye.is_finite() => {
+                    // Named after the camera, else its node, else its index.
+                    let name = cam
+                        .name()
+                        .or(node.name())
+                        .map_or_else(|| format!("camera{}", cam.index()), str::to_owned);
+                    self.out.cameras.push(NamedCamera {
+                        name,
+                        camera: Camera {
+                            eye,
+                            look_at: eye + f,
+                            up: u,
+                            fov_y_degrees: fov,
+                            near,
+                            far,
+                            projection,
+                        },
+                    });
+                }
+                _ => self
+                    .note("a camera with a degenerate transform, fov or magnification was skipped"),
             }
         }
         if let Some(light) = node.light() {

@@ -73,7 +73,6 @@ fn unsupported_features_are_one_warning_each_with_a_json_pointer() {
         "m.gltf: animations are ignored: at /animations/0",
         "m.gltf: morph targets are ignored (the base shape is loaded): \
              at /meshes/0/primitives/0/targets (and 2 more)",
-        "m.gltf: orthographic cameras are skipped: at /cameras/0",
         "m.gltf: light `range` is ignored (inverse-square fall-off everywhere): \
              at /extensions/KHR_lights_punctual/lights/0/range",
         "m.gltf: scenes other than the default one are not loaded: at /scenes/0",
@@ -84,7 +83,9 @@ fn unsupported_features_are_one_warning_each_with_a_json_pointer() {
     assert_eq!(has("KHR_texture_transform"), 0, "{w:#?}");
     // Skins are posed and two texCoord sets are read: neither is warned about.
     assert_eq!(has("skin") + has("texCoord"), 0, "{w:#?}");
-    assert_eq!(w.len(), 8, "{w:#?}");
+    assert_eq!(w.len(), 7, "{w:#?}");
+    // Orthographic cameras are read (`nodes.rs`), not warned about.
+    assert_eq!(has("orthographic"), 0, "{w:#?}");
 }
 
 /// Through the loader: the warning reaches `Imported::warnings` once.
@@ -382,4 +383,25 @@ fn damaged_helmet_textures_hold_their_8bit_codes_once() {
     let mip = chiaro_core::shading::texture::MipMap::new(&ours[0]);
     let below: usize = (1..=11).map(|l| (2048usize >> l).pow(2)).sum();
     assert_eq!(mip.extra_bytes(), below * 16);
+}
+
+/// An orthographic camera becomes a named camera whose film half-height
+/// is `ymag`, looking down the node's -z.
+#[test]
+fn orthographic_cameras_are_read() {
+    let text = SCENE.replace(
+        r#""cameras": [{"type": "perspective", "perspective": {"yfov": 0.5, "znear": 0.1}}]"#,
+        r#""cameras": [{"type": "orthographic",
+            "orthographic": {"xmag": 3.0, "ymag": 1.5, "znear": 0.0, "zfar": 50.0}}]"#,
+    );
+    assert_ne!(text, SCENE);
+    let imp = load_gltf_slice(text.as_bytes(), None, Path::new("s.gltf")).expect("loads");
+    let c = imp.cameras[0].camera;
+    assert_eq!(
+        c.projection,
+        chiaro_core::scene::Projection::Orthographic { half_height: 1.5 }
+    );
+    assert!((c.eye - Vec3::new(0.0, 0.0, 3.0)).length() < 1e-6);
+    assert!((c.look_at - c.eye - Vec3::NEG_Z).length() < 1e-6);
+    assert!(c.near > 0.0 && c.far == 50.0);
 }

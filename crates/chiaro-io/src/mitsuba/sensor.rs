@@ -6,7 +6,7 @@ use super::Builder;
 use super::props::Props;
 use super::xml::Element;
 use crate::Result;
-use chiaro_core::scene::{Camera, PixelFilter, Technique};
+use chiaro_core::scene::{Camera, PixelFilter, Projection, Technique};
 use chiaro_core::{Mat4, Vec3};
 
 /// Mitsuba's perspective field of view along x from `fov` and `fov_axis`,
@@ -66,19 +66,19 @@ impl Builder<'_> {
     pub fn sensor(&mut self, el: &Element) -> Result<()> {
         let ty = Self::plugin_type(el)?;
         match ty {
-            "perspective" => {}
+            "perspective" | "orthographic" => {}
             "thinlens" => self.warn(
                 el,
                 "approximate: drawn as a pinhole perspective camera (no depth of field)",
             ),
-            "orthographic" | "telecentric" => {
-                return Err(el.loc.error(format!(
-                    "sensor \"{ty}\" is refused: chiaro has only perspective cameras"
-                )));
+            "telecentric" => {
+                return Err(el.loc.error(
+                    "sensor \"telecentric\" is refused: chiaro has perspective and orthographic cameras",
+                ));
             }
             other => {
                 return Err(el.loc.error(format!(
-                    "unknown sensor plugin \"{other}\" (chiaro reads perspective and thinlens)"
+                    "unknown sensor plugin \"{other}\" (chiaro reads perspective, orthographic and thinlens)"
                 )));
             }
         }
@@ -91,6 +91,19 @@ impl Builder<'_> {
         }
         let world_from_camera = p.transform("to_world")?;
         let aspect = self.scene.render.width as f32 / self.scene.render.height.max(1) as f32;
+        if ty == "orthographic" {
+            let near = p.float("near_clip", 0.01)?;
+            let far = p.float("far_clip", 10_000.0)?;
+            if !(near > 0.0 && far > near) {
+                return Err(el.loc.error(format!(
+                    "near_clip and far_clip must satisfy 0 < near < far, got {near} and {far}"
+                )));
+            }
+            let _ = p.string("srf")?;
+            self.set_orthographic(el, world_from_camera, aspect, near, far);
+            self.warn_unused(&p);
+            return Ok(());
+        }
         let fov = match p.named("fov") {
             Some(_) => Some(p.float("fov", 0.0)?),
             None => None,
@@ -151,6 +164,45 @@ impl Builder<'_> {
             fov_y_degrees: fov_y_from_x(39.3077, aspect),
             near: 0.01,
             far: 10_000.0,
+            ..Default::default()
+        };
+    }
+
+    /// Mitsuba's `orthographic` sensor: a film `[-1, 1]` wide along camera
+    /// x and `[-1/aspect, 1/aspect]` high along y, scaled by `to_world`
+    /// (mitsuba3 `orthographic_projection` in `sensor.h`); its rays start
+    /// on the near plane, chiaro's on the film through the eye, which only
+    /// differs for surfaces closer than `near_clip`.
+    fn set_orthographic(&mut self, el: &Element, m: Mat4, aspect: f32, near: f32, far: f32) {
+        let eye = m.transform_point3(Vec3::ZERO);
+        let forward = m.transform_vector3(Vec3::Z);
+        let up = m.transform_vector3(Vec3::Y);
+        let left = m.transform_vector3(Vec3::X);
+        if left.dot(up.cross(forward)) < 0.0 {
+            self.warn(
+                el,
+                "approximate: the camera transform mirrors the image; rendered unmirrored",
+            );
+        }
+        // The film's half-width is |to_world x|, its half-height
+        // |to_world y| / aspect; chiaro's film has the image's aspect.
+        let (half_w, half_h) = (left.length(), up.length() / aspect);
+        if (half_w - half_h * aspect).abs() > 1e-4 * half_w.max(half_h * aspect) {
+            self.warn(
+                el,
+                "approximate: the camera transform scales x and y differently; the film's height is kept, its width follows the image's aspect",
+            );
+        }
+        self.scene.camera = Camera {
+            eye,
+            look_at: eye + forward.normalize_or(Vec3::Z),
+            up: up.normalize_or(Vec3::Y),
+            near,
+            far,
+            projection: Projection::Orthographic {
+                half_height: half_h,
+            },
+            ..Default::default()
         };
     }
 
@@ -178,6 +230,7 @@ impl Builder<'_> {
             fov_y_degrees: fov_y,
             near,
             far,
+            ..Default::default()
         };
     }
 

@@ -128,6 +128,9 @@ enum Saved {
 struct CameraSpec {
     camera_from_world: Mat4,
     fov: f32,
+    /// `Camera "orthographic"`: its `screenwindow` (x0, x1, y0, y1; camera
+    /// space units), `None` for pbrt's default.
+    orthographic: Option<Option<[f32; 4]>>,
     loc: Loc,
 }
 
@@ -747,21 +750,45 @@ impl Builder {
         let ty = lx.string("a camera type")?;
         let p = Params::read(lx)?;
         let what = format!("Camera \"{}\"", ty.text);
-        match ty.text.as_str() {
-            "perspective" => {}
-            "orthographic" | "realistic" | "spherical" => {
+        let orthographic = match ty.text.as_str() {
+            "perspective" => false,
+            "orthographic" => true,
+            "realistic" | "spherical" => {
                 return Err(ty.loc.error(format!(
-                    "Camera \"{}\" is refused: chiaro has only perspective cameras",
+                    "Camera \"{}\" is refused: chiaro has perspective and orthographic cameras",
                     ty.text
                 )));
             }
             other => {
-                return Err(ty
-                    .loc
-                    .error(format!("unknown Camera \"{other}\" (expected perspective)")));
+                return Err(ty.loc.error(format!(
+                    "unknown Camera \"{other}\" (expected perspective or orthographic)"
+                )));
             }
-        }
-        let fov = p.float("fov", 90.0)?;
+        };
+        // The screen window of an orthographic camera is its film, in
+        // camera space units (pbrt-v4 `CameraBase`, `OrthographicCamera`).
+        let screen = if orthographic {
+            match p.floats("screenwindow")? {
+                None => Some(None),
+                Some(v) => match <[f32; 4]>::try_from(v.as_slice()) {
+                    Ok(w) if w[1] > w[0] && w[3] > w[2] && w.iter().all(|x| x.is_finite()) => {
+                        Some(Some(w))
+                    }
+                    _ => {
+                        return Err(p.loc_of("screenwindow").error(format!(
+                            "screenwindow: expected four finite numbers x0 < x1, y0 < y1, got {v:?}"
+                        )));
+                    }
+                },
+            }
+        } else {
+            None
+        };
+        let fov = if orthographic {
+            90.0
+        } else {
+            p.float("fov", 90.0)?
+        };
         if !(fov > 0.0 && fov < 180.0) {
             return Err(p
                 .loc_of("fov")
@@ -776,7 +803,7 @@ impl Builder {
             );
         }
         for k in ["screenwindow", "frameaspectratio"] {
-            if p.has(k) {
+            if p.has(k) && !(orthographic && k == "screenwindow") {
                 self.warn(
                     loc,
                     &what,
@@ -797,6 +824,7 @@ impl Builder {
         self.camera = Some(CameraSpec {
             camera_from_world,
             fov,
+            orthographic: screen,
             loc: loc.clone(),
         });
         self.warn_unused(loc, &what, &p);
@@ -893,6 +921,7 @@ impl Builder {
         let spec = self.camera.clone().unwrap_or_else(|| CameraSpec {
             camera_from_world: Mat4::IDENTITY,
             fov: 90.0,
+            orthographic: None,
             loc: Loc {
                 file: Arc::new(PathBuf::from("<pbrt default>")),
                 line: 0,
@@ -943,6 +972,33 @@ impl Builder {
         self.scene.camera.look_at = eye + forward;
         self.scene.camera.up = up;
         self.scene.camera.fov_y_degrees = fov_y;
+        if let Some(screen) = spec.orthographic {
+            // pbrt's default screen window spans [-1, 1] along the shorter
+            // image axis; camera space units scale to the world by the
+            // camera transform.
+            let aspect = w / h;
+            let half_height = match screen {
+                None if w >= h => 1.0,
+                None => 1.0 / aspect,
+                Some([x0, x1, y0, y1]) => {
+                    let off_centre = x0 != -x1 || y0 != -y1;
+                    let stretched = ((x1 - x0) / (y1 - y0) - aspect).abs() > 1e-4 * aspect;
+                    if off_centre || stretched {
+                        let loc = spec.loc.clone();
+                        self.warn(
+                            &loc,
+                            "Camera \"orthographic\"",
+                            "approximate: the screenwindow is centred on the view axis with the film's aspect (its height kept)",
+                        );
+                    }
+                    0.5 * (y1 - y0)
+                }
+            };
+            let scale = world_from_camera.transform_vector3(Vec3::Y).length();
+            self.scene.camera.projection = chiaro_core::scene::Projection::Orthographic {
+                half_height: half_height * scale,
+            };
+        }
         // pbrt's image +x is `right_pbrt`, chiaro's `forward x up`: where
         // they differ, mirror the world about the camera's vertical plane.
         let mirror = if right_pbrt.dot(right) < 0.0 {

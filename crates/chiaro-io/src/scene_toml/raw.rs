@@ -286,6 +286,10 @@ pub(crate) struct RawCamera {
     pub fov: Opt<f32>,
     pub near: Opt<f32>,
     pub far: Opt<f32>,
+    /// `"perspective"` (the default) or `"orthographic"`.
+    pub projection: Opt<String>,
+    /// An orthographic camera's film half-height, scene units.
+    pub half_height: Opt<f32>,
 }
 
 /// One of Warn's flaps: `{ axis = [1, 0, 0], min = -1, max = 1 }`.

@@ -50,8 +50,14 @@ pub(crate) fn closed_objects(ps: &PreparedScene<'_>) -> ClosedObjects {
 pub(crate) fn hidden_backs(closed: &ClosedObjects, camera: &Camera, aspect: f32) -> Vec<bool> {
     // Every point of the near plane's rectangle lies within this distance
     // of the eye.
-    let tan = (camera.fov_y_degrees.to_radians() * 0.5).tan();
-    let reach = camera.near * (1.0 + tan * tan * (1.0 + aspect * aspect)).sqrt();
+    let reach = match camera.orthographic_half_height() {
+        None => {
+            let tan = (camera.fov_y_degrees.to_radians() * 0.5).tan();
+            camera.near * (1.0 + tan * tan * (1.0 + aspect * aspect)).sqrt()
+        }
+        // Every ray origin (the film) and the near rectangle in front of it.
+        Some(hh) => (camera.near * camera.near + hh * hh * (1.0 + aspect * aspect)).sqrt(),
+    };
     closed
         .0
         .iter()

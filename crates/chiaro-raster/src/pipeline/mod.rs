@@ -79,7 +79,7 @@ use crate::pipeline::shading::Ctx;
 use crate::pipeline::vertex::Rays;
 use crate::pipeline::visibility::Class;
 use crate::pipeline::visibility::Visibility;
-use crate::raster::sample_offsets;
+use crate::raster::{DepthKey, sample_offsets};
 pub use crate::screen_door::dither_threshold;
 use crate::shadows::Shadows;
 use crate::shadows::volumes::VolumeCounting;
@@ -172,7 +172,7 @@ pub(crate) fn render_work(
     progress.begin("vertex", 1);
     let rects = tiles(w, h, TILE_SIZE);
     let tiles_x = w.div_ceil(TILE_SIZE);
-    let (vp_cull, vp_all) = vertex::viewports(w, h);
+    let (vp_cull, vp_all) = vertex::viewports(w, h, DepthKey::of_camera(camera));
     let verts = vertex::screen_vertices(ps, clip_from_world, &vp_all);
     progress.advance(1);
 

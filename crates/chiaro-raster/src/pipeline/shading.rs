@@ -111,7 +111,7 @@ impl Ctx<'_, '_> {
             return false;
         }
         let p0 = self.ps.positions[self.ps.triangles[t as usize][0] as usize];
-        self.ps.face_normal(t).dot(self.rays.eye - p0) < 0.0
+        self.ps.face_normal(t).dot(self.rays.toward_viewer3(p0)) < 0.0
     }
 
     /// `shade_local` with area lights sampled at the strata centres and the
@@ -368,10 +368,10 @@ pub(crate) fn shade_tile<'a>(
                 }
                 let dir = Rays::dir_from(column, row);
                 let td = ctx.tri_data(id, cache, poly);
+                let (sx, sy) = (sample_x(px, o), sample_y(py, o));
                 let r = if td.lean {
-                    lean_sample(ctx, td, dir)
+                    lean_sample(ctx, td, sx, sy, dir)
                 } else {
-                    let (sx, sy) = (sample_x(px, o), sample_y(py, o));
                     let whole = SampleShare::WHOLE;
                     shade_sample(ctx, poly, td, sx, sy, dir, counts_of(pi), false, whole)
                 };
@@ -413,7 +413,7 @@ pub(crate) fn shade_tile<'a>(
                 } else {
                     let td = ctx.tri_data(id, cache, poly);
                     if td.lean {
-                        lean_sample(ctx, td, dir)
+                        lean_sample(ctx, td, sx, sy, dir)
                     } else {
                         shade_sample(ctx, poly, td, sx, sy, dir, counts_of(i), false, share)
                     }
@@ -448,14 +448,21 @@ pub(crate) fn shade_tile<'a>(
 /// case, without what it does not read (uv footprint, the view direction
 /// of flat and Gouraud samples, per-corner lookups).
 #[inline(always)]
-pub(crate) fn lean_sample(ctx: &Ctx<'_, '_>, td: &TriData, dir: Vec3A) -> SampleResult {
-    let b = td.bary(dir).unwrap_or(Vec2::splat(1.0 / 3.0));
+pub(crate) fn lean_sample(
+    ctx: &Ctx<'_, '_>,
+    td: &TriData,
+    sx: f32,
+    sy: f32,
+    dir: Vec3A,
+) -> SampleResult {
+    let b = td
+        .bary_at(&ctx.rays, sx, sy, dir)
+        .unwrap_or(Vec2::splat(1.0 / 3.0));
     let (u, v) = (b.x, b.y);
     // Ctx::surface: w = 1 - u - v and the same interpolations.
     let w = 1.0 - u - v;
     let p = td.p[0] * w + td.p[1] * u + td.p[2] * v;
-    let eye = Vec3A::from(ctx.rays.eye);
-    let depth = (p - eye).length();
+    let depth = ctx.rays.distance(p);
     let ng = td.ng;
     let ns = || {
         let ns = exact::try_normalize(td.n[0] * w + td.n[1] * u + td.n[2] * v).unwrap_or(ng);
@@ -592,11 +599,10 @@ pub(crate) fn shade_sample(
     share: SampleShare,
 ) -> SampleResult {
     let ps = ctx.ps;
-    let eye = ctx.rays.eye;
     let [i0, i1, i2] = td.idx;
     // Perspective-correct barycentrics of the sample and of its neighbours.
     let third = Vec2::splat(1.0 / 3.0);
-    let b = td.bary(dir).unwrap_or(third);
+    let b = td.bary_at(&ctx.rays, sx, sy, dir).unwrap_or(third);
     let material = td.material;
     let needs_footprint = td.textured;
     // Flat samples read no shading normal or vertex colour, unless
@@ -605,7 +611,9 @@ pub(crate) fn shade_sample(
     let hit = ctx.surface(td, b.x, b.y, needs_footprint, shading);
     let (duv_dx, duv_dy) = if needs_footprint {
         let uv_at = |x: f32, y: f32| {
-            let bb = td.bary(ctx.rays.dir(x, y).into()).unwrap_or(b);
+            let bb = td
+                .bary_at(&ctx.rays, x, y, ctx.rays.dir(x, y).into())
+                .unwrap_or(b);
             ps.uvs[i0] * (1.0 - bb.x - bb.y) + ps.uvs[i1] * bb.x + ps.uvs[i2] * bb.y
         };
         let dx = uv_at(sx + 1.0, sy) - hit.uv;
@@ -618,14 +626,14 @@ pub(crate) fn shade_sample(
     } else {
         (Vec2::ZERO, Vec2::ZERO)
     };
-    let (eye_a, p_a) = (Vec3A::from(eye), Vec3A::from(hit.p));
+    let p_a = Vec3A::from(hit.p);
     // Flat and Gouraud samples read the view direction only to tell the
     // back of a two-sided surface and for the reflection map.
     let wo = if td.mode == ShadeMode::Phong
         || material.sidedness.eye_sees_back()
         || ctx.ps.scene.environment.is_some()
     {
-        Vec3::from(exact::normalize_or_zero(eye_a - p_a))
+        Vec3::from(exact::normalize_or_zero(ctx.rays.toward_viewer(p_a)))
     } else {
         Vec3::ZERO
     };
@@ -669,7 +677,7 @@ pub(crate) fn shade_sample(
         let kr = mirror_reflectance(kr, material.conductor, n.dot(wo));
         color += kr * environment_radiance(ctx.ps.scene, reflect(wo, n));
     }
-    let depth = (p_a - eye_a).length();
+    let depth = ctx.rays.distance(p_a);
     if let Some(cue) = &ctx.settings.depth_cue {
         color = depth_cue(color, depth, cue);
     }

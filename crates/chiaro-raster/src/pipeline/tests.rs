@@ -723,7 +723,7 @@ fn lean_samples_equal_shade_sample_bit_for_bit() {
                 for _ in 0..4 {
                     let (sx, sy) = (next() * w as f32, next() * h as f32);
                     let dir = Rays::dir_from(ctx.rays.column(sx), ctx.rays.row(sy));
-                    let a = lean_sample(&ctx, &td, dir);
+                    let a = lean_sample(&ctx, &td, sx, sy, dir);
                     let share = chiaro_core::shading::SampleShare::WHOLE;
                     let b = shade_sample(&ctx, &poly, &td, sx, sy, dir, None, false, share);
                     let bits = |v: Vec3| v.to_array().map(f32::to_bits);

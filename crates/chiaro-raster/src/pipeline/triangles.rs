@@ -5,6 +5,7 @@ use crate::gouraud::PolyShading;
 use crate::pipeline::exact;
 use crate::pipeline::shading::Ctx;
 use crate::pipeline::shading::Split;
+use crate::pipeline::vertex::Rays;
 use chiaro_core::prepared::SurfaceHit;
 use chiaro_core::scene::MaterialId;
 use chiaro_core::scene::{Material, ShadeMode};
@@ -90,6 +91,29 @@ impl TriData<'_> {
         let inv = 1.0 / det;
         let u = self.s.dot(pv) * inv;
         let v = d.dot(self.q) * inv;
+        let r = Vec2::new(u, v);
+        r.is_finite().then_some(r)
+    }
+
+    /// The barycentrics of the sample at film position `(sx, sy)` whose
+    /// eye ray has direction `d`: [`TriData::bary`], or for an orthographic
+    /// camera, whose rays start on the film, the same Moller-Trumbore terms
+    /// from the sample's own origin (affine in screen space: the
+    /// perspective correction vanishes).
+    #[inline]
+    pub(crate) fn bary_at(&self, rays: &Rays, sx: f32, sy: f32, d: Vec3A) -> Option<Vec2> {
+        if rays.ortho.is_none() {
+            return self.bary(d);
+        }
+        let s = rays.origin(sx, sy) - self.p[0];
+        let pv = exact::cross(d, self.e2);
+        let det = self.e1.dot(pv);
+        if det.abs() < 1e-30 {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let u = s.dot(pv) * inv;
+        let v = d.dot(exact::cross(s, self.e1)) * inv;
         let r = Vec2::new(u, v);
         r.is_finite().then_some(r)
     }
@@ -185,7 +209,7 @@ impl<'a> Ctx<'a, '_> {
         d.lean = self.lean_frame
             && !d.textured
             && !(d.material.sidedness.eye_sees_back()
-                && d.ng.dot(Vec3A::from(self.rays.eye) - d.p[0]) < 0.0)
+                && d.ng.dot(self.rays.toward_viewer(d.p[0])) < 0.0)
             && match d.mode {
                 ShadeMode::Phong => {
                     self.point_lighting.is_some() && self.bases.get(d.material_id.index()).is_some()

@@ -34,20 +34,76 @@ pub(crate) struct Rays {
     pub(crate) aspect: f32,
     pub(crate) width: f32,
     pub(crate) height: f32,
+    /// An orthographic camera's film half-height (scene units): its rays
+    /// start on the film and all run along `forward` (`tan_half` is then 0).
+    pub(crate) ortho: Option<f32>,
 }
 
 impl Rays {
     pub(crate) fn new(cam: &Camera, width: u32, height: u32) -> Self {
         let f = cam.frame();
+        let ortho = cam.orthographic_half_height();
         Self {
             eye: cam.eye,
             right: f.right,
             up: f.up,
             forward: f.forward,
-            tan_half: (cam.fov_y_degrees.to_radians() * 0.5).tan(),
+            tan_half: match ortho {
+                None => (cam.fov_y_degrees.to_radians() * 0.5).tan(),
+                Some(_) => 0.0,
+            },
             aspect: width as f32 / height as f32,
             width: width as f32,
             height: height as f32,
+            ortho,
+        }
+    }
+
+    /// The origin of the eye ray through film position `(x, y)`: the eye,
+    /// or the film point of an orthographic camera (as
+    /// [`chiaro_core::scene::PixelRays::origin`]).
+    #[inline]
+    pub(crate) fn origin(&self, x: f32, y: f32) -> Vec3A {
+        match self.ortho {
+            None => self.eye.into(),
+            Some(hh) => {
+                let ndc_x = (2.0 * x / self.width - 1.0) * hh * self.aspect;
+                let ndc_y = (1.0 - 2.0 * y / self.height) * hh;
+                (self.eye + ndc_x * self.right + ndc_y * self.up).into()
+            }
+        }
+    }
+
+    /// From `p` towards the viewer, not normalised: `eye - p`, or minus the
+    /// viewing direction for an orthographic camera (which side of a
+    /// surface the camera sees; the view direction `wo`).
+    #[inline]
+    pub(crate) fn toward_viewer(&self, p: Vec3A) -> Vec3A {
+        match self.ortho {
+            None => Vec3A::from(self.eye) - p,
+            Some(_) => -Vec3A::from(self.forward),
+        }
+    }
+
+    /// [`Rays::toward_viewer`] in `Vec3` arithmetic (`eye - p`, for the
+    /// callers that computed it so).
+    #[inline]
+    pub(crate) fn toward_viewer3(&self, p: Vec3) -> Vec3 {
+        match self.ortho {
+            None => self.eye - p,
+            Some(_) => -self.forward,
+        }
+    }
+
+    /// The distance along the eye ray from its origin to the visible point
+    /// `p` (the film's depth): `|p - eye|`, or the depth past the film
+    /// plane for an orthographic camera.
+    #[inline]
+    pub(crate) fn distance(&self, p: Vec3A) -> f32 {
+        let eye = Vec3A::from(self.eye);
+        match self.ortho {
+            None => (p - eye).length(),
+            Some(_) => (p - eye).dot(self.forward.into()),
         }
     }
 
@@ -82,12 +138,12 @@ impl Rays {
 
 /// The viewport of a `w` x `h` image that culls back faces, and the one
 /// that keeps them.
-pub(crate) fn viewports(w: u32, h: u32) -> (Viewport, Viewport) {
+pub(crate) fn viewports(w: u32, h: u32, depth_key: DepthKey) -> (Viewport, Viewport) {
     let vp_cull = Viewport {
         width: w,
         height: h,
         cull_back: true,
-        depth_key: DepthKey::InvW,
+        depth_key,
     };
     let vp_all = Viewport {
         cull_back: false,
@@ -113,8 +169,11 @@ pub(crate) fn screen_vertices(
                 xy: if inside { vp_all.snap(clip) } else { [0; 2] },
                 // The key `Viewport::setup` gives an unclipped vertex:
                 // its barycentric (a unit vector) dotted with (1, 1, 1),
-                // exactly 1, over w.
-                key: 1.0 / clip.w,
+                // exactly 1, over w; or `-z / w`.
+                key: match vp_all.depth_key {
+                    DepthKey::InvW => 1.0 / clip.w,
+                    DepthKey::ZOverW => -clip.z / clip.w,
+                },
             }
         })
         .collect()

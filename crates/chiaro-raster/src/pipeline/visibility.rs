@@ -116,9 +116,10 @@ impl Visibility<'_, '_> {
         let (ps, coverage, sample_rays) = (self.ps, &self.coverage, &self.sample_rays);
         let sub = crate::raster::SUBPIXEL as f32;
         let Some(c) = coverage else { return false };
-        let dir = sample_rays.dir(x as f32 + o[0] as f32 / sub, y as f32 + o[1] as f32 / sub);
+        let (sx, sy) = (x as f32 + o[0] as f32 / sub, y as f32 + o[1] as f32 / sub);
+        let dir = sample_rays.dir(sx, sy);
         let [a, b, d] = ps.triangles[t as usize].map(|i| ps.positions[i as usize]);
-        let ray = chiaro_core::geometry::Ray::new(sample_rays.eye, dir);
+        let ray = chiaro_core::geometry::Ray::new(sample_rays.origin(sx, sy).into(), dir);
         match chiaro_core::accel::intersect_triangle(&ray, a, b, d) {
             Some((t_hit, u, v)) => !c.covers(&chiaro_core::accel::Hit {
                 t: t_hit,

@@ -52,6 +52,7 @@ impl MapView {
             fov_y_degrees: fov_deg,
             near: 1e-4,
             far: 1e30,
+            ..Default::default()
         };
         let view = cam.view_matrix();
         Self {

@@ -34,10 +34,11 @@
 //! of spheres over a plane, about 9 million candidate pairs give 414,000
 //! shadow polygons; the sweep itself is `O(rows * active polygons)`.
 
+use crate::raster::DepthKey;
 use crate::shadows::object_precision::{
     Casters, DVec2, DVec3, LightGeom, ReceiverFrame, intersect2, scene_scale, tri_points,
 };
-use crate::zbuffer::{NO_ITEM, item_buffer};
+use crate::zbuffer::{ItemBufferOptions, NO_ITEM, item_buffer_with};
 use chiaro_core::error::CoreError;
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::Camera;
@@ -157,7 +158,19 @@ fn scanline_visibility_with(
     let candidate_pairs = per_receiver.iter().map(|(n, _)| n).sum();
     // 3. The camera: visible triangles and screen-space shadow polygons.
     let m = camera.projection_matrix(width as f32 / height.max(1) as f32) * camera.view_matrix();
-    let items = item_buffer(m, width, height, &ps.positions, &ps.triangles, &[]);
+    let options = ItemBufferOptions {
+        cull_back_faces: false,
+        depth_key: DepthKey::of_camera(camera),
+    };
+    let items = item_buffer_with(
+        m,
+        width,
+        height,
+        &ps.positions,
+        &ps.triangles,
+        &[],
+        &options,
+    );
     let (wf, hf) = (f64::from(width), f64::from(height));
     // Screen polygons bucketed by the first scan line they cross.
     let mut rows: Vec<Vec<(u32, Vec<DVec2>)>> = vec![Vec::new(); height as usize];

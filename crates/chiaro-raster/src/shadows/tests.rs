@@ -840,3 +840,26 @@ fn ray_fallback_classifies_points_like_the_fragments() {
         total - agree
     );
 }
+
+/// Under an orthographic camera (whose points at infinity have no screen
+/// position, so volumes are extruded to a finite reach) the shadow map,
+/// the volumes and the exact methods classify the pixels as rays do.
+#[test]
+fn shadow_methods_agree_under_an_orthographic_camera() {
+    let (w, h) = (96, 72);
+    let mut scene = light_only(64);
+    scene.camera.projection = chiaro_core::scene::Projection::Orthographic { half_height: 2.0 };
+    let none = dark_with(&scene, ShadowMethod::None, w, h);
+    let ray = dark_with(&scene, ShadowMethod::Ray, w, h);
+    let cast = (0..none.len()).filter(|&i| ray[i] && !none[i]).count();
+    assert!(cast > 150, "only {cast} shadowed pixels");
+    for method in [
+        ShadowMethod::Map,
+        ShadowMethod::Volume,
+        ShadowMethod::Object,
+        ShadowMethod::Scanline,
+    ] {
+        let d = disagreement(&ray, &dark_with(&scene, method, w, h), w, h);
+        assert!(d < 0.005, "{method:?} disagrees with rays on {d}");
+    }
+}

@@ -11,7 +11,7 @@ use crate::shadows::rays::RayShadows;
 use chiaro_core::progress::Progress;
 
 use crate::raster::rasterize_window;
-use crate::raster::{RasterTri, Rect, Viewport};
+use crate::raster::{DepthKey, RasterTri, Rect, Viewport};
 use chiaro_core::prepared::PreparedScene;
 use chiaro_core::scene::{Light, RenderSettings};
 use chiaro_core::shading::EmitterGroup;
@@ -61,6 +61,12 @@ pub(crate) struct ShadowVolumes {
     /// Objects with opaque triangles that are not closed meshes, which get
     /// one volume per triangle; `None` when every caster is closed.
     pub(crate) warning: Option<String>,
+    /// `Some(l)`: extrude to finite points `l` beyond each vertex instead
+    /// of to infinity (an orthographic camera, under which points at
+    /// infinity have no place on the screen and the back caps would be
+    /// lost); `l` exceeds the scene's extent, so the volumes still hold
+    /// every receiver they shadow.
+    pub(crate) finite_reach: Option<f32>,
 }
 
 impl ShadowVolumes {
@@ -133,6 +139,7 @@ impl ShadowVolumes {
             closed,
             from,
             warning,
+            finite_reach: None,
         }
     }
 
@@ -153,7 +160,7 @@ impl ShadowVolumes {
             return;
         };
         for (o, tris) in self.by_object.iter().enumerate() {
-            extrude(ps, tris, self.closed[o], *from, sink);
+            extrude(ps, tris, self.closed[o], *from, self.finite_reach, sink);
         }
     }
 
@@ -241,21 +248,25 @@ pub(crate) fn facing_light(a: Vec3, b: Vec3, c: Vec3, from: Vec4) -> Facing {
 }
 
 /// Appends the shadow volume of the triangles `tris` (one object) for a light
-/// at homogeneous position `from` (`w = 0`: a direction towards the light).
+/// at homogeneous position `from` (`w = 0`: a direction towards the light),
+/// extruded to infinity, or `reach` beyond each vertex when given (see
+/// [`ShadowVolumes::finite_reach`]).
 pub(crate) fn extrude(
     ps: &PreparedScene<'_>,
     tris: &[u32],
     closed: bool,
     from: Vec4,
+    reach: Option<f32>,
     out: &mut impl FnMut([Vec4; 3]),
 ) {
     let l3 = from.truncate();
-    // Direction of extrusion of a point away from the light, as a point at infinity.
+    // Direction of extrusion of a point away from the light, as a point at
+    // infinity (or `reach` along it).
     let inf = |p: Vec3| -> Vec4 {
-        if from.w == 0.0 {
-            (-l3).extend(0.0)
-        } else {
-            (p - l3).extend(0.0)
+        let d = if from.w == 0.0 { -l3 } else { p - l3 };
+        match reach {
+            None => d.extend(0.0),
+            Some(l) => (p + d.normalize_or_zero() * l).extend(1.0),
         }
     };
     let facing = |a: Vec3, b: Vec3, c: Vec3| facing_light(a, b, c, from);
@@ -361,7 +372,16 @@ pub(crate) fn volume_bins(
 ) -> ((Bins, [Option<String>; 2]), usize) {
     let group = EmitterGroup::of_scene(ps, settings.light_samples.max(1));
     let exact = crate::shadows::exact_lights(ps, group.as_ref());
-    let vols = ShadowVolumes::new(ps, &exact);
+    let mut vols = ShadowVolumes::new(ps, &exact);
+    if vp.depth_key == DepthKey::ZOverW {
+        // The viewport keys depth by NDC z only under an orthographic camera.
+        let extent = (ps.bounds.max - ps.bounds.min).length();
+        vols.finite_reach = Some(if extent.is_finite() {
+            2.0 * extent + 1.0
+        } else {
+            f32::MAX.sqrt()
+        });
+    }
     let nl = ps.lights.len();
     let points = u64::from(settings.width) * u64::from(settings.height) * u64::from(spp);
     // Per light: the binned copies its volumes would take.
@@ -457,7 +477,13 @@ pub(crate) fn count_volumes(
                 if key == f32::NEG_INFINITY {
                     return;
                 }
-                let behind = k <= key * (1.0 + VOLUME_EPS);
+                // Within VOLUME_EPS of the key, relative to its size: a
+                // `1/w` key is positive, an orthographic `-z/w` one negative.
+                let behind = if key >= 0.0 {
+                    k <= key * (1.0 + VOLUME_EPS)
+                } else {
+                    k <= key * (1.0 - VOLUME_EPS)
+                };
                 let d =
                     match (counting, behind, rt.back) {
                         (VolumeCounting::ZFail, true, true)

@@ -42,7 +42,6 @@
 use chiaro_core::context::{RenderContext, RenderStats, Renderer};
 use chiaro_core::error::Result;
 use chiaro_core::film::{Film, TilePixels, render_tiles};
-use chiaro_core::geometry::Ray;
 use chiaro_core::sampling::{SobolSampler, pixel_rng, uniform2};
 use chiaro_core::scene::Technique;
 use chiaro_core::shading::sanitize;
@@ -186,8 +185,7 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                     for s in 0..spp {
                         let mut rng = pixel_rng(settings.seed, px, py, s);
                         let (x, y) = film_pos(px, py, uniform2(&mut rng));
-                        let dir = pixel_rays.direction(x, y);
-                        let ray = Ray::new(cam.eye, dir);
+                        let ray = pixel_rays.ray(x, y);
                         let (l, fh) = tracer.reference_radiance(ray, &mut rng, &mut count);
                         sum += sanitize(l);
                         if s == 0 {
@@ -197,7 +195,7 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                 } else if lanes {
                     let camera = |j: Vec2| {
                         let (x, y) = film_pos(px, py, j);
-                        Ray::new(cam.eye, pixel_rays.direction(x, y))
+                        pixel_rays.ray(x, y)
                     };
                     for first in (0..spp).step_by(LANES) {
                         let n = ((spp - first) as usize).min(LANES);
@@ -214,8 +212,8 @@ fn render_impl(ctx: &RenderContext<'_>, kernel: Kernel, env_sampling: bool) -> R
                     for s in 0..spp {
                         rng.set_sample(s);
                         let (x, y) = film_pos(px, py, rng.next_2d());
-                        let dir = pixel_rays.direction(x, y);
-                        let (l, fh) = tracer.radiance(Ray::new(cam.eye, dir), &mut rng, &mut count);
+                        let ray = pixel_rays.ray(x, y);
+                        let (l, fh) = tracer.radiance(ray, &mut rng, &mut count);
                         sum += sanitize(l);
                         if s == 0 {
                             first_hit = fh;

@@ -4,6 +4,7 @@
 use super::*;
 use chiaro_core::accel::Accelerator;
 use chiaro_core::accel::bvh::SceneBvh;
+use chiaro_core::geometry::Ray;
 use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;

@@ -204,10 +204,8 @@ pub struct Tracer<'s> {
     /// strata centres, as the scan converter takes them, so that both
     /// techniques estimate direct light with the same samples.
     centre_light_samples: bool,
-    /// The camera's ray directions at the settings' image size.
+    /// The camera's rays at the settings' image size.
     pixel_rays: PixelRays,
-    /// The camera's eye (the context's camera).
-    eye: Vec3,
 }
 
 impl std::fmt::Debug for Tracer<'_> {
@@ -240,7 +238,6 @@ impl<'s> Tracer<'s> {
             pixel_rays: ctx
                 .camera()
                 .pixel_rays(settings.width.max(1), settings.height.max(1)),
-            eye: ctx.camera().eye,
         }
     }
 
@@ -422,10 +419,11 @@ impl<'s> Tracer<'s> {
     ) -> PrimarySample {
         let scene = self.prepared.scene;
         let pr = &self.pixel_rays;
-        let ray = Ray::new(self.eye, pr.direction(film.x, film.y));
+        let ray = pr.ray(film.x, film.y);
         // The rays through the neighbouring pixels, for texture filtering.
         let differentials = (!scene.textures.is_empty()).then(|| RayDifferentials {
-            origin: ray.origin,
+            origin_dx: pr.origin(film.x + 1.0, film.y),
+            origin_dy: pr.origin(film.x, film.y + 1.0),
             dir_dx: pr.direction(film.x + 1.0, film.y),
             dir_dy: pr.direction(film.x, film.y + 1.0),
         });
