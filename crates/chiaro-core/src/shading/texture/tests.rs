@@ -549,3 +549,20 @@ fn set_environment(
         as_background,
     });
 }
+
+#[test]
+fn one_lookup_gives_the_radiance_and_the_pdf() {
+    // `EnvironmentLight::radiance_pdf` equals `environment_radiance` and
+    // `pdf` bit for bit, for a turned map and directions of any length.
+    let scene = spot_scene(30.0);
+    let light = EnvironmentLight::new(&scene).expect("a light");
+    let mut rng = crate::sampling::pixel_rng(9, 8, 7, 6);
+    for k in 0..20_000 {
+        let d = crate::sampling::sample_uniform_sphere(crate::sampling::uniform2(&mut rng))
+            * (0.5 + (k % 7) as f32);
+        let (l, pdf) = light.radiance_pdf(d);
+        assert_eq!(l, environment_radiance(&scene, d));
+        assert_eq!(pdf.to_bits(), light.pdf(d).to_bits());
+    }
+    assert_eq!(light.radiance_pdf(Vec3::ZERO), (Vec3::ZERO, 0.0));
+}
