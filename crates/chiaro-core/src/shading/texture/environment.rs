@@ -30,7 +30,10 @@ pub fn environment_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
 #[inline]
 pub(super) fn environment_uv(env: &crate::scene::Environment, d: Vec3) -> Vec2 {
     let mut uv = latlong_uv(d);
-    uv.x = (uv.x + env.rotate_y_degrees / 360.0).rem_euclid(1.0);
+    // (`x - floor(x)` is `x.rem_euclid(1.0)` bit for bit, both one
+    // rounding of the same exact value, without `fmodf`; -0 gives +0.)
+    let x = uv.x + env.rotate_y_degrees / 360.0;
+    uv.x = x - x.floor();
     uv
 }
 

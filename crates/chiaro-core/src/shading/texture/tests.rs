@@ -566,3 +566,26 @@ fn one_lookup_gives_the_radiance_and_the_pdf() {
     }
     assert_eq!(light.radiance_pdf(Vec3::ZERO), (Vec3::ZERO, 0.0));
 }
+
+#[test]
+fn fract_by_floor_is_rem_euclid() {
+    // `environment_uv`'s turn of u: `x - floor(x)` for `rem_euclid(1.0)`,
+    // the same bits but for the sign of a zero (-0 gives +0, the same
+    // texel).
+    let mut xs: Vec<f32> = (-30_000..30_000).map(|k| k as f32 * 7.3e-5).collect();
+    xs.extend([
+        -1e-10,
+        1e-10,
+        -0.0,
+        0.0,
+        1.0,
+        -1.0,
+        2.5,
+        -2.5,
+        1.0f32.next_down(),
+    ]);
+    for x in xs {
+        let (a, b) = (x - x.floor(), x.rem_euclid(1.0));
+        assert!(a.to_bits() == b.to_bits() || (a == 0.0 && b == 0.0), "{x}");
+    }
+}
