@@ -312,7 +312,7 @@ impl PiecewiseConstant1D {
     #[inline]
     fn count_at_most(&self, u: f32) -> usize {
         let n = self.func.len();
-        if !(u >= 0.0) {
+        if u.is_nan() || u < 0.0 {
             // (Below 0 or NaN: no entry, as the full search finds.)
             return self.cdf.partition_point(|&c| c <= u);
         }
