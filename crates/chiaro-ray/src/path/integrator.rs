@@ -90,8 +90,16 @@ pub(super) struct MaterialInfo {
     pub(super) textured: bool,
     /// True when the only lobe is Lambert's (no glossy, mirror or
     /// transmission lobe), chosen with probability 1 and weighted by `kd`:
-    /// the vertices that [`lanes`] shades.
+    /// the vertices that [`lanes`] shades with its own Lambert arithmetic.
     pub(super) lambert: bool,
+    /// True for the vertices [`lanes`] shades: `lambert`, or a mixture of
+    /// Lambert and a glossy lobe (GGX, Beckmann, Phong or Blinn: the glTF
+    /// metal/dielectric mix) without mirror, transmission, clear coat or
+    /// BLEND, on a two-sided surface. Its sample never reads the Fresnel
+    /// choice's number (see [`Bsdf::sample`]: the lobe number is below 1,
+    /// so the choice falls in the non-delta lobes), so its numbers are the
+    /// same pairs for every lane.
+    pub(super) lock_step: bool,
     /// True when `Bsdf::eval` is zero for every pair of directions (no
     /// diffuse colour, no specular lobe): next-event estimation then finds
     /// nothing, and skips its light sample.
@@ -111,12 +119,22 @@ impl MaterialInfo {
         // (The lone lobe's probability is wd / wd = 1 and its weight kd / 1
         // = kd exactly; the kernel relies on both.)
         let lambert = wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular;
+        // (A one-sided material's back is black: the scalar loop's test.)
+        let two_sided = m.sidedness != Sidedness::OneSided;
+        let lambert =
+            lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd && two_sided;
+        // Diffuse and glossy lobes only; no absorption (no `kt` at all).
+        let mixture = lobes.total > 0.0
+            && wr == 0.0
+            && wt == 0.0
+            && !lobes.rough
+            && lobes.p_coat == 0.0
+            && surface.kt == Vec3::ZERO
+            && two_sided
+            && m.alpha_mode != AlphaMode::Blend;
         Self {
-            // (A one-sided material's back is black: the scalar loop's test.)
-            lambert: lambert
-                && lobes.p_diffuse == 1.0
-                && lobes.lambert_weight == surface.kd
-                && m.sidedness != Sidedness::OneSided,
+            lambert,
+            lock_step: lambert || mixture,
             // (The rough dielectric reflects light samples in front of it.)
             dark: surface.kd == Vec3::ZERO
                 && !lobes.specular
@@ -573,15 +591,17 @@ impl<'a, 's> PathTracer<'a, 's> {
     pub(super) fn escaped(&self, ray: &Ray, depth: u32, prev_pdf: f32) -> Vec3 {
         let scene = self.prepared.scene;
         if scene.environment.is_some() || depth == 0 || prev_pdf == 0.0 {
-            let l = chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0);
             match &self.env {
                 Some(env) if depth > 0 && prev_pdf > 0.0 => {
+                    // (`miss_radiance` of a scattered ray is the map's
+                    // radiance: with its pdf from one lookup.)
+                    let (l, pdf) = env.radiance_pdf(ray.dir);
                     // (The environment's choice does not depend on the point.)
                     let pick = self.light_pick_pdf(ray.origin, Vec3::ZERO, self.lights.len());
-                    let light_pdf = pick * env.pdf(ray.dir);
+                    let light_pdf = pick * pdf;
                     l * power_heuristic(prev_pdf, light_pdf)
                 }
-                _ => l,
+                _ => chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0),
             }
         } else {
             Vec3::ZERO

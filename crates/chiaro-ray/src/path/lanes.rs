@@ -8,20 +8,29 @@
 //! the scalar loop's order (Rust never fuses or reorders float operations,
 //! so a loop over lanes gives each lane the scalar result), and draws its
 //! numbers from the same Sobol pairs ([`SobolSampler::lanes_2d`]). It
-//! shades Lambertian vertices on plain triangles and spheres
-//! ([`PathTracer::plain_vertex`]); a lane whose vertex it does not shade
-//! (a material with a glossy, mirror or transmission lobe, a textured or
-//! vertex-coloured surface) leaves the batch there and finishes in the
-//! scalar loop from the same state and the same pair
-//! ([`PathTracer::radiance_from`]), and so do the last few lanes of a
+//! shades the vertices of plain triangles and spheres
+//! ([`PathTracer::plain_vertex`]) whose material is Lambertian, or a
+//! mixture of Lambert and a glossy lobe (GGX and the other microfacet and
+//! Phong lobes: the glTF metal/dielectric mix, `MaterialInfo::lock_step`);
+//! a lane whose vertex it does not shade (a mirror or transmission lobe, a
+//! clear coat, a textured or vertex-coloured surface) leaves the batch
+//! there and finishes in the scalar loop from the same state and the same
+//! pair ([`PathTracer::radiance_from`]), and so do the last few lanes of a
 //! batch ([`SCALAR_TAIL`]).
 //!
 //! Rays are still traced one at a time; what runs lane-parallel is the
 //! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
 //! cosine sampling, Russian roulette. Emissive-triangle lights are sampled
-//! lane-parallel; a lane that picks another light (point, spot,
-//! directional, an area light's quad, disk or sphere, the environment)
-//! gets it from the scalar loop's own code ([`PathTracer::direct_from`]).
+//! lane-parallel at Lambertian vertices; a mixture vertex, or a lane that
+//! picks another light (point, spot, directional, an area light's quad,
+//! disk or sphere, the environment), gets its light sample from the scalar
+//! loop's own code ([`PathTracer::direct_from`]), and a mixture vertex its
+//! next direction from `Bsdf::sample`, lane by lane, the lanes staying in
+//! step. Escaping lanes see the environment through
+//! [`PathTracer::escaped`], lane by lane; the lat-long mapping under every
+//! environment lookup is the polynomial one of
+//! `chiaro_core::shading::texture::latlong_uv`, shared with the scalar
+//! loop.
 
 // A lane loop indexes a dozen arrays by the lane number: that is the
 // form LLVM vectorises, and clearer than a dozen zipped iterators.
@@ -266,7 +275,7 @@ impl PathTracer<'_, '_> {
                 let Hit { t, prim, u, v: hv } = hit;
                 let Some((v, m)) = self
                     .plain_vertex(&ray, t, prim, u, hv)
-                    .filter(|(_, m)| m.lambert)
+                    .filter(|(_, m)| m.lock_step)
                 else {
                     // The scalar loop from this vertex, at this pair.
                     let path = (&beta, &l, &prev_pdf, (&prev_p, &prev_n));
@@ -298,6 +307,7 @@ impl PathTracer<'_, '_> {
                 vx.ng.set(i, v.ng);
                 vx.n.set(i, v.ns);
                 vx.kd.set(i, m.bsdf.m.kd);
+                vx.glossy[i] = !m.lambert;
                 info[i] = Some(m);
                 shade[i] = true;
             }
@@ -345,10 +355,16 @@ impl PathTracer<'_, '_> {
                 }
                 break;
             }
-            // Continue the path: Lambert's lobe alone (its choice's pair
-            // skipped), cosine-distributed, in `Frame::from_normal(n)`.
-            // (Pair `dim + 1`, drawn inside `direct_lanes`.)
+            // Continue the path. Mixture lanes sample their BSDF through
+            // `Bsdf::sample`, lane by lane, with the lobe choice's number
+            // (pair `dim`, drawn when some lane needs it) and the
+            // direction's pair; Lambert lanes draw Lambert's lobe alone
+            // (its choice's pair skipped), cosine-distributed, in
+            // `Frame::from_normal(n)`, lane-parallel. (Pair `dim + 1`,
+            // drawn inside `direct_lanes`.)
             let u = u_next;
+            let glossy: [bool; LANES] = std::array::from_fn(|i| shade[i] & vx.glossy[i]);
+            let g = self.sample_mixtures(&vx, &info, &glossy, &dir, u, dim, &rev, rng);
             dim += 2;
             let mut q: F = [0.0; LANES];
             let mut ended = [false; LANES];
@@ -360,16 +376,24 @@ impl PathTracer<'_, '_> {
                     .to_array();
                 let cos_i = dot(n, wi);
                 let ok = passes(cos_i) & passes(dot(vx.ngs.at(i), wi));
-                // (`Lobes::lambert_weight` is kd for these materials.)
-                let (bt, w) = (beta.at(i), vx.kd.at(i));
+                // The mixture lanes' sample in their place (selects).
+                let gi = glossy[i];
+                let wi = if gi { g.wi.at(i) } else { wi };
+                let ok = if gi { g.ok[i] } else { ok };
+                // (`Lobes::lambert_weight` is kd for Lambert's materials.)
+                let (bt, w) = (beta.at(i), if gi { g.weight.at(i) } else { vx.kd.at(i) });
                 let b: [f32; 3] = std::array::from_fn(|k| bt[k] * w[k]);
                 let live =
                     shade[i] && ok && b.iter().all(|c| c.is_finite()) && passes(max_element(b));
                 ended[i] = shade[i] && !live;
                 shade[i] = live;
                 beta.put(i, b);
-                // (`p_diffuse` is 1: the pdf is the cosine's.)
-                prev_pdf[i] = cosine_hemisphere_pdf(cos_i);
+                // (Lambert's `p_diffuse` is 1: the pdf is the cosine's.)
+                prev_pdf[i] = if gi {
+                    g.pdf[i]
+                } else {
+                    cosine_hemisphere_pdf(cos_i)
+                };
                 let p = vx.p.get(i);
                 prev_p.set(i, p);
                 prev_n.set(i, vx.ngs.get(i));
@@ -509,8 +533,9 @@ impl PathTracer<'_, '_> {
         if let Some((p, _)) = picked.filter(|_| !self.select_lights.is_empty()) {
             // Every light an emissive triangle: light 0 everywhere, then
             // each other light selected into the lanes that picked it (by
-            // power: the probability is the light's).
-            ok = *shade;
+            // power: the probability is the light's). Mixture lanes are
+            // sampled below.
+            ok = std::array::from_fn(|i| shade[i] & !vx.glossy[i]);
             let pick = |j: usize| self.light_pick_pdf(Vec3::ZERO, Vec3::ZERO, j);
             let (first, rest) = self.select_lights.split_first().expect("lights");
             *lt = LightLanes::splat(first, pick(0));
@@ -519,7 +544,8 @@ impl PathTracer<'_, '_> {
                 lt.select(&m, tl, pick(j));
             }
         } else {
-            for i in set_lanes(shade) {
+            let flat: [bool; LANES] = std::array::from_fn(|i| shade[i] & !vx.glossy[i]);
+            for i in set_lanes(&flat) {
                 let Some((li, pk)) = picked.map(|(p, pmf)| (p[i] as usize, pmf[i])) else {
                     break;
                 };
@@ -538,6 +564,23 @@ impl PathTracer<'_, '_> {
                 };
                 ok[i] = true;
                 lt.set(i, tl, pk);
+            }
+        }
+        // Mixture lanes: the scalar loop's code, lane by lane (their BSDF
+        // is not Lambert's, whose terms the loops below spell out).
+        if let Some((p, pmf)) = &picked {
+            let glossy: [bool; LANES] = std::array::from_fn(|i| shade[i] & vx.glossy[i]);
+            for i in set_lanes(&glossy) {
+                if p[i] == NO_PICK {
+                    continue;
+                }
+                if let Some(m) = info[i] {
+                    let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
+                    let u = Vec2::new(u[0][i], u[1][i]);
+                    let pk = (p[i] as usize, pmf[i]);
+                    let c = self.direct_from(pk, vx.p.get(i), m, n, ng, wo, mis, u, rays);
+                    l.set(i, l.get(i) + beta.get(i) * c);
+                }
             }
         }
         // The path's next pair, drawn here: independent work while the
@@ -626,6 +669,77 @@ impl PathTracer<'_, '_> {
     }
 }
 
+/// The mixture lanes' BSDF samples ([`PathTracer::sample_mixtures`]).
+#[derive(Default)]
+struct MixtureSamples {
+    /// Direction, `f cos / pdf`, and the MIS pdf (0 for a delta lobe).
+    wi: V3,
+    weight: V3,
+    pdf: F,
+    /// False where the sample was lost (`Bsdf::sample` gave `None`).
+    ok: [bool; LANES],
+}
+
+impl PathTracer<'_, '_> {
+    /// The next direction of each lane in `glossy` (vertices of a
+    /// Lambert-and-glossy mixture), as the scalar loop's `sample_bsdf`
+    /// draws it: the lobe choice's number from pair `dim` (drawn only when
+    /// some lane needs one), the direction's pair `u`, through
+    /// [`chiaro_core::shading::Bsdf::sample`] at the lane's viewer-side
+    /// normals.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn sample_mixtures(
+        &self,
+        vx: &Vertices,
+        info: &[Option<&super::MaterialInfo>; LANES],
+        glossy: &[bool; LANES],
+        dir: &V3,
+        u: [[f32; LANES]; 2],
+        dim: u32,
+        rev: &[u32; LANES],
+        rng: &mut SobolSampler,
+    ) -> MixtureSamples {
+        let mut g = MixtureSamples::default();
+        let needs = set_lanes(glossy).any(|i| info[i].is_some_and(|m| m.bsdf.needs_lobe_number()));
+        let u_lobe = if needs {
+            rng.lanes_1d(dim, rev)
+        } else {
+            [0.0; LANES]
+        };
+        for i in set_lanes(glossy) {
+            let Some(m) = info[i] else { continue };
+            let bsdf = &m.bsdf;
+            let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
+            // (The scalar loop's `front`: the unflipped normal's side.)
+            let front = vx.ng.get(i).dot(wo) >= 0.0;
+            let ul = if bsdf.needs_lobe_number() {
+                u_lobe[i]
+            } else {
+                0.0
+            };
+            let uv = Vec2::new(u[0][i], u[1][i]);
+            // (The Fresnel choice is never asked for: see `lock_step`.)
+            let s = if bsdf.scatters() {
+                bsdf.sample(n, ng, wo, front, ul, uv, || 0.0)
+            } else {
+                None
+            };
+            if let Some(s) = s {
+                g.wi.set(i, s.wi);
+                g.weight.set(i, s.weight);
+                g.pdf[i] = if s.delta || ng.dot(s.wi) < 0.0 {
+                    0.0
+                } else {
+                    s.pdf
+                };
+                g.ok[i] = true;
+            }
+        }
+        g
+    }
+}
+
 /// The lanes set in `m`, in order, read from their bit mask: the loop
 /// visits only those lanes, so its branches do not depend on which lanes
 /// are set (a test per lane of a random mask would mispredict often).
@@ -664,6 +778,9 @@ pub(super) struct Vertices {
     n: V3,
     ngs: V3,
     kd: V3,
+    /// The material is a Lambert-and-glossy mixture (`lock_step` but not
+    /// `lambert`): shaded through the BSDF's own functions.
+    glossy: [bool; LANES],
 }
 
 #[cfg(test)]

@@ -9,7 +9,8 @@ use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{
-    AreaShape, Geometry, Light, LightSelection, Material, Object, Scene, Technique, Transform,
+    AreaShape, Geometry, Light, LightSelection, Material, MetallicRoughness, Object, Scene,
+    Technique, Transform,
 };
 use chiaro_testkit::scenes::{
     add_object, camera, point_light, repo_scene, set_environment, shipped,
@@ -1032,4 +1033,70 @@ fn area_lights_that_are_not_geometry_keep_their_whole_light_sample() {
             "{kernel:?}: depth 4 - depth 1 = {mean} +- {se} (direct light {direct})"
         );
     }
+}
+
+#[test]
+fn lock_step_kernel_equals_the_scalar_loop_on_environment_lit_glossy_spheres() {
+    // The environment-lit spheres of the Mitsuba comparison
+    // (benches/env_spheres.toml): Lambert and GGX metals under the studio
+    // map only, whose samples stay in lock-step through the glossy
+    // vertices, the environment's next-event estimation and its escapes.
+    let mut s = repo_scene("benches/env_spheres.toml", 12);
+    s.render.samples = 19;
+    assert!(assert_samples_agree(&s, "environment-lit spheres") > 1000);
+    // glTF metal/dielectric mixtures (Lambert and GGX chosen by a number):
+    // the floor (triangles) half metallic, the spheres dielectric and a
+    // Phong mixture; the map turned, and a triangle light beside it (some
+    // lanes pick it, gathered lane by lane), then by the hierarchy.
+    let id = |s: &Scene, n: &str| s.material_by_name(n).expect("a bench material").index();
+    let mr = |base: Vec3, metallic: f32, roughness: f32| {
+        let (kd, ks, alpha) = MetallicRoughness::coefficients(base, metallic, roughness);
+        Material {
+            metallic_roughness: Some(MetallicRoughness {
+                base_color: base,
+                metallic,
+                roughness,
+                texture: None,
+            }),
+            specular: ks,
+            roughness: alpha,
+            model: chiaro_core::scene::ReflectanceModel::TorranceSparrow,
+            distribution: chiaro_core::scene::Distribution::Ggx,
+            ..Material::diffuse("mr", kd)
+        }
+    };
+    let floor = id(&s, "floor");
+    s.materials[floor] = mr(Vec3::new(0.6, 0.5, 0.4), 0.5, 0.5);
+    let rough = id(&s, "rough");
+    s.materials[rough] = Material {
+        metallic_roughness: None,
+        ..mr(Vec3::new(0.2, 0.5, 0.8), 0.0, 0.3)
+    };
+    let glossy = id(&s, "glossy");
+    s.materials[glossy].diffuse = Vec3::splat(0.3);
+    s.materials[glossy].model = chiaro_core::scene::ReflectanceModel::Phong;
+    s.materials[glossy].shininess = 40.0;
+    if let Some(env) = s.environment.as_mut() {
+        env.rotate_y_degrees = 30.0;
+    }
+    s.render.samples = 13;
+    assert!(assert_samples_agree(&s, "mixtures") > 1000);
+    s.lights.push(Light::Area {
+        shape: AreaShape::Triangle {
+            a: Vec3::new(-1.0, 2.5, 0.0),
+            b: Vec3::new(1.0, 2.5, 0.0),
+            c: Vec3::new(0.0, 2.5, 1.0),
+        },
+        color: Vec3::new(1.0, 0.9, 0.8),
+        intensity: 3.0,
+        two_sided: false,
+    });
+    assert!(assert_samples_agree(&s, "mixtures and a triangle light") > 1000);
+    assert_kernels_agree(&s, "mixtures and a triangle light, films");
+    s.render.light_selection = LightSelection::Tree;
+    assert!(assert_samples_agree(&s, "mixtures, by the hierarchy") > 1000);
+    // The triangle alone: every lane's light gathered by selects.
+    s.render.light_selection = LightSelection::Power;
+    s.environment = None;
+    assert!(assert_samples_agree(&s, "mixtures under a triangle light") > 500);
 }

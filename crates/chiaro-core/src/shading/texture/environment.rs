@@ -2,18 +2,9 @@
 //! 1984): lookups, the importance-sampled [`EnvironmentLight`], the miss rule.
 
 use super::image::{bilinear, wrap_index};
+use super::latlong::{latlong_dir, latlong_uv};
 use crate::scene::{Scene, Texture};
 use glam::{Vec2, Vec3};
-
-/// Lat-long texture coordinates of the unit direction `d`: `+y` maps to the
-/// top row (`v = 0`), `-z` to the centre column (`u = 0.5`), `u` increasing
-/// towards `+x` (so `+x` is at `u = 0.75`).
-#[inline]
-pub fn latlong_uv(d: Vec3) -> Vec2 {
-    let u = 0.5 + d.x.atan2(-d.z) / std::f32::consts::TAU;
-    let v = d.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI;
-    Vec2::new(u, v)
-}
 
 /// Radiance of the scene's environment map in world direction `dir` (need not
 /// be unit): the lat-long image (rotated by `rotate_y_degrees` about +y)
@@ -39,21 +30,19 @@ pub fn environment_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
 #[inline]
 pub(super) fn environment_uv(env: &crate::scene::Environment, d: Vec3) -> Vec2 {
     let mut uv = latlong_uv(d);
-    uv.x = (uv.x + env.rotate_y_degrees / 360.0).rem_euclid(1.0);
+    // (`x - floor(x)` is `x.rem_euclid(1.0)` bit for bit, both one
+    // rounding of the same exact value, without `fmodf`; -0 gives +0.)
+    let x = uv.x + env.rotate_y_degrees / 360.0;
+    uv.x = x - x.floor();
     uv
 }
 
 /// The unit direction whose [`environment_uv`] is `uv` (`v` from the top,
-/// `theta = v pi`), and `sin(theta)`.
+/// `theta = v pi`), and `sin(theta)`: [`latlong_dir`] turned by the map's
+/// rotation.
 #[inline]
 fn environment_dir(env: &crate::scene::Environment, uv: Vec2) -> (Vec3, f32) {
-    let phi = (uv.x - env.rotate_y_degrees / 360.0 - 0.5) * std::f32::consts::TAU;
-    let (sin_t, cos_t) = (uv.y * std::f32::consts::PI).sin_cos();
-    let (sin_p, cos_p) = phi.sin_cos();
-    (
-        Vec3::new(sin_t * sin_p, cos_t, -sin_t * cos_p),
-        sin_t.max(0.0),
-    )
+    latlong_dir(uv, env.rotate_y_degrees / 360.0)
 }
 
 /// A direction drawn towards the environment by [`EnvironmentLight::sample`].
@@ -198,6 +187,27 @@ impl<'s> EnvironmentLight<'s> {
         }
         self.dist.pdf(environment_uv(self.env, d))
             / (2.0 * std::f32::consts::PI * std::f32::consts::PI * sin_t)
+    }
+
+    /// [`environment_radiance`] in direction `dir` (need not be unit) and
+    /// [`Self::pdf`] of it, the same values from one lat-long lookup (what
+    /// a path tracer needs of a ray that escapes after a scatter).
+    #[inline]
+    pub fn radiance_pdf(&self, dir: Vec3) -> (Vec3, f32) {
+        let Some(d) = dir.try_normalize() else {
+            return (Vec3::ZERO, 0.0);
+        };
+        let uv = environment_uv(self.env, d);
+        let radiance = match self.scene.textures.get(self.env.texture.index()) {
+            Some(Texture::Image(img)) => bilinear(img, uv).truncate() * self.env.intensity,
+            _ => Vec3::ZERO,
+        };
+        let sin_t = (d.x * d.x + d.z * d.z).sqrt();
+        if sin_t <= 0.0 {
+            return (radiance, 0.0);
+        }
+        let pdf = self.dist.pdf(uv) / (2.0 * std::f32::consts::PI * std::f32::consts::PI * sin_t);
+        (radiance, pdf)
     }
 
     /// The map's mean radiance over the sphere (luminance, intensity

@@ -8,6 +8,10 @@ use glam::{Vec2, Vec4};
 #[inline]
 pub fn wrap_index(i: i64, size: u32, mode: WrapMode) -> u32 {
     let n = i64::from(size.max(1));
+    // (Inside the image every mode is the identity: no division.)
+    if (0..n).contains(&i) {
+        return i as u32;
+    }
     match mode {
         WrapMode::Repeat => i.rem_euclid(n) as u32,
         WrapMode::Clamp => i.clamp(0, n - 1) as u32,
@@ -34,12 +38,10 @@ pub fn bilinear(img: &ImageTexture, uv: Vec2) -> Vec4 {
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = (x - x0, y - y0);
     let (x0, y0) = (x0 as i64, y0 as i64);
-    let t = |dx: i64, dy: i64| {
-        Vec4::from(img.texel(
-            wrap_index(x0 + dx, img.width, wrap_u),
-            wrap_index(y0 + dy, img.height, wrap_v),
-        ))
-    };
+    // Each axis's two texel indices, wrapped once.
+    let xs = [x0, x0 + 1].map(|x| wrap_index(x, img.width, wrap_u));
+    let ys = [y0, y0 + 1].map(|y| wrap_index(y, img.height, wrap_v));
+    let t = |dx: usize, dy: usize| Vec4::from(img.texel(xs[dx], ys[dy]));
     let top = t(0, 0).lerp(t(1, 0), fx);
     let bottom = t(0, 1).lerp(t(1, 1), fx);
     top.lerp(bottom, fy)

@@ -7,6 +7,7 @@
 mod bump;
 mod environment;
 mod image;
+mod latlong;
 mod mipmap;
 mod prefiltered;
 mod procedural;
@@ -16,10 +17,11 @@ mod tests;
 pub use bump::{bump_normal, normal_map_normal, uv_surface_gradient};
 pub use environment::{
     EnvironmentLight, EnvironmentSample, background_radiance, environment_mean_radiance,
-    environment_radiance, latlong_uv, miss_radiance,
+    environment_radiance, miss_radiance,
 };
 use image::filtered;
 pub use image::{bilinear, nearest, wrap_index};
+pub use latlong::{MAX_ANGLE_ERROR, atan2, latlong_dir, latlong_uv, latlong_uv_lanes, sin_cos};
 pub use mipmap::MipMap;
 pub use prefiltered::{
     LEVEL_ALPHAS, PrefilteredEnvironment, environment_diffuse, environment_specular,

@@ -16,7 +16,8 @@
 //! share of the lobe, so a few hundred samples per texel give smooth
 //! images even of a map with small bright lamps.
 
-use super::environment::{environment_radiance, latlong_uv};
+use super::environment::environment_radiance;
+use super::latlong::{latlong_dir as turned_latlong_dir, latlong_uv};
 use crate::geometry::Frame;
 use crate::scene::{Distribution, ReflectanceModel, Scene, Texture};
 use crate::shading::brdf::SurfaceMaterial;
@@ -52,10 +53,7 @@ struct LatLong {
 /// The unit direction at lat-long coordinates `uv` ([`latlong_uv`]'s inverse).
 #[inline]
 fn latlong_dir(uv: Vec2) -> Vec3 {
-    let phi = (uv.x - 0.5) * TAU;
-    let (sin_t, cos_t) = (uv.y * PI).sin_cos();
-    let (sin_p, cos_p) = phi.sin_cos();
-    Vec3::new(sin_t * sin_p, cos_t, -sin_t * cos_p)
+    turned_latlong_dir(uv, 0.0).0
 }
 
 impl LatLong {

@@ -549,3 +549,43 @@ fn set_environment(
         as_background,
     });
 }
+
+#[test]
+fn one_lookup_gives_the_radiance_and_the_pdf() {
+    // `EnvironmentLight::radiance_pdf` equals `environment_radiance` and
+    // `pdf` bit for bit, for a turned map and directions of any length.
+    let scene = spot_scene(30.0);
+    let light = EnvironmentLight::new(&scene).expect("a light");
+    let mut rng = crate::sampling::pixel_rng(9, 8, 7, 6);
+    for k in 0..20_000 {
+        let d = crate::sampling::sample_uniform_sphere(crate::sampling::uniform2(&mut rng))
+            * (0.5 + (k % 7) as f32);
+        let (l, pdf) = light.radiance_pdf(d);
+        assert_eq!(l, environment_radiance(&scene, d));
+        assert_eq!(pdf.to_bits(), light.pdf(d).to_bits());
+    }
+    assert_eq!(light.radiance_pdf(Vec3::ZERO), (Vec3::ZERO, 0.0));
+}
+
+#[test]
+fn fract_by_floor_is_rem_euclid() {
+    // `environment_uv`'s turn of u: `x - floor(x)` for `rem_euclid(1.0)`,
+    // the same bits but for the sign of a zero (-0 gives +0, the same
+    // texel).
+    let mut xs: Vec<f32> = (-30_000..30_000).map(|k| k as f32 * 7.3e-5).collect();
+    xs.extend([
+        -1e-10,
+        1e-10,
+        -0.0,
+        0.0,
+        1.0,
+        -1.0,
+        2.5,
+        -2.5,
+        1.0f32.next_down(),
+    ]);
+    for x in xs {
+        let (a, b) = (x - x.floor(), x.rem_euclid(1.0));
+        assert!(a.to_bits() == b.to_bits() || (a == 0.0 && b == 0.0), "{x}");
+    }
+}
