@@ -556,7 +556,7 @@ impl<'t, 'a, 's> Clustered<'t, 'a, 's> {
     }
 
     /// Evaluates the new links (marked NaN) in parallel and drops those
-    /// that carry nothing.
+    /// between surfaces that carry nothing.
     fn evaluate(&mut self) {
         let mut surface = std::mem::take(&mut self.t.links);
         let mut clusters = std::mem::take(&mut self.clinks);
@@ -581,7 +581,10 @@ impl<'t, 'a, 's> Clustered<'t, 'a, 's> {
                         };
                     }
                 }
-                ls.retain(|(_, f)| *f > 0.0);
+                // A link from a cluster carrying nothing now (its sampled
+                // rays blocked, its centre behind) is kept: refined later,
+                // parts of it may carry light.
+                ls.retain(|(q, f)| *f > 0.0 || is_cluster(*q));
             });
             clusters.par_iter_mut().enumerate().for_each(|(c, ls)| {
                 for (q, f) in ls.iter_mut() {
@@ -589,7 +592,6 @@ impl<'t, 'a, 's> Clustered<'t, 'a, 's> {
                         *f = me.visibility(c as u32 | CL, *q);
                     }
                 }
-                ls.retain(|(_, f)| *f > 0.0);
             });
         }
         self.t.links = surface;

@@ -56,16 +56,17 @@ fn clustered_cornell_box_agrees_with_the_pairwise_solution() {
     let pairwise = solve_hierarchical(&s, 0.125, usize::MAX, &NoProgress).expect("pairwise");
     let clustered = solve_hierarchical(&s, 0.125, 0, &NoProgress).expect("clustered");
     assert!(clustered.stats.links > 0);
-    // Each object's mean radiance within 8 % (measured: 2 to 7 % darker,
-    // the most on the blocks), and no element off by more than 15 % of the
-    // brightest reflecting one.
+    // Each object's mean radiance within 3 % (under 2 % measured; 7 %
+    // darker on the blocks when links from clusters whose sampled rays
+    // were all blocked were dropped), and no element off by more than 15 %
+    // of the brightest reflecting one.
     for o in 0..7 {
         let (a, b) = (
             pairwise.object_mean_radiance(o).expect("object"),
             clustered.object_mean_radiance(o).expect("object"),
         );
         let err = ((b - a) / a.max(Vec3::splat(1e-6))).abs().max_element();
-        assert!(err < 0.08, "object {o}: clustered {b} vs pairwise {a}");
+        assert!(err < 0.03, "object {o}: clustered {b} vs pairwise {a}");
     }
     let (la, lb) = (pairwise.element_radiance(), clustered.element_radiance());
     let bright = la
