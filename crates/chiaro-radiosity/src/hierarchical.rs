@@ -10,7 +10,10 @@
 //! then solved by Jacobi-style gathers along links followed by a push-pull
 //! over each quadtree; links are refined again with the new radiances
 //! (BF refinement) until nothing changes. The number of links grows about
-//! linearly with the number of leaves, instead of quadratically.
+//! linearly with the number of leaves, instead of quadratically. The first
+//! links join every pair of source triangles (quadratic in the input);
+//! above 2048 source triangles they start instead from a cluster hierarchy
+//! over them (`cluster.rs`).
 
 use crate::direct::point_light_direct;
 use crate::environment::node_mean;

@@ -54,6 +54,9 @@
 //!   stop criterion of every solver (`radiosity.tolerance`).
 //! - **link** (hierarchical): an interaction between two quadtree nodes at
 //!   the level where its form factor is accurate enough.
+//! - **cluster** (hierarchical, above 2048 source triangles): a node of a
+//!   bounding-volume tree over the source triangles that exchanges light
+//!   as one, with its projected area and mean radiance (`cluster.rs`).
 
 pub mod analytic;
 mod cluster;
