@@ -8,15 +8,18 @@
 //! of volume *clusters* is built over the roots (median splits of their
 //! centroids along the longest axis: a BVH), and linking starts from the
 //! root cluster's link to itself, refined top down: a cluster's link to
-//! itself becomes the links among its two children; a link whose oracle
-//! exceeds the threshold splits its larger end (a cluster into its two
-//! children, a surface into its quadtree children, as without clusters).
+//! itself becomes the links among its two children (or waits, re-examined
+//! after each solve, while `rho * max(B) * A` is below the power
+//! threshold); a link whose oracle exceeds the threshold splits its larger
+//! end (a cluster into its two children, a surface into its quadtree
+//! children, as without clusters).
 //!
 //! The oracle bounds the radiance a link carries, `rho_p * max(B_q) * F`,
 //! with `F = A_q / (pi d^2 + A_q)` (the disc bound of the pairwise solver;
 //! `d` is the gap between the bounding spheres when either end is a
 //! cluster, and `F = 1` where they overlap). It must exceed both the
-//! pairwise solver's radiance threshold and a threshold on the *power* it
+//! pairwise solver's radiance threshold (a quarter of it when either end
+//! is a cluster) and a threshold on the *power* it
 //! moves (times the receiver's area: Smits, Arvo and Greenberg's `B F A`),
 //! [`POWER_EPS`] of the emitted power, so small receivers stay linked at
 //! cluster level and the number of links follows the light, not the input.
