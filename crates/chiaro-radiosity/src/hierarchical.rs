@@ -10,7 +10,10 @@
 //! then solved by Jacobi-style gathers along links followed by a push-pull
 //! over each quadtree; links are refined again with the new radiances
 //! (BF refinement) until nothing changes. The number of links grows about
-//! linearly with the number of leaves, instead of quadratically.
+//! linearly with the number of leaves, instead of quadratically. The first
+//! links join every pair of source triangles (quadratic in the input);
+//! above 2048 source triangles they start instead from a cluster hierarchy
+//! over them (`cluster.rs`).
 
 use crate::direct::point_light_direct;
 use crate::environment::node_mean;
@@ -38,31 +41,68 @@ pub(crate) struct HrStats {
     pub stop: Stop,
 }
 
-struct Tree<'a, 's> {
-    ps: &'a PreparedScene<'s>,
-    mesh: &'a ElementMesh,
-    lights: &'a [Light],
+pub(crate) struct Tree<'a, 's> {
+    pub(crate) ps: &'a PreparedScene<'s>,
+    pub(crate) mesh: &'a ElementMesh,
+    pub(crate) lights: &'a [Light],
     /// Each element's reflected environment light (empty without a map),
     /// averaged over a node's elements for the node's emission.
-    env: &'a [Vec3],
-    vis: Option<&'a Visibility<'a>>,
-    rule: PairRule,
-    tol: f32,
-    el: Vec<Element>,
-    e: Vec<Vec3>,
-    b: Vec<Vec3>,
-    bmax: Vec<Vec3>,
-    g: Vec<Vec3>,
-    incident: Vec<Vec3>,
-    children: Vec<Option<[u32; 4]>>,
-    depth: Vec<u32>,
-    links: Vec<Vec<(u32, f32)>>,
-    roots: Vec<u32>,
-    eps: f32,
+    pub(crate) env: &'a [Vec3],
+    pub(crate) vis: Option<&'a Visibility<'a>>,
+    pub(crate) rule: PairRule,
+    pub(crate) tol: f32,
+    pub(crate) el: Vec<Element>,
+    pub(crate) e: Vec<Vec3>,
+    pub(crate) b: Vec<Vec3>,
+    pub(crate) bmax: Vec<Vec3>,
+    pub(crate) g: Vec<Vec3>,
+    pub(crate) incident: Vec<Vec3>,
+    pub(crate) children: Vec<Option<[u32; 4]>>,
+    pub(crate) depth: Vec<u32>,
+    pub(crate) links: Vec<Vec<(u32, f32)>>,
+    pub(crate) roots: Vec<u32>,
+    pub(crate) eps: f32,
 }
 
-impl Tree<'_, '_> {
-    fn make_node(&mut self, source: u32, p: [Vec3; 3], depth: u32) -> u32 {
+impl<'a, 's> Tree<'a, 's> {
+    /// The quadtree roots of every source triangle of `mesh`, with no
+    /// links (`eps` still 0).
+    pub(crate) fn forest(
+        ps: &'a PreparedScene<'s>,
+        mesh: &'a ElementMesh,
+        env: &'a [Vec3],
+        vis: Option<&'a Visibility<'a>>,
+        rule: PairRule,
+        tol: f32,
+    ) -> Self {
+        let mut t = Tree {
+            ps,
+            mesh,
+            lights: &ps.scene.lights,
+            env,
+            vis,
+            rule,
+            tol,
+            el: Vec::new(),
+            e: Vec::new(),
+            b: Vec::new(),
+            bmax: Vec::new(),
+            g: Vec::new(),
+            incident: Vec::new(),
+            children: Vec::new(),
+            depth: Vec::new(),
+            links: Vec::new(),
+            roots: Vec::new(),
+            eps: 0.0,
+        };
+        for (si, s) in mesh.sources.iter().enumerate() {
+            let r = t.make_node(si as u32, s.p, 0);
+            t.roots.push(r);
+        }
+        t
+    }
+
+    pub(crate) fn make_node(&mut self, source: u32, p: [Vec3; 3], depth: u32) -> u32 {
         let s = &self.mesh.sources[source as usize];
         let c = (p[0] + p[1] + p[2]) / 3.0;
         let (u, v) = barycentric(&s.p, c);
@@ -92,11 +132,11 @@ impl Tree<'_, '_> {
         k.trailing_zeros()
     }
 
-    fn can_subdivide(&self, node: u32) -> bool {
+    pub(crate) fn can_subdivide(&self, node: u32) -> bool {
         self.depth[node as usize] < self.max_depth(node)
     }
 
-    fn subdivide(&mut self, node: u32) -> [u32; 4] {
+    pub(crate) fn subdivide(&mut self, node: u32) -> [u32; 4] {
         if let Some(c) = self.children[node as usize] {
             return c;
         }
@@ -184,7 +224,7 @@ impl Tree<'_, '_> {
         changed
     }
 
-    fn push_pull(&mut self, node: u32, down: Vec3) -> Vec3 {
+    pub(crate) fn push_pull(&mut self, node: u32, down: Vec3) -> Vec3 {
         let i = node as usize;
         let d = down + self.g[i];
         let b = match self.children[i] {
@@ -208,7 +248,7 @@ impl Tree<'_, '_> {
         b
     }
 
-    fn leaf_power_change(&self, old: &[Vec3]) -> f32 {
+    pub(crate) fn leaf_power_change(&self, old: &[Vec3]) -> f32 {
         (0..self.el.len())
             .filter(|&i| self.children[i].is_none())
             .map(|i| self.el[i].area * (self.b[i] - old[i]).abs().element_sum())
@@ -256,7 +296,7 @@ impl Tree<'_, '_> {
     }
 
     /// The deepest node of the tree of `source` containing point `x`.
-    fn locate(&self, source: u32, x: Vec3) -> u32 {
+    pub(crate) fn locate(&self, source: u32, x: Vec3) -> u32 {
         let mut node = self.roots[source as usize];
         while let Some(kids) = self.children[node as usize] {
             let (u, v) = barycentric(&self.el[node as usize].p, x);
@@ -275,11 +315,17 @@ impl Tree<'_, '_> {
     }
 }
 
+/// Link refinements after the first linking: the progress counts the solve
+/// after the first linking and after each of them.
+pub(crate) const REFINEMENTS: u64 = 6;
+
 /// Solves by hierarchical radiosity and returns the radiance of every
 /// element of `mesh` (whose subdivisions must be powers of two) and the
 /// statistics. `e_elem` is each element's emitted plus direct radiance
 /// (point lights and `env`, the environment's part, empty without a map):
 /// an element smaller than its leaf gets `E_elem + rho * incident(leaf)`.
+/// Above `cluster_above` source triangles the links start from a cluster
+/// hierarchy (`cluster.rs`), else from every pair of source triangles.
 pub(crate) fn solve(
     ps: &PreparedScene<'_>,
     mesh: &ElementMesh,
@@ -290,36 +336,11 @@ pub(crate) fn solve(
     tol_geom: f32,
     tolerance: f32,
     max_iter: u32,
+    cluster_above: usize,
     progress: &dyn Progress,
 ) -> Result<(Vec<Vec3>, HrStats), CoreError> {
-    let mut t = Tree {
-        ps,
-        mesh,
-        lights: &ps.scene.lights,
-        env,
-        vis,
-        rule,
-        tol: tol_geom,
-        el: Vec::new(),
-        e: Vec::new(),
-        b: Vec::new(),
-        bmax: Vec::new(),
-        g: Vec::new(),
-        incident: Vec::new(),
-        children: Vec::new(),
-        depth: Vec::new(),
-        links: Vec::new(),
-        roots: Vec::new(),
-        eps: 0.0,
-    };
-    // The work is the solve after the first linking and after each of up
-    // to `REFINEMENTS` link refinements.
-    const REFINEMENTS: u64 = 6;
     progress.begin("radiosity hierarchical", REFINEMENTS + 1);
-    for (si, s) in mesh.sources.iter().enumerate() {
-        let r = t.make_node(si as u32, s.p, 0);
-        t.roots.push(r);
-    }
+    let mut t = Tree::forest(ps, mesh, env, vis, rule, tol_geom);
     let p0: f32 = e_elem
         .iter()
         .zip(&mesh.elements)
@@ -338,6 +359,43 @@ pub(crate) fn solve(
     // walls as close to the path tracer as the full-matrix solution
     // (BENCHMARKS.md, "Radiosity").
     t.eps = (0.01 * tolerance * max_e).max(f32::MIN_POSITIVE);
+    // Above `cluster_above` source triangles, links start from a cluster
+    // hierarchy over them instead of from every pair (quadratic).
+    let clusters = if t.roots.len() > cluster_above.max(1) {
+        let (links, clusters) =
+            crate::cluster::solve(&mut t, tolerance, max_iter, p0, &mut stats, progress)?;
+        stats.links = links;
+        clusters
+    } else {
+        link_pairwise(&mut t, tolerance, max_iter, p0, &mut stats, progress)?;
+        stats.links = t.links.iter().map(Vec::len).sum();
+        0
+    };
+    // Clusters count as nodes; leaves are the quadtrees'.
+    stats.nodes = t.el.len() + clusters;
+    stats.leaves = t.children.iter().filter(|c| c.is_none()).count();
+    let l = mesh
+        .elements
+        .iter()
+        .zip(e_elem)
+        .map(|(el, e)| {
+            let leaf = t.locate(el.source, el.c) as usize;
+            *e + el.rho * t.incident[leaf]
+        })
+        .collect();
+    Ok((l, stats))
+}
+
+/// The first links of every pair of quadtree roots, refined with the BF
+/// oracle, then solved and re-refined up to [`REFINEMENTS`] times.
+fn link_pairwise(
+    t: &mut Tree<'_, '_>,
+    tolerance: f32,
+    max_iter: u32,
+    p0: f32,
+    stats: &mut HrStats,
+    progress: &dyn Progress,
+) -> Result<(), CoreError> {
     let roots = t.roots.clone();
     // Every pair of roots is linked first (quadratic in the source
     // triangles): say so, and poll for cancellation between receivers.
@@ -356,7 +414,7 @@ pub(crate) fn solve(
         }
     }
     t.evaluate_links();
-    t.iterate(tolerance, max_iter, p0, &mut stats, progress)?;
+    t.iterate(tolerance, max_iter, p0, stats, progress)?;
     progress.advance(1);
     let mut rounds = 1;
     for _ in 0..REFINEMENTS {
@@ -364,22 +422,10 @@ pub(crate) fn solve(
             break;
         }
         t.evaluate_links();
-        t.iterate(tolerance, max_iter, p0, &mut stats, progress)?;
+        t.iterate(tolerance, max_iter, p0, stats, progress)?;
         progress.advance(1);
         rounds += 1;
     }
     progress.advance(REFINEMENTS + 1 - rounds);
-    stats.nodes = t.el.len();
-    stats.leaves = t.children.iter().filter(|c| c.is_none()).count();
-    stats.links = t.links.iter().map(Vec::len).sum();
-    let l = mesh
-        .elements
-        .iter()
-        .zip(e_elem)
-        .map(|(el, e)| {
-            let leaf = t.locate(el.source, el.c) as usize;
-            *e + el.rho * t.incident[leaf]
-        })
-        .collect();
-    Ok((l, stats))
+    Ok(())
 }

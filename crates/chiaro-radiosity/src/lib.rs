@@ -54,8 +54,12 @@
 //!   stop criterion of every solver (`radiosity.tolerance`).
 //! - **link** (hierarchical): an interaction between two quadtree nodes at
 //!   the level where its form factor is accurate enough.
+//! - **cluster** (hierarchical, above 2048 source triangles): a node of a
+//!   bounding-volume tree over the source triangles that exchanges light
+//!   as one, with its projected area and mean radiance (`cluster.rs`).
 
 pub mod analytic;
+mod cluster;
 mod direct;
 mod environment;
 pub mod formfactor;
@@ -368,6 +372,16 @@ pub(crate) fn solve_with(
     ctx: &RenderContext<'_>,
     clustered: bool,
 ) -> Result<RadiositySolution, CoreError> {
+    solve_clustering(ctx, clustered, cluster::CLUSTER_ABOVE)
+}
+
+/// [`solve_with`], with the hierarchical solver building a cluster
+/// hierarchy above `cluster_above` source triangles (`cluster.rs`).
+pub(crate) fn solve_clustering(
+    ctx: &RenderContext<'_>,
+    clustered: bool,
+    cluster_above: usize,
+) -> Result<RadiositySolution, CoreError> {
     let cfg = &ctx.settings().radiosity;
     let (scene, progress) = (ctx.scene(), ctx.progress());
     let start = Instant::now();
@@ -548,6 +562,7 @@ pub(crate) fn solve_with(
                 tol,
                 stop,
                 max_iter,
+                cluster_above,
                 progress,
             )?;
             (stats.nodes, stats.leaves, stats.links) = (hs.nodes, hs.leaves, hs.links);
@@ -897,6 +912,8 @@ pub(crate) fn surface(ps: &PreparedScene<'_>, t: u32, u: f32, v: f32) -> (Vec3, 
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_cluster;
 #[cfg(test)]
 mod tests_environment;
 #[cfg(test)]

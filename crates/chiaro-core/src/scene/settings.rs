@@ -308,7 +308,9 @@ pub enum RadiositySolver {
     /// Progressive refinement (shooting).
     #[default]
     Progressive,
-    /// Hierarchical radiosity.
+    /// Hierarchical radiosity; above 2048 source triangles its links start
+    /// from a cluster hierarchy over the input instead of from every pair
+    /// of triangles (docs/decisions/0050-radiosity-clusters.md).
     Hierarchical,
 }
 
