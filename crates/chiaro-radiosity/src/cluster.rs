@@ -51,8 +51,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
-/// Source triangles above which the hierarchical solver clusters.
-pub(crate) const CLUSTER_ABOVE: usize = 2048;
+/// Source triangles above which the hierarchical solver clusters (and the
+/// `auto` solver picks it).
+pub(crate) const CLUSTER_ABOVE: usize = crate::Solver::CLUSTER_ABOVE;
 
 /// The power threshold of the oracle, as a fraction of the emitted power.
 pub(crate) const POWER_EPS: f32 = 1e-4;

@@ -140,7 +140,7 @@ fn display_supersampling(settings: &RenderSettings) -> u32 {
 pub const DESCRIPTION: Description = Description {
     technique: Technique::Radiosity,
     title: "radiosity",
-    method: "elements, with patches grouped from fine input triangles to shoot from; hemicube / ray-cast / analytic form factors, Jacobi, Gauss-Seidel, progressive and hierarchical solvers; the view-independent solution drawn with Gouraud interpolation",
+    method: "elements, with patches grouped from fine input triangles to shoot from; hemicube / ray-cast / analytic form factors, Jacobi, Gauss-Seidel, progressive and hierarchical (clustered above 2048 triangles) solvers, `auto` picking progressive or clustered by size; the view-independent solution drawn with Gouraud interpolation",
     shows: "diffuse interreflection and colour bleeding, soft shadows, textures (the texture times the patches' light), the environment map's light with its occlusion",
     cannot_show: &[
         (
@@ -397,13 +397,15 @@ pub(crate) fn solve_clustering(
         accel: ctx.tessellated_accel(),
         eps: size * 1e-4,
     };
+    // `auto`: progressive refinement on small scenes, clusters above.
+    let solver = cfg.solver.resolve(ps.triangles.len(), cfg.formfactor);
     progress.begin("radiosity meshing", 1);
-    let mesh = mesh::build(ps, patch, cfg.solver == Solver::Hierarchical, progress)?;
+    let mesh = mesh::build(ps, patch, solver == Solver::Hierarchical, progress)?;
     // Patches above elements shoot in progressive refinement with element
     // form factors (hemicubes are cast from one element's centre, so their
     // shots stay per element); the other solvers work on elements.
     let patches =
-        if clustered && cfg.solver == Solver::Progressive && cfg.formfactor != Method::Hemicube {
+        if clustered && solver == Solver::Progressive && cfg.formfactor != Method::Hemicube {
             patch::Patches::build(&mesh, patch, progress)?
         } else {
             patch::Patches::singletons(&mesh)
@@ -413,7 +415,7 @@ pub(crate) fn solve_clustering(
     progress.message(&format!(
         "radiosity: {n} elements in {} patches (patch size {patch}), solver {}, form factors {}",
         patches.len(),
-        cfg.solver.name(),
+        solver.name(),
         cfg.formfactor.name()
     ));
     let mut point_direct: Vec<Vec3> = par_map(n, progress, |i| {
@@ -447,7 +449,7 @@ pub(crate) fn solve_clustering(
         .map(|(el, d)| el.le + *d)
         .collect();
     let mut stats = SolveStats {
-        solver: cfg.solver.name().into(),
+        solver: solver.name().into(),
         formfactor: cfg.formfactor.name().into(),
         patch_size: patch,
         elements: n,
@@ -488,10 +490,10 @@ pub(crate) fn solve_clustering(
     // Each solver's radiance per element, iterations, final unshot fraction,
     // why it stopped and where most unshot light was left.
     let (stop, max_iter) = (cfg.tolerance, cfg.max_iterations);
-    let (l, iterations, unshot, ended, worst) = match cfg.solver {
+    let (l, iterations, unshot, ended, worst) = match solver {
         Solver::Jacobi | Solver::GaussSeidel => {
             let m = gathering::build_matrix(&mesh.elements, ff, progress)?;
-            let sweep = if cfg.solver == Solver::Jacobi {
+            let sweep = if solver == Solver::Jacobi {
                 gathering::Sweep::Jacobi
             } else {
                 gathering::Sweep::GaussSeidel
@@ -499,7 +501,8 @@ pub(crate) fn solve_clustering(
             let out = gathering::iterate(&mesh.elements, &e, &m, stop, max_iter, progress, sweep)?;
             (out.l, out.iterations, out.unshot, out.stop, Some(out.worst))
         }
-        Solver::Progressive => {
+        // `resolve` turned `auto` into progressive or hierarchical.
+        Solver::Progressive | Solver::Auto => {
             let columns = |i: usize, du: &[Vec3], f: &mut [f32], g: &mut [Vec3]| {
                 ff.column(i, f);
                 g.par_iter_mut()

@@ -306,22 +306,47 @@ pub enum RadiositySolver {
     /// Full matrix, Gauss-Seidel iteration.
     GaussSeidel,
     /// Progressive refinement (shooting).
-    #[default]
     Progressive,
     /// Hierarchical radiosity; above 2048 source triangles its links start
     /// from a cluster hierarchy over the input instead of from every pair
     /// of triangles (docs/decisions/0050-radiosity-clusters.md).
     Hierarchical,
+    /// The default: progressive refinement up to
+    /// [`RadiositySolver::CLUSTER_ABOVE`] triangles (and with hemicube form
+    /// factors), the clustered hierarchical solver above, whose cost grows
+    /// with the scene's light rather than its triangle count.
+    #[default]
+    Auto,
 }
 
 impl RadiositySolver {
     /// Every solver.
-    pub const ALL: [Self; 4] = [
+    pub const ALL: [Self; 5] = [
         Self::Jacobi,
         Self::GaussSeidel,
         Self::Progressive,
         Self::Hierarchical,
+        Self::Auto,
     ];
+
+    /// Above this many source triangles the hierarchical solver links
+    /// clusters instead of every pair of triangles, and `auto` picks it.
+    pub const CLUSTER_ABOVE: usize = 2048;
+
+    /// The solver that runs: `auto` resolved for a scene of `triangles`
+    /// source triangles with form factors by `formfactor` (the hierarchical
+    /// solver needs area-to-area ones); any other solver is itself.
+    pub fn resolve(self, triangles: usize, formfactor: FormFactorMethod) -> Self {
+        match self {
+            Self::Auto
+                if triangles > Self::CLUSTER_ABOVE && formfactor != FormFactorMethod::Hemicube =>
+            {
+                Self::Hierarchical
+            }
+            Self::Auto => Self::Progressive,
+            s => s,
+        }
+    }
 
     /// Parses a solver name.
     pub fn from_name(name: &str) -> Option<Self> {
@@ -335,6 +360,7 @@ impl RadiositySolver {
             Self::GaussSeidel => "gauss-seidel",
             Self::Progressive => "progressive",
             Self::Hierarchical => "hierarchical",
+            Self::Auto => "auto",
         }
     }
 
@@ -397,7 +423,7 @@ pub struct RadiositySettings {
 impl Default for RadiositySettings {
     fn default() -> Self {
         Self {
-            solver: RadiositySolver::Progressive,
+            solver: RadiositySolver::Auto,
             formfactor: FormFactorMethod::Raycast,
             patch_size: 0.0,
             hemicube_resolution: 128,
