@@ -302,8 +302,6 @@ impl SceneBvh {
             ray,
             &pre,
             |first| prefetch_block(blocks, first),
-            // Inlined into each kernel, as in `closest_hit`.
-            #[inline(always)]
             |first, count| {
                 let end = first + count;
                 for (b, blk) in (first / BLOCK..).zip(&blocks[first / BLOCK..=(end - 1) / BLOCK]) {
@@ -352,9 +350,6 @@ impl SceneBvh {
             ray,
             &pre,
             |first| prefetch_block(blocks, first),
-            // Inlined so that each kernel compiles its own leaf test
-            // rather than calling one shared baseline copy.
-            #[inline(always)]
             |first, count, t_max| {
                 let end = first + count;
                 wr.t_max = t_max;
