@@ -21,6 +21,9 @@
 # TBB threads, which do spin, so compare builds by wall clock on a quiet
 # machine (benches/wait_quiet.sh). EMBREE_ISA (e.g. avx2) caps the kernels
 # Embree picks (its device config `isa=`), to see what an AVX-512 host gives it.
+# CHIARO_KERNELS="auto baseline" runs chiaro once per listed value of
+# CHIARO_KERNEL in each pair (the single-ray kernel: auto picks AVX-512 where
+# the CPU has it, baseline keeps the build's x86-64-v3), to compare kernels.
 set -euo pipefail
 THREADS=${1:-2}
 REPS=${2:-5}
@@ -129,10 +132,13 @@ fi
 EMBREE_VERSION=$(dpkg-query -W -f='${Version}' libembree3-3 2>/dev/null || echo 3)
 for pair in $(seq "$PAIRS"); do
     echo "== pair $pair, load: $(cut -d' ' -f1-3 /proc/loadavg)"
-    echo "-- chiaro (crates/chiaro-ray/examples/bvh_bench.rs)"
     DUMP=()
     [ "$pair" = 1 ] && DUMP=(--dump "$OUT")
-    "$ROOT/target/release/examples/bvh_bench" --threads "$THREADS" --reps "$REPS" "${DUMP[@]}"
+    for kernel in ${CHIARO_KERNELS:-auto}; do
+        echo "-- chiaro, CHIARO_KERNEL=$kernel (crates/chiaro-ray/examples/bvh_bench.rs)"
+        CHIARO_KERNEL=$kernel "$ROOT/target/release/examples/bvh_bench" --threads "$THREADS" --reps "$REPS" "${DUMP[@]}"
+        DUMP=()
+    done
     echo "-- Embree $EMBREE_VERSION (embree3_cpu)"
     OMP_WAIT_POLICY=passive PEERS_OUT="$OUT" "$OUT/embree3_cpu" "$THREADS" "$REPS"
 done

@@ -327,6 +327,14 @@ pub fn info_system() {
     } else {
         println!("budget     {} (set with --memory-limit)", budget.limit);
     }
+    // The BVH queries' kernel, chosen once from the CPU (and CHIARO_KERNEL).
+    use chiaro::{KERNEL_ENV, Kernel, kernel};
+    let names: Vec<&str> = Kernel::available().iter().map(|k| k.name()).collect();
+    println!(
+        "kernels    BVH traversal: {} (this CPU runs: {}; {KERNEL_ENV}=baseline caps it)",
+        kernel().name(),
+        names.join(", ")
+    );
 }
 
 /// `chiaro info`.

@@ -83,9 +83,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     let ps = PreparedScene::new(&scene, PrepareOptions::default());
     println!(
-        "mesh: {} triangles, {} vertices; {threads} threads",
+        "mesh: {} triangles, {} vertices; {threads} threads; single-ray kernel {}",
         ps.triangles.len(),
-        ps.positions.len()
+        ps.positions.len(),
+        chiaro_core::accel::bvh::kernel().name()
     );
 
     // Rays: the pinhole camera of embree_rays.py, and random rays.

@@ -32,6 +32,7 @@ pub mod hybrid;
 pub mod limitations;
 pub mod settings;
 
+pub use chiaro_core::accel::bvh::{KERNEL_ENV, Kernel, kernel};
 pub use chiaro_core::budget;
 pub use chiaro_core::film::{self, Film};
 pub use chiaro_core::progress::{self, NoProgress, Progress};

@@ -57,6 +57,7 @@
 //! [`PACKET_MIN_NODES`] nodes, where they pay.
 
 mod build;
+mod dispatch;
 mod node;
 mod packet;
 mod partition;
@@ -66,6 +67,7 @@ mod tests;
 mod traverse;
 mod wide;
 
+pub use dispatch::{KERNEL_ENV, Kernel, kernel};
 pub use node::{BvhNode, Child};
 pub use packet::{PACKET, PACKET_MIN_NODES};
 pub use scene::SceneBvh;

@@ -1,6 +1,7 @@
 //! [`SceneBvh`]: the BVH over a prepared scene's triangles and spheres, leaf
 //! triangles in four-wide blocks for the watertight test (Woop, Benthin and Wald 2013).
 
+use super::dispatch::{self, Kernel, kernel};
 use super::node::RayPre;
 use super::{BLOCK, Bvh, BvhOptions, PAD_SLOT};
 use crate::accel::pages::HugeArray;
@@ -335,8 +336,11 @@ pub(super) fn read_ray(ray: &Ray) -> Ray {
     }
 }
 
-impl Accelerator for SceneBvh {
-    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+impl SceneBvh {
+    /// The closest-hit query's body, inlined into each kernel
+    /// ([`super::dispatch`]) that [`Accelerator::intersect`] picks from.
+    #[inline(always)]
+    pub(super) fn closest_hit(&self, ray: &Ray) -> Option<Hit> {
         let ray = &read_ray(ray);
         let pre = RayPre::new(ray);
         let mut wr = WatertightRay::with_inverse(ray, pre.recip);
@@ -386,6 +390,36 @@ impl Accelerator for SceneBvh {
         best
     }
 
+    /// The occlusion query's body, inlined into each kernel as
+    /// [`SceneBvh::closest_hit`] is.
+    #[inline(always)]
+    pub(super) fn any_hit(&self, ray: &Ray) -> bool {
+        let ray = &read_ray(ray);
+        self.any_block(ray, |blk, r, mut spheres| {
+            if r.mask != 0 {
+                return true;
+            }
+            while spheres != 0 {
+                let i = spheres.trailing_zeros() as usize;
+                spheres &= spheres - 1;
+                if self.sphere_hit(ray, blk.prim[i], ray.t_max).is_some() {
+                    return true;
+                }
+            }
+            false
+        })
+    }
+}
+
+impl Accelerator for SceneBvh {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        match kernel() {
+            #[cfg(target_arch = "x86_64")]
+            Kernel::X86_64V4 => dispatch::closest_hit_v4(self, ray),
+            _ => self.closest_hit(ray),
+        }
+    }
+
     fn intersect_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         if self.packets_pay() {
             SceneBvh::intersect_packet(self, rays, hits);
@@ -415,19 +449,10 @@ impl Accelerator for SceneBvh {
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        let ray = &read_ray(ray);
-        self.any_block(ray, |blk, r, mut spheres| {
-            if r.mask != 0 {
-                return true;
-            }
-            while spheres != 0 {
-                let i = spheres.trailing_zeros() as usize;
-                spheres &= spheres - 1;
-                if self.sphere_hit(ray, blk.prim[i], ray.t_max).is_some() {
-                    return true;
-                }
-            }
-            false
-        })
+        match kernel() {
+            #[cfg(target_arch = "x86_64")]
+            Kernel::X86_64V4 => dispatch::any_hit_v4(self, ray),
+            _ => self.any_hit(ray),
+        }
     }
 }
