@@ -299,15 +299,22 @@ fn lit_floor(rho: f32) -> Scene {
     s
 }
 
-#[test]
-fn furnace_gives_e_over_one_minus_rho_for_every_solver() {
-    let rho = 0.6f32;
-    let e = Vec3::new(1.0, 0.5, 0.25);
+/// The furnace: a closed unit box of albedo `rho` emitting `e` from every
+/// wall, whose radiance is `e / (1 - rho)` everywhere.
+pub(crate) fn furnace(rho: f32, e: Vec3) -> Scene {
     let mut s = Scene::default();
     let mut m = Material::diffuse("furnace", Vec3::splat(rho));
     m.emission = e;
     s.add_material(m);
     add_unit_box(&mut s, [MaterialId(0); 6], true);
+    s
+}
+
+#[test]
+fn furnace_gives_e_over_one_minus_rho_for_every_solver() {
+    let rho = 0.6f32;
+    let e = Vec3::new(1.0, 0.5, 0.25);
+    let s = furnace(rho, e);
     let expect = e / (1.0 - rho);
     // Every solver with ray-cast form factors, and Gauss-Seidel with the
     // hemicube and analytic ones, each within 1 %. Not progressive with

@@ -4,8 +4,7 @@
 
 use super::*;
 use chiaro_core::progress::NoProgress;
-use chiaro_core::scene::{Material, MaterialId};
-use chiaro_testkit::scenes::{add_unit_box, unit_cornell_box};
+use chiaro_testkit::scenes::unit_cornell_box;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 /// Hierarchical radiosity with ray-cast form factors and elements of
@@ -30,11 +29,7 @@ fn solve_hierarchical(
 fn clustered_furnace_gives_e_over_one_minus_rho() {
     let rho = 0.6f32;
     let e = Vec3::new(1.0, 0.5, 0.25);
-    let mut s = Scene::default();
-    let mut m = Material::diffuse("furnace", Vec3::splat(rho));
-    m.emission = e;
-    s.add_material(m);
-    add_unit_box(&mut s, [MaterialId(0); 6], true);
+    let s = crate::tests::furnace(rho, e);
     let expect = e / (1.0 - rho);
     let sol = solve_hierarchical(&s, 0.34, 0, &NoProgress).expect("solve");
     assert!(sol.stats.nodes > sol.stats.leaves, "no clusters");

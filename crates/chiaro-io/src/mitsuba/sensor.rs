@@ -174,16 +174,7 @@ impl Builder<'_> {
     /// on the near plane, chiaro's on the film through the eye, which only
     /// differs for surfaces closer than `near_clip`.
     fn set_orthographic(&mut self, el: &Element, m: Mat4, aspect: f32, near: f32, far: f32) {
-        let eye = m.transform_point3(Vec3::ZERO);
-        let forward = m.transform_vector3(Vec3::Z);
-        let up = m.transform_vector3(Vec3::Y);
-        let left = m.transform_vector3(Vec3::X);
-        if left.dot(up.cross(forward)) < 0.0 {
-            self.warn(
-                el,
-                "approximate: the camera transform mirrors the image; rendered unmirrored",
-            );
-        }
+        let [eye, forward, up, left] = self.sensor_frame(el, m);
         // The film's half-width is |to_world x|, its half-height
         // |to_world y| / aspect; chiaro's film has the image's aspect.
         let (half_w, half_h) = (left.length(), up.length() / aspect);
@@ -206,19 +197,26 @@ impl Builder<'_> {
         };
     }
 
-    fn set_camera(&mut self, el: &Element, m: Mat4, fov_y: f32, near: f32, far: f32) {
+    /// The sensor's `to_world` frame: eye, forward (+z), up (+y) and left
+    /// (+x), unnormalised. A look_at frame has det > 0 (left = up x dir); a
+    /// mirrored one (e.g. `<scale x="-1"/>`) flips the image, which chiaro's
+    /// camera cannot: that is warned of here.
+    fn sensor_frame(&mut self, el: &Element, m: Mat4) -> [Vec3; 4] {
         let eye = m.transform_point3(Vec3::ZERO);
         let forward = m.transform_vector3(Vec3::Z);
         let up = m.transform_vector3(Vec3::Y);
         let left = m.transform_vector3(Vec3::X);
-        // A look_at frame has det > 0 (left = up x dir); a mirrored one
-        // (e.g. `<scale x="-1"/>`) flips the image, which chiaro's camera cannot.
         if left.dot(up.cross(forward)) < 0.0 {
             self.warn(
                 el,
                 "approximate: the camera transform mirrors the image; rendered unmirrored",
             );
         }
+        [eye, forward, up, left]
+    }
+
+    fn set_camera(&mut self, el: &Element, m: Mat4, fov_y: f32, near: f32, far: f32) {
+        let [eye, forward, up, _] = self.sensor_frame(el, m);
         let scale = forward.length();
         if (scale - 1.0).abs() > 1e-3 || (up.length() - 1.0).abs() > 1e-3 {
             self.warn(el, "approximate: the camera transform scales; only its position and directions are used");
