@@ -2,6 +2,7 @@
 //! tracer of Kajiya (1986) with Russian roulette (Arvo and Kirk 1990).
 
 use super::lanes;
+use super::lanes_env::escape_mis;
 use super::lights::NO_LIGHT;
 use chiaro_core::accel::{Accelerator, Hit};
 use chiaro_core::geometry::{Ray, offset_ray_origin};
@@ -590,22 +591,47 @@ impl<'a, 's> PathTracer<'a, 's> {
     #[inline]
     pub(super) fn escaped(&self, ray: &Ray, depth: u32, prev_pdf: f32) -> Vec3 {
         let scene = self.prepared.scene;
+        if let Some(env) = self.env.as_ref().filter(|_| self.sees_map(depth)) {
+            // (`miss_radiance` of a scattered ray is the map's radiance:
+            // with its pdf from one lookup.)
+            let (l, pdf) = env.radiance_pdf(ray.dir);
+            return if escape_mis(depth, prev_pdf) {
+                l * self.escape_weight(ray.origin, prev_pdf, pdf)
+            } else {
+                l
+            };
+        }
         if scene.environment.is_some() || depth == 0 || prev_pdf == 0.0 {
-            match &self.env {
-                Some(env) if depth > 0 && prev_pdf > 0.0 => {
-                    // (`miss_radiance` of a scattered ray is the map's
-                    // radiance: with its pdf from one lookup.)
-                    let (l, pdf) = env.radiance_pdf(ray.dir);
-                    // (The environment's choice does not depend on the point.)
-                    let pick = self.light_pick_pdf(ray.origin, Vec3::ZERO, self.lights.len());
-                    let light_pdf = pick * pdf;
-                    l * power_heuristic(prev_pdf, light_pdf)
-                }
-                _ => chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0),
-            }
+            chiaro_core::shading::texture::miss_radiance(scene, ray.dir, depth == 0)
         } else {
             Vec3::ZERO
         }
+    }
+
+    /// True when a ray escaping at segment `depth` sees the environment
+    /// light's map (`miss_radiance`'s rule): every scattered ray, and the
+    /// camera's when the map is the background.
+    #[inline(always)]
+    pub(super) fn sees_map(&self, depth: u32) -> bool {
+        let background = |e: &chiaro_core::scene::Environment| e.as_background;
+        self.env.is_some()
+            && (depth > 0
+                || self
+                    .prepared
+                    .scene
+                    .environment
+                    .as_ref()
+                    .is_some_and(background))
+    }
+
+    /// The power heuristic's weight of the map's radiance found by BSDF
+    /// sampling from `origin` with pdf `prev_pdf`, against the
+    /// environment's next-event estimation, whose density there is `pdf`.
+    #[inline(always)]
+    pub(super) fn escape_weight(&self, origin: Vec3, prev_pdf: f32, pdf: f32) -> f32 {
+        // (The environment's choice does not depend on the point.)
+        let pick = self.light_pick_pdf(origin, Vec3::ZERO, self.lights.len());
+        power_heuristic(prev_pdf, pick * pdf)
     }
 
     /// Samples the next direction through [`Bsdf::sample`], drawing its

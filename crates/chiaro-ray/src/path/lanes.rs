@@ -108,6 +108,12 @@ impl V3 {
         select(&mut self.z, m, v.z);
     }
 
+    /// The three component arrays.
+    #[inline(always)]
+    fn arrays(&self) -> [F; 3] {
+        [self.x, self.y, self.z]
+    }
+
     #[inline(always)]
     fn splat(v: Vec3) -> Self {
         Self {
@@ -120,7 +126,7 @@ impl V3 {
 
 /// The dot product as `glam::Vec3::dot` evaluates it.
 #[inline(always)]
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+pub(super) fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     (a[0] * b[0]) + (a[1] * b[1]) + (a[2] * b[2])
 }
 
@@ -135,7 +141,7 @@ fn max_element(v: [f32; 3]) -> f32 {
 /// returns (`if x <= 0.0 { return ... }`) let a NaN through.
 #[allow(clippy::neg_cmp_op_on_partial_ord)]
 #[inline(always)]
-fn passes(x: f32) -> bool {
+pub(super) fn passes(x: f32) -> bool {
     !(x <= 0.0)
 }
 
@@ -257,6 +263,7 @@ impl PathTracer<'_, '_> {
             // Trace; sort the lanes into escaped, handed to the scalar
             // loop, and shaded here (whose emission is added now).
             let mut shade = [false; LANES];
+            let mut escaped = [false; LANES];
             for i in set_lanes(&alive) {
                 *rays += 1;
                 let ray = Ray::new(org.get(i), dir.get(i));
@@ -267,8 +274,8 @@ impl PathTracer<'_, '_> {
                     self.accel.intersect(&ray)
                 };
                 let Some(hit) = hit else {
-                    let seen = self.escaped(&ray, depth, prev_pdf[i]);
-                    out[i] = l.get(i) + beta.get(i) * seen;
+                    // (What it sees is looked up below, with the others'.)
+                    escaped[i] = true;
                     alive[i] = false;
                     continue;
                 };
@@ -310,6 +317,14 @@ impl PathTracer<'_, '_> {
                 vx.glossy[i] = !m.lambert;
                 info[i] = Some(m);
                 shade[i] = true;
+            }
+            if escaped.iter().any(|&e| e) {
+                let seen =
+                    self.escaped_lanes(&escaped, &org.arrays(), &dir.arrays(), depth, &prev_pdf);
+                for i in set_lanes(&escaped) {
+                    let c = Vec3::new(seen[0][i], seen[1][i], seen[2][i]);
+                    out[i] = l.get(i) + beta.get(i) * c;
+                }
             }
             if !shade.iter().any(|&s| s) {
                 break;
@@ -553,8 +568,9 @@ impl PathTracer<'_, '_> {
                     continue;
                 }
                 let Some(tl) = &self.tri_lights[li] else {
-                    // Not an emissive triangle: the scalar loop's code.
-                    if let Some(m) = info[i] {
+                    // Not an emissive triangle: the scalar loop's code (the
+                    // environment's lanes together, below).
+                    if let Some(m) = info[i].filter(|_| li != self.lights.len()) {
                         let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
                         let u = Vec2::new(u[0][i], u[1][i]);
                         let c = self.direct_from((li, pk), vx.p.get(i), m, n, ng, wo, mis, u, rays);
@@ -571,7 +587,7 @@ impl PathTracer<'_, '_> {
         if let Some((p, pmf)) = &picked {
             let glossy: [bool; LANES] = std::array::from_fn(|i| shade[i] & vx.glossy[i]);
             for i in set_lanes(&glossy) {
-                if p[i] == NO_PICK {
+                if p[i] == NO_PICK || p[i] as usize == self.lights.len() {
                     continue;
                 }
                 if let Some(m) = info[i] {
@@ -579,6 +595,26 @@ impl PathTracer<'_, '_> {
                     let u = Vec2::new(u[0][i], u[1][i]);
                     let pk = (p[i] as usize, pmf[i]);
                     let c = self.direct_from(pk, vx.p.get(i), m, n, ng, wo, mis, u, rays);
+                    l.set(i, l.get(i) + beta.get(i) * c);
+                }
+            }
+        }
+        // Lanes that chose the environment: its sample, lane-parallel.
+        if let Some((p, pmf)) = picked.as_ref().filter(|_| self.env.is_some()) {
+            let env: [bool; LANES] =
+                std::array::from_fn(|i| shade[i] & (p[i] as usize == self.lights.len()));
+            if env.iter().any(|&e| e) {
+                let at = super::lanes_env::EnvVertices {
+                    p: &vx.p.arrays(),
+                    n: &vx.n.arrays(),
+                    ngs: &vx.ngs.arrays(),
+                    dir: &dir.arrays(),
+                    kd: &vx.kd.arrays(),
+                    glossy: &vx.glossy,
+                };
+                let c = self.direct_env_lanes(&env, pmf, &at, info, mis, &u, rays);
+                for i in set_lanes(&env) {
+                    let c = Vec3::new(c[0][i], c[1][i], c[2][i]);
                     l.set(i, l.get(i) + beta.get(i) * c);
                 }
             }
@@ -744,7 +780,7 @@ impl PathTracer<'_, '_> {
 /// visits only those lanes, so its branches do not depend on which lanes
 /// are set (a test per lane of a random mask would mispredict often).
 #[inline(always)]
-fn set_lanes(m: &[bool; LANES]) -> impl Iterator<Item = usize> + use<> {
+pub(super) fn set_lanes(m: &[bool; LANES]) -> impl Iterator<Item = usize> + use<> {
     // Each eight bytes (each 0 or 1) as one word; the multiply gathers
     // byte `i`'s bit into bit `56 + i` (no two partial products overlap
     // or carry): a load, a multiply and a shift per eight lanes.

@@ -2,6 +2,7 @@
 //! shadow ray, combined with BSDF sampling by the power heuristic (Veach 1997).
 
 use super::integrator::{MaterialInfo, PathTracer, Vertex};
+use super::lanes_env::env_weight;
 use chiaro_core::geometry::{Ray, offset_ray_origin};
 use chiaro_core::sampling::{SobolSampler, power_heuristic};
 use chiaro_core::scene::{AreaShape, Light};
@@ -272,13 +273,7 @@ impl PathTracer<'_, '_> {
         let Some(tr) = self.shadow_pass(&Ray::new(offset_ray_origin(p, ng, s.wi), s.wi)) else {
             return Vec3::ZERO;
         };
-        let light_pdf = s.pdf * pick;
-        let w_over_pdf = if mis {
-            let bsdf_pdf = bsdf.pdf(n, wo, s.wi);
-            light_pdf / (light_pdf * light_pdf + bsdf_pdf * bsdf_pdf)
-        } else {
-            1.0 / light_pdf
-        };
-        f_cos * s.radiance * w_over_pdf * tr
+        let bsdf_pdf = if mis { bsdf.pdf(n, wo, s.wi) } else { 0.0 };
+        f_cos * s.radiance * env_weight(s.pdf * pick, bsdf_pdf, mis) * tr
     }
 }

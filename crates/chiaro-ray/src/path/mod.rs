@@ -53,6 +53,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 mod blend_tests;
 mod integrator;
 mod lanes;
+mod lanes_env;
 mod lights;
 mod reference;
 #[cfg(test)]

@@ -1,8 +1,8 @@
 //! Environment maps (Blinn and Newell 1976; lat-long after Miller and Hoffman
 //! 1984): lookups, the importance-sampled [`EnvironmentLight`], the miss rule.
 
-use super::image::{bilinear, wrap_index};
-use super::latlong::{latlong_dir, latlong_uv};
+use super::image::{bilinear, bilinear_lanes, wrap_index};
+use super::latlong::{latlong_dir, latlong_uv, latlong_uv_lanes};
 use crate::scene::{Scene, Texture};
 use glam::{Vec2, Vec3};
 
@@ -29,12 +29,18 @@ pub fn environment_radiance(scene: &Scene, dir: Vec3) -> Vec3 {
 /// y keeps `v` and moves the azimuth `u` by `+a / 360`.
 #[inline]
 pub(super) fn environment_uv(env: &crate::scene::Environment, d: Vec3) -> Vec2 {
-    let mut uv = latlong_uv(d);
+    let uv = latlong_uv(d);
+    Vec2::new(turned_u(env, uv.x), uv.y)
+}
+
+/// The lat-long `u` of the map `env` turned by its rotation, wrapped
+/// into `[0, 1)`.
+#[inline(always)]
+fn turned_u(env: &crate::scene::Environment, u: f32) -> f32 {
     // (`x - floor(x)` is `x.rem_euclid(1.0)` bit for bit, both one
     // rounding of the same exact value, without `fmodf`; -0 gives +0.)
-    let x = uv.x + env.rotate_y_degrees / 360.0;
-    uv.x = x - x.floor();
-    uv
+    let x = u + env.rotate_y_degrees / 360.0;
+    x - x.floor()
 }
 
 /// The unit direction whose [`environment_uv`] is `uv` (`v` from the top,
@@ -54,6 +60,21 @@ pub struct EnvironmentSample {
     pub radiance: Vec3,
     /// Density per solid angle.
     pub pdf: f32,
+}
+
+/// [`EnvironmentSample`]s of `N` lanes, as component arrays
+/// ([`EnvironmentLight::sample_lanes`]).
+#[derive(Debug, Clone, Copy)]
+pub struct EnvironmentSamples<const N: usize> {
+    /// Unit directions towards the environment.
+    pub wi: [[f32; N]; 3],
+    /// [`environment_radiance`] in those directions.
+    pub radiance: [[f32; N]; 3],
+    /// Densities per solid angle.
+    pub pdf: [f32; N],
+    /// False where [`EnvironmentLight::sample`] gives `None` (and in the
+    /// lanes not asked for).
+    pub ok: [bool; N],
 }
 
 /// The environment map as a light to sample (pbrt-v4's
@@ -158,20 +179,53 @@ impl<'s> EnvironmentLight<'s> {
 
     /// A direction for the uniform pair `u`: the direction, its radiance
     /// and its density per solid angle (`pdf_uv / (2 pi^2 sin theta)`);
-    /// `None` at the poles, where the density is infinite.
+    /// `None` at the poles, where the density is infinite. One lane of
+    /// [`Self::sample_lanes`].
     #[inline]
     pub fn sample(&self, u: Vec2) -> Option<EnvironmentSample> {
-        let (uv, pdf_uv) = self.dist.sample(u);
-        let (wi, sin_t) = environment_dir(self.env, uv);
-        if !(sin_t > 0.0 && pdf_uv > 0.0) {
-            return None;
-        }
-        let pdf = pdf_uv / (2.0 * std::f32::consts::PI * std::f32::consts::PI * sin_t);
-        Some(EnvironmentSample {
-            wi,
-            radiance: environment_radiance(self.scene, wi),
-            pdf,
+        let s = self.sample_lanes(&[u.x], &[u.y], &[true]);
+        let at = |v: &[[f32; 1]; 3]| Vec3::new(v[0][0], v[1][0], v[2][0]);
+        s.ok[0].then(|| EnvironmentSample {
+            wi: at(&s.wi),
+            radiance: at(&s.radiance),
+            pdf: s.pdf[0],
         })
+    }
+
+    /// [`Self::sample`] of the pairs `(u0[i], u1[i])` of the lanes set in
+    /// `m`: the cell searches lane by lane, then the directions (the
+    /// polynomial `sin_cos`), densities and radiance lookups of all lanes
+    /// together, each lane's bits what one lane alone gets.
+    #[inline(always)]
+    pub fn sample_lanes<const N: usize>(
+        &self,
+        u0: &[f32; N],
+        u1: &[f32; N],
+        m: &[bool; N],
+    ) -> EnvironmentSamples<N> {
+        let (mut su, mut sv, mut pdf_uv) = ([0.0; N], [0.0; N], [0.0; N]);
+        for i in 0..N {
+            if m[i] {
+                let (uv, pdf) = self.dist.sample(Vec2::new(u0[i], u1[i]));
+                (su[i], sv[i], pdf_uv[i]) = (uv.x, uv.y, pdf);
+            }
+        }
+        let mut wi = [[0.0; N]; 3];
+        let mut pdf = [0.0; N];
+        let mut ok = [false; N];
+        for i in 0..N {
+            let (d, sin_t) = environment_dir(self.env, Vec2::new(su[i], sv[i]));
+            (wi[0][i], wi[1][i], wi[2][i]) = (d.x, d.y, d.z);
+            ok[i] = m[i] & (sin_t > 0.0 && pdf_uv[i] > 0.0);
+            pdf[i] = pdf_uv[i] / (2.0 * std::f32::consts::PI * std::f32::consts::PI * sin_t);
+        }
+        let (radiance, _) = self.lookup_lanes(&wi, &ok, false);
+        EnvironmentSamples {
+            wi,
+            radiance,
+            pdf,
+            ok,
+        }
     }
 
     /// The density per solid angle with which [`Self::sample`] draws the
@@ -191,22 +245,70 @@ impl<'s> EnvironmentLight<'s> {
 
     /// [`environment_radiance`] in direction `dir` (need not be unit) and
     /// [`Self::pdf`] of it, the same values from one lat-long lookup (what
-    /// a path tracer needs of a ray that escapes after a scatter).
+    /// a path tracer needs of a ray that escapes after a scatter). One
+    /// lane of [`Self::radiance_pdf_lanes`].
     #[inline]
     pub fn radiance_pdf(&self, dir: Vec3) -> (Vec3, f32) {
-        let Some(d) = dir.try_normalize() else {
-            return (Vec3::ZERO, 0.0);
-        };
-        let uv = environment_uv(self.env, d);
-        let radiance = match self.scene.textures.get(self.env.texture.index()) {
-            Some(Texture::Image(img)) => bilinear(img, uv).truncate() * self.env.intensity,
-            _ => Vec3::ZERO,
-        };
-        let sin_t = (d.x * d.x + d.z * d.z).sqrt();
-        if sin_t <= 0.0 {
-            return (radiance, 0.0);
+        let (l, pdf) = self.lookup_lanes(&[[dir.x], [dir.y], [dir.z]], &[true], true);
+        (Vec3::new(l[0][0], l[1][0], l[2][0]), pdf[0])
+    }
+
+    /// [`Self::radiance_pdf`] of the directions `(d[0][i], d[1][i],
+    /// d[2][i])` of the lanes set in `m` (zero in the others), each
+    /// lane's bits what one lane alone gets.
+    #[inline(always)]
+    pub fn radiance_pdf_lanes<const N: usize>(
+        &self,
+        d: &[[f32; N]; 3],
+        m: &[bool; N],
+    ) -> ([[f32; N]; 3], [f32; N]) {
+        self.lookup_lanes(d, m, true)
+    }
+
+    /// [`environment_radiance`] of the lanes set in `m`, and with `want_pdf`
+    /// [`Self::pdf`], in passes over the lanes: the unit directions and the
+    /// lat-long mapping (vectorised), the bilinear lookups (their texel
+    /// reads issued together), the densities.
+    #[inline(always)]
+    fn lookup_lanes<const N: usize>(
+        &self,
+        d: &[[f32; N]; 3],
+        m: &[bool; N],
+        want_pdf: bool,
+    ) -> ([[f32; N]; 3], [f32; N]) {
+        // The unit directions (as `try_normalize`; lanes it refuses see
+        // nothing).
+        let mut unit = [[0.0; N]; 3];
+        let mut ok = [false; N];
+        for i in 0..N {
+            if let Some(v) = Vec3::new(d[0][i], d[1][i], d[2][i]).try_normalize() {
+                (unit[0][i], unit[1][i], unit[2][i]) = (v.x, v.y, v.z);
+                ok[i] = m[i];
+            }
         }
-        let pdf = self.dist.pdf(uv) / (2.0 * std::f32::consts::PI * std::f32::consts::PI * sin_t);
+        let (mut u, v) = latlong_uv_lanes(&unit[0], &unit[1], &unit[2]);
+        for u in &mut u {
+            *u = turned_u(self.env, *u);
+        }
+        let mut radiance = [[0.0; N]; 3];
+        if let Some(Texture::Image(img)) = self.scene.textures.get(self.env.texture.index()) {
+            let rgba = bilinear_lanes(img, &u, &v, &ok);
+            for i in 0..N {
+                let c = rgba[i].truncate() * self.env.intensity;
+                (radiance[0][i], radiance[1][i], radiance[2][i]) = (c.x, c.y, c.z);
+            }
+        }
+        let mut pdf = [0.0; N];
+        if want_pdf {
+            for i in 0..N {
+                let (x, z) = (unit[0][i], unit[2][i]);
+                let sin_t = (x * x + z * z).sqrt();
+                if ok[i] && sin_t > 0.0 {
+                    pdf[i] = self.dist.pdf(Vec2::new(u[i], v[i]))
+                        / (2.0 * std::f32::consts::PI * std::f32::consts::PI * sin_t);
+                }
+            }
+        }
         (radiance, pdf)
     }
 

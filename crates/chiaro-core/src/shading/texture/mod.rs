@@ -16,8 +16,8 @@ mod tests;
 
 pub use bump::{bump_normal, normal_map_normal, uv_surface_gradient};
 pub use environment::{
-    EnvironmentLight, EnvironmentSample, background_radiance, environment_mean_radiance,
-    environment_radiance, miss_radiance,
+    EnvironmentLight, EnvironmentSample, EnvironmentSamples, background_radiance,
+    environment_mean_radiance, environment_radiance, miss_radiance,
 };
 use image::filtered;
 pub use image::{bilinear, nearest, wrap_index};

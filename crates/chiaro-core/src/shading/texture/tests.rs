@@ -589,3 +589,101 @@ fn fract_by_floor_is_rem_euclid() {
         assert!(a.to_bits() == b.to_bits() || (a == 0.0 && b == 0.0), "{x}");
     }
 }
+
+#[test]
+fn environment_lanes_give_each_lane_its_one_lane_bits() {
+    // `radiance_pdf_lanes` and `sample_lanes` over sixteen lanes, some
+    // masked off, against `radiance_pdf` and `sample` (their one-lane
+    // case) lane by lane: any direction, the poles, a zero vector, a
+    // number pair at the ends of [0, 1); masked lanes give zeros.
+    let scene = spot_scene(30.0);
+    let light = EnvironmentLight::new(&scene).expect("a light");
+    let mut rng = crate::sampling::pixel_rng(3, 1, 4, 1);
+    const N: usize = 16;
+    for round in 0..500 {
+        let mut d = [[0.0f32; N]; 3];
+        let mut u = [[0.0f32; N]; 2];
+        let m: [bool; N] = std::array::from_fn(|i| (i * 7 + round) % 5 != 0);
+        for i in 0..N {
+            let v = match (round + i) % 29 {
+                0 => Vec3::Y,
+                1 => -Vec3::Y * 3.0,
+                2 => Vec3::ZERO,
+                _ => {
+                    crate::sampling::sample_uniform_sphere(crate::sampling::uniform2(&mut rng))
+                        * (0.5 + (i % 3) as f32)
+                }
+            };
+            (d[0][i], d[1][i], d[2][i]) = (v.x, v.y, v.z);
+            let p = crate::sampling::uniform2(&mut rng);
+            (u[0][i], u[1][i]) = match (round + i) % 31 {
+                0 => (0.0, 0.0),
+                1 => (1.0f32.next_down(), 1.0f32.next_down()),
+                _ => (p.x, p.y),
+            };
+        }
+        let (l, pdf) = light.radiance_pdf_lanes(&d, &m);
+        let s = light.sample_lanes(&u[0], &u[1], &m);
+        for i in 0..N {
+            let lane = |v: &[[f32; N]; 3]| Vec3::new(v[0][i], v[1][i], v[2][i]);
+            if !m[i] {
+                assert_eq!((lane(&l), pdf[i], s.ok[i]), (Vec3::ZERO, 0.0, false));
+                continue;
+            }
+            let (l1, pdf1) = light.radiance_pdf(lane(&d));
+            assert_eq!(
+                lane(&l).to_array().map(f32::to_bits),
+                l1.to_array().map(f32::to_bits)
+            );
+            assert_eq!(pdf[i].to_bits(), pdf1.to_bits(), "lane {i}");
+            let one = light.sample(Vec2::new(u[0][i], u[1][i]));
+            assert_eq!(s.ok[i], one.is_some(), "lane {i}");
+            if let Some(one) = one {
+                let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                assert_eq!(bits(lane(&s.wi)), bits(one.wi));
+                assert_eq!(bits(lane(&s.radiance)), bits(one.radiance));
+                assert_eq!(s.pdf[i].to_bits(), one.pdf.to_bits());
+                // (The sample's radiance is the lookup's in its direction.)
+                assert_eq!(one.radiance, environment_radiance(&scene, one.wi));
+            }
+        }
+    }
+}
+
+#[test]
+fn bilinear_lanes_give_each_lane_the_scalar_lookup() {
+    // Every wrap mode, coordinates inside, outside and not finite, an
+    // image without texels; masked lanes read nothing and give zero.
+    const N: usize = 16;
+    let mut rng = crate::sampling::pixel_rng(2, 7, 1, 8);
+    for wrap in [WrapMode::Repeat, WrapMode::Clamp, WrapMode::Mirror] {
+        let mut img = image(5, 3, |x, y| (x * 3 + y * 7) as f32 * 0.1);
+        img.wrap = wrap;
+        let empty = ImageTexture {
+            texels: Vec::new(),
+            ..img.clone()
+        };
+        for img in [&img, &empty] {
+            for round in 0..200 {
+                let m: [bool; N] = std::array::from_fn(|i| (i + round) % 4 != 1);
+                let mut u = [0.0f32; N];
+                let mut v = [0.0f32; N];
+                for i in 0..N {
+                    let p = crate::sampling::uniform2(&mut rng);
+                    (u[i], v[i]) = (p.x * 3.0 - 1.0, p.y * 3.0 - 1.0);
+                }
+                u[3] = f32::NAN;
+                v[5] = f32::INFINITY;
+                let got = image::bilinear_lanes(img, &u, &v, &m);
+                for i in 0..N {
+                    let want = if m[i] {
+                        bilinear(img, Vec2::new(u[i], v[i]))
+                    } else {
+                        Vec4::ZERO
+                    };
+                    assert_eq!(bits(got[i]), bits(want), "{wrap:?} lane {i}");
+                }
+            }
+        }
+    }
+}
