@@ -331,13 +331,19 @@ impl PiecewiseConstant1D {
     /// The cell holding `x`.
     #[inline]
     pub fn cell(&self, x: f32) -> usize {
-        let n = self.func.len();
-        let i = (x * n as f32).floor();
-        if i.is_nan() || i < 0.0 {
-            0
-        } else {
-            (i as usize).min(n - 1)
-        }
+        cell(x, self.func.len())
+    }
+}
+
+/// The cell of `n` equal cells on `[0, 1)` holding `x` (`x` outside is
+/// clamped to the first or last).
+#[inline(always)]
+fn cell(x: f32, n: usize) -> usize {
+    let i = (x * n as f32).floor();
+    if i.is_nan() || i < 0.0 {
+        0
+    } else {
+        (i as usize).min(n - 1)
     }
 }
 
@@ -349,6 +355,9 @@ pub struct PiecewiseConstant2D {
     /// One distribution per row that has positive values (`None` for the others).
     rows: Vec<Option<PiecewiseConstant1D>>,
     marginal: PiecewiseConstant1D,
+    /// [`Self::pdf`] of each cell, row-major: one read where the row's
+    /// and the marginal's tables would be read one after the other.
+    cell_pdf: Vec<f32>,
 }
 
 impl PiecewiseConstant2D {
@@ -367,30 +376,75 @@ impl PiecewiseConstant2D {
             .map(|r| r.as_ref().map_or(0.0, PiecewiseConstant1D::integral))
             .collect();
         let marginal = PiecewiseConstant1D::new(&sums)?;
-        Some(Self { rows, marginal })
+        // The row's density times the row's, as `pdf` multiplies them.
+        let cell_pdf = rows
+            .iter()
+            .enumerate()
+            .flat_map(|(y, r)| {
+                let pdf_y = marginal.func[y] / marginal.integral;
+                (0..width).map(move |x| match r {
+                    Some(r) => r.func[x] / r.integral * pdf_y,
+                    None => 0.0,
+                })
+            })
+            .collect();
+        Some(Self {
+            rows,
+            marginal,
+            cell_pdf,
+        })
     }
 
     /// A point `(x, y)` for the uniform pair `u` and its density on the
     /// unit square.
     #[inline]
     pub fn sample(&self, u: Vec2) -> (Vec2, f32) {
-        let (y, pdf_y, row) = self.marginal.sample(u.y);
-        // (The marginal never picks a row of zeros.)
-        let Some(r) = &self.rows[row] else {
-            return (Vec2::new(u.x, y), 0.0);
-        };
-        let (x, pdf_x, _) = r.sample(u.x);
-        (Vec2::new(x, y), pdf_x * pdf_y)
+        let (x, y, pdf) = self.sample_lanes(&[u.x], &[u.y], &[true]);
+        (Vec2::new(x[0], y[0]), pdf[0])
     }
 
-    /// The density at `p` on the unit square.
+    /// [`Self::sample`] of the pairs `(u0[i], u1[i])` of the lanes set in
+    /// `m` (zeros in the others) as `(x, y, pdf)`: every lane's row first,
+    /// then every lane's column, so that the lanes' searches overlap
+    /// rather than wait on one another; each lane's bits what one lane
+    /// alone gets.
+    #[inline(always)]
+    pub fn sample_lanes<const N: usize>(
+        &self,
+        u0: &[f32; N],
+        u1: &[f32; N],
+        m: &[bool; N],
+    ) -> ([f32; N], [f32; N], [f32; N]) {
+        let (mut x, mut y, mut pdf) = ([0.0; N], [0.0; N], [0.0; N]);
+        let mut row = [0usize; N];
+        for i in 0..N {
+            if m[i] {
+                (y[i], pdf[i], row[i]) = self.marginal.sample(u1[i]);
+            }
+        }
+        for i in 0..N {
+            if !m[i] {
+                continue;
+            }
+            // (The marginal never picks a row of zeros.)
+            match &self.rows[row[i]] {
+                Some(r) => {
+                    let (xi, pdf_x, _) = r.sample(u0[i]);
+                    (x[i], pdf[i]) = (xi, pdf_x * pdf[i]);
+                }
+                None => (x[i], pdf[i]) = (u0[i], 0.0),
+            }
+        }
+        (x, y, pdf)
+    }
+
+    /// The density at `p` on the unit square: the row's density times the
+    /// marginal's, read from one table.
     #[inline]
     pub fn pdf(&self, p: Vec2) -> f32 {
         let row = self.marginal.cell(p.y);
-        match &self.rows[row] {
-            Some(r) => r.pdf(p.x) * self.marginal.pdf(p.y),
-            None => 0.0,
-        }
+        let width = self.cell_pdf.len() / self.marginal.len();
+        self.cell_pdf[row * width + cell(p.x, width)]
     }
 }
 
@@ -432,6 +486,49 @@ mod tests {
             for u in us {
                 assert_eq!(d.count_at_most(u), full(u), "u = {u}, {} cells", f.len());
             }
+        }
+    }
+
+    #[test]
+    fn the_cell_table_holds_the_row_times_the_marginal_and_lanes_sample_alike() {
+        // `PiecewiseConstant2D::pdf` reads the product the two densities
+        // give, bit for bit (zero rows, points outside the square); its
+        // lanes sample what one lane samples.
+        let mut rng = pixel_rng(1, 2, 3, 4);
+        let func: Vec<f32> = (0..37 * 11)
+            .map(|i| {
+                if (i / 37) % 4 == 2 {
+                    0.0
+                } else {
+                    rng.random::<f32>()
+                }
+            })
+            .collect();
+        let d = PiecewiseConstant2D::new(&func, 37).expect("positive");
+        for k in 0..20_000 {
+            let p = Vec2::new(rng.random::<f32>(), rng.random::<f32>()) * 1.2 - 0.1;
+            let p = if k == 0 { Vec2::NAN } else { p };
+            let row = d.marginal.cell(p.y);
+            let want = match &d.rows[row] {
+                Some(r) => r.pdf(p.x) * d.marginal.pdf(p.y),
+                None => 0.0,
+            };
+            assert_eq!(d.pdf(p).to_bits(), want.to_bits(), "{p}");
+        }
+        let u0: [f32; 16] = std::array::from_fn(|_| rng.random());
+        let u1: [f32; 16] = std::array::from_fn(|_| rng.random());
+        let m: [bool; 16] = std::array::from_fn(|i| i % 3 != 1);
+        let (x, y, pdf) = d.sample_lanes(&u0, &u1, &m);
+        for i in 0..16 {
+            let (uv, p) = if m[i] {
+                d.sample(Vec2::new(u0[i], u1[i]))
+            } else {
+                (Vec2::ZERO, 0.0)
+            };
+            assert_eq!(
+                [x[i], y[i], pdf[i]].map(f32::to_bits),
+                [uv.x, uv.y, p].map(f32::to_bits)
+            );
         }
     }
 

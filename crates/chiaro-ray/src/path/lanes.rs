@@ -21,21 +21,30 @@
 //! Rays are still traced one at a time; what runs lane-parallel is the
 //! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
 //! cosine sampling, Russian roulette. Emissive-triangle lights are sampled
-//! lane-parallel at Lambertian vertices; a mixture vertex, or a lane that
+//! lane-parallel at Lambertian vertices. The environment's work is in
+//! `lanes_env.rs`: the lanes that escape at a bounce see the map through
+//! one batched lookup ([`PathTracer::escaped_lanes`]: the lat-long
+//! mapping, the bilinear weights and blends, the MIS weights in lane
+//! loops, the texel and density reads issued together), and the lanes
+//! that choose the environment, Lambert and mixture alike, get its
+//! samples the same way ([`PathTracer::direct_env_lanes`]: the CDF
+//! searches lane by lane but batched, the directions by the polynomial
+//! `sin_cos` lane-parallel; the mixture lanes' `Bsdf::eval` and `pdf` and
+//! the shadow rays one lane at a time). A mixture vertex, or a lane that
 //! picks another light (point, spot, directional, an area light's quad,
-//! disk or sphere, the environment), gets its light sample from the scalar
-//! loop's own code ([`PathTracer::direct_from`]), and a mixture vertex its
-//! next direction from `Bsdf::sample`, lane by lane, the lanes staying in
-//! step. Escaping lanes see the environment through
-//! [`PathTracer::escaped`], lane by lane; the lat-long mapping under every
-//! environment lookup is the polynomial one of
-//! `chiaro_core::shading::texture::latlong_uv`, shared with the scalar
-//! loop.
+//! disk or sphere), gets its light sample from the scalar loop's own code
+//! ([`PathTracer::direct_from`]), and a mixture vertex its next direction
+//! from `Bsdf::sample`, lane by lane, the lanes staying in step. The
+//! lat-long mapping under every environment lookup is the polynomial one
+//! of `chiaro_core::shading::texture::latlong_uv`, and the scalar loop's
+//! lookups and samples are the one-lane case of the functions the lanes
+//! call.
 
 // A lane loop indexes a dozen arrays by the lane number: that is the
 // form LLVM vectorises, and clearer than a dozen zipped iterators.
 #![allow(clippy::needless_range_loop)]
 
+use super::lanes_env::lambert_f_cos;
 use super::{PathState, PathTracer};
 use chiaro_core::accel::Hit;
 use chiaro_core::geometry::{Frame, Ray, offset_ray_origin};
@@ -45,7 +54,6 @@ use chiaro_core::sampling::{
 };
 use chiaro_core::shading::TriangleEmitter;
 use glam::{Vec2, Vec3};
-use std::f32::consts::FRAC_1_PI;
 
 /// Live lanes at or below which a batch hands its paths to the scalar
 /// loop at the next bounce (BENCHMARKS.md, "Plain spheres, dark materials
@@ -651,12 +659,8 @@ impl PathTracer<'_, '_> {
             light_pdf[i] = dist2 / (cos_l * lt.area[i]) * lt.pick[i];
             let c_i = dot(vx.n.at(i), wi);
             cos_i[i] = c_i;
-            // `eval_brdf_cos` for these materials (no specular lobe), its
-            // expression spelled per component: calling it here keeps the
-            // loop from vectorising; the kernel-vs-scalar tests hold the
-            // two to the same bits.
-            let kd = vx.kd.at(i);
-            let f_cos = kd.map(|k| k * (FRAC_1_PI * c_i));
+            // `eval_brdf_cos` for these materials (no specular lobe).
+            let f_cos = lambert_f_cos(vx.kd.at(i), c_i);
             // (`&` rather than `&&`: no branches in the lane loop.)
             ok[i] = ok[i]
                 & (lt.pick[i] > 0.0)

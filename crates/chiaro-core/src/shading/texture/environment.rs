@@ -193,7 +193,8 @@ impl<'s> EnvironmentLight<'s> {
     }
 
     /// [`Self::sample`] of the pairs `(u0[i], u1[i])` of the lanes set in
-    /// `m`: the cell searches lane by lane, then the directions (the
+    /// `m`: the cell searches lane by lane (every lane's row, then every
+    /// lane's column), then the directions (the
     /// polynomial `sin_cos`), densities and radiance lookups of all lanes
     /// together, each lane's bits what one lane alone gets.
     #[inline(always)]
@@ -203,13 +204,7 @@ impl<'s> EnvironmentLight<'s> {
         u1: &[f32; N],
         m: &[bool; N],
     ) -> EnvironmentSamples<N> {
-        let (mut su, mut sv, mut pdf_uv) = ([0.0; N], [0.0; N], [0.0; N]);
-        for i in 0..N {
-            if m[i] {
-                let (uv, pdf) = self.dist.sample(Vec2::new(u0[i], u1[i]));
-                (su[i], sv[i], pdf_uv[i]) = (uv.x, uv.y, pdf);
-            }
-        }
+        let (su, sv, pdf_uv) = self.dist.sample_lanes(u0, u1, m);
         let mut wi = [[0.0; N]; 3];
         let mut pdf = [0.0; N];
         let mut ok = [false; N];
