@@ -120,10 +120,10 @@ pub(crate) fn bilinear_lanes<const N: usize>(
     let mut taps = [BilinearTaps::default(); N];
     let mut on_grid = [false; N];
     for i in 0..N {
-        if m[i] {
-            if let Some(t) = bilinear_taps(img, Vec2::new(u[i], v[i])) {
-                (taps[i], on_grid[i]) = (t, true);
-            }
+        if m[i]
+            && let Some(t) = bilinear_taps(img, Vec2::new(u[i], v[i]))
+        {
+            (taps[i], on_grid[i]) = (t, true);
         }
     }
     let mut texels = [[[0.0f32; 4]; 4]; N];
