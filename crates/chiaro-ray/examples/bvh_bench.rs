@@ -151,10 +151,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let b = bvh.bvh();
         let mut h = WordHash::default();
         for n in b.nodes() {
-            n.origin.iter().chain(&n.scale).for_each(|&v| h.eat_f32(v));
-            n.q.iter().flatten().for_each(|&v| h.eat(v.into()));
-            n.child.iter().for_each(|&v| h.eat(v));
-            n.count.iter().for_each(|&v| h.eat(v.into()));
+            n.bounds.iter().flatten().for_each(|&v| h.eat_f32(v));
+            n.child.iter().chain(&n.count).for_each(|&v| h.eat(v));
         }
         b.prim_order().iter().for_each(|&v| h.eat(v));
         println!("tree fingerprint {:016x}", h.0);

@@ -27,13 +27,12 @@
 //! partition in parallel and build their children with rayon; the result
 //! does not depend on the number of threads.
 //!
-//! Layout: 128-byte [`BvhNode`]s (two cache lines) holding the child boxes
-//! quantised to 8-bit grid indices, rounded outward (Ylitie, Karras and
-//! Laine 2017; Embree's QBVH8), in structure-of-arrays form,
-//! `q[row][lane]`, so one node test is one round of 8-lane AVX2 operations
-//! on x86-64 (through `safe_arch`'s safe wrappers; the workspace forbids
-//! `unsafe`), decoding each plane with one fused multiply-add, and two
-//! rounds of 4-lane `glam::Vec4` elsewhere, the two bit-identical. The SAH prices a leaf in blocks of [`BLOCK`] = 4 primitives
+//! Layout: 256-byte [`BvhNode`]s (four cache lines, loaded independently)
+//! holding the child boxes in structure-of-arrays form,
+//! `bounds[row][lane]`, so one node test is one round of 8-lane AVX
+//! operations on x86-64 with AVX (through `safe_arch`'s safe wrappers; the
+//! workspace forbids `unsafe`) and two rounds of 4-lane `glam::Vec4`
+//! elsewhere, the two bit-identical. The SAH prices a leaf in blocks of [`BLOCK`] = 4 primitives
 //! (as Embree's builder does) and every leaf starts at a slot that is a
 //! multiple of four, so in a [`SceneBvh`] a leaf of up to four triangles is
 //! one 160-byte SoA block, tested four at a time with the same arithmetic
@@ -96,7 +95,7 @@ const EXIT_SLACK: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f3
 /// [`Bvh::prim_order`] entry of a padding slot (no leaf refers to it).
 pub const PAD_SLOT: u32 = u32::MAX;
 /// [`BvhNode::count`] of an unused lane.
-pub const EMPTY_LANE: u16 = u16::MAX;
+pub const EMPTY_LANE: u32 = u32::MAX;
 
 /// Build parameters. The defaults suit ray tracing triangle meshes.
 #[derive(Debug, Clone, Copy, PartialEq)]

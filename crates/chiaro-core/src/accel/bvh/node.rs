@@ -3,49 +3,25 @@
 
 use super::{EMPTY_LANE, EXIT_SLACK, WIDTH};
 use crate::geometry::{Aabb, Ray};
-#[cfg(any(
-    test,
-    not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))
-))]
+#[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "avx"))))]
 use glam::Vec4;
 use glam::{Vec3, Vec3A};
 
 /// One [`WIDTH`]-wide node: up to `WIDTH` children, each an inner node or
-/// a leaf (a run of primitive slots). 128 bytes (two cache lines), 64-byte
-/// aligned.
-///
-/// Child boxes are quantised (Ylitie, Karras and Laine 2017; Embree's
-/// QBVH8): per axis a grid from `origin` (the lower corner of all the
-/// children) in steps of `scale`, a power of two, and per child and plane
-/// an 8-bit grid index, rounded outward so that the decoded box holds the
-/// child's box. A plane decodes as `fma(q, scale, origin)` (see
-/// [`BvhNode::decode`]): `q * scale` is exact, so the scalar build and every
-/// vector kernel get the same bits, and the node test is the slab test of
-/// the decoded boxes.
+/// a leaf (a run of primitive slots). `32 * WIDTH` bytes, 64-byte aligned.
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C, align(64))]
 pub struct BvhNode {
-    /// Per axis: the grid's origin.
-    pub origin: [f32; 3],
-    /// Per axis: the grid's step, a power of two.
-    pub scale: [f32; 3],
-    /// Child boxes' grid indices, structure of arrays: rows 0-2 hold the
-    /// lower corners' x, y, z, rows 3-5 the upper corners', one lane per
-    /// child.
-    pub q: [[u8; WIDTH]; 6],
+    /// Child boxes, structure of arrays: rows 0-2 hold the lower corners'
+    /// x, y, z, rows 3-5 the upper corners', one lane per child. Unused
+    /// lanes hold an inverted (empty) box.
+    pub bounds: [[f32; WIDTH]; 6],
     /// Per lane: the child node's index for an inner child, the first slot
     /// in [`Bvh::prim_order`](super::Bvh::prim_order) for a leaf.
     pub child: [u32; WIDTH],
     /// Per lane: 0 for an inner child, the primitive count (>= 1) for a
     /// leaf, [`EMPTY_LANE`] for an unused lane.
-    pub count: [u16; WIDTH],
-    /// Bit mask of the used lanes (the node test's answer is masked by it).
-    pub used: u8,
-    _pad: [u8; 7],
+    pub count: [u32; WIDTH],
 }
 
 /// One child of a [`BvhNode`].
@@ -62,116 +38,44 @@ pub enum Child {
     },
 }
 
-/// `2^e` for `e` in `-126..=127`.
-fn pow2(e: i32) -> f32 {
-    f32::from_bits(((e + 127) as u32) << 23)
-}
-
-/// The smallest power of two `s` (from `2^-126`, so that `q * s` stays
-/// exact) with `fma(255, s, lo) >= hi`, or `2^127`.
-fn grid_step(lo: f32, hi: f32) -> f32 {
-    let (mut a, mut b) = (-126i32, 127i32);
-    while a < b {
-        let m = (a + b).div_euclid(2);
-        if BvhNode::decode(255, pow2(m), lo) >= hi {
-            b = m;
-        } else {
-            a = m + 1;
-        }
-    }
-    pow2(a)
-}
-
-/// The first grid index `q` in `0..=255` for which the monotone `pred(q)`
-/// holds, or 256 (binary search).
-fn search(pred: impl Fn(u8) -> bool) -> u16 {
-    let (mut a, mut b) = (0u16, 256u16);
-    while a < b {
-        let m = (a + b) / 2;
-        if pred(m as u8) {
-            b = m;
-        } else {
-            a = m + 1;
-        }
-    }
-    a
-}
-
 impl BvhNode {
     pub(super) const EMPTY: BvhNode = BvhNode {
-        origin: [0.0; 3],
-        scale: [1.0; 3],
-        q: [[0; WIDTH]; 6],
+        bounds: [
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+            [f32::NEG_INFINITY; WIDTH],
+        ],
         child: [0; WIDTH],
         count: [EMPTY_LANE; WIDTH],
-        used: 0,
-        _pad: [0; 7],
     };
 
-    /// A plane's coordinate from its grid index: one fused multiply-add,
-    /// whose product is exact (a power of two times an integer below 256),
-    /// so it is also `origin + q * scale` rounded once, whatever unit
-    /// computes it.
-    #[inline(always)]
-    pub(super) fn decode(q: u8, scale: f32, origin: f32) -> f32 {
-        f32::from(q).mul_add(scale, origin)
-    }
-
-    /// The node whose lanes `0..lanes.len()` hold the given children
-    /// (`(box, child, count)`, as [`BvhNode::child`] and [`BvhNode::count`]
-    /// say), their boxes quantised outward; the other lanes unused.
-    pub(super) fn new(lanes: &[(Aabb, u32, u32)]) -> Self {
-        debug_assert!(lanes.len() <= WIDTH);
-        let mut n = Self::EMPTY;
-        let all = lanes.iter().fold(Aabb::EMPTY, |u, l| u.union(l.0));
+    pub(super) fn set_lane(&mut self, lane: usize, b: &Aabb, child: u32, count: u32) {
         for a in 0..3 {
-            let (lo, hi) = (all.min[a], all.max[a]);
-            n.origin[a] = lo;
-            n.scale[a] = grid_step(lo, hi);
+            self.bounds[a][lane] = b.min[a];
+            self.bounds[a + 3][lane] = b.max[a];
         }
-        for (lane, (b, child, count)) in lanes.iter().enumerate() {
-            for a in 0..3 {
-                let dec = |q: u8| Self::decode(q, n.scale[a], n.origin[a]);
-                // The last index at or below the box (0 decodes to the
-                // origin, at or below every box), the first at or above it
-                // (255 decodes at or above every box).
-                n.q[a][lane] = search(|q| dec(q) > b.min[a]).saturating_sub(1) as u8;
-                n.q[a + 3][lane] = search(|q| dec(q) >= b.max[a]).min(255) as u8;
-            }
-            n.child[lane] = *child;
-            // (Leaves hold at most 255 primitives: `BvhOptions::max_leaf`.)
-            debug_assert!(*count < u32::from(EMPTY_LANE));
-            n.count[lane] = *count as u16;
-            n.used |= 1 << lane;
-        }
-        n
+        self.child[lane] = child;
+        self.count[lane] = count;
     }
 
-    /// The decoded child boxes, rows as in [`BvhNode::q`] (unused lanes
-    /// decode to the origin).
-    pub fn planes(&self) -> [[f32; WIDTH]; 6] {
-        std::array::from_fn(|row| {
-            let a = row % 3;
-            self.q[row].map(|q| Self::decode(q, self.scale[a], self.origin[a]))
-        })
-    }
-
-    /// The used lanes: each child's (decoded) box and what it is.
+    /// The used lanes: each child's box and what it is.
     pub fn children(&self) -> impl Iterator<Item = (Aabb, Child)> + '_ {
-        let p = self.planes();
         (0..WIDTH)
-            .filter(|&i| self.used >> i & 1 == 1)
-            .map(move |i| {
+            .filter(|&i| self.count[i] != EMPTY_LANE)
+            .map(|i| {
                 let b = Aabb {
-                    min: Vec3::new(p[0][i], p[1][i], p[2][i]),
-                    max: Vec3::new(p[3][i], p[4][i], p[5][i]),
+                    min: Vec3::new(self.bounds[0][i], self.bounds[1][i], self.bounds[2][i]),
+                    max: Vec3::new(self.bounds[3][i], self.bounds[4][i], self.bounds[5][i]),
                 };
                 let c = if self.count[i] == 0 {
                     Child::Node(self.child[i])
                 } else {
                     Child::Leaf {
                         first: self.child[i],
-                        count: u32::from(self.count[i]),
+                        count: self.count[i],
                     }
                 };
                 (b, c)
@@ -183,34 +87,21 @@ impl BvhNode {
     /// `max`/`min` take their second operand when either is NaN (the SSE
     /// and AVX `max`/`min` instructions), so a NaN product (a zero
     /// direction component with the origin on a slab plane) never narrows
-    /// the interval. Unused lanes are masked out by [`BvhNode::used`].
-    /// The boxes are the decoded ones, which hold the children's, so the
-    /// exit widening's argument is unchanged.
+    /// the interval. Unused lanes hold inverted boxes, whose entry always
+    /// lies beyond their exit, so they never hit.
     ///
-    /// With AVX2 and FMA (the default x86-64-v3 build) all eight lanes are
-    /// one round of 256-bit operations; elsewhere two rounds of 4-lane
-    /// `glam::Vec4` ([`BvhNode::intersect4`]) on [`BvhNode::planes`]. Both
-    /// do the same IEEE operations per lane, so they agree bit for bit.
-    #[cfg(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    ))]
+    /// With AVX (the default x86-64-v3 build) all eight lanes are one
+    /// round of 256-bit operations; elsewhere two rounds of 4-lane
+    /// `glam::Vec4` ([`BvhNode::intersect4`]). Both do the same IEEE
+    /// operations per lane, so they agree bit for bit.
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
     #[inline(always)]
     pub(super) fn intersect(&self, r: &RayPre, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
         use safe_arch::*;
         const _: () = assert!(WIDTH == 8, "the AVX node test is eight lanes wide");
-        // A row's eight grid indices widened to f32, then decoded.
-        let plane = |row: usize, a: usize| {
-            let q = set_i64_m128i_s(i64::from_le_bytes(self.q[row]));
-            let q = convert_to_m256_from_i32_m256i(convert_to_i16_m256i_from_lower8_u8_m128i(q));
-            fused_mul_add_m256(
-                q,
-                set_splat_m256(self.scale[a]),
-                set_splat_m256(self.origin[a]),
-            )
-        };
-        let slab = |row: usize, a: usize| mul_m256(sub_m256(plane(row, a), r.org[a]), r.inv[a]);
+        let b = &self.bounds;
+        let slab =
+            |row: usize, a: usize| mul_m256(sub_m256(m256::from_array(b[row]), r.org[a]), r.inv[a]);
         let near = max_m256(
             slab(r.near_row[2], 2),
             max_m256(
@@ -230,17 +121,10 @@ impl BvhNode {
             set_splat_m256(t_max),
         );
         let hit = cmp_op_mask_m256::<{ cmp_op!(LessEqualOrdered) }>(near, far);
-        (
-            near.to_array(),
-            move_mask_m256(hit) as u32 & u32::from(self.used),
-        )
+        (near.to_array(), move_mask_m256(hit) as u32)
     }
 
-    #[cfg(not(all(
-        target_arch = "x86_64",
-        target_feature = "avx2",
-        target_feature = "fma"
-    )))]
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
     #[inline(always)]
     pub(super) fn intersect(&self, r: &RayPre, t_min: f32, t_max: f32) -> ([f32; WIDTH], u32) {
         self.intersect4(&r.org, &r.inv, r, t_min, t_max)
@@ -249,14 +133,7 @@ impl BvhNode {
     /// [`BvhNode::intersect`] four lanes at a time with `glam::Vec4` (SSE
     /// on x86), from the ray's origin and inverse direction splat over four
     /// lanes: the portable node test, and the AVX one's test oracle.
-    #[cfg(any(
-        test,
-        not(all(
-            target_arch = "x86_64",
-            target_feature = "avx2",
-            target_feature = "fma"
-        ))
-    ))]
+    #[cfg(any(test, not(all(target_arch = "x86_64", target_feature = "avx"))))]
     #[inline(always)]
     pub(super) fn intersect4(
         &self,
@@ -266,7 +143,7 @@ impl BvhNode {
         t_min: f32,
         t_max: f32,
     ) -> ([f32; WIDTH], u32) {
-        let b = self.planes();
+        let b = &self.bounds;
         let mut near_all = [0.0f32; WIDTH];
         let mut mask = 0u32;
         for h in 0..WIDTH / 4 {
@@ -281,38 +158,22 @@ impl BvhNode {
             mask |= near.cmple(far).bitmask() << (4 * h);
             near.write_to_slice(&mut near_all[lanes]);
         }
-        (near_all, mask & u32::from(self.used))
+        (near_all, mask)
     }
 }
 
 /// A ray constant splat over the node test's lanes.
-#[cfg(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-))]
+#[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
 type Splat = safe_arch::m256;
-#[cfg(not(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-)))]
+#[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
 type Splat = Vec4;
 
-#[cfg(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-))]
+#[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
 #[inline(always)]
 pub(super) fn splat(v: f32) -> Splat {
     safe_arch::set_splat_m256(v)
 }
-#[cfg(not(all(
-    target_arch = "x86_64",
-    target_feature = "avx2",
-    target_feature = "fma"
-)))]
+#[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
 #[inline(always)]
 pub(super) fn splat(v: f32) -> Splat {
     Vec4::splat(v)
@@ -327,7 +188,7 @@ pub(super) struct RayPre {
     /// test's lanes.
     pub(super) org: [Splat; 3],
     pub(super) inv: [Splat; 3],
-    /// Row of [`BvhNode::q`] holding the entry plane on each axis (the
+    /// Row of [`BvhNode::bounds`] holding the entry plane on each axis (the
     /// lower corner for a positive direction component).
     near_row: [usize; 3],
     far_row: [usize; 3],

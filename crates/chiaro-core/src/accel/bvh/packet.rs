@@ -172,7 +172,7 @@ pub(super) fn node_packet(
 ) -> NodeRays {
     #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
     {
-        use super::EXIT_SLACK;
+        use super::{EMPTY_LANE, EXIT_SLACK};
         use safe_arch::*;
         // (The per-ray forms are for the portable test.)
         let _ = (pre, t_min);
@@ -181,10 +181,9 @@ pub(super) fn node_packet(
         let mut lane_key = [f32::INFINITY; WIDTH];
         let cull = m256::from_array(*cull);
         let path = m256::from_array(*path);
-        // The decoded boxes, as the single-ray test decodes them.
-        let b = n.planes();
+        let b = &n.bounds;
         for i in 0..WIDTH {
-            if n.used >> i & 1 == 0 {
+            if n.count[i] == EMPTY_LANE {
                 continue;
             }
             let slab = |a: usize, near: bool| {
@@ -306,12 +305,12 @@ impl Bvh {
                 if k > 0 {
                     let entry = |i: usize| PacketEntry {
                         child: n.child[i],
-                        count: u32::from(n.count[i]),
+                        count: n.count[i],
                         rays: lane_rays[i],
                         near: lane_near[i],
                     };
                     for &i in &order[..k - 1] {
-                        prefetch(nodes, n.child[i], u32::from(n.count[i]), &leaf);
+                        prefetch(nodes, n.child[i], n.count[i], &leaf);
                         stack.push(entry(i));
                     }
                     cur = entry(order[k - 1]);
@@ -381,7 +380,7 @@ impl Bvh {
                     }
                     let e = PacketEntry {
                         child: n.child[i],
-                        count: u32::from(n.count[i]),
+                        count: n.count[i],
                         rays,
                         near: [0.0; PACKET],
                     };

@@ -6,7 +6,7 @@ use super::{Bvh, BvhNode, WIDTH};
 use crate::geometry::Ray;
 
 /// Starts loading a child pushed on the traversal stack into the cache:
-/// the two cache lines of an inner child's node (`count` 0), or, through
+/// the four cache lines of an inner child's node (`count` 0), or, through
 /// `leaf`, a leaf's primitives (`leaf(first)`). A pushed child is popped
 /// after its nearer sibling's subtree, by when its data has arrived, so an
 /// incoherent ray waits on several misses at once rather than one after
@@ -19,7 +19,9 @@ pub(super) fn prefetch(nodes: &[BvhNode], child: u32, count: u32, leaf: &impl Fn
     }
     #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
     if let Some(n) = nodes.get(child as usize) {
-        safe_arch::prefetch_t0(&n.origin);
+        safe_arch::prefetch_t0(&n.bounds[0]);
+        safe_arch::prefetch_t0(&n.bounds[2]);
+        safe_arch::prefetch_t0(&n.bounds[4]);
         safe_arch::prefetch_t0(&n.child);
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
@@ -180,7 +182,7 @@ impl Bvh {
                     let rest = mask & (mask - 1);
                     if rest == 0 {
                         // One child: descend.
-                        (child, count) = (n.child[first], u32::from(n.count[first]));
+                        (child, count) = (n.child[first], n.count[first]);
                         continue;
                     }
                     let second = rest.trailing_zeros() as usize;
@@ -193,14 +195,13 @@ impl Bvh {
                         } else {
                             (first, second)
                         };
-                        let far_count = u32::from(n.count[far]);
-                        prefetch(nodes, n.child[far], far_count, &leaf);
+                        prefetch(nodes, n.child[far], n.count[far], &leaf);
                         stack.push(Entry {
                             child: n.child[far],
-                            count: far_count,
+                            count: n.count[far],
                             near: near[far],
                         });
-                        (child, count) = (n.child[near_lane], u32::from(n.count[near_lane]));
+                        (child, count) = (n.child[near_lane], n.count[near_lane]);
                         continue;
                     }
                     // Several: push all but the nearest, farthest deepest
@@ -213,7 +214,7 @@ impl Bvh {
                         m &= m - 1;
                         let e = Entry {
                             child: n.child[i],
-                            count: u32::from(n.count[i]),
+                            count: n.count[i],
                             near: near[i],
                         };
                         let mut j = k;
@@ -291,15 +292,14 @@ impl Bvh {
                     while mask != 0 {
                         let i = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        let count = u32::from(n.count[i]);
-                        prefetch(nodes, n.child[i], count, &leaf);
+                        prefetch(nodes, n.child[i], n.count[i], &leaf);
                         stack.push(Entry {
                             child: n.child[i],
-                            count,
+                            count: n.count[i],
                             near: 0.0,
                         });
                     }
-                    (child, count) = (n.child[first], u32::from(n.count[first]));
+                    (child, count) = (n.child[first], n.count[first]);
                     continue;
                 }
             } else if test(child as usize, count as usize) {

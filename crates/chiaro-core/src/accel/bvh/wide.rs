@@ -97,7 +97,7 @@ pub(super) fn build_tree(refs: &mut [PrimRef], root: Item, opts: &Build) -> Tree
     let mut scratch = new_bins();
     if root.is_leaf() {
         let first = out.leaf(refs);
-        out.nodes[0] = BvhNode::new(&[(root.bounds, first, root.len as u32)]);
+        out.nodes[0].set_lane(0, &root.bounds, first, root.len as u32);
     } else {
         fill_node(refs, root, 0, opts, &mut scratch, &mut out);
     }
@@ -285,13 +285,13 @@ fn fill_node(
         k += 1;
     }
     let kids = &kids[..k];
-    let mut lanes = [(Aabb::EMPTY, 0u32, 0u32); WIDTH];
+    let mut node = BvhNode::EMPTY;
     let mut inner = [0usize; WIDTH];
     let mut ni = 0;
     for (lane, c) in kids.iter().enumerate() {
         if c.is_leaf() {
             let first = out.leaf(&refs[c.start..c.start + c.len]);
-            lanes[lane] = (c.bounds, first, c.len as u32);
+            node.set_lane(lane, &c.bounds, first, c.len as u32);
         } else {
             inner[ni] = lane;
             ni += 1;
@@ -299,10 +299,10 @@ fn fill_node(
     }
     let first = out.nodes.len();
     for (m, &lane) in inner[..ni].iter().enumerate() {
-        lanes[lane] = (kids[lane].bounds, (first + m) as u32, 0);
+        node.set_lane(lane, &kids[lane].bounds, (first + m) as u32, 0);
     }
     out.nodes.resize(first + ni, BvhNode::EMPTY);
-    out.nodes[slot] = BvhNode::new(&lanes[..k]);
+    out.nodes[slot] = node;
     // The inner children's disjoint runs of references, in order.
     let mut runs: Vec<(&mut [PrimRef], Item)> = Vec::with_capacity(ni);
     let (mut rest, mut at) = (refs, 0);
