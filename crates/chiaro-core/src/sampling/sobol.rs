@@ -225,13 +225,13 @@ impl SobolSampler {
     /// lane loop.
     #[inline]
     pub fn lanes_2d_at(&mut self, dims: &[u32; LANES], rev: &[u32; LANES]) -> [[f32; LANES]; 2] {
-        let keys: [PairKeys; LANES] = std::array::from_fn(|i| self.keys_at(dims[i]));
+        let (shuffle, kx, ky) = self.keys_of(dims);
         let mut out = [[0.0; LANES]; 2];
         for i in 0..LANES {
-            let index = laine_karras(rev[i], keys[i].shuffle).reverse_bits() & self.mask;
+            let index = laine_karras(rev[i], shuffle[i]).reverse_bits() & self.mask;
             let second = second_by_taylor_shift(index);
-            out[0][i] = to_unit(laine_karras(index, keys[i].x).reverse_bits());
-            out[1][i] = to_unit(laine_karras(second, keys[i].y).reverse_bits());
+            out[0][i] = to_unit(laine_karras(index, kx[i]).reverse_bits());
+            out[1][i] = to_unit(laine_karras(second, ky[i]).reverse_bits());
         }
         out
     }
@@ -240,13 +240,32 @@ impl SobolSampler {
     /// [`Self::lanes_2d_at`]): what `next_1d` draws for each.
     #[inline]
     pub fn lanes_1d_at(&mut self, dims: &[u32; LANES], rev: &[u32; LANES]) -> [f32; LANES] {
-        let keys: [PairKeys; LANES] = std::array::from_fn(|i| self.keys_at(dims[i]));
+        let (shuffle, kx, _) = self.keys_of(dims);
         let mut out = [0.0; LANES];
         for i in 0..LANES {
-            let index = laine_karras(rev[i], keys[i].shuffle).reverse_bits() & self.mask;
-            out[i] = to_unit(laine_karras(index, keys[i].x).reverse_bits());
+            let index = laine_karras(rev[i], shuffle[i]).reverse_bits() & self.mask;
+            out[i] = to_unit(laine_karras(index, kx[i]).reverse_bits());
         }
         out
+    }
+
+    /// The keys of pair `dims[i]` per lane, as three arrays (shuffle, x, y),
+    /// every pair up to the largest hashed first.
+    #[inline(always)]
+    fn keys_of(&mut self, dims: &[u32; LANES]) -> ([u32; LANES], [u32; LANES], [u32; LANES]) {
+        let top = dims.iter().copied().max().unwrap_or(0);
+        self.keys_at(top);
+        let keys = &self.keys;
+        let at = |i: usize| keys.get(dims[i] as usize).copied();
+        let key = |i: usize| {
+            at(i).unwrap_or(PairKeys {
+                shuffle: 0,
+                x: 0,
+                y: 0,
+            })
+        };
+        let ks: [PairKeys; LANES] = std::array::from_fn(key);
+        (ks.map(|k| k.shuffle), ks.map(|k| k.x), ks.map(|k| k.y))
     }
 
     /// The keys of pair `dim` (hashed on first use).

@@ -381,8 +381,7 @@ impl PathTracer<'_, '_> {
             let glossy: [bool; LANES] = std::array::from_fn(|i| shade[i] & vx.glossy[i]);
             let mixed = without(&glossy, &delta);
             let mut g = self.sample_mixtures(&vx, &info, &mixed, &dir, u, dim, &pairs, rng);
-            let lanes = (&shade, &delta);
-            self.sample_deltas(&mut g, &vx, &info, lanes, &dir, u, dim, &mut pairs, rng);
+            self.sample_deltas(&mut g, &vx, &info, &delta, &dir, u, dim, &mut pairs, rng);
             dim += 2;
             let mut q: F = [0.0; LANES];
             let mut ended = [false; LANES];
@@ -436,6 +435,7 @@ impl PathTracer<'_, '_> {
                     beta.put(i, bt.map(|c| c / q[i]));
                 }
             }
+            pairs.retire(&shade);
             alive = shade;
         }
         (out, first_hit)
@@ -607,8 +607,10 @@ impl PathTracer<'_, '_> {
         if let Some((d, u_next)) = next {
             *u_next = pairs.lanes_2d(rng, d);
         }
-        if picked.is_none() {
-            // No lights: nothing to sample (the pair above is still drawn).
+        if picked.is_none() || !ok.iter().any(|&o| o) {
+            // No lights, or no lane left to sample one lane-parallel (all
+            // delta, glossy or lit by other lights): nothing more (the pair
+            // above is still drawn).
             return;
         }
         // The light sample (`TriangleEmitter::sample`), the Lambert term

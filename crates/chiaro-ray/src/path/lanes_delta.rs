@@ -48,23 +48,67 @@ impl LanePairs {
     }
 
     /// Pair `dim` of the batch for every lane (its own pair where it runs
-    /// ahead): `SobolSampler::lanes_2d` while no lane does.
+    /// ahead): `SobolSampler::lanes_2d` when every lane is as far ahead
+    /// (the lanes of a pixel often meet the same surfaces), two of them
+    /// selected by lane when the leads differ by one, else each lane's own
+    /// pair (`SobolSampler::lanes_2d_at`).
     #[inline(always)]
     pub(super) fn lanes_2d(&self, rng: &mut SobolSampler, dim: u32) -> [[f32; LANES]; 2] {
-        if self.ahead == [0; LANES] {
-            rng.lanes_2d(dim, &self.rev)
-        } else {
-            rng.lanes_2d_at(&self.ahead.map(|a| dim + a), &self.rev)
+        let (lo, hi) = self.leads();
+        if lo == hi {
+            return rng.lanes_2d(dim + lo, &self.rev);
         }
+        if hi - lo == 1 {
+            let (a, b) = (
+                rng.lanes_2d(dim + lo, &self.rev),
+                rng.lanes_2d(dim + hi, &self.rev),
+            );
+            return std::array::from_fn(|k| self.pick(hi, &a[k], &b[k]));
+        }
+        rng.lanes_2d_at(&self.ahead.map(|a| dim + a), &self.rev)
     }
 
     /// The first number of [`Self::lanes_2d`]'s pair.
     #[inline(always)]
     pub(super) fn lanes_1d(&self, rng: &mut SobolSampler, dim: u32) -> F {
-        if self.ahead == [0; LANES] {
-            rng.lanes_1d(dim, &self.rev)
-        } else {
-            rng.lanes_1d_at(&self.ahead.map(|a| dim + a), &self.rev)
+        let (lo, hi) = self.leads();
+        if lo == hi {
+            return rng.lanes_1d(dim + lo, &self.rev);
+        }
+        if hi - lo == 1 {
+            let (a, b) = (
+                rng.lanes_1d(dim + lo, &self.rev),
+                rng.lanes_1d(dim + hi, &self.rev),
+            );
+            return self.pick(hi, &a, &b);
+        }
+        rng.lanes_1d_at(&self.ahead.map(|a| dim + a), &self.rev)
+    }
+
+    /// The least and the greatest lead.
+    #[inline(always)]
+    fn leads(&self) -> (u32, u32) {
+        let lo = self.ahead.iter().fold(u32::MAX, |m, &a| m.min(a));
+        let hi = self.ahead.iter().fold(0, |m, &a| m.max(a));
+        (lo, hi)
+    }
+
+    /// `b` in the lanes `hi` ahead, `a` in the others.
+    #[inline(always)]
+    fn pick(&self, hi: u32, a: &F, b: &F) -> F {
+        std::array::from_fn(|i| if self.ahead[i] == hi { b[i] } else { a[i] })
+    }
+
+    /// Gives the lanes not in `alive` (whose numbers are no longer read)
+    /// the lead of a live one, so that they do not widen the leads' range.
+    #[inline(always)]
+    pub(super) fn retire(&mut self, alive: &[bool; LANES]) {
+        let Some(k) = alive.iter().position(|&a| a) else {
+            return;
+        };
+        let lead = self.ahead[k];
+        for i in 0..LANES {
+            self.ahead[i] = if alive[i] { self.ahead[i] } else { lead };
         }
     }
 }
@@ -91,7 +135,6 @@ impl PathTracer<'_, '_> {
     /// lane needs one), the direction's pair `u` (which delta lobes do not
     /// read), the Fresnel choice's number from pair `dim + 2` only where
     /// [`Bsdf::sample`] asks for it, that lane then running one pair ahead.
-    /// Lanes not in `shade` (ended) lose their lead.
     ///
     /// [`Bsdf::sample`]: chiaro_core::shading::Bsdf::sample
     #[allow(clippy::too_many_arguments)]
@@ -101,16 +144,13 @@ impl PathTracer<'_, '_> {
         g: &mut MixtureSamples,
         vx: &Vertices,
         info: &[Option<&MaterialInfo>; LANES],
-        (shade, delta): (&[bool; LANES], &[bool; LANES]),
+        delta: &[bool; LANES],
         dir: &V3,
         u: [[f32; LANES]; 2],
         dim: u32,
         pairs: &mut LanePairs,
         rng: &mut SobolSampler,
     ) {
-        for i in 0..LANES {
-            pairs.ahead[i] = if shade[i] { pairs.ahead[i] } else { 0 };
-        }
         if !delta.iter().any(|&d| d) {
             return;
         }
@@ -120,8 +160,15 @@ impl PathTracer<'_, '_> {
         } else {
             [0.0; LANES]
         };
-        // (Drawn for every lane; read only where the choice is made.)
-        let u_fresnel = pairs.lanes_1d(rng, dim + 2);
+        // (Drawn for every lane when some lane's glass may ask for it; read
+        // only where the choice is made.)
+        let glass = set_lanes(delta)
+            .any(|i| info[i].is_some_and(|m| m.bsdf.fresnel && m.bsdf.lobes.weights[3] > 0.0));
+        let u_fresnel = if glass {
+            pairs.lanes_1d(rng, dim + 2)
+        } else {
+            [0.0; LANES]
+        };
         for i in set_lanes(delta) {
             let Some(m) = info[i] else { continue };
             let bsdf = &m.bsdf;

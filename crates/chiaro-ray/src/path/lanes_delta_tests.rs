@@ -70,23 +70,27 @@ fn kernel_keeps_mirror_and_conductor_vertices() {
 #[test]
 fn kernel_keeps_glass_seen_from_outside_and_inside() {
     // A glass sphere in the box (entered and left: Fresnel choices from
-    // both sides, each moving the lane's pairs on), then the camera inside
-    // a second glass sphere off its centre, whose camera rays meet the
-    // inside obliquely: total internal reflection beyond 41.8 degrees.
+    // both sides, each moving the lane's pairs on), then a glass block
+    // beside it, inside which light that came in through one face meets
+    // the next beyond the critical angle (41.8 degrees): total internal
+    // reflection.
     let mut s = mitsuba_cbox(10);
     let g = glass(&mut s);
     sphere(&mut s, g, 0.35, Vec3::new(0.2, -0.5, 0.2));
     s.render.samples = 21;
     s.render.path.max_depth = 12;
     s.render.path.rr_depth = 2;
-    let n = kernel_deltas(|| assert!(assert_samples_agree(&s, "glass outside") > 1000));
+    let n = kernel_deltas(|| assert!(assert_samples_agree(&s, "glass sphere") > 1000));
     assert!(n > 100, "{n} delta vertices in the kernel");
-    let eye = s.camera.eye;
-    sphere(&mut s, g, 0.3, eye + Vec3::new(0.22, 0.05, -0.02));
-    let n = kernel_deltas(|| assert!(assert_samples_agree(&s, "camera inside glass") > 500));
-    // (Every camera ray meets the sphere's inside.)
-    assert!(n > 1000, "{n} delta vertices in the kernel");
-    assert_kernels_agree(&s, "camera inside glass, films");
+    let block = s.add_mesh(primitives::box_mesh(Vec3::new(0.25, 0.3, 0.25)));
+    let at = Transform {
+        translate: Vec3::new(-0.4, -0.5, -0.1),
+        ..Default::default()
+    };
+    add_object(&mut s, Geometry::Mesh(block), g, at);
+    let n = kernel_deltas(|| assert!(assert_samples_agree(&s, "glass block") > 1000));
+    assert!(n > 200, "{n} delta vertices in the kernel");
+    assert_kernels_agree(&s, "glass block, films");
 }
 
 #[test]
