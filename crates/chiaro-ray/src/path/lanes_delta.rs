@@ -1,7 +1,7 @@
 //! Delta vertices in the lock-step kernel: ideal mirrors, smooth
 //! conductors and smooth (Fresnel or fixed-weight) transmission, the
 //! vertices of `MaterialInfo::delta`. Such a lane stays in its batch: its
-//! next direction and weight come from [`Bsdf::sample`] with the numbers
+//! next direction and weight come from `Bsdf::sample` with the numbers
 //! the scalar loop's `sample_bsdf` draws, its MIS pdf from [`mis_pdf`]
 //! (0: a delta bounce), and its throughput, ray and Russian roulette from
 //! the kernel's own loop, as for the glossy lanes. Next-event estimation
