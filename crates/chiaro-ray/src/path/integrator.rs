@@ -447,6 +447,22 @@ impl<'a, 's> PathTracer<'a, 's> {
         }
     }
 
+    /// The vertex at `ray`'s `hit` through the surface layer (the base
+    /// level of textures) and its material there: textures, vertex colours
+    /// and normal or bump maps applied. What both loops shade at a hit
+    /// that [`Self::plain_vertex`] does not take.
+    #[inline]
+    pub(super) fn surface_vertex(&self, ray: &Ray, hit: &Hit) -> (Vertex, MaterialInfo) {
+        let ss = self.prepared.shading_surface(ray, hit, None);
+        let mat = self.prepared.material(ss.hit.material);
+        let v = Vertex {
+            p: ss.hit.p,
+            ng: ss.hit.ng,
+            ns: ss.ns,
+        };
+        (v, MaterialInfo::new(ss.material, mat))
+    }
+
     /// Radiance along camera ray `ray`, and the first hit's distance and normal.
     pub(super) fn radiance(
         &self,
@@ -507,16 +523,8 @@ impl<'a, 's> PathTracer<'a, 's> {
             let (v, info) = match self.plain_vertex(&ray, t, prim, u, hv) {
                 Some(plain) => plain,
                 None => {
-                    let hit = Hit { t, prim, u, v: hv };
-                    // The surface layer, base level of textures.
-                    let ss = self.prepared.shading_surface(&ray, &hit, None);
-                    let mat = self.prepared.material(ss.hit.material);
-                    owned = MaterialInfo::new(ss.material, mat);
-                    let v = Vertex {
-                        p: ss.hit.p,
-                        ng: ss.hit.ng,
-                        ns: ss.ns,
-                    };
+                    let v;
+                    (v, owned) = self.surface_vertex(&ray, &Hit { t, prim, u, v: hv });
                     (v, &owned)
                 }
             };

@@ -8,20 +8,22 @@
 //! the scalar loop's order (Rust never fuses or reorders float operations,
 //! so a loop over lanes gives each lane the scalar result), and draws its
 //! numbers from the same Sobol pairs ([`SobolSampler::lanes_2d`]). It
-//! shades the vertices of plain triangles and spheres
-//! ([`PathTracer::plain_vertex`]) whose material is Lambertian, a
-//! mixture of Lambert and a glossy lobe (GGX and the other microfacet and
-//! Phong lobes: the glTF metal/dielectric mix), or delta lobes alone (ideal
-//! mirror, smooth conductor, smooth Fresnel or fixed-weight transmission,
-//! without absorption: `lanes_delta.rs`), `MaterialInfo::lock_step`. A
-//! delta vertex's Fresnel choice draws one more number, so each lane keeps
-//! its own lead over the batch's pair count (`LanePairs`). A lane whose
-//! vertex it does not shade (a delta lobe mixed with diffuse or glossy
-//! ones, a rough dielectric, a clear coat, an absorbing medium, a textured
-//! or vertex-coloured surface) leaves the batch there and finishes in the
-//! scalar loop from the same state and the same pair
-//! ([`PathTracer::radiance_from`]), and so do the last few lanes of a
-//! batch ([`SCALAR_TAIL`]).
+//! shades the vertices whose material is Lambertian, a mixture of Lambert
+//! and a glossy lobe (GGX and the other microfacet and Phong lobes: the
+//! glTF metal/dielectric mix), or delta lobes alone (ideal mirror, smooth
+//! conductor, smooth Fresnel or fixed-weight transmission, without
+//! absorption: `lanes_delta.rs`), `MaterialInfo::lock_step`: of plain
+//! triangles and spheres from their cached material
+//! ([`PathTracer::plain_vertex`]), of textured, vertex-coloured or
+//! normal-mapped ones from the material the scalar loop resolves at the
+//! hit ([`PathTracer::surface_vertex`], lane by lane). A delta vertex's
+//! Fresnel choice draws one more number, so each lane keeps its own lead
+//! over the batch's pair count (`LanePairs`). A lane whose vertex it does
+//! not shade (a delta lobe mixed with diffuse or glossy ones, a rough
+//! dielectric, a clear coat, an absorbing medium, a one-sided Lambertian
+//! surface) leaves the batch there and finishes in the scalar loop from
+//! the same state and the same pair ([`PathTracer::radiance_from`]), and
+//! so do the last few lanes of a batch ([`SCALAR_TAIL`]).
 //!
 //! Rays are still traced one at a time; what runs lane-parallel is the
 //! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
@@ -245,7 +247,9 @@ impl PathTracer<'_, '_> {
         // The vertex of each lane shaded here: position, geometric normal,
         // both normals on the viewer's side, Lambert's constants.
         let mut vx = Vertices::default();
-        let mut info = [None; LANES];
+        // The material at each lane's vertex when it is not a plain one
+        // (textured, vertex-coloured, mapped): resolved per hit.
+        let mut surfaces: [Option<super::MaterialInfo>; LANES] = [None; LANES];
         let mut lights = LightLanes::default();
         let mut u_next = [[0.0; LANES]; 2];
         for depth in 0..self.max_depth {
@@ -268,6 +272,11 @@ impl PathTracer<'_, '_> {
             // Trace; sort the lanes into escaped, handed to the scalar
             // loop, and shaded here (whose emission is added now).
             let mut shade = [false; LANES];
+            // Each shaded lane's material: the cached one of a plain vertex,
+            // or (lanes in `resolved`) its slot in `surfaces`, filled in
+            // after this loop.
+            let mut info = [None; LANES];
+            let mut resolved = [false; LANES];
             for i in set_lanes(&alive) {
                 *rays += 1;
                 let ray = Ray::new(org.get(i), dir.get(i));
@@ -284,10 +293,17 @@ impl PathTracer<'_, '_> {
                     continue;
                 };
                 let Hit { t, prim, u, v: hv } = hit;
-                let Some((v, m)) = self
-                    .plain_vertex(&ray, t, prim, u, hv)
-                    .filter(|(_, m)| m.lock_step)
-                else {
+                let plain = self.plain_vertex(&ray, t, prim, u, hv);
+                let (v, m) = match plain {
+                    Some(vm) => vm,
+                    None => {
+                        let (v, m) = self.surface_vertex(&ray, &Hit { t, prim, u, v: hv });
+                        (v, &*surfaces[i].insert(m))
+                    }
+                };
+                if !m.lock_step {
+                    #[cfg(test)]
+                    HANDED_OFF.set(HANDED_OFF.get() + 1);
                     // The scalar loop from this vertex, at this pair.
                     let path = (&beta, &l, &prev_pdf, (&prev_p, &prev_n));
                     let pair = (first, pairs.dim(i, dim));
@@ -298,7 +314,7 @@ impl PathTracer<'_, '_> {
                     }
                     alive[i] = false;
                     continue;
-                };
+                }
                 if depth == 0 && i == 0 {
                     first_hit = Some((t * ray.dir.length(), v.ns));
                 }
@@ -319,8 +335,12 @@ impl PathTracer<'_, '_> {
                 vx.n.set(i, v.ns);
                 vx.kd.set(i, m.bsdf.m.kd);
                 vx.glossy[i] = !m.lambert;
-                info[i] = Some(m);
+                info[i] = plain.map(|(_, m)| m);
+                resolved[i] = plain.is_none();
                 shade[i] = true;
+            }
+            for i in set_lanes(&resolved) {
+                info[i] = surfaces[i].as_ref();
             }
             if !shade.iter().any(|&s| s) {
                 break;
@@ -798,6 +818,14 @@ pub(super) struct Vertices {
     /// The material is a Lambert-and-glossy mixture (`lock_step` but not
     /// `lambert`): shaded through the BSDF's own functions.
     glossy: [bool; LANES],
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Lanes this thread's kernel handed to the scalar loop at a vertex it
+    /// does not shade: what the tests read to see which vertices stay in
+    /// lock-step.
+    pub(super) static HANDED_OFF: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
 }
 
 #[cfg(test)]

@@ -57,6 +57,8 @@ mod lights;
 mod reference;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod texture_tests;
 
 use integrator::{MAX_PASSES, MaterialInfo, PathState, PathTracer};
 use lights::NO_LIGHT;

@@ -22,7 +22,7 @@ use lanes::Vertices;
 mod lanes_delta_tests;
 use std::f32::consts::PI;
 
-fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
+pub(super) fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
     Box::new(SceneBvh::new(p))
 }
 
@@ -689,7 +689,7 @@ fn glass_sphere_of_ior_one_is_invisible() {
 /// lock-step batches of `radiance_lanes` and one `radiance` per sample)
 /// and asserts each sample's radiance, each pixel's ray count and first
 /// hit equal bit for bit; returns how many samples saw something.
-fn assert_samples_agree(scene: &Scene, what: &str) -> usize {
+pub(super) fn assert_samples_agree(scene: &Scene, what: &str) -> usize {
     let settings = &scene.render;
     let ctx = RenderContext::new(scene, settings, &NoProgress)
         .expect("a context")
