@@ -171,14 +171,46 @@ pub const DESCRIPTION: Description = Description {
     ],
 };
 
-/// Adds what the radiosity solver allocates to `estimate`: with the
-/// matrix solvers, two dense f32 matrices over at least one element a
-/// triangle of the tessellated scene.
+/// Adds what the radiosity solver allocates to `estimate`, over at least
+/// one element a triangle of the tessellated scene: with the matrix
+/// solvers, two dense f32 matrices; with the hierarchical solver (and
+/// `auto` where it picks it), its quadtrees, links and clusters
+/// ([`hierarchical`]'s estimate; the solve checks it again with the real
+/// element count once the scene is meshed, before building them).
 pub fn solver_memory(scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
-    if settings.radiosity.solver.is_matrix() {
-        let n = chiaro_core::context::tessellated_triangles(scene, settings);
+    let cfg = &settings.radiosity;
+    let n = chiaro_core::context::tessellated_triangles(scene, settings);
+    if cfg.solver.is_matrix() {
         estimate.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
+    } else if cfg
+        .solver
+        .resolve(usize::try_from(n).unwrap_or(usize::MAX), cfg.formfactor)
+        == Solver::Hierarchical
+    {
+        hierarchical::memory(n, n, n > cluster::CLUSTER_ABOVE as u64, estimate);
     }
+}
+
+/// The hierarchical solver's memory over `mesh` checked against the
+/// budget before its quadtrees, links and clusters are built: the render's
+/// estimate ([`chiaro_core::context::memory_estimate`]) with
+/// [`hierarchical::memory`] at the mesh's element count.
+fn check_hierarchy_memory(
+    ctx: &RenderContext<'_>,
+    mesh: &ElementMesh,
+    clustered: bool,
+) -> Result<(), CoreError> {
+    let (scene, settings) = (ctx.scene(), ctx.settings());
+    let mut estimate = chiaro_core::context::memory_estimate(scene, settings);
+    hierarchical::memory(
+        mesh.sources.len() as u64,
+        mesh.elements.len() as u64,
+        clustered,
+        &mut estimate,
+    );
+    estimate.check(settings.memory_budget()).map_err(|e| {
+        CoreError::Unsupported(format!("radiosity ({} elements): {e}", mesh.elements.len()))
+    })
 }
 
 /// The context's radiosity solution: the one it was given (a saved
@@ -555,6 +587,7 @@ pub(crate) fn solve_clustering(
                     Some(&vis),
                 ),
             };
+            check_hierarchy_memory(ctx, &mesh, mesh.sources.len() > cluster_above.max(1))?;
             let (l, hs) = hierarchical::solve(
                 ps,
                 &mesh,
@@ -921,3 +954,5 @@ mod tests_cluster;
 mod tests_environment;
 #[cfg(test)]
 mod tests_hostile;
+#[cfg(test)]
+mod tests_memory;
