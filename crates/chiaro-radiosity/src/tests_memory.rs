@@ -3,21 +3,10 @@
 //! before its quadtrees, links and clusters are built.
 
 use super::*;
+use crate::tests_cluster::hierarchical_settings;
 use chiaro_core::budget::ByteSize;
 use chiaro_core::progress::NoProgress;
 use chiaro_testkit::scenes::unit_cornell_box;
-
-/// Hierarchical ray-cast settings with elements of `patch` size.
-fn hierarchical_settings(patch: f32) -> RenderSettings {
-    let mut r = RenderSettings {
-        width: 32,
-        height: 32,
-        ..Default::default()
-    };
-    r.radiosity.solver = Solver::Hierarchical;
-    r.radiosity.patch_size = patch;
-    r
-}
 
 /// The estimate for `s` meshed at `patch` and the bytes the solve's nodes,
 /// links and clusters held (by the solution's counts and the per-item

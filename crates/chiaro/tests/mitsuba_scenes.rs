@@ -11,6 +11,9 @@ use chiaro::progress::NoProgress;
 use chiaro_testkit::stats::mitsuba_z_test;
 use std::path::{Path, PathBuf};
 
+#[path = "common/techniques.rs"]
+mod techniques;
+
 /// Each scene file and its reference's stem.
 const SCENES: [(&str, &str); 7] = [
     (
@@ -54,21 +57,7 @@ fn every_technique_renders_every_scene() {
         let scene = chiaro::io::load_scene(&dir.join(file))
             .unwrap_or_else(|e| panic!("{file}: {e}"))
             .scene;
-        for technique in Technique::ALL {
-            let mut s = scene.render.clone();
-            s.technique = technique;
-            s.width = 24;
-            s.height = 24;
-            s.samples = 1;
-            let film = chiaro::render(&scene, &s, &NoProgress)
-                .unwrap_or_else(|e| panic!("{file} with {}: {e}", technique.name()));
-            assert_eq!((film.width, film.height), (24, 24));
-            assert!(
-                film.color.iter().all(|c| c.is_finite()),
-                "{file}: {}",
-                technique.name()
-            );
-        }
+        techniques::renders_with_every_technique(&scene, file);
     }
 }
 
