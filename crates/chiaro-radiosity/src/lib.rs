@@ -191,26 +191,22 @@ pub fn solver_memory(scene: &Scene, settings: &RenderSettings, estimate: &mut Es
     }
 }
 
-/// The hierarchical solver's memory over `mesh` checked against the
-/// budget before its quadtrees, links and clusters are built: the render's
-/// estimate ([`chiaro_core::context::memory_estimate`]) with
-/// [`hierarchical::memory`] at the mesh's element count.
+/// The hierarchical solver's memory over `sources` source triangles meshed
+/// into `elements` elements, checked against the budget before they are
+/// made: the render's estimate ([`chiaro_core::context::memory_estimate`])
+/// with [`hierarchical::memory`] at that element count.
 fn check_hierarchy_memory(
     ctx: &RenderContext<'_>,
-    mesh: &ElementMesh,
+    sources: usize,
+    elements: u64,
     clustered: bool,
 ) -> Result<(), CoreError> {
     let (scene, settings) = (ctx.scene(), ctx.settings());
     let mut estimate = chiaro_core::context::memory_estimate(scene, settings);
-    hierarchical::memory(
-        mesh.sources.len() as u64,
-        mesh.elements.len() as u64,
-        clustered,
-        &mut estimate,
-    );
-    estimate.check(settings.memory_budget()).map_err(|e| {
-        CoreError::Unsupported(format!("radiosity ({} elements): {e}", mesh.elements.len()))
-    })
+    hierarchical::memory(sources as u64, elements, clustered, &mut estimate);
+    estimate
+        .check(settings.memory_budget())
+        .map_err(|e| CoreError::Unsupported(format!("radiosity ({elements} elements): {e}")))
 }
 
 /// The context's radiosity solution: the one it was given (a saved
@@ -432,7 +428,22 @@ pub(crate) fn solve_clustering(
     // `auto`: progressive refinement on small scenes, clusters above.
     let solver = cfg.solver.resolve(ps.triangles.len(), cfg.formfactor);
     progress.begin("radiosity meshing", 1);
-    let mesh = mesh::build(ps, patch, solver == Solver::Hierarchical, progress)?;
+    // The hierarchical solver's quadtrees, links and clusters are checked
+    // against the budget at the element count, before the elements are made.
+    let hierarchy = |sources: usize, elements: u64| {
+        if solver == Solver::Hierarchical {
+            check_hierarchy_memory(ctx, sources, elements, sources > cluster_above.max(1))
+        } else {
+            Ok(())
+        }
+    };
+    let mesh = mesh::build_checked(
+        ps,
+        patch,
+        solver == Solver::Hierarchical,
+        progress,
+        &hierarchy,
+    )?;
     // Patches above elements shoot in progressive refinement with element
     // form factors (hemicubes are cast from one element's centre, so their
     // shots stay per element); the other solvers work on elements.
@@ -587,7 +598,6 @@ pub(crate) fn solve_clustering(
                     Some(&vis),
                 ),
             };
-            check_hierarchy_memory(ctx, &mesh, mesh.sources.len() > cluster_above.max(1))?;
             let (l, hs) = hierarchical::solve(
                 ps,
                 &mesh,
