@@ -11,34 +11,11 @@ use chiaro::progress::NoProgress;
 use chiaro_testkit::stats::mitsuba_z_test;
 use std::path::{Path, PathBuf};
 
+#[path = "common/mitsuba_scene_files.rs"]
+mod mitsuba_scene_files;
 #[path = "common/techniques.rs"]
 mod techniques;
-
-/// Each scene file and its reference's stem.
-const SCENES: [(&str, &str); 7] = [
-    (
-        "floating_sphere/test_directional_direct.xml",
-        "test_directional",
-    ),
-    ("infinite_mirrors/scene_path.xml", "scene"),
-    ("instancing/test_instancing_path.xml", "test_instancing"),
-    (
-        "mesh_attributes/test_mesh_attributes_1_face_direct.xml",
-        "test_mesh_attributes_1_face",
-    ),
-    (
-        "mesh_attributes/test_mesh_attributes_3_face_direct.xml",
-        "test_mesh_attributes_3_face",
-    ),
-    (
-        "mesh_attributes/test_mesh_attributes_3_vertex_direct.xml",
-        "test_mesh_attributes_3_vertex",
-    ),
-    (
-        "texture_interp/test_texture_interp_direct.xml",
-        "test_texture_interp",
-    ),
-];
+use mitsuba_scene_files::SCENES;
 
 fn scenes_dir() -> Option<PathBuf> {
     let d = chiaro_testkit::shared_assets()?.join("mitsuba3-test-scenes/tests/scenes");
