@@ -513,7 +513,7 @@ impl<'s> PreparedScene<'s> {
 
     /// The mip-map pyramid of image texture `t` (`None` for a procedural or
     /// missing texture). All pyramids are built, in parallel, on the first
-    /// call ([`build_mip_maps`]); threads calling meanwhile wait for them.
+    /// call, on threads of their own; threads calling meanwhile wait for them.
     pub fn mip_map(&self, t: TextureId) -> Option<&MipMap> {
         self.mip_maps
             .get_or_init(|| build_mip_maps(&self.scene.textures))
