@@ -512,25 +512,13 @@ impl<'s> PreparedScene<'s> {
     }
 
     /// The mip-map pyramid of image texture `t` (`None` for a procedural or
-    /// missing texture). All pyramids are built, in parallel, on the first call.
+    /// missing texture). All pyramids are built, in parallel, on the first
+    /// call, on threads of their own; threads calling meanwhile wait for them.
     pub fn mip_map(&self, t: TextureId) -> Option<&MipMap> {
-        use rayon::prelude::*;
-        // Built outside the lock: a rayon worker blocked in `get_or_init`
-        // while this thread waits on that worker's pool would deadlock.
-        if self.mip_maps.get().is_none() {
-            let built = self
-                .scene
-                .textures
-                .par_iter()
-                .map(|t| match t {
-                    Texture::Image(img) => Some(MipMap::new(img)),
-                    Texture::Procedural(_) => None,
-                })
-                .collect();
-            // A thread that finished first has set the same pyramids.
-            let _ = self.mip_maps.set(built);
-        }
-        self.mip_maps.get()?.get(t.index()).and_then(Option::as_ref)
+        self.mip_maps
+            .get_or_init(|| build_mip_maps(&self.scene.textures))
+            .get(t.index())
+            .and_then(Option::as_ref)
     }
 
     /// The environment map prefiltered for glossy reflection by the local
@@ -956,6 +944,54 @@ impl RayDifferentials {
             _ => (Vec2::ZERO, Vec2::ZERO),
         }
     }
+}
+
+/// The mip-map pyramid of every image texture of `textures` (`None` for a
+/// procedural one), built on scoped threads rather than rayon. The first
+/// lookup comes from rayon workers shading in parallel: a rayon build
+/// inside `OnceLock::get_or_init` can steal a shading job that waits on the
+/// same lock (a deadlock), and a build outside the lock lets every worker
+/// build its own copy (DamagedHelmet's five 2048x2048 textures: 105 MB a
+/// copy). These threads take no rayon work, so waiting on them is safe.
+fn build_mip_maps(textures: &[Texture]) -> Vec<Option<MipMap>> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let next = AtomicUsize::new(0);
+    // Each thread takes the next texture until none is left.
+    let work = || {
+        let mut built = Vec::new();
+        loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            let Some(t) = textures.get(i) else {
+                return built;
+            };
+            if let Texture::Image(img) = t {
+                built.push((i, MipMap::new(img)));
+            }
+        }
+    };
+    let images = textures
+        .iter()
+        .filter(|t| matches!(t, Texture::Image(_)))
+        .count();
+    let helpers = rayon::current_num_threads().min(images).saturating_sub(1);
+    let mut out: Vec<Option<MipMap>> = textures.iter().map(|_| None).collect();
+    std::thread::scope(|s| {
+        // A helper that cannot be started leaves its share to the others.
+        let handles: Vec<_> = (0..helpers)
+            .filter_map(|_| std::thread::Builder::new().spawn_scoped(s, work).ok())
+            .collect();
+        let mut all = work();
+        for h in handles {
+            match h.join() {
+                Ok(built) => all.extend(built),
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        }
+        for (i, m) in all {
+            out[i] = Some(m);
+        }
+    });
+    out
 }
 
 #[cfg(test)]

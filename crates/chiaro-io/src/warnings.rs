@@ -2,10 +2,36 @@
 //! meshes each with zero-area triangles) become one line with a count and
 //! the first few names, not one line each.
 
+use std::collections::HashMap;
 use std::path::Path;
 
 /// How many places a summary names before "and N more".
 const NAMES_SHOWN: usize = 3;
+
+/// Adds `message` to `warnings`, one line per place: the line of `key`
+/// (which `warned` indexes) when there is one and lacks the message, else
+/// a new line `first(key)` with `message` after it.
+pub(crate) fn warn_at(
+    warnings: &mut Vec<String>,
+    warned: &mut HashMap<String, usize>,
+    key: String,
+    message: &str,
+    first: impl FnOnce(&str) -> String,
+) {
+    match warned.get(&key) {
+        Some(&i) => {
+            let w = &mut warnings[i];
+            if !w.contains(message) {
+                w.push_str("; ");
+                w.push_str(message);
+            }
+        }
+        None => {
+            warnings.push(format!("{}{message}", first(&key)));
+            warned.insert(key, warnings.len() - 1);
+        }
+    }
+}
 
 /// The loader's own warnings with exact repeats folded into one line
 /// ("... (N times)"), then the validation warnings `(place, message)` one

@@ -60,7 +60,7 @@ pub(crate) const POWER_EPS: f32 = 1e-4;
 
 /// Links past which refinement stops (each link then stays where it is),
 /// so memory and time stay bounded however fine the input.
-const LINK_BUDGET: usize = 6_000_000;
+pub(crate) const LINK_BUDGET: usize = 6_000_000;
 
 /// The tag of a cluster's node id (a surface node's id is its index in the
 /// quadtree forest).
@@ -152,6 +152,30 @@ struct Cluster {
     kids: [u32; 2],
     /// The number of quadtree roots under it.
     count: u32,
+}
+
+/// Bytes a cluster holds: itself, its radiance and brightest leaf
+/// radiance, its parent and its list of received links.
+pub(crate) const CLUSTER_BYTES: u64 = (size_of::<Cluster>()
+    + 2 * size_of::<Vec3>()
+    + size_of::<u32>()
+    + size_of::<Vec<(u32, f32)>>()) as u64;
+
+/// Bytes the cluster tree holds a source triangle: its root's parent, its
+/// place in the leaf order, its entry while the tree is built (centroid and
+/// root) and what the push carries down to it each iteration.
+pub(crate) const ROOT_BYTES: u64 =
+    (2 * size_of::<u32>() + size_of::<(Vec3, u32)>() + size_of::<Vec3>()) as u64;
+
+/// Adds the cluster tree over `sources` quadtree roots to `estimate`: a
+/// binary tree, so one cluster fewer than the roots.
+pub(crate) fn memory(sources: u64, estimate: &mut chiaro_core::budget::Estimate) {
+    let clusters = sources.saturating_sub(1);
+    estimate.add(
+        format!("radiosity clusters ({clusters})"),
+        chiaro_core::budget::bytes_of(clusters, CLUSTER_BYTES)
+            .saturating_add(chiaro_core::budget::bytes_of(sources, ROOT_BYTES)),
+    );
 }
 
 /// The clustered solver's state over the quadtree forest `t`.

@@ -171,14 +171,42 @@ pub const DESCRIPTION: Description = Description {
     ],
 };
 
-/// Adds what the radiosity solver allocates to `estimate`: with the
-/// matrix solvers, two dense f32 matrices over at least one element a
-/// triangle of the tessellated scene.
+/// Adds what the radiosity solver allocates to `estimate`, over at least
+/// one element a triangle of the tessellated scene: with the matrix
+/// solvers, two dense f32 matrices; with the hierarchical solver (and
+/// `auto` where it picks it), its quadtrees, links and clusters
+/// ([`hierarchical`]'s estimate; the solve checks it again with the real
+/// element count once the scene is meshed, before building them).
 pub fn solver_memory(scene: &Scene, settings: &RenderSettings, estimate: &mut Estimate) {
-    if settings.radiosity.solver.is_matrix() {
-        let n = chiaro_core::context::tessellated_triangles(scene, settings);
+    let cfg = &settings.radiosity;
+    let n = chiaro_core::context::tessellated_triangles(scene, settings);
+    if cfg.solver.is_matrix() {
         estimate.add("radiosity matrix", bytes_of(n.saturating_mul(n), 8));
+    } else if cfg
+        .solver
+        .resolve(usize::try_from(n).unwrap_or(usize::MAX), cfg.formfactor)
+        == Solver::Hierarchical
+    {
+        hierarchical::memory(n, n, n > cluster::CLUSTER_ABOVE as u64, estimate);
     }
+}
+
+/// The hierarchical solver's memory over `sources` source triangles meshed
+/// into `elements` elements, checked against the budget before they are
+/// made: the render's estimate ([`chiaro_core::context::memory_estimate`])
+/// with [`hierarchical::memory`] at that element count.
+fn check_hierarchy_memory(
+    ctx: &RenderContext<'_>,
+    sources: usize,
+    elements: u64,
+    clustered: bool,
+) -> Result<(), CoreError> {
+    let (scene, settings) = (ctx.scene(), ctx.settings());
+    let mut estimate = chiaro_core::context::memory_estimate(scene, settings);
+    hierarchical::memory(sources as u64, elements, clustered, &mut estimate);
+    estimate
+        .check(settings.memory_budget())
+        .map_err(|e| CoreError::Unsupported(format!("radiosity ({elements} elements): {e}")))
 }
 
 /// The context's radiosity solution: the one it was given (a saved
@@ -400,7 +428,22 @@ pub(crate) fn solve_clustering(
     // `auto`: progressive refinement on small scenes, clusters above.
     let solver = cfg.solver.resolve(ps.triangles.len(), cfg.formfactor);
     progress.begin("radiosity meshing", 1);
-    let mesh = mesh::build(ps, patch, solver == Solver::Hierarchical, progress)?;
+    // The hierarchical solver's quadtrees, links and clusters are checked
+    // against the budget at the element count, before the elements are made.
+    let hierarchy = |sources: usize, elements: u64| {
+        if solver == Solver::Hierarchical {
+            check_hierarchy_memory(ctx, sources, elements, sources > cluster_above.max(1))
+        } else {
+            Ok(())
+        }
+    };
+    let mesh = mesh::build_checked(
+        ps,
+        patch,
+        solver == Solver::Hierarchical,
+        progress,
+        &hierarchy,
+    )?;
     // Patches above elements shoot in progressive refinement with element
     // form factors (hemicubes are cast from one element's centre, so their
     // shots stay per element); the other solvers work on elements.
@@ -921,3 +964,5 @@ mod tests_cluster;
 mod tests_environment;
 #[cfg(test)]
 mod tests_hostile;
+#[cfg(test)]
+mod tests_memory;

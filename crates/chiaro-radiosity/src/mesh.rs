@@ -295,17 +295,31 @@ pub(crate) fn subdivision(sources: &[SourceTri], patch_size: f32, power_of_two: 
     k
 }
 
-/// Meshes the prepared scene and its area lights into elements of edge at
-/// most `patch_size` (see the module docs).
-///
-/// # Errors
-/// [`CoreError::Unsupported`] when the mesh would exceed [`MAX_ELEMENTS`];
-/// [`CoreError::Cancelled`] when `progress` asks.
+/// `build_checked` with nothing to check (the tests' meshes).
+#[cfg(test)]
 pub(crate) fn build(
     ps: &PreparedScene<'_>,
     patch_size: f32,
     power_of_two: bool,
     progress: &dyn Progress,
+) -> Result<ElementMesh, CoreError> {
+    build_checked(ps, patch_size, power_of_two, progress, &|_, _| Ok(()))
+}
+
+/// Meshes the prepared scene and its area lights into elements of edge at
+/// most `patch_size` (see the module docs), calling `check` with the number
+/// of source triangles and of elements once they are known and before the
+/// elements are made (the solver's memory check).
+///
+/// # Errors
+/// [`CoreError::Unsupported`] when the mesh would exceed [`MAX_ELEMENTS`];
+/// `check`'s error; [`CoreError::Cancelled`] when `progress` asks.
+pub(crate) fn build_checked(
+    ps: &PreparedScene<'_>,
+    patch_size: f32,
+    power_of_two: bool,
+    progress: &dyn Progress,
+    check: &dyn Fn(usize, u64) -> Result<(), CoreError>,
 ) -> Result<ElementMesh, CoreError> {
     let sources = source_triangles(ps);
     let k = subdivision(&sources, patch_size, power_of_two);
@@ -316,6 +330,7 @@ pub(crate) fn build(
              raise radiosity.patch_size"
         )));
     }
+    check(sources.len(), total)?;
     let mut mesh = ElementMesh {
         sources,
         k,

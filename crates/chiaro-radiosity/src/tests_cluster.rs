@@ -15,6 +15,12 @@ fn solve_hierarchical(
     cluster_above: usize,
     progress: &dyn Progress,
 ) -> Result<RadiositySolution, CoreError> {
+    let r = hierarchical_settings(patch);
+    solve_clustering(&RenderContext::new(s, &r, progress)?, true, cluster_above)
+}
+
+/// Hierarchical ray-cast settings at 32x32 with elements of `patch` size.
+pub(crate) fn hierarchical_settings(patch: f32) -> RenderSettings {
     let mut r = RenderSettings {
         width: 32,
         height: 32,
@@ -22,7 +28,7 @@ fn solve_hierarchical(
     };
     r.radiosity.solver = Solver::Hierarchical;
     r.radiosity.patch_size = patch;
-    solve_clustering(&RenderContext::new(s, &r, progress)?, true, cluster_above)
+    r
 }
 
 #[test]

@@ -18,31 +18,9 @@ use chiaro_testkit::bench::flag_value;
 use chiaro_testkit::stats::{mitsuba_z_failures, mitsuba_z_test};
 use std::path::{Path, PathBuf};
 
-/// Each scene file and the stem of its reference (`refs/STEM_ref_rgb.exr`).
-const SCENES: [(&str, &str); 7] = [
-    (
-        "floating_sphere/test_directional_direct.xml",
-        "test_directional",
-    ),
-    ("infinite_mirrors/scene_path.xml", "scene"),
-    ("instancing/test_instancing_path.xml", "test_instancing"),
-    (
-        "mesh_attributes/test_mesh_attributes_1_face_direct.xml",
-        "test_mesh_attributes_1_face",
-    ),
-    (
-        "mesh_attributes/test_mesh_attributes_3_face_direct.xml",
-        "test_mesh_attributes_3_face",
-    ),
-    (
-        "mesh_attributes/test_mesh_attributes_3_vertex_direct.xml",
-        "test_mesh_attributes_3_vertex",
-    ),
-    (
-        "texture_interp/test_texture_interp_direct.xml",
-        "test_texture_interp",
-    ),
-];
+#[path = "../tests/common/mitsuba_scene_files.rs"]
+mod mitsuba_scene_files;
+use mitsuba_scene_files::SCENES;
 
 fn rgb_image(path: &Path) -> Result<(u32, u32, Vec<[f64; 3]>), String> {
     let img = chiaro::io::images::load_texture(path, false).map_err(|e| e.to_string())?;

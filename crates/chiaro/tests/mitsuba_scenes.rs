@@ -11,31 +11,11 @@ use chiaro::progress::NoProgress;
 use chiaro_testkit::stats::mitsuba_z_test;
 use std::path::{Path, PathBuf};
 
-/// Each scene file and its reference's stem.
-const SCENES: [(&str, &str); 7] = [
-    (
-        "floating_sphere/test_directional_direct.xml",
-        "test_directional",
-    ),
-    ("infinite_mirrors/scene_path.xml", "scene"),
-    ("instancing/test_instancing_path.xml", "test_instancing"),
-    (
-        "mesh_attributes/test_mesh_attributes_1_face_direct.xml",
-        "test_mesh_attributes_1_face",
-    ),
-    (
-        "mesh_attributes/test_mesh_attributes_3_face_direct.xml",
-        "test_mesh_attributes_3_face",
-    ),
-    (
-        "mesh_attributes/test_mesh_attributes_3_vertex_direct.xml",
-        "test_mesh_attributes_3_vertex",
-    ),
-    (
-        "texture_interp/test_texture_interp_direct.xml",
-        "test_texture_interp",
-    ),
-];
+#[path = "common/mitsuba_scene_files.rs"]
+mod mitsuba_scene_files;
+#[path = "common/techniques.rs"]
+mod techniques;
+use mitsuba_scene_files::SCENES;
 
 fn scenes_dir() -> Option<PathBuf> {
     let d = chiaro_testkit::shared_assets()?.join("mitsuba3-test-scenes/tests/scenes");
@@ -54,21 +34,7 @@ fn every_technique_renders_every_scene() {
         let scene = chiaro::io::load_scene(&dir.join(file))
             .unwrap_or_else(|e| panic!("{file}: {e}"))
             .scene;
-        for technique in Technique::ALL {
-            let mut s = scene.render.clone();
-            s.technique = technique;
-            s.width = 24;
-            s.height = 24;
-            s.samples = 1;
-            let film = chiaro::render(&scene, &s, &NoProgress)
-                .unwrap_or_else(|e| panic!("{file} with {}: {e}", technique.name()));
-            assert_eq!((film.width, film.height), (24, 24));
-            assert!(
-                film.color.iter().all(|c| c.is_finite()),
-                "{file}: {}",
-                technique.name()
-            );
-        }
+        techniques::renders_with_every_technique(&scene, file);
     }
 }
 

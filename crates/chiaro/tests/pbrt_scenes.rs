@@ -14,6 +14,9 @@ use chiaro::progress::NoProgress;
 use chiaro::scene::{Geometry, Scene};
 use std::path::{Path, PathBuf};
 
+#[path = "common/techniques.rs"]
+mod techniques;
+
 fn scenes() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
 }
@@ -159,21 +162,7 @@ fn the_three_hand_written_boxes_load_to_one_scene() {
 #[test]
 fn every_technique_renders_the_pbrt_box() {
     let scene = load("cornell-box.pbrt").scene;
-    for technique in Technique::ALL {
-        let mut s = scene.render.clone();
-        s.technique = technique;
-        s.width = 24;
-        s.height = 24;
-        s.samples = 1;
-        let film = chiaro::render(&scene, &s, &NoProgress)
-            .unwrap_or_else(|e| panic!("{}: {e}", technique.name()));
-        assert_eq!((film.width, film.height), (24, 24));
-        assert!(
-            film.color.iter().all(|c| c.is_finite()),
-            "{}",
-            technique.name()
-        );
-    }
+    techniques::renders_with_every_technique(&scene, "cornell-box.pbrt");
 }
 
 /// Per-pixel mean and variance of the mean over `runs` independent path

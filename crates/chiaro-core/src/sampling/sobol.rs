@@ -218,6 +218,56 @@ impl SobolSampler {
         out
     }
 
+    /// [`Self::lanes_2d`] with a pair of its own per lane: lane `i` draws
+    /// pair `dims[i]` (what `set_sample(index); skip(dims[i]); next_2d()`
+    /// draws for it), for lanes whose paths have drawn different counts of
+    /// numbers. Each lane gathers its pair's keys; the rest is the same
+    /// lane loop.
+    #[inline]
+    pub fn lanes_2d_at(&mut self, dims: &[u32; LANES], rev: &[u32; LANES]) -> [[f32; LANES]; 2] {
+        let (shuffle, kx, ky) = self.keys_of(dims);
+        let mut out = [[0.0; LANES]; 2];
+        for i in 0..LANES {
+            let index = laine_karras(rev[i], shuffle[i]).reverse_bits() & self.mask;
+            let second = second_by_taylor_shift(index);
+            out[0][i] = to_unit(laine_karras(index, kx[i]).reverse_bits());
+            out[1][i] = to_unit(laine_karras(second, ky[i]).reverse_bits());
+        }
+        out
+    }
+
+    /// The first number of pair `dims[i]` for lane `i` (as
+    /// [`Self::lanes_2d_at`]): what `next_1d` draws for each.
+    #[inline]
+    pub fn lanes_1d_at(&mut self, dims: &[u32; LANES], rev: &[u32; LANES]) -> [f32; LANES] {
+        let (shuffle, kx, _) = self.keys_of(dims);
+        let mut out = [0.0; LANES];
+        for i in 0..LANES {
+            let index = laine_karras(rev[i], shuffle[i]).reverse_bits() & self.mask;
+            out[i] = to_unit(laine_karras(index, kx[i]).reverse_bits());
+        }
+        out
+    }
+
+    /// The keys of pair `dims[i]` per lane, as three arrays (shuffle, x, y),
+    /// every pair up to the largest hashed first.
+    #[inline(always)]
+    fn keys_of(&mut self, dims: &[u32; LANES]) -> ([u32; LANES], [u32; LANES], [u32; LANES]) {
+        let top = dims.iter().copied().max().unwrap_or(0);
+        self.keys_at(top);
+        let keys = &self.keys;
+        let at = |i: usize| keys.get(dims[i] as usize).copied();
+        let key = |i: usize| {
+            at(i).unwrap_or(PairKeys {
+                shuffle: 0,
+                x: 0,
+                y: 0,
+            })
+        };
+        let ks: [PairKeys; LANES] = std::array::from_fn(key);
+        (ks.map(|k| k.shuffle), ks.map(|k| k.x), ks.map(|k| k.y))
+    }
+
     /// The keys of pair `dim` (hashed on first use).
     #[inline]
     fn keys_at(&mut self, dim: u32) -> PairKeys {
@@ -435,6 +485,29 @@ mod tests {
                     for i in 0..LANES {
                         let mut s = SobolSampler::new(9, 4, 7, first + i as u32, count);
                         s.skip(dim);
+                        let mut t = s.clone();
+                        assert_eq!(s.next_2d(), glam::Vec2::new(two[0][i], two[1][i]));
+                        assert_eq!(t.next_1d(), one[i]);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_at_their_own_pairs_draw_what_each_sample_draws() {
+        for count in [5, 64, 300, 70_000] {
+            let mut lanes = SobolSampler::new(9, 4, 7, 0, count);
+            lanes.set_pixel(4, 7);
+            for first in [0, LANES as u32, count / 2 + 1] {
+                let rev = SobolSampler::lane_indices(first);
+                for base in [0, 3, 17] {
+                    let dims: [u32; LANES] = std::array::from_fn(|i| base + (i as u32 * 7) % 5);
+                    let two = lanes.lanes_2d_at(&dims, &rev);
+                    let one = lanes.lanes_1d_at(&dims, &rev);
+                    for i in 0..LANES {
+                        let mut s = SobolSampler::new(9, 4, 7, first + i as u32, count);
+                        s.skip(dims[i]);
                         let mut t = s.clone();
                         assert_eq!(s.next_2d(), glam::Vec2::new(two[0][i], two[1][i]));
                         assert_eq!(t.next_1d(), one[i]);

@@ -105,7 +105,8 @@ pub fn rough_dielectric_eval(
 }
 
 /// Solid-angle pdf (1/sr) of [`sample_rough_dielectric`] at `wi`: the
-/// microfacet density `D(h) cos_theta_h`, times the Jacobian of `h -> wi`
+/// microfacet normal's density ([`microfacet::microfacet_normal_pdf`]: the
+/// normals visible from `wo` for GGX), times the Jacobian of `h -> wi`
 /// (`1 / (4 |wo.h|)` for reflection, `|wi.h| / (wi.h + wo.h / eta)^2` for
 /// refraction; Walter et al. 2007, eqs. 14, 17), times the probability of
 /// the branch (`F` or `1 - F`).
@@ -120,9 +121,8 @@ pub fn rough_dielectric_pdf(
     let Some((h, reflected)) = half_vector(n, wo, wi, eta) else {
         return 0.0;
     };
-    let cos_h = n.dot(h);
     let (o_h, i_h) = (wo.dot(h), wi.dot(h));
-    let pdf_h = microfacet::d(dist, cos_h, alpha) * cos_h;
+    let pdf_h = microfacet::microfacet_normal_pdf(dist, alpha, n.dot(wo), n.dot(h), o_h);
     let f = fresnel_dielectric(o_h, 1.0, eta);
     if reflected {
         return f * pdf_h / (4.0 * o_h);
@@ -136,8 +136,9 @@ pub fn rough_dielectric_pdf(
 }
 
 /// Samples an incident direction of the rough dielectric for `wo`: a
-/// microfacet normal from `D(h) cos_theta_h` by `u` in `[0, 1)^2` (Walter
-/// et al. 2007, eqs. 28, 35), then reflection about it with probability
+/// microfacet normal by `u` in `[0, 1)^2` from
+/// [`microfacet::sample_microfacet_normal`] (visible from `wo` for GGX),
+/// then reflection about it with probability
 /// `F` (1 under total internal reflection), else refraction. `u_fresnel()`
 /// gives the number of that choice and is called only when both branches
 /// are possible. `None` when the microfacet faces away from `wo` or the
@@ -152,9 +153,18 @@ pub fn sample_rough_dielectric(
     u: Vec2,
     u_fresnel: impl FnOnce() -> f32,
 ) -> Option<Vec3> {
-    let h = Frame::from_normal(n).to_world(sample_microfacet_normal(dist, alpha, u));
+    if n.dot(wo) <= 0.0 {
+        return None;
+    }
+    let frame = Frame::from_normal(n);
+    let h = frame.to_world(microfacet::sample_microfacet_normal(
+        dist,
+        alpha,
+        frame.to_local(wo),
+        u,
+    ));
     let o_h = wo.dot(h);
-    if o_h <= 0.0 || n.dot(wo) <= 0.0 {
+    if o_h <= 0.0 {
         return None;
     }
     let f = fresnel_dielectric(o_h, 1.0, eta);
@@ -173,17 +183,4 @@ pub fn sample_rough_dielectric(
         return None;
     }
     Some(wi)
-}
-
-/// Samples a microfacet normal about +z with density `D(h) cos_theta_h`
-/// (Walter et al. 2007, eqs. 28, 35).
-pub(crate) fn sample_microfacet_normal(dist: Distribution, alpha: f32, u: Vec2) -> Vec3 {
-    let tan2 = match dist {
-        Distribution::Ggx => alpha * alpha * u.x / (1.0 - u.x).max(1e-7),
-        Distribution::Beckmann => -alpha * alpha * (1.0 - u.x).max(1e-7).ln(),
-    };
-    let cos_t = 1.0 / (1.0 + tan2).sqrt();
-    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-    let phi = 2.0 * std::f32::consts::PI * u.y;
-    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
 }

@@ -169,21 +169,13 @@ impl<'d> Builder<'d> {
     /// Adds `message` to the warning of plugin `el` (one line per plugin,
     /// naming its file, line and column).
     pub fn warn(&mut self, el: &Element, message: &str) {
-        let key = el.loc.describe();
-        match self.warned.get(&key) {
-            Some(&i) => {
-                let w = &mut self.warnings[i];
-                if !w.contains(message) {
-                    w.push_str("; ");
-                    w.push_str(message);
-                }
-            }
-            None => {
-                self.warned.insert(key.clone(), self.warnings.len());
-                self.warnings
-                    .push(format!("{key}: <{}>: {message}", el.plugin_name()));
-            }
-        }
+        crate::warnings::warn_at(
+            &mut self.warnings,
+            &mut self.warned,
+            el.loc.describe(),
+            message,
+            |key| format!("{key}: <{}>: ", el.plugin_name()),
+        );
     }
 
     /// Warns about each property of `p` that no mapping read.

@@ -252,20 +252,13 @@ impl Builder {
     /// Adds `message` to the warning of the directive at `loc`, written
     /// `what` (one line per directive, naming its file, line and column).
     pub fn warn(&mut self, loc: &Loc, what: &str, message: &str) {
-        let key = loc.describe();
-        match self.warned.get(&key) {
-            Some(&i) => {
-                let w = &mut self.warnings[i];
-                if !w.contains(message) {
-                    w.push_str("; ");
-                    w.push_str(message);
-                }
-            }
-            None => {
-                self.warned.insert(key.clone(), self.warnings.len());
-                self.warnings.push(format!("{key}: {what}: {message}"));
-            }
-        }
+        crate::warnings::warn_at(
+            &mut self.warnings,
+            &mut self.warned,
+            loc.describe(),
+            message,
+            |key| format!("{key}: {what}: "),
+        );
     }
 
     /// Warns about each parameter of `p` that no mapping read.

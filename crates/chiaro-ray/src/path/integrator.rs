@@ -93,14 +93,21 @@ pub(super) struct MaterialInfo {
     /// transmission lobe), chosen with probability 1 and weighted by `kd`:
     /// the vertices that [`lanes`] shades with its own Lambert arithmetic.
     pub(super) lambert: bool,
-    /// True for the vertices [`lanes`] shades: `lambert`, or a mixture of
-    /// Lambert and a glossy lobe (GGX, Beckmann, Phong or Blinn: the glTF
-    /// metal/dielectric mix) without mirror, transmission, clear coat or
-    /// BLEND, on a two-sided surface. Its sample never reads the Fresnel
-    /// choice's number (see [`Bsdf::sample`]: the lobe number is below 1,
-    /// so the choice falls in the non-delta lobes), so its numbers are the
-    /// same pairs for every lane.
+    /// True for the vertices [`lanes`] shades: `lambert`, `delta`, or a
+    /// mixture of Lambert and a glossy lobe (GGX, Beckmann, Phong or Blinn:
+    /// the glTF metal/dielectric mix) without mirror, transmission, clear
+    /// coat or BLEND, on a two-sided surface. A mixture's sample never reads
+    /// the Fresnel choice's number (see [`Bsdf::sample`]: the lobe number is
+    /// below 1, so the choice falls in the non-delta lobes); a `delta`
+    /// vertex's may, and the kernel then moves that lane's later pairs on
+    /// by one.
     pub(super) lock_step: bool,
+    /// True when every lobe is a delta one (ideal mirror, smooth conductor,
+    /// smooth Fresnel or fixed-weight transmission: no diffuse, glossy,
+    /// rough or coat lobe, so next-event estimation finds nothing), without
+    /// absorption or BLEND, and its back not black: the vertices that
+    /// `lanes_delta` samples in the kernel.
+    pub(super) delta: bool,
     /// True when `Bsdf::eval` is zero for every pair of directions (no
     /// diffuse colour, no specular lobe): next-event estimation then finds
     /// nothing, and skips its light sample.
@@ -133,9 +140,25 @@ impl MaterialInfo {
             && surface.kt == Vec3::ZERO
             && two_sided
             && m.alpha_mode != AlphaMode::Blend;
+        let transmissive = surface.kt.max_element() > 0.0;
+        let absorption = if transmissive {
+            m.absorption.max(Vec3::ZERO)
+        } else {
+            Vec3::ZERO
+        };
+        let delta = (wr > 0.0 || wt > 0.0)
+            && surface.kd == Vec3::ZERO
+            && ws == 0.0
+            && !lobes.specular
+            && !lobes.rough
+            && lobes.p_coat == 0.0
+            && (two_sided || transmissive)
+            && absorption.max_element() <= 0.0
+            && m.alpha_mode != AlphaMode::Blend;
         Self {
             lambert,
-            lock_step: lambert || mixture,
+            lock_step: lambert || mixture || delta,
+            delta,
             // (The rough dielectric reflects light samples in front of it.)
             dark: surface.kd == Vec3::ZERO
                 && !lobes.specular
@@ -147,12 +170,22 @@ impl MaterialInfo {
             sidedness: m.sidedness,
             textured: m.is_textured() || m.bump.is_some() || m.normal_map.is_some(),
             blend: m.alpha_mode == AlphaMode::Blend,
-            absorption: if surface.kt.max_element() > 0.0 {
-                m.absorption.max(Vec3::ZERO)
-            } else {
-                Vec3::ZERO
-            },
+            absorption,
         }
+    }
+}
+
+/// The MIS pdf a path carries from a BSDF sample `s` at a vertex of
+/// viewer-side geometric normal `ng`: 0 for a delta lobe, and for a
+/// direction behind the surface (next-event estimation samples no light
+/// there, so what a rough refraction finds is not weighted against it);
+/// else the sample's pdf. The scalar loop's and the kernel's one rule.
+#[inline(always)]
+pub(super) fn mis_pdf(s: &BsdfSample, ng: Vec3) -> f32 {
+    if s.delta || ng.dot(s.wi) < 0.0 {
+        0.0
+    } else {
+        s.pdf
     }
 }
 
@@ -560,13 +593,7 @@ impl<'a, 's> PathTracer<'a, 's> {
                 break;
             }
             if !pass {
-                // (Next-event estimation samples no light behind the surface,
-                // so what a rough refraction finds is not weighted against it.)
-                prev_pdf = if s.delta || ng.dot(s.wi) < 0.0 {
-                    0.0
-                } else {
-                    s.pdf
-                };
+                prev_pdf = mis_pdf(&s, ng);
                 prev_p = v.p;
                 prev_n = ng;
             }

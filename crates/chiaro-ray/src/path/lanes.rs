@@ -8,17 +8,22 @@
 //! the scalar loop's order (Rust never fuses or reorders float operations,
 //! so a loop over lanes gives each lane the scalar result), and draws its
 //! numbers from the same Sobol pairs ([`SobolSampler::lanes_2d`]). It
-//! shades the vertices whose material is Lambertian, or a mixture of
-//! Lambert and a glossy lobe (GGX and the other microfacet and Phong
-//! lobes: the glTF metal/dielectric mix, `MaterialInfo::lock_step`): of
-//! plain triangles and spheres from their cached material
+//! shades the vertices whose material is Lambertian, a mixture of Lambert
+//! and a glossy lobe (GGX and the other microfacet and Phong lobes: the
+//! glTF metal/dielectric mix), or delta lobes alone (ideal mirror, smooth
+//! conductor, smooth Fresnel or fixed-weight transmission, without
+//! absorption: `lanes_delta.rs`), `MaterialInfo::lock_step`: of plain
+//! triangles and spheres from their cached material
 //! ([`PathTracer::plain_vertex`]), of textured, vertex-coloured or
 //! normal-mapped ones from the material the scalar loop resolves at the
-//! hit ([`PathTracer::surface_vertex`], lane by lane). A lane whose vertex
-//! it does not shade (a mirror or transmission lobe, a clear coat) leaves
-//! the batch there and finishes in the scalar loop from the same state and
-//! the same pair ([`PathTracer::radiance_from`]), and so do the last few
-//! lanes of a batch ([`SCALAR_TAIL`]).
+//! hit ([`PathTracer::surface_vertex`], lane by lane). A delta vertex's
+//! Fresnel choice draws one more number, so each lane keeps its own lead
+//! over the batch's pair count (`LanePairs`). A lane whose vertex it does
+//! not shade (a delta lobe mixed with diffuse or glossy ones, a rough
+//! dielectric, a clear coat, an absorbing medium, a one-sided Lambertian
+//! surface) leaves the batch there and finishes in the scalar loop from
+//! the same state and the same pair ([`PathTracer::radiance_from`]), and
+//! so do the last few lanes of a batch ([`SCALAR_TAIL`]).
 //!
 //! Rays are still traced one at a time; what runs lane-parallel is the
 //! rest: Sobol draws, light sampling, the Lambert terms, MIS weights,
@@ -35,12 +40,12 @@
 //! the shadow rays one lane at a time). A mixture vertex, or a lane that
 //! picks another light (point, spot, directional, an area light's quad,
 //! disk or sphere), gets its light sample from the scalar loop's own code
-//! ([`PathTracer::direct_from`]), and a mixture vertex its next direction
-//! from `Bsdf::sample`, lane by lane, the lanes staying in step. The
-//! lat-long mapping under every environment lookup is the polynomial one
-//! of `chiaro_core::shading::texture::latlong_uv`, and the scalar loop's
-//! lookups and samples are the one-lane case of the functions the lanes
-//! call.
+//! ([`PathTracer::direct_from`]), and a mixture or delta vertex its next
+//! direction from `Bsdf::sample`, lane by lane, the lanes staying in the
+//! batch. The lat-long mapping under every environment lookup is the
+//! polynomial one of `chiaro_core::shading::texture::latlong_uv`, and the
+//! scalar loop's lookups and samples are the one-lane case of the
+//! functions the lanes call.
 
 // A lane loop indexes a dozen arrays by the lane number: that is the
 // form LLVM vectorises, and clearer than a dozen zipped iterators.
@@ -55,7 +60,13 @@ use chiaro_core::sampling::{
     SobolSampler, cosine_hemisphere_pdf, sample_cosine_hemisphere_xyz, sample_uniform_triangle_xy,
 };
 use chiaro_core::shading::TriangleEmitter;
+use delta::{LanePairs, delta_lanes, without};
 use glam::{Vec2, Vec3};
+
+#[path = "lanes_delta.rs"]
+mod delta;
+#[cfg(test)]
+pub(super) use delta::KERNEL_DELTAS;
 
 /// Live lanes at or below which a batch hands its paths to the scalar
 /// loop at the next bounce (BENCHMARKS.md, "Plain spheres, dark materials
@@ -226,7 +237,7 @@ impl PathTracer<'_, '_> {
         rng: &mut SobolSampler,
         rays: &mut u64,
     ) -> ([Vec3; LANES], Option<(f32, Vec3)>) {
-        let rev = SobolSampler::lane_indices(first);
+        let mut pairs = LanePairs::new(first);
         let mut out = [Vec3::ZERO; LANES];
         let mut first_hit = None;
         let mut alive: [bool; LANES] = std::array::from_fn(|i| i < count);
@@ -239,7 +250,7 @@ impl PathTracer<'_, '_> {
         let mut prev_n = V3::default();
         // Pairs drawn so far (the same for every live lane).
         let mut dim = 0u32;
-        let jitter = rng.lanes_2d(dim, &rev);
+        let jitter = pairs.lanes_2d(rng, dim);
         dim += 1;
         for i in 0..LANES {
             let ray = camera(Vec2::new(jitter[0][i], jitter[1][i]));
@@ -263,8 +274,8 @@ impl PathTracer<'_, '_> {
                 for i in set_lanes(&alive) {
                     let ray = Ray::new(org.get(i), dir.get(i));
                     let path = (&beta, &l, &prev_pdf, (&prev_p, &prev_n));
-                    let (li, fh) =
-                        self.hand_off(i, ray, None, depth, path, (first, dim), rng, rays);
+                    let pair = (first, pairs.dim(i, dim));
+                    let (li, fh) = self.hand_off(i, ray, None, depth, path, pair, rng, rays);
                     out[i] = li;
                     if depth == 0 && i == 0 {
                         first_hit = fh;
@@ -310,7 +321,7 @@ impl PathTracer<'_, '_> {
                     HANDED_OFF.set(HANDED_OFF.get() + 1);
                     // The scalar loop from this vertex, at this pair.
                     let path = (&beta, &l, &prev_pdf, (&prev_p, &prev_n));
-                    let pair = (first, dim);
+                    let pair = (first, pairs.dim(i, dim));
                     let (li, fh) = self.hand_off(i, ray, Some(hit), depth, path, pair, rng, rays);
                     out[i] = li;
                     if depth == 0 && i == 0 {
@@ -361,11 +372,11 @@ impl PathTracer<'_, '_> {
             // independent work while the hit loop's single-lane stores
             // drain before the lane loop below reads them as vectors.
             let u_pick = if self.light_count() > 1 {
-                rng.lanes_1d(dim, &rev)
+                pairs.lanes_1d(rng, dim)
             } else {
                 [0.0; LANES]
             };
-            let u_light = rng.lanes_2d(dim + 1, &rev);
+            let u_light = pairs.lanes_2d(rng, dim + 1);
             // Both normals onto the viewer's side, lane-parallel (lanes not
             // shaded compute on stale values, masked off later).
             for i in 0..LANES {
@@ -376,16 +387,18 @@ impl PathTracer<'_, '_> {
                 vx.ngs.put(i, ng.map(|x| x * side));
             }
             let last = depth + 1 >= self.max_depth;
+            // (Delta vertices: next-event estimation finds nothing there.)
+            let delta = delta_lanes(&info, &shade);
             self.direct_lanes(
                 &vx,
                 &info,
-                &shade,
+                &without(&shade, &delta),
                 &dir,
                 !last,
                 &mut lights,
                 &mut l,
                 &beta,
-                &rev,
+                &pairs,
                 rng,
                 rays,
                 (u_pick, u_light),
@@ -406,8 +419,12 @@ impl PathTracer<'_, '_> {
             // `Frame::from_normal(n)`, lane-parallel. (Pair `dim + 1`,
             // drawn inside `direct_lanes`.)
             let u = u_next;
+            // Delta lanes (glossy too: not Lambert) sample theirs through
+            // `sample_deltas`.
             let glossy: [bool; LANES] = std::array::from_fn(|i| shade[i] & vx.glossy[i]);
-            let g = self.sample_mixtures(&vx, &info, &glossy, &dir, u, dim, &rev, rng);
+            let mixed = without(&glossy, &delta);
+            let mut g = self.sample_mixtures(&vx, &info, &mixed, &dir, u, dim, &pairs, rng);
+            self.sample_deltas(&mut g, &vx, &info, &delta, &dir, u, dim, &mut pairs, rng);
             dim += 2;
             let mut q: F = [0.0; LANES];
             let mut ended = [false; LANES];
@@ -449,7 +466,7 @@ impl PathTracer<'_, '_> {
             }
             // Russian roulette.
             if depth + 1 >= self.rr_depth {
-                let r = rng.lanes_1d(dim, &rev);
+                let r = pairs.lanes_1d(rng, dim);
                 dim += 1;
                 let stop: [bool; LANES] = std::array::from_fn(|i| shade[i] & (r[i] >= q[i]));
                 for i in set_lanes(&stop) {
@@ -461,6 +478,7 @@ impl PathTracer<'_, '_> {
                     beta.put(i, bt.map(|c| c / q[i]));
                 }
             }
+            pairs.retire(&shade);
             alive = shade;
         }
         (out, first_hit)
@@ -563,7 +581,7 @@ impl PathTracer<'_, '_> {
         lt: &mut LightLanes,
         l: &mut V3,
         beta: &V3,
-        rev: &[u32; LANES],
+        pairs: &LanePairs,
         rng: &mut SobolSampler,
         rays: &mut u64,
         (u_pick, u): (F, [[f32; LANES]; 2]),
@@ -651,10 +669,12 @@ impl PathTracer<'_, '_> {
         // gather's stores drain (the lane loop below reads them as whole
         // vectors, which cannot be forwarded from single-lane stores).
         if let Some((d, u_next)) = next {
-            *u_next = rng.lanes_2d(d, rev);
+            *u_next = pairs.lanes_2d(rng, d);
         }
-        if picked.is_none() {
-            // No lights: nothing to sample (the pair above is still drawn).
+        if picked.is_none() || !ok.iter().any(|&o| o) {
+            // No lights, or no lane left to sample one lane-parallel (all
+            // delta, glossy or lit by other lights): nothing more (the pair
+            // above is still drawn).
             return;
         }
         // The light sample (`TriangleEmitter::sample`), the Lambert term
@@ -757,13 +777,13 @@ impl PathTracer<'_, '_> {
         dir: &V3,
         u: [[f32; LANES]; 2],
         dim: u32,
-        rev: &[u32; LANES],
+        pairs: &LanePairs,
         rng: &mut SobolSampler,
     ) -> MixtureSamples {
         let mut g = MixtureSamples::default();
         let needs = set_lanes(glossy).any(|i| info[i].is_some_and(|m| m.bsdf.needs_lobe_number()));
         let u_lobe = if needs {
-            rng.lanes_1d(dim, rev)
+            pairs.lanes_1d(rng, dim)
         } else {
             [0.0; LANES]
         };
@@ -779,7 +799,8 @@ impl PathTracer<'_, '_> {
                 0.0
             };
             let uv = Vec2::new(u[0][i], u[1][i]);
-            // (The Fresnel choice is never asked for: see `lock_step`.)
+            // (The Fresnel choice is never asked for: delta lanes are not
+            // in `glossy`, see `lock_step`.)
             let s = if bsdf.scatters() {
                 bsdf.sample(n, ng, wo, front, ul, uv, || 0.0)
             } else {
@@ -788,11 +809,7 @@ impl PathTracer<'_, '_> {
             if let Some(s) = s {
                 g.wi.set(i, s.wi);
                 g.weight.set(i, s.weight);
-                g.pdf[i] = if s.delta || ng.dot(s.wi) < 0.0 {
-                    0.0
-                } else {
-                    s.pdf
-                };
+                g.pdf[i] = super::integrator::mis_pdf(&s, ng);
                 g.ok[i] = true;
             }
         }

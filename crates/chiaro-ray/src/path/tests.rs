@@ -17,6 +17,9 @@ use chiaro_testkit::scenes::{
 };
 use chiaro_testkit::stats;
 use lanes::Vertices;
+
+#[path = "lanes_delta_tests.rs"]
+mod lanes_delta_tests;
 use std::f32::consts::PI;
 
 pub(super) fn bvh(p: &PreparedScene<'_>) -> Box<dyn Accelerator> {
@@ -255,8 +258,8 @@ fn lock_step_kernel_equals_the_scalar_loop_on_a_diffuse_box() {
 fn lock_step_kernel_hands_other_surfaces_to_the_scalar_loop() {
     let mut s = mitsuba_cbox(12);
     s.render.samples = 11;
-    // A glossy wall, a mirror wall, and a glass sphere (analytic): lanes
-    // meeting them finish in the scalar loop.
+    // A glossy wall, a mirror wall, and a glass sphere (analytic): the
+    // kernel shades all three (mirror and glass as delta vertices).
     let id = |s: &Scene, n: &str| s.material_by_name(n).expect("a shipped material").index();
     let red = id(&s, "red");
     s.materials[red].specular = Vec3::splat(0.4);

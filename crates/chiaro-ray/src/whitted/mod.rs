@@ -227,6 +227,9 @@ impl<'s> Tracer<'s> {
         let settings = ctx.settings();
         let casters = ShadowCasters::new(prepared);
         let emitters = EmitterGroup::for_render(prepared, settings);
+        // The prefiltered environment is built here, before the parallel
+        // tiles, so that the workers do not each build it at their first hit.
+        prepared.prefiltered_environment();
         Self {
             prepared,
             accel,
