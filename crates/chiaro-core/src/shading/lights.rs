@@ -236,6 +236,8 @@ struct SphericalRectangle {
     /// and the edges `y = y0` and `y = y1`.
     b0: f32,
     b1: f32,
+    /// `1 - b0^2`, without its cancellation.
+    one_minus_b0_sq: f32,
     /// The sampled angle at `u.x = 0`, less `pi` (the paper's `k - pi`).
     phi0: f32,
     /// The solid angle.
@@ -298,6 +300,7 @@ impl SphericalRectangle {
             z0,
             b0: -y0 / (z2 + y0 * y0).sqrt(),
             b1: y1 / (z2 + y1 * y1).sqrt(),
+            one_minus_b0_sq: z2 / (z2 + y0 * y0),
             phi0: a01 - a00,
             solid_angle,
         })
@@ -312,11 +315,13 @@ impl SphericalRectangle {
         // solid angle. The paper's angle is `au = pi + phi`, so its
         // `(cos au b0 - b1) / sin au` is `(cos phi b0 + b1) / sin phi`.
         let (sin_phi, cos_phi) = sin_cos(u.x * self.solid_angle + self.phi0);
+        // The paper's `cu = sign(fu) / sqrt(fu^2 + b0^2)` and `xu = -cu z0 /
+        // sqrt(1 - cu^2)` in one root: `1 - b0^2` is `z0^2 / (z0^2 + y0^2)`.
         let fu = (cos_phi * self.b0 + self.b1) / sin_phi;
-        let cu = (fu.signum() / (fu * fu + self.b0 * self.b0).sqrt()).clamp(-1.0, 1.0);
-        let xu = if cu.abs() < 1.0 {
-            (-(cu * self.z0) / (1.0 - cu * cu).sqrt()).clamp(self.x0, self.x1)
-        } else if cu > 0.0 {
+        let den = fu * fu - self.one_minus_b0_sq;
+        let xu = if den > 0.0 {
+            (-(fu.signum() * self.z0) / den.sqrt()).clamp(self.x0, self.x1)
+        } else if fu > 0.0 {
             self.x1
         } else {
             self.x0
