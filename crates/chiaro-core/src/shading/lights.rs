@@ -189,7 +189,7 @@ fn sample_area(
 
 /// Rectangles seen under less solid angle than this are sampled uniformly
 /// in area: the solid angle is a difference of four corner terms, whose
-/// rounding (about 1e-6 sr) would be a large part of it.
+/// rounding (a few 1e-6 sr at worst) would be 0.1 % of it or more.
 const MIN_RECT_SOLID_ANGLE: f32 = 1e-3;
 
 /// Points at least this many half-diagonals from a rectangle's centre
