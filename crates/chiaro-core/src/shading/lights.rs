@@ -134,11 +134,11 @@ fn sample_area(
             edge_u,
             edge_v,
         } => {
+            if let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p) {
+                return rect.sample(u, p, two_sided, le);
+            }
             let c = edge_u.cross(edge_v);
             let area = c.length();
-            if let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p) {
-                return rect.sample(u, p, c / area, two_sided, le);
-            }
             (corner + u.x * edge_u + u.y * edge_v, c / area, area)
         }
         AreaShape::Disk {
@@ -242,6 +242,8 @@ struct SphericalRectangle {
     phi0: f32,
     /// The solid angle.
     solid_angle: f32,
+    /// The point is on the emitting side (`edge_u x edge_v`'s).
+    front: bool,
 }
 
 impl SphericalRectangle {
@@ -265,6 +267,7 @@ impl SphericalRectangle {
         let mut z = x.cross(y);
         let d = corner - p;
         let mut z0 = d.dot(z);
+        let front = z0 < 0.0;
         if z0 > 0.0 {
             z = -z;
             z0 = -z0;
@@ -303,14 +306,19 @@ impl SphericalRectangle {
             one_minus_b0_sq: z2 / (z2 + y0 * y0),
             phi0: a01 - a00,
             solid_angle,
+            front,
         })
     }
 
     /// The sample of `u` in `[0,1)^2`, uniform in solid angle, of the
-    /// rectangle of unit normal `nl` emitting `le` (one-sided unless
-    /// `two_sided`) seen from `p`: `None` when its back faces `p`.
+    /// rectangle emitting `le` (from its front only unless `two_sided`)
+    /// seen from `p`: `None` when its back faces `p` (the whole plane
+    /// does, so before any work).
     #[inline]
-    fn sample(&self, u: Vec2, p: Vec3, nl: Vec3, two_sided: bool, le: Vec3) -> Option<LightSample> {
+    fn sample(&self, u: Vec2, p: Vec3, two_sided: bool, le: Vec3) -> Option<LightSample> {
+        if !(two_sided || self.front) {
+            return None;
+        }
         // The x coordinate: the sub-rectangle [x0, xu] covers u.x of the
         // solid angle. The paper's angle is `au = pi + phi`, so its
         // `(cos au b0 - b1) / sin au` is `(cos phi b0 + b1) / sin phi`.
@@ -333,18 +341,25 @@ impl SphericalRectangle {
         let h1 = self.y1 / (dd2 + self.y1 * self.y1).sqrt();
         let hv = h0 + u.y * (h1 - h0);
         let hv2 = hv * hv;
-        let yv = if hv2 < 1.0 - 1e-6 {
-            (hv * (dd2 / (1.0 - hv2)).sqrt()).clamp(self.y0, self.y1)
+        // `sqrt(dd2 / (1 - hv^2))` is the distance to the sample: `yv` is
+        // `hv` times it (unless clamped, when the distance is recomputed).
+        let (yv, dist) = if hv2 < 1.0 - 1e-6 {
+            let t = (dd2 / (1.0 - hv2)).sqrt();
+            let yv = hv * t;
+            if yv >= self.y0 && yv <= self.y1 {
+                (yv, t)
+            } else {
+                let yv = yv.clamp(self.y0, self.y1);
+                (yv, (dd2 + yv * yv).sqrt())
+            }
         } else {
-            self.y1
+            (self.y1, (dd2 + self.y1 * self.y1).sqrt())
         };
-        let local = self.x * xu + self.y * yv + self.z * self.z0;
-        let dist = local.length();
         if dist.is_nan() || dist <= 0.0 {
             return None;
         }
+        let local = self.x * xu + self.y * yv + self.z * self.z0;
         let wi = local / dist;
-        facing_cosine(nl, wi, two_sided)?;
         Some(LightSample {
             wi,
             distance: dist,
