@@ -134,10 +134,15 @@ fn sample_area(
             edge_u,
             edge_v,
         } => {
+            // A one-sided quad whose plane faces away lights nothing here
+            // (found before the rectangle's set-up, by its sign alone).
+            let c = edge_u.cross(edge_v);
+            if !two_sided && (p - corner).dot(c) <= 0.0 {
+                return None;
+            }
             if let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p) {
                 return rect.sample(u, p, two_sided, le);
             }
-            let c = edge_u.cross(edge_v);
             let area = c.length();
             (corner + u.x * edge_u + u.y * edge_v, c / area, area)
         }
