@@ -13,6 +13,10 @@
 # for the AVX-512 kernel; BENCHMARKS.md, session 14) into target/bench-flags;
 # with BOTH=1 as well, each pair also renders with the default build, so the
 # two builds are compared render by render (columns chiaro_s, flags_s).
+# BEFORE=PATH (a path_bench binary copied aside before a change) renders in
+# each pair as well, in place of the flags build: before, after and Mitsuba
+# share one run (columns chiaro_s, before_s; the medians of after over
+# Mitsuba, before over Mitsuba and after's samples/s over before's).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 pairs=${1:-9}
@@ -39,13 +43,19 @@ elif [ "${BOTH:-0}" = 1 ]; then
     flags=$bench
     bench=$default
 fi
+label=flags
+if [ -n "${BEFORE:-}" ]; then
+    [ -x "$BEFORE" ] || { echo "BEFORE=$BEFORE is not an executable" >&2; exit 1; }
+    flags=$BEFORE
+    label=before
+fi
 # mitsuba_cbox.py builds Mitsuba's scene with `chiaro export` (benches/chiaro_export.py).
 cargo build --release -q -p chiaro-cli
 out=target/mitsuba-bench
 mkdir -p "$out"
 fastest() { grep -o 'render\[[0-9]*\]=[0-9.]*' "$1" | cut -d= -f2 | sort -n | head -1; }
 if [ -n "$flags" ]; then
-    echo "pair  mitsuba_s  chiaro_s  ratio  flags_s  flags_ratio (chiaro samples/s over Mitsuba's)"
+    echo "pair  mitsuba_s  chiaro_s  ratio  ${label}_s  ${label}_ratio (chiaro samples/s over Mitsuba's)"
 else
     echo "pair  mitsuba_s  chiaro_s  ratio (chiaro samples/s over Mitsuba's)"
 fi
@@ -70,8 +80,8 @@ median_of() {
 }
 median_of 4 ratio
 if [ -n "$flags" ]; then
-    median_of 6 "flags ratio"
-    awk '{ print $5 / $3 }' "$out/pairs.log" | sort -n | awk '{ r[NR] = $1 } END {
-        printf "median flags_s / chiaro_s %.3f (range %.3f-%.3f)\n", r[int((NR + 1) / 2)], r[1], r[NR]
+    median_of 6 "$label ratio"
+    awk '{ print $5 / $3 }' "$out/pairs.log" | sort -n | awk -v l="$label" '{ r[NR] = $1 } END {
+        printf "median %s_s / chiaro_s %.3f (range %.3f-%.3f)\n", l, r[int((NR + 1) / 2)], r[1], r[NR]
     }'
 fi

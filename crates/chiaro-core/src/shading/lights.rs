@@ -3,6 +3,7 @@
 
 use crate::geometry::Frame;
 use crate::scene::{AreaShape, Light, SpotLight};
+use crate::shading::texture::{atan2, sin_cos};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -133,11 +134,16 @@ fn sample_area(
             edge_u,
             edge_v,
         } => {
+            // A one-sided quad whose plane faces away lights nothing here
+            // (found before the rectangle's set-up, by its sign alone).
             let c = edge_u.cross(edge_v);
-            let area = c.length();
-            if let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p) {
-                return rect.sample(u, p, c / area, two_sided, le);
+            if !two_sided && (p - corner).dot(c) <= 0.0 {
+                return None;
             }
+            if let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p) {
+                return rect.sample(u, p, two_sided, le);
+            }
+            let area = c.length();
             (corner + u.x * edge_u + u.y * edge_v, c / area, area)
         }
         AreaShape::Disk {
@@ -186,10 +192,30 @@ fn sample_area(
     })
 }
 
-/// Rectangles seen under less solid angle than this (far away) are
-/// sampled uniformly in area: there the two samplings differ little, and
-/// the spherical one loses its precision in `f32`.
+/// Rectangles seen under less solid angle than this are sampled uniformly
+/// in area: the solid angle is a difference of four corner terms, whose
+/// rounding (a few 1e-6 sr at worst) would be 0.1 % of it or more.
 const MIN_RECT_SOLID_ANGLE: f32 = 1e-3;
+
+/// Points at least this many half-diagonals from a rectangle's centre
+/// sample it uniformly in area, which is then almost as good and cheaper.
+/// The single sample stays bounded there: for a planar emitter
+/// `cos_l / d^2 = h / d^3` (`h`: the point's distance from the plane), so
+/// the area sample's estimate `Le A h / (pi d^3)` over solid-angle
+/// sampling's `Le Omega / pi`, where `Omega = int h / d^3 dA >= A h /
+/// d_max^3`, is at most `(d_max / d_min)^3`; every point of the rectangle
+/// lies within a half-diagonal `R` of its centre, so at `|p - c| >= k R`
+/// that is at most `((k + 1) / (k - 1))^3` (`FAR_RECT_ESTIMATE_BOUND`),
+/// whatever the orientation.
+const FAR_RECT_HALF_DIAGONALS: f32 = 8.0;
+
+/// `((k + 1) / (k - 1))^3` for `k` = [`FAR_RECT_HALF_DIAGONALS`]: how far an
+/// area-sampled far rectangle's estimate can exceed `Le Omega / pi`.
+#[cfg(test)]
+const FAR_RECT_ESTIMATE_BOUND: f32 = {
+    let r = (FAR_RECT_HALF_DIAGONALS + 1.0) / (FAR_RECT_HALF_DIAGONALS - 1.0);
+    r * r * r
+};
 
 /// A rectangular area light as seen from a point: the spherical rectangle
 /// it subtends, sampled uniformly in solid angle (Urena, Fajardo and King
@@ -211,19 +237,33 @@ struct SphericalRectangle {
     y1: f32,
     /// Its (negative) distance along `z`.
     z0: f32,
+    /// The `z` components of the normals of the planes through the point
+    /// and the edges `y = y0` and `y = y1`.
     b0: f32,
     b1: f32,
-    k: f32,
+    /// `1 - b0^2`, without its cancellation.
+    one_minus_b0_sq: f32,
+    /// The sampled angle at `u.x = 0`, less `pi` (the paper's `k - pi`).
+    phi0: f32,
     /// The solid angle.
     solid_angle: f32,
+    /// The point is on the emitting side (`edge_u x edge_v`'s).
+    front: bool,
 }
 
 impl SphericalRectangle {
     /// The spherical rectangle of the quad `corner + [0,1]^2 (edge_u,
     /// edge_v)` seen from `p`; `None` when the quad is not a rectangle,
-    /// `p` lies in its plane, or it subtends less than
-    /// [`MIN_RECT_SOLID_ANGLE`] (the caller then samples it by area).
+    /// `p` lies in its plane, `p` is [`FAR_RECT_HALF_DIAGONALS`] or more
+    /// from it, or it subtends less than [`MIN_RECT_SOLID_ANGLE`] (the
+    /// caller then samples it by area).
+    #[inline]
     fn new(corner: Vec3, edge_u: Vec3, edge_v: Vec3, p: Vec3) -> Option<Self> {
+        let half = 0.5 * (edge_u + edge_v);
+        let k = FAR_RECT_HALF_DIAGONALS;
+        if (corner + half - p).length_squared() >= k * k * half.length_squared() {
+            return None;
+        }
         let (ex, ey) = (edge_u.length(), edge_v.length());
         if ex <= 0.0 || ey <= 0.0 || edge_u.dot(edge_v).abs() > 1e-4 * ex * ey {
             return None;
@@ -232,6 +272,7 @@ impl SphericalRectangle {
         let mut z = x.cross(y);
         let d = corner - p;
         let mut z0 = d.dot(z);
+        let front = z0 < 0.0;
         if z0 > 0.0 {
             z = -z;
             z0 = -z0;
@@ -241,21 +282,18 @@ impl SphericalRectangle {
         }
         let (x0, y0) = (d.dot(x), d.dot(y));
         let (x1, y1) = (x0 + ex, y0 + ey);
-        let v00 = Vec3::new(x0, y0, z0);
-        let v01 = Vec3::new(x0, y1, z0);
-        let v10 = Vec3::new(x1, y0, z0);
-        let v11 = Vec3::new(x1, y1, z0);
-        // The normals of the four planes through p and an edge, and the
-        // rectangle's interior angles between them (Girard: their sum
-        // less 2 pi is the solid angle).
-        let n0 = v00.cross(v10).try_normalize()?;
-        let n1 = v10.cross(v11).try_normalize()?;
-        let n2 = v11.cross(v01).try_normalize()?;
-        let n3 = v01.cross(v00).try_normalize()?;
-        let angle = |a: Vec3, b: Vec3| (-a.dot(b)).clamp(-1.0, 1.0).acos();
-        let (g0, g1, g2, g3) = (angle(n0, n1), angle(n1, n2), angle(n2, n3), angle(n3, n0));
-        let k = 2.0 * PI - g2 - g3;
-        let solid_angle = g0 + g1 - k;
+        // The solid angle by inclusion-exclusion of the four corner terms
+        // `atan(x y / (h r))` (the rectangle [0, x] x [0, y] at height `h`,
+        // corner distance `r`). Girard's sum of the four interior angles
+        // less 2 pi is the same (angle `i` is `pi/2 -+ a_i`), but rounds each
+        // angle near pi/2 where these terms are small for a rectangle seen
+        // near its normal. One shared polynomial `atan2` (libm's `acosf`
+        // was a third of the rectangle's cost), within `MAX_ANGLE_ERROR`.
+        let (h, z2) = (-z0, z0 * z0);
+        let corner_term = |cx: f32, cy: f32| atan2(cx * cy, h * (cx * cx + cy * cy + z2).sqrt());
+        let (a00, a01) = (corner_term(x0, y0), corner_term(x0, y1));
+        let (a10, a11) = (corner_term(x1, y0), corner_term(x1, y1));
+        let solid_angle = (a11 - a10) + (a00 - a01);
         if solid_angle.is_nan() || solid_angle < MIN_RECT_SOLID_ANGLE {
             return None;
         }
@@ -268,49 +306,65 @@ impl SphericalRectangle {
             y0,
             y1,
             z0,
-            b0: n0.z,
-            b1: n2.z,
-            k,
+            b0: -y0 / (z2 + y0 * y0).sqrt(),
+            b1: y1 / (z2 + y1 * y1).sqrt(),
+            one_minus_b0_sq: z2 / (z2 + y0 * y0),
+            phi0: a01 - a00,
             solid_angle,
+            front,
         })
     }
 
     /// The sample of `u` in `[0,1)^2`, uniform in solid angle, of the
-    /// rectangle of unit normal `nl` emitting `le` (one-sided unless
-    /// `two_sided`) seen from `p`: `None` when its back faces `p`.
-    fn sample(&self, u: Vec2, p: Vec3, nl: Vec3, two_sided: bool, le: Vec3) -> Option<LightSample> {
+    /// rectangle emitting `le` (from its front only unless `two_sided`)
+    /// seen from `p`: `None` when its back faces `p` (the whole plane
+    /// does, so before any work).
+    #[inline]
+    fn sample(&self, u: Vec2, p: Vec3, two_sided: bool, le: Vec3) -> Option<LightSample> {
+        if !(two_sided || self.front) {
+            return None;
+        }
         // The x coordinate: the sub-rectangle [x0, xu] covers u.x of the
-        // solid angle.
-        let au = u.x * self.solid_angle + self.k;
-        let (sin_au, cos_au) = au.sin_cos();
-        let fu = (cos_au * self.b0 - self.b1) / sin_au;
-        let cu = (fu.signum() / (fu * fu + self.b0 * self.b0).sqrt()).clamp(-1.0, 1.0);
-        let xu = if cu.abs() < 1.0 {
-            (-(cu * self.z0) / (1.0 - cu * cu).sqrt()).clamp(self.x0, self.x1)
-        } else if cu > 0.0 {
+        // solid angle. The paper's angle is `au = pi + phi`, so its
+        // `(cos au b0 - b1) / sin au` is `(cos phi b0 + b1) / sin phi`.
+        let (sin_phi, cos_phi) = sin_cos(u.x * self.solid_angle + self.phi0);
+        // The paper's `cu = sign(fu) / sqrt(fu^2 + b0^2)` and `xu = -cu z0 /
+        // sqrt(1 - cu^2)` in one root: `1 - b0^2` is `z0^2 / (z0^2 + y0^2)`.
+        let fu = (cos_phi * self.b0 + self.b1) / sin_phi;
+        let den = fu * fu - self.one_minus_b0_sq;
+        let xu = if den > 0.0 {
+            (-(fu.signum() * self.z0) / den.sqrt()).clamp(self.x0, self.x1)
+        } else if fu > 0.0 {
             self.x1
         } else {
             self.x0
         };
         // The y coordinate: uniform in the sine of the elevation along
         // that column.
-        let dd = (xu * xu + self.z0 * self.z0).sqrt();
-        let h0 = self.y0 / (dd * dd + self.y0 * self.y0).sqrt();
-        let h1 = self.y1 / (dd * dd + self.y1 * self.y1).sqrt();
+        let dd2 = xu * xu + self.z0 * self.z0;
+        let h0 = self.y0 / (dd2 + self.y0 * self.y0).sqrt();
+        let h1 = self.y1 / (dd2 + self.y1 * self.y1).sqrt();
         let hv = h0 + u.y * (h1 - h0);
         let hv2 = hv * hv;
-        let yv = if hv2 < 1.0 - 1e-6 {
-            (hv * dd / (1.0 - hv2).sqrt()).clamp(self.y0, self.y1)
+        // `sqrt(dd2 / (1 - hv^2))` is the distance to the sample: `yv` is
+        // `hv` times it (unless clamped, when the distance is recomputed).
+        let (yv, dist) = if hv2 < 1.0 - 1e-6 {
+            let t = (dd2 / (1.0 - hv2)).sqrt();
+            let yv = hv * t;
+            if yv >= self.y0 && yv <= self.y1 {
+                (yv, t)
+            } else {
+                let yv = yv.clamp(self.y0, self.y1);
+                (yv, (dd2 + yv * yv).sqrt())
+            }
         } else {
-            self.y1
+            (self.y1, (dd2 + self.y1 * self.y1).sqrt())
         };
-        let local = self.x * xu + self.y * yv + self.z * self.z0;
-        let dist = local.length();
         if dist.is_nan() || dist <= 0.0 {
             return None;
         }
+        let local = self.x * xu + self.y * yv + self.z * self.z0;
         let wi = local / dist;
-        facing_cosine(nl, wi, two_sided)?;
         Some(LightSample {
             wi,
             distance: dist,
@@ -594,7 +648,8 @@ mod tests {
     #[test]
     fn rectangle_light_samples_are_bounded_and_integrate_to_closed_form() {
         // A 1 x 1 panel facing down, Le = 2; points straight under its
-        // centre at heights 1, 0.1 and 0.001: the mean of pi * intensity *
+        // centre at heights 10 (sampled by area, far), 1, 0.1 and 0.001
+        // (in solid angle): the mean of pi * intensity *
         // cos is the irradiance pi Le F, and no sample exceeds what the
         // whole hemisphere could give (Le * 2 pi / pi). Uniform area
         // sampling gives samples up to Le A / (pi h^2) = 6e5 at h = 0.001.
@@ -609,7 +664,7 @@ mod tests {
             intensity: le,
             two_sided: false,
         };
-        for h in [1.0f32, 0.1, 0.001] {
+        for h in [10.0f32, 1.0, 0.1, 0.001] {
             let p = Vec3::new(0.0, -h, 0.0);
             let k = 128;
             let (mut e, mut most) = (0.0f64, 0.0f32);
@@ -630,6 +685,185 @@ mod tests {
             let expect = std::f64::consts::PI * f64::from(le) * centre_form_factor(half, half);
             assert!((e - expect).abs() < 2e-3 * expect, "h {h}: {e} vs {expect}");
             assert!(most <= 2.0 * le, "h {h}: a sample of {most}");
+        }
+    }
+
+    /// The solid angle of the rectangle `corner + [0,1]^2 (edge_u, edge_v)`
+    /// seen from `p`, in `f64` with libm's `atan`: the four corner terms.
+    fn rect_solid_angle_f64(corner: Vec3, edge_u: Vec3, edge_v: Vec3, p: Vec3) -> f64 {
+        let v = |a: Vec3| a.to_array().map(f64::from);
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let (eu, ev, d) = (v(edge_u), v(edge_v), v(corner - p));
+        let (lu, lv) = (dot(eu, eu).sqrt(), dot(ev, ev).sqrt());
+        let z = [
+            eu[1] * ev[2] - eu[2] * ev[1],
+            eu[2] * ev[0] - eu[0] * ev[2],
+            eu[0] * ev[1] - eu[1] * ev[0],
+        ];
+        let h = dot(d, z).abs() / (lu * lv);
+        let (x0, y0) = (dot(d, eu) / lu, dot(d, ev) / lv);
+        let (x1, y1) = (x0 + lu, y0 + lv);
+        let f = |cx: f64, cy: f64| (cx * cy / (h * (cx * cx + cy * cy + h * h).sqrt())).atan();
+        f(x1, y1) - f(x0, y1) - f(x1, y0) + f(x0, y0)
+    }
+
+    /// A 1 x 1 panel at `y = 0` facing down, `Le = 2`.
+    fn panel() -> (Light, Vec3, Vec3, Vec3) {
+        let (corner, edge_u, edge_v) = (Vec3::new(-0.5, 0.0, -0.5), Vec3::X, Vec3::Z);
+        let light = Light::Area {
+            shape: AreaShape::Quad {
+                corner,
+                edge_u,
+                edge_v,
+            },
+            color: Vec3::ONE,
+            intensity: 2.0,
+            two_sided: false,
+        };
+        (light, corner, edge_u, edge_v)
+    }
+
+    #[test]
+    fn rectangle_solid_angle_is_within_its_bound_of_libm() {
+        // Random rectangles and points, near and far, straight under and
+        // almost edge-on: the polynomial corner terms' solid angle against
+        // f64 libm, within four times the shared `atan2`'s bound plus the
+        // rounding of the four terms' sum.
+        let bound = 4.0 * f64::from(crate::shading::texture::MAX_ANGLE_ERROR) + 2e-6;
+        let (mut worst, mut worst_rel, mut checked) = (0.0f64, 0.0f64, 0);
+        for i in 0..20_000u32 {
+            let mut rng = crate::sampling::pixel_rng(7, i, 0, 0);
+            let mut r = || crate::sampling::uniform(&mut rng);
+            let edge_u = Vec3::new(r() + 0.05, 0.3 * r() - 0.15, 0.0);
+            let edge_v = edge_u.cross(Vec3::Y).normalize() * (r() + 0.05);
+            let corner = Vec3::new(r() - 0.5, r() - 0.5, r() - 0.5);
+            let scale = 10f32.powf(2.0 * r() - 1.5);
+            let p = Vec3::new(r() - 0.5, -r() * r(), r() - 0.5) * scale * 4.0;
+            let Some(rect) = SphericalRectangle::new(corner, edge_u, edge_v, p) else {
+                continue;
+            };
+            let exact = rect_solid_angle_f64(corner, edge_u, edge_v, p);
+            let err = (f64::from(rect.solid_angle) - exact).abs();
+            worst = worst.max(err);
+            worst_rel = worst_rel.max(err / exact);
+            checked += 1;
+        }
+        eprintln!("{checked} rectangles: worst error {worst:e} sr, relative {worst_rel:e}");
+        assert!(checked > 5_000, "{checked}");
+        assert!(worst <= bound, "{worst:e} > {bound:e}");
+        assert!(worst_rel <= 1e-3, "relative {worst_rel:e}");
+    }
+
+    /// The chi-square statistic of `observed` counts against `expected`.
+    fn chi_square(observed: &[f64], expected: &[f64]) -> f64 {
+        observed
+            .iter()
+            .zip(expected)
+            .map(|(&o, &e)| (o - e) * (o - e) / e)
+            .sum()
+    }
+
+    #[test]
+    fn rectangle_samples_follow_the_pdf_near_and_far() {
+        // Samples binned on the panel in an 8 x 8 grid, against the count
+        // that `sample_light_pdf` predicts: `n` times the integral of the
+        // pdf over the cell's solid angle (4 x 4 sub-cells, each its exact
+        // solid angle times the pdf at its centre). Near points (sampled in
+        // solid angle) and far ones (by area).
+        let (light, corner, edge_u, edge_v) = panel();
+        const CELLS: usize = 8;
+        const SUB: usize = 4;
+        let n = 200_000u32;
+        // Chi-square with 63 degrees of freedom: mean 63, sd 11.2.
+        let limit = 63.0 + 6.0 * 126f64.sqrt();
+        let points = [
+            (Vec3::new(0.3, -0.05, 0.2), true),
+            (Vec3::new(0.9, -0.3, 0.0), true),
+            (Vec3::new(-0.2, -2.0, 0.4), true),
+            (Vec3::new(3.0, -8.0, 2.0), false),
+        ];
+        for (p, solid) in points {
+            assert_eq!(
+                SphericalRectangle::new(corner, edge_u, edge_v, p).is_some(),
+                solid,
+                "{p}"
+            );
+            let mut observed = vec![0f64; CELLS * CELLS];
+            let mut rng = crate::sampling::pixel_rng(11, 0, 0, 0);
+            for _ in 0..n {
+                let u = crate::sampling::uniform2(&mut rng);
+                let s = sample_light(&light, p, u).expect("faces the point");
+                let q = s.point - corner;
+                let cell = |t: f32| ((t * CELLS as f32) as usize).min(CELLS - 1);
+                observed[cell(q.z) * CELLS + cell(q.x)] += 1.0;
+            }
+            let mut expected = vec![0f64; CELLS * CELLS];
+            let (mut area_density, step) = (vec![0f64; CELLS * CELLS], 1.0 / (CELLS * SUB) as f32);
+            for j in 0..CELLS * SUB {
+                for i in 0..CELLS * SUB {
+                    let c = corner + edge_u * (i as f32 * step) + edge_v * (j as f32 * step);
+                    let omega = rect_solid_angle_f64(c, edge_u * step, edge_v * step, p);
+                    let mid = c + 0.5 * step * (edge_u + edge_v);
+                    let pdf = sample_light_pdf(&light, p, mid).expect("area light");
+                    let k = (j / SUB) * CELLS + i / SUB;
+                    expected[k] += f64::from(n) * omega * f64::from(pdf);
+                    area_density[k] += f64::from(n) * f64::from(step * step);
+                }
+            }
+            let total: f64 = expected.iter().sum::<f64>() / f64::from(n);
+            assert!(
+                (total - 1.0).abs() < 1e-3,
+                "{p}: the pdf integrates to {total}"
+            );
+            let chi2 = chi_square(&observed, &expected);
+            assert!(chi2 < limit, "{p}: chi-square {chi2} (limit {limit})");
+            // The test tells the two densities apart where they differ.
+            if p.y > -1.0 {
+                let wrong = chi_square(&observed, &area_density);
+                assert!(
+                    wrong > 10.0 * limit,
+                    "{p}: area density's chi-square {wrong}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn far_rectangle_area_samples_stay_within_their_bound() {
+        // From points at least FAR_RECT_HALF_DIAGONALS from the panel's
+        // centre, in every direction in front of it, no area sample's
+        // estimate exceeds the bound times `Le Omega / pi`; just inside that
+        // distance the rectangle is sampled in solid angle.
+        let (light, corner, edge_u, edge_v) = panel();
+        let (le, r) = (2.0f32, 0.5f32.sqrt());
+        let mut rng = crate::sampling::pixel_rng(3, 0, 0, 0);
+        for _ in 0..500 {
+            let dir =
+                crate::sampling::sample_uniform_hemisphere(crate::sampling::uniform2(&mut rng));
+            // (y down, in front of the panel; not within 1 degree of its plane.)
+            let dir = Vec3::new(dir.x, -dir.z.max(0.02), dir.y).normalize();
+            let inside = dir * (0.99 * FAR_RECT_HALF_DIAGONALS * r);
+            // (Seen edge-on it may subtend too little: area-sampled too.)
+            if rect_solid_angle_f64(corner, edge_u, edge_v, inside) > 1.1e-3 {
+                assert!(SphericalRectangle::new(corner, edge_u, edge_v, inside).is_some());
+            }
+            let p = dir
+                * (FAR_RECT_HALF_DIAGONALS * r * (1.0 + 3.0 * crate::sampling::uniform(&mut rng)));
+            assert!(
+                SphericalRectangle::new(corner, edge_u, edge_v, p).is_none(),
+                "{p}"
+            );
+            let omega = rect_solid_angle_f64(corner, edge_u, edge_v, p) as f32;
+            let most = FAR_RECT_ESTIMATE_BOUND * le * omega / PI;
+            for _ in 0..16 {
+                let u = crate::sampling::uniform2(&mut rng);
+                let s = sample_light(&light, p, u).expect("in front");
+                assert!(
+                    s.intensity.x <= most * 1.0001,
+                    "{p}: {} > {most}",
+                    s.intensity.x
+                );
+            }
         }
     }
 
