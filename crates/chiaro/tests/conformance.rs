@@ -882,9 +882,13 @@ fn rule_path_depth_one_is_direct(m: &mut Matrix, case: &Case, ids: &Ids) {
 
 /// The fast path tracer equals the reference path tracer statistically:
 /// per 8x8 block and channel, the mean difference over `SEEDS` renders is
-/// within four standard errors.
+/// within four standard errors. The standard error is estimated from the
+/// seeds' own spread, so the statistic is Student's t with `SEEDS - 1`
+/// degrees of freedom: with 4 seeds a 4-SE excursion has odds of about 3 %
+/// per block and channel (DamagedHelmet's emissive fireflies failed at 7.96
+/// on fixed seeds, and held at 16 seeds, where the odds are 0.1 %).
 fn rule_fast_path_is_reference(m: &mut Matrix, case: &Case) {
-    const SEEDS: u64 = 4;
+    const SEEDS: u64 = 16;
     let (w, h) = (W, 32u32);
     let means = |kernel: Kernel| -> (Vec<Vec3>, Vec<Vec3>) {
         let films: Vec<Vec<Vec3>> = (0..SEEDS)
@@ -911,14 +915,17 @@ fn rule_fast_path_is_reference(m: &mut Matrix, case: &Case) {
         h,
         8,
         SEEDS,
-    )
-    .z;
+    );
+    let (z, (bx, by)) = (worst.z, worst.block);
     m.check(
         "fast path = reference",
         &case.name,
         "path, path-reference",
-        worst <= 4.0,
-        format!("largest block difference {worst:.2} standard errors"),
+        z <= 4.0,
+        format!(
+            "largest block difference {z:.2} standard errors (block {bx},{by} channel {}: {:.4} +- {:.4})",
+            worst.channel, worst.difference, worst.stderr
+        ),
     );
 }
 
