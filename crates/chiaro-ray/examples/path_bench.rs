@@ -5,7 +5,8 @@
 //! ```text
 //! cargo run --release -p chiaro-ray --example path_bench -- SCENE.toml OUT_PREFIX \
 //!     [--spp N] [--max-depth D] [--repeats R] [--threads N] [--seed S]
-//!     [--width W] [--height H] [--max-leaf N] [--traversal-cost C] [--scalar]
+//!     [--width W] [--height H] [--max-leaf N] [--traversal-cost C]
+//!     [--scalar | --reference]
 //! ```
 //!
 //! `--width`/`--height` replace the scene's image size (the camera's
@@ -71,9 +72,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let accel = |p: &PreparedScene<'_>| -> Box<dyn Accelerator> {
         Box::new(SceneBvh::with_options(p, &bvh_options))
     };
-    // `--scalar`: one path at a time (the lock-step kernel's oracle).
+    // `--scalar`: one path at a time (the lock-step kernel's oracle);
+    // `--reference`: the plain reference path tracer.
     let kernel = if args.iter().any(|a| a == "--scalar") {
         path::Kernel::Scalar
+    } else if args.iter().any(|a| a == "--reference") {
+        path::Kernel::Reference
     } else {
         path::Kernel::Lanes
     };

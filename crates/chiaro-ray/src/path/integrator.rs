@@ -93,15 +93,20 @@ pub(super) struct MaterialInfo {
     /// transmission lobe), chosen with probability 1 and weighted by `kd`:
     /// the vertices that [`lanes`] shades with its own Lambert arithmetic.
     pub(super) lambert: bool,
-    /// True for the vertices [`lanes`] shades: `lambert`, `delta`, or a
-    /// mixture of Lambert and a glossy lobe (GGX, Beckmann, Phong or Blinn:
-    /// the glTF metal/dielectric mix) without mirror, transmission, clear
-    /// coat or BLEND, on a two-sided surface. A mixture's sample never reads
+    /// True for the vertices [`lanes`] shades wherever they are seen: a
+    /// two-sided `lambert` or mixture of Lambert and a glossy lobe (GGX,
+    /// Beckmann, Phong or Blinn: the glTF metal/dielectric mix) without
+    /// mirror, transmission, clear coat or BLEND, or `delta`. A mixture's sample never reads
     /// the Fresnel choice's number (see [`Bsdf::sample`]: the lobe number is
     /// below 1, so the choice falls in the non-delta lobes); a `delta`
     /// vertex's may, and the kernel then moves that lane's later pairs on
     /// by one.
     pub(super) lock_step: bool,
+    /// True for a one-sided Lambert or Lambert-and-glossy material (a
+    /// one-sided emitter, say): [`lanes`] shades it where it is seen from
+    /// the front (`Sidedness::seen_from`), where it is the two-sided
+    /// material, and hands its black back to the scalar loop.
+    pub(super) front_lock_step: bool,
     /// True when every lobe is a delta one (ideal mirror, smooth conductor,
     /// smooth Fresnel or fixed-weight transmission: no diffuse, glossy,
     /// rough or coat lobe, so next-event estimation finds nothing), without
@@ -129,8 +134,7 @@ impl MaterialInfo {
         let lambert = wd > 0.0 && ws == 0.0 && wr == 0.0 && wt == 0.0 && !lobes.specular;
         // (A one-sided material's back is black: the scalar loop's test.)
         let two_sided = m.sidedness != Sidedness::OneSided;
-        let lambert =
-            lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd && two_sided;
+        let lambert = lambert && lobes.p_diffuse == 1.0 && lobes.lambert_weight == surface.kd;
         // Diffuse and glossy lobes only; no absorption (no `kt` at all).
         let mixture = lobes.total > 0.0
             && wr == 0.0
@@ -138,7 +142,6 @@ impl MaterialInfo {
             && !lobes.rough
             && lobes.p_coat == 0.0
             && surface.kt == Vec3::ZERO
-            && two_sided
             && m.alpha_mode != AlphaMode::Blend;
         let transmissive = surface.kt.max_element() > 0.0;
         let absorption = if transmissive {
@@ -157,7 +160,8 @@ impl MaterialInfo {
             && m.alpha_mode != AlphaMode::Blend;
         Self {
             lambert,
-            lock_step: lambert || mixture || delta,
+            lock_step: ((lambert || mixture) && two_sided) || delta,
+            front_lock_step: (lambert || mixture) && !two_sided,
             delta,
             // (The rough dielectric reflects light samples in front of it.)
             dark: surface.kd == Vec3::ZERO

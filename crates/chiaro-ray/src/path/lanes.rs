@@ -12,7 +12,9 @@
 //! and a glossy lobe (GGX and the other microfacet and Phong lobes: the
 //! glTF metal/dielectric mix), or delta lobes alone (ideal mirror, smooth
 //! conductor, smooth Fresnel or fixed-weight transmission, without
-//! absorption: `lanes_delta.rs`), `MaterialInfo::lock_step`: of plain
+//! absorption: `lanes_delta.rs`), `MaterialInfo::lock_step` (a one-sided
+//! Lambert or mixture where it is seen from the front: `front_lock_step`,
+//! a one-sided emitter say): of plain
 //! triangles and spheres from their cached material
 //! ([`PathTracer::plain_vertex`]), of textured, vertex-coloured or
 //! normal-mapped ones from the material the scalar loop resolves at the
@@ -20,8 +22,8 @@
 //! Fresnel choice draws one more number, so each lane keeps its own lead
 //! over the batch's pair count (`LanePairs`). A lane whose vertex it does
 //! not shade (a delta lobe mixed with diffuse or glossy ones, a rough
-//! dielectric, a clear coat, an absorbing medium, a one-sided Lambertian
-//! surface) leaves the batch there and finishes in the scalar loop from
+//! dielectric, a clear coat, an absorbing medium, the black back of a
+//! one-sided surface) leaves the batch there and finishes in the scalar loop from
 //! the same state and the same pair ([`PathTracer::radiance_from`]), and
 //! so do the last few lanes of a batch ([`SCALAR_TAIL`]).
 //!
@@ -316,7 +318,12 @@ impl PathTracer<'_, '_> {
                         (v, &*surfaces[i].insert(m))
                     }
                 };
-                if !m.lock_step {
+                // (A one-sided surface's front is shaded here, as the scalar
+                // loop's `seen_from` decides: the same `cos_o`.)
+                let front = m.front_lock_step && v.ng.dot(-ray.dir) >= 0.0;
+                #[cfg(test)]
+                FRONTS_SHADED.set(FRONTS_SHADED.get() + u64::from(front));
+                if !(m.lock_step || front) {
                     #[cfg(test)]
                     HANDED_OFF.set(HANDED_OFF.get() + 1);
                     // The scalar loop from this vertex, at this pair.
@@ -866,6 +873,9 @@ thread_local! {
     /// does not shade: what the tests read to see which vertices stay in
     /// lock-step.
     pub(super) static HANDED_OFF: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+    /// Lanes this thread's kernel shaded at the front of a one-sided
+    /// surface (`MaterialInfo::front_lock_step`).
+    pub(super) static FRONTS_SHADED: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
 }
 
 #[cfg(test)]
