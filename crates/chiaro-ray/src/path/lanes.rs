@@ -796,31 +796,49 @@ impl PathTracer<'_, '_> {
         };
         for i in set_lanes(glossy) {
             let Some(m) = info[i] else { continue };
-            let bsdf = &m.bsdf;
-            let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
-            // (The scalar loop's `front`: the unflipped normal's side.)
-            let front = vx.ng.get(i).dot(wo) >= 0.0;
-            let ul = if bsdf.needs_lobe_number() {
-                u_lobe[i]
-            } else {
-                0.0
-            };
-            let uv = Vec2::new(u[0][i], u[1][i]);
             // (The Fresnel choice is never asked for: delta lanes are not
             // in `glossy`, see `lock_step`.)
-            let s = if bsdf.scatters() {
-                bsdf.sample(n, ng, wo, front, ul, uv, || 0.0)
-            } else {
-                None
-            };
-            if let Some(s) = s {
-                g.wi.set(i, s.wi);
-                g.weight.set(i, s.weight);
-                g.pdf[i] = super::integrator::mis_pdf(&s, ng);
-                g.ok[i] = true;
-            }
+            g.sample_lane(i, &m.bsdf, (vx, dir), (&u_lobe, &u), || 0.0);
         }
         g
+    }
+}
+
+impl MixtureSamples {
+    /// Lane `i`'s next direction through `bsdf`, as the scalar loop's
+    /// `sample_bsdf` draws it: at the lane's viewer-side normals, with the
+    /// lobe choice's number `u_lobe[i]` (where the BSDF reads one), the
+    /// direction's pair `u` and `u_fresnel` for a Fresnel choice; stored
+    /// in the lane's slots (left unset where the BSDF gives no sample).
+    #[inline(always)]
+    fn sample_lane(
+        &mut self,
+        i: usize,
+        bsdf: &chiaro_core::shading::Bsdf,
+        (vx, dir): (&Vertices, &V3),
+        (u_lobe, u): (&F, &[F; 2]),
+        u_fresnel: impl FnOnce() -> f32,
+    ) {
+        let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
+        // (The scalar loop's `front`: the unflipped normal's side.)
+        let front = vx.ng.get(i).dot(wo) >= 0.0;
+        let ul = if bsdf.needs_lobe_number() {
+            u_lobe[i]
+        } else {
+            0.0
+        };
+        let uv = Vec2::new(u[0][i], u[1][i]);
+        let s = if bsdf.scatters() {
+            bsdf.sample(n, ng, wo, front, ul, uv, u_fresnel)
+        } else {
+            None
+        };
+        if let Some(s) = s {
+            self.wi.set(i, s.wi);
+            self.weight.set(i, s.weight);
+            self.pdf[i] = super::integrator::mis_pdf(&s, ng);
+            self.ok[i] = true;
+        }
     }
 }
 

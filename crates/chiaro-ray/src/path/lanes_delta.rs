@@ -17,11 +17,10 @@
 // A lane loop indexes several arrays by the lane number (as in `lanes`).
 #![allow(clippy::needless_range_loop)]
 
-use super::super::integrator::{MaterialInfo, mis_pdf};
+use super::super::integrator::MaterialInfo;
 use super::{F, MixtureSamples, PathTracer, V3, Vertices, set_lanes};
 use chiaro_core::sampling::SobolSampler;
 use chiaro_core::sampling::sobol::LANES;
-use glam::Vec2;
 
 /// The batch's samples as the sampler sees them: each lane's bit-reversed
 /// sample index, and how many pairs each lane has drawn beyond the
@@ -171,34 +170,14 @@ impl PathTracer<'_, '_> {
         };
         for i in set_lanes(delta) {
             let Some(m) = info[i] else { continue };
-            let bsdf = &m.bsdf;
-            let (n, ng, wo) = (vx.n.get(i), vx.ngs.get(i), -dir.get(i));
-            // (The scalar loop's `front`: the unflipped normal's side.)
-            let front = vx.ng.get(i).dot(wo) >= 0.0;
-            let ul = if bsdf.needs_lobe_number() {
-                u_lobe[i]
-            } else {
-                0.0
-            };
-            let uv = Vec2::new(u[0][i], u[1][i]);
             let mut drew = false;
-            let s = if bsdf.scatters() {
-                bsdf.sample(n, ng, wo, front, ul, uv, || {
-                    drew = true;
-                    u_fresnel[i]
-                })
-            } else {
-                None
-            };
+            g.sample_lane(i, &m.bsdf, (vx, dir), (&u_lobe, &u), || {
+                drew = true;
+                u_fresnel[i]
+            });
             pairs.ahead[i] += u32::from(drew);
             #[cfg(test)]
             KERNEL_DELTAS.with(|c| c.set(c.get() + 1));
-            if let Some(s) = s {
-                g.wi.set(i, s.wi);
-                g.weight.set(i, s.weight);
-                g.pdf[i] = mis_pdf(&s, ng);
-                g.ok[i] = true;
-            }
         }
     }
 }

@@ -14,19 +14,6 @@ fn kernel_deltas(f: impl FnOnce()) -> u64 {
     count() - before
 }
 
-/// A sphere of `material` with radius `r` at `c`.
-fn sphere(s: &mut Scene, material: chiaro_core::scene::MaterialId, r: f32, c: Vec3) {
-    s.objects.push(Object {
-        geometry: Geometry::Sphere { radius: r },
-        material,
-        transform: chiaro_core::scene::Transform {
-            translate: c,
-            ..Default::default()
-        },
-        ..Default::default()
-    });
-}
-
 fn glass(s: &mut Scene) -> chiaro_core::scene::MaterialId {
     s.add_material(Material {
         transmit: Vec3::ONE,
@@ -53,8 +40,8 @@ fn kernel_keeps_mirror_and_conductor_vertices() {
         }),
         ..Material::diffuse("gold", Vec3::ZERO)
     });
-    sphere(&mut s, mirror, 0.3, Vec3::new(-0.45, -0.6, -0.3));
-    sphere(&mut s, gold, 0.3, Vec3::new(0.45, -0.6, 0.3));
+    add_sphere(&mut s, mirror, 0.3, Vec3::new(-0.45, -0.6, -0.3));
+    add_sphere(&mut s, gold, 0.3, Vec3::new(0.45, -0.6, 0.3));
     let green = s.material_by_name("green").expect("shipped").index();
     s.materials[green] = Material {
         reflect: Vec3::splat(0.9),
@@ -76,7 +63,7 @@ fn kernel_keeps_glass_seen_from_outside_and_inside() {
     // reflection.
     let mut s = mitsuba_cbox(10);
     let g = glass(&mut s);
-    sphere(&mut s, g, 0.35, Vec3::new(0.2, -0.5, 0.2));
+    add_sphere(&mut s, g, 0.35, Vec3::new(0.2, -0.5, 0.2));
     s.render.samples = 21;
     s.render.path.max_depth = 12;
     s.render.path.rr_depth = 2;

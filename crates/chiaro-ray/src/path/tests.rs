@@ -9,11 +9,11 @@ use chiaro_core::geometry::primitives;
 use chiaro_core::prepared::{PrepareOptions, PreparedScene};
 use chiaro_core::progress::NoProgress;
 use chiaro_core::scene::{
-    AreaShape, Geometry, Light, LightSelection, Material, MetallicRoughness, Object, Scene,
-    Sidedness, Technique, Transform,
+    AreaShape, Geometry, Light, LightSelection, Material, MaterialId, MetallicRoughness, Object,
+    Scene, Sidedness, Technique, Transform,
 };
 use chiaro_testkit::scenes::{
-    add_object, camera, point_light, repo_scene, set_environment, shipped,
+    add_named, add_object, camera, point_light, repo_scene, set_environment, shipped,
 };
 use chiaro_testkit::stats;
 use lanes::Vertices;
@@ -210,6 +210,16 @@ fn depth_one_point_light_is_the_lambert_term() {
     for c in &film.color {
         assert!((c.x - expect).abs() < 0.01 * expect, "{c} vs {expect}");
     }
+}
+
+/// Adds an analytic sphere of `material` with radius `r` at `c` (smooth,
+/// as `Object::default`).
+pub(super) fn add_sphere(s: &mut Scene, material: MaterialId, r: f32, c: Vec3) {
+    let at = Transform {
+        translate: c,
+        ..Transform::default()
+    };
+    add_named(s, "", (Geometry::Sphere { radius: r }, material), at, true);
 }
 
 /// Mitsuba's Cornell box as shipped (`scenes/mitsuba-cbox.toml`).
@@ -821,15 +831,7 @@ fn delta_box(size: u32) -> Scene {
         (mixture, 0.2, Vec3::new(0.5, 0.3, -0.4)),
         (grey, 0.15, Vec3::new(-0.5, 0.3, 0.2)),
     ] {
-        s.objects.push(Object {
-            geometry: Geometry::Sphere { radius: r },
-            material,
-            transform: chiaro_core::scene::Transform {
-                translate: c,
-                ..Default::default()
-            },
-            ..Default::default()
-        });
+        add_sphere(&mut s, material, r, c);
     }
     let id = |s: &Scene, n: &str| s.material_by_name(n).expect("a shipped material").index();
     let green = id(&s, "green");
